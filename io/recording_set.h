@@ -1,0 +1,120 @@
+// Recording sets, format version 1 (`fluxcal.recording.v1`), exactly as
+// specified in shared/specs/recording-format.md (copied to
+// docs/recording-format.md). SI units everywhere; names carry their unit.
+//
+// Conventions (the same everywhere in fluxcal):
+//   theta_e_rad: electrical angle of the rotor d axis from the phase-a axis,
+//     counter-clockwise positive.
+//   Clarke, amplitude invariant: i_alpha = (2 ia - ib - ic)/3,
+//     i_beta = (ib - ic)/sqrt(3).
+//   Park: id + j iq = (i_alpha + j i_beta) exp(-j theta_e).
+//   Machine (motor convention): ud = Rs id + dpsi_d/dt - w psi_q,
+//     uq = Rs iq + dpsi_q/dt + w psi_d;  T = 1.5 p (psi_d iq - psi_q id).
+#ifndef FLUXCAL_IO_RECORDING_SET_H_
+#define FLUXCAL_IO_RECORDING_SET_H_
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+
+namespace fluxcal::io {
+
+inline constexpr char kRecordingFormatV1[] = "fluxcal.recording.v1";
+
+struct MotorNominal {
+  int pole_pairs = 0;                  // required
+  std::optional<double> rs_ohm;        // nominal (datasheet) value
+  std::optional<double> psi_pm_wb;     // nominal (datasheet) value
+};
+
+struct DriveInfo {
+  std::optional<double> udc_v;
+  std::optional<double> f_pwm_hz;
+  double f_sample_hz = 0.0;            // required
+  std::optional<double> dead_time_s;
+  std::optional<bool> dead_time_compensated;
+};
+
+struct InjectionInfo {
+  std::string type;                    // "rotating"
+  double amplitude_v = 0.0;
+  double frequency_hz = 0.0;
+};
+
+struct PointSpec {
+  std::string id;                      // e.g. "p000"
+  std::string file;                    // relative to the set root
+  double id_ref_a = 0.0;
+  double iq_ref_a = 0.0;
+  double speed_rpm = 0.0;
+  std::optional<double> temperature_c;
+};
+
+struct Manifest {
+  std::string format = kRecordingFormatV1;
+  std::string serial;
+  MotorNominal motor;
+  DriveInfo drive;
+  std::optional<InjectionInfo> injection;  // required when points present
+  std::vector<PointSpec> points;
+  std::optional<std::string> steady_state;  // relative file name
+  std::optional<std::string> hf_results;    // relative file name
+};
+
+// One points/<id>.csv: equally spaced samples at drive.f_sample_hz.
+// ualpha/ubeta_ref_v: the command sent at this sample, applied by the
+// inverter during the following PWM period. udc_v is NaN where the cell was
+// empty (then drive.udc_v holds; see EffectiveUdc()).
+struct Waveform {
+  std::vector<double> t_s;
+  std::vector<double> ia_a, ib_a, ic_a;
+  std::vector<double> theta_e_rad;
+  std::vector<double> ualpha_ref_v, ubeta_ref_v;
+  std::vector<double> udc_v;
+  size_t size() const { return t_s.size(); }
+};
+
+struct SteadyStateRow {
+  double id_a = 0, iq_a = 0, speed_rpm = 0, ud_ref_v = 0, uq_ref_v = 0;
+  std::optional<double> torque_nm;
+  std::optional<double> temperature_c;
+};
+
+struct HfResultRow {
+  double id_a = 0, iq_a = 0, speed_rpm = 0, ld_h = 0, lq_h = 0;
+  std::optional<double> ldq_h;
+  std::optional<double> temperature_c;
+};
+
+struct RecordingSet {
+  std::string root_dir;                // directory the set was read from
+  Manifest manifest;
+  std::vector<Waveform> waveforms;     // parallel to manifest.points
+  std::vector<SteadyStateRow> steady_state;
+  std::vector<HfResultRow> hf_results;
+};
+
+// Reads and strictly validates a set. Errors (never a crash, never a silent
+// default) name the file, the line and the field, e.g.
+//   set/points/p003.csv:41: field 'ia_a': expected a number, got 'x'
+// Returns InvalidArgument for malformed content, NotFound for a missing
+// manifest or referenced file.
+absl::StatusOr<RecordingSet> ReadRecordingSet(const std::string& dir);
+
+// Parses only manifest.json (validated as above).
+absl::StatusOr<Manifest> ReadManifest(const std::string& manifest_path);
+
+// Writes a set (manifest, waveforms, steady_state.csv, hf_results.csv as
+// present) into dir, creating it. Numbers are written with enough digits to
+// round-trip the physics (not necessarily bit-exact).
+absl::Status WriteRecordingSet(const std::string& dir, const RecordingSet& set);
+
+// Serial rule: 1 to 64 characters of A-Z a-z 0-9 - _ .
+bool IsValidSerial(const std::string& serial);
+
+}  // namespace fluxcal::io
+
+#endif  // FLUXCAL_IO_RECORDING_SET_H_
