@@ -115,6 +115,16 @@ absl::Status WriteRecordingSet(const std::string& dir, const RecordingSet& set);
 // Serial rule: 1 to 64 characters of A-Z a-z 0-9 - _ .
 bool IsValidSerial(const std::string& serial);
 
+// Standalone readers/writers of the optional tables (same validation).
+absl::StatusOr<std::vector<SteadyStateRow>> ReadSteadyStateCsv(const std::string& path);
+absl::StatusOr<std::vector<HfResultRow>> ReadHfResultsCsv(const std::string& path);
+absl::Status WriteHfResultsCsv(const std::string& path, const std::vector<HfResultRow>& rows);
+absl::Status WriteSteadyStateCsv(const std::string& path,
+                                 const std::vector<SteadyStateRow>& rows);
+
+// DC-link voltage at a sample: the row's udc_v, else drive.udc_v, else NaN.
+double EffectiveUdc(const RecordingSet& set, size_t point, size_t sample);
+
 }  // namespace fluxcal::io
 
 #endif  // FLUXCAL_IO_RECORDING_SET_H_

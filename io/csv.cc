@@ -1,0 +1,173 @@
+#include "io/csv.h"
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <limits>
+#include <sstream>
+#include <system_error>
+
+#include "absl/strings/str_cat.h"
+
+namespace fluxcal::io {
+namespace {
+
+std::string_view Trim(std::string_view s) {
+  while (!s.empty() && (s.front() == ' ' || s.front() == '\t')) s.remove_prefix(1);
+  while (!s.empty() && (s.back() == ' ' || s.back() == '\t' || s.back() == '\r')) s.remove_suffix(1);
+  return s;
+}
+
+std::string Shorten(std::string_view s) {
+  if (s.size() <= 40) return std::string(s);
+  return absl::StrCat(absl::string_view(s.data(), 37), "...");
+}
+
+}  // namespace
+
+absl::StatusOr<std::string> ReadFileToString(const std::string& path) {
+  std::FILE* f = std::fopen(path.c_str(), "rb");
+  if (f == nullptr) {
+    return absl::NotFoundError(absl::StrCat(path, ": file not found or not readable"));
+  }
+  std::string out;
+  char buf[1 << 16];
+  size_t n;
+  while ((n = std::fread(buf, 1, sizeof buf, f)) > 0) out.append(buf, n);
+  const bool err = std::ferror(f);
+  std::fclose(f);
+  if (err) return absl::DataLossError(absl::StrCat(path, ": read error"));
+  return out;
+}
+
+absl::Status WriteFileAtomically(const std::string& path, std::string_view contents) {
+  const std::string tmp = path + ".tmp";
+  std::FILE* f = std::fopen(tmp.c_str(), "wb");
+  if (f == nullptr) {
+    return absl::PermissionDeniedError(absl::StrCat(path, ": cannot open for writing"));
+  }
+  const bool ok = std::fwrite(contents.data(), 1, contents.size(), f) == contents.size();
+  const bool flushed = std::fflush(f) == 0;
+  std::fclose(f);
+  if (!ok || !flushed || std::rename(tmp.c_str(), path.c_str()) != 0) {
+    std::remove(tmp.c_str());
+    return absl::DataLossError(absl::StrCat(path, ": write failed"));
+  }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<CsvTable> ParseNumericCsv(std::string_view text,
+                                         const std::string& display_path,
+                                         const std::vector<CsvColumnSpec>& spec) {
+  CsvTable table;
+  table.columns.resize(spec.size());
+  size_t pos = 0;
+  size_t line_no = 0;
+  bool header_seen = false;
+  // Reserve from a cheap line-count estimate to keep parsing allocation-free.
+  const size_t approx_rows = static_cast<size_t>(std::count(text.begin(), text.end(), '\n'));
+  for (auto& c : table.columns) c.reserve(approx_rows);
+
+  while (pos < text.size()) {
+    size_t eol = text.find('\n', pos);
+    if (eol == std::string_view::npos) eol = text.size();
+    std::string_view line = text.substr(pos, eol - pos);
+    pos = eol + 1;
+    ++line_no;
+    if (!line.empty() && line.back() == '\r') line.remove_suffix(1);
+    if (!header_seen) {
+      header_seen = true;
+      std::vector<std::string_view> names;
+      size_t s = 0;
+      while (true) {
+        size_t comma = line.find(',', s);
+        names.push_back(Trim(line.substr(s, comma == std::string_view::npos ? line.npos : comma - s)));
+        if (comma == std::string_view::npos) break;
+        s = comma + 1;
+      }
+      for (size_t c = 0; c < spec.size(); ++c) {
+        if (c >= names.size()) {
+          return absl::InvalidArgumentError(absl::StrCat(
+              display_path, ":1: field '", spec[c].name, "': missing column in header"));
+        }
+        if (names[c] != spec[c].name) {
+          bool elsewhere = false;
+          for (auto n : names) elsewhere |= (n == spec[c].name);
+          return absl::InvalidArgumentError(absl::StrCat(
+              display_path, ":1: field '", spec[c].name, "': ",
+              elsewhere ? "column out of order" : "missing column", " (header has '",
+              Shorten(names[c]), "' at column ", c + 1, ")"));
+        }
+      }
+      if (names.size() > spec.size()) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            display_path, ":1: field '", Shorten(names[spec.size()]),
+            "': unknown column (format fluxcal.recording.v1 expects ", spec.size(),
+            " columns)"));
+      }
+      continue;
+    }
+    if (Trim(line).empty()) {
+      // Only a trailing empty line is tolerated.
+      if (pos >= text.size()) break;
+      return absl::InvalidArgumentError(
+          absl::StrCat(display_path, ":", line_no, ": field '", spec[0].name, "': empty line"));
+    }
+    size_t s = 0;
+    for (size_t c = 0; c < spec.size(); ++c) {
+      size_t comma = line.find(',', s);
+      const bool last = (c + 1 == spec.size());
+      if (!last && comma == std::string_view::npos) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            display_path, ":", line_no, ": field '", spec[c + 1].name,
+            "': missing cell (row has ", c + 1, " of ", spec.size(), " cells)"));
+      }
+      if (last && comma != std::string_view::npos) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            display_path, ":", line_no, ": field '", spec[c].name,
+            "': too many cells (expected ", spec.size(), ")"));
+      }
+      std::string_view cell = Trim(line.substr(s, last ? line.npos : comma - s));
+      s = comma + 1;
+      double v = 0.0;
+      if (cell.empty()) {
+        if (!spec[c].optional_cells) {
+          return absl::InvalidArgumentError(absl::StrCat(
+              display_path, ":", line_no, ": field '", spec[c].name, "': empty cell"));
+        }
+        v = std::numeric_limits<double>::quiet_NaN();
+      } else {
+        const char* b = cell.data();
+        const char* e = cell.data() + cell.size();
+        if (*b == '+') ++b;  // from_chars rejects a leading '+'
+        auto [ptr, ec] = std::from_chars(b, e, v);
+        if (ec == std::errc::result_out_of_range) {
+          return absl::InvalidArgumentError(absl::StrCat(
+              display_path, ":", line_no, ": field '", spec[c].name,
+              "': number out of range, got '", Shorten(cell), "'"));
+        }
+        if (ec != std::errc() || ptr != e) {
+          return absl::InvalidArgumentError(absl::StrCat(
+              display_path, ":", line_no, ": field '", spec[c].name,
+              "': expected a number, got '", Shorten(cell), "'"));
+        }
+        if (!std::isfinite(v)) {
+          return absl::InvalidArgumentError(absl::StrCat(
+              display_path, ":", line_no, ": field '", spec[c].name,
+              "': expected a finite number, got '", Shorten(cell), "'"));
+        }
+      }
+      table.columns[c].push_back(v);
+    }
+    ++table.rows;
+  }
+  if (!header_seen) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(display_path, ":1: field '", spec[0].name, "': empty file, no header"));
+  }
+  return table;
+}
+
+}  // namespace fluxcal::io

@@ -1,0 +1,41 @@
+// Strict CSV reading for recording sets: a header line of known column names,
+// then rows of numbers. Every error names file, line and field.
+#ifndef FLUXCAL_IO_CSV_H_
+#define FLUXCAL_IO_CSV_H_
+
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "absl/status/statusor.h"
+
+namespace fluxcal::io {
+
+struct CsvColumnSpec {
+  std::string name;
+  bool optional_cells = false;   // an empty cell is allowed (stored as NaN)
+};
+
+// Parsed numeric table; columns[c][row]. Empty optional cells are NaN.
+struct CsvTable {
+  std::vector<std::vector<double>> columns;
+  size_t rows = 0;
+};
+
+// Parses `text` (contents of `display_path`) whose header must list exactly
+// `spec` (in this order). Rejects missing/extra/reordered columns, wrong cell
+// counts, non-numeric cells, NaN/inf (literal or overflowing).
+absl::StatusOr<CsvTable> ParseNumericCsv(std::string_view text,
+                                         const std::string& display_path,
+                                         const std::vector<CsvColumnSpec>& spec);
+
+// Reads a whole file. NotFound names the path.
+absl::StatusOr<std::string> ReadFileToString(const std::string& path);
+
+// Writes via a temporary file and rename, so a crash never leaves a partial
+// file under the final name.
+absl::Status WriteFileAtomically(const std::string& path, std::string_view contents);
+
+}  // namespace fluxcal::io
+
+#endif  // FLUXCAL_IO_CSV_H_

@@ -1,0 +1,301 @@
+// Tests of the recording-set reader/writer: the three example sets read, a
+// written set reads back, and every malformed input yields an error naming
+// the file, the line and the field.
+#include "io/recording_set.h"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <numbers>
+#include <random>
+#include <sstream>
+
+#include "gtest/gtest.h"
+#include "io/csv.h"
+
+namespace fluxcal::io {
+namespace {
+
+namespace fs = std::filesystem;
+
+// A small valid set: 2 locked points of 200 samples at 10 kHz with 500 Hz
+// injection (10 periods) plus steady_state and hf_results tables.
+RecordingSet MakeSet(size_t samples = 200) {
+  RecordingSet s;
+  Manifest& m = s.manifest;
+  m.serial = "IPM-TEST-001";
+  m.motor.pole_pairs = 4;
+  m.motor.rs_ohm = 0.011;
+  m.motor.psi_pm_wb = 0.0089;
+  m.drive.udc_v = 50.0;
+  m.drive.f_pwm_hz = 10000.0;
+  m.drive.f_sample_hz = 10000.0;
+  m.drive.dead_time_s = 1e-6;
+  m.drive.dead_time_compensated = true;
+  m.injection = InjectionInfo{"rotating", 5.0, 500.0};
+  for (int p = 0; p < 2; ++p) {
+    PointSpec ps;
+    ps.id = "p00" + std::to_string(p);
+    ps.file = "points/" + ps.id + ".csv";
+    ps.id_ref_a = -20.0 * p;
+    ps.iq_ref_a = 40.0;
+    ps.temperature_c = 25.0;
+    m.points.push_back(ps);
+    Waveform w;
+    for (size_t k = 0; k < samples; ++k) {
+      const double t = static_cast<double>(k) / m.drive.f_sample_hz;
+      const double ph = 2 * std::numbers::pi * 500.0 * t;
+      w.t_s.push_back(t);
+      w.ia_a.push_back(10 * std::cos(ph));
+      w.ib_a.push_back(10 * std::cos(ph - 2.0944));
+      w.ic_a.push_back(10 * std::cos(ph + 2.0944));
+      w.theta_e_rad.push_back(0.3 * p);
+      w.ualpha_ref_v.push_back(5 * std::cos(ph));
+      w.ubeta_ref_v.push_back(5 * std::sin(ph));
+      w.udc_v.push_back(k % 2 ? 50.01 : std::nan(""));
+    }
+    s.waveforms.push_back(w);
+  }
+  m.steady_state = "steady_state.csv";
+  s.steady_state.push_back({-20, 60, 1000, -10.5, 20.25, 8.5, 25});
+  s.steady_state.push_back({0, 40, 2000, -12.5, 22.25, std::nullopt, std::nullopt});
+  m.hf_results = "hf_results.csv";
+  s.hf_results.push_back({-20, 40, 0, 1.8e-4, 3.5e-4, -1e-5, 25});
+  s.hf_results.push_back({0, 0, 0, 1.9e-4, 3.7e-4, std::nullopt, std::nullopt});
+  return s;
+}
+
+class RecordingSetTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("fluxcal_io_test_" + std::to_string(::getpid()) + "_" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    ASSERT_TRUE(WriteRecordingSet(dir_.string(), MakeSet()).ok());
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  std::string Read(const std::string& rel) {
+    std::ifstream f(dir_ / rel);
+    std::stringstream ss;
+    ss << f.rdbuf();
+    return ss.str();
+  }
+  void Write(const std::string& rel, const std::string& text) {
+    std::ofstream f(dir_ / rel, std::ios::trunc);
+    f << text;
+  }
+  // Replaces the first occurrence of `from` in file `rel`.
+  void Replace(const std::string& rel, const std::string& from, const std::string& to) {
+    std::string t = Read(rel);
+    const auto pos = t.find(from);
+    ASSERT_NE(pos, std::string::npos) << from << " not in " << rel;
+    t.replace(pos, from.size(), to);
+    Write(rel, t);
+  }
+  // Replaces line `line_no` (1-based) of a file.
+  void ReplaceLine(const std::string& rel, size_t line_no, const std::string& line) {
+    std::istringstream in(Read(rel));
+    std::string out, l;
+    size_t n = 0;
+    while (std::getline(in, l)) {
+      ++n;
+      out += (n == line_no ? line : l) + "\n";
+    }
+    Write(rel, out);
+  }
+  // 1-based line of the first occurrence of `needle` in file `rel`.
+  std::string LineOf(const std::string& rel, const std::string& needle) {
+    const std::string t = Read(rel);
+    const auto pos = t.find(needle);
+    return rel + ":" + std::to_string(1 + std::count(t.begin(), t.begin() + pos, '\n'));
+  }
+  // Expects an error whose message contains every fragment.
+  void ExpectError(absl::StatusCode code, const std::vector<std::string>& fragments) {
+    auto r = ReadRecordingSet(dir_.string());
+    ASSERT_FALSE(r.ok()) << "expected an error containing " << fragments[0];
+    EXPECT_EQ(r.status().code(), code) << r.status();
+    for (const auto& f : fragments) {
+      EXPECT_NE(std::string(r.status().message()).find(f), std::string::npos)
+          << "message '" << r.status().message() << "' lacks '" << f << "'";
+    }
+  }
+  fs::path dir_;
+};
+
+TEST_F(RecordingSetTest, RoundTrip) {
+  auto r = ReadRecordingSet(dir_.string());
+  ASSERT_TRUE(r.ok()) << r.status();
+  const RecordingSet want = MakeSet();
+  EXPECT_EQ(r->manifest.serial, want.manifest.serial);
+  EXPECT_EQ(r->manifest.motor.pole_pairs, 4);
+  EXPECT_DOUBLE_EQ(*r->manifest.motor.rs_ohm, 0.011);
+  EXPECT_EQ(*r->manifest.drive.dead_time_compensated, true);
+  ASSERT_EQ(r->manifest.points.size(), 2u);
+  ASSERT_EQ(r->waveforms.size(), 2u);
+  ASSERT_EQ(r->waveforms[1].size(), 200u);
+  for (size_t k = 0; k < 200; ++k) {
+    EXPECT_NEAR(r->waveforms[1].ia_a[k], want.waveforms[1].ia_a[k], 1e-7);
+    EXPECT_NEAR(r->waveforms[1].t_s[k], want.waveforms[1].t_s[k], 1e-12);
+    EXPECT_EQ(std::isnan(r->waveforms[1].udc_v[k]), k % 2 == 0);
+  }
+  EXPECT_NEAR(EffectiveUdc(*r, 0, 0), 50.0, 0);
+  EXPECT_NEAR(EffectiveUdc(*r, 0, 1), 50.01, 1e-12);
+  ASSERT_EQ(r->steady_state.size(), 2u);
+  EXPECT_FALSE(r->steady_state[1].torque_nm.has_value());
+  EXPECT_DOUBLE_EQ(*r->steady_state[0].torque_nm, 8.5);
+  ASSERT_EQ(r->hf_results.size(), 2u);
+  EXPECT_DOUBLE_EQ(*r->hf_results[0].ldq_h, -1e-5);
+  EXPECT_FALSE(r->hf_results[1].ldq_h.has_value());
+}
+
+TEST_F(RecordingSetTest, NonNumericCell) {
+  ReplaceLine("points/p001.csv", 41, "0.0039,x,1,1,0,0,0,50");
+  ExpectError(absl::StatusCode::kInvalidArgument, {"p001.csv:41", "field 'ia_a'", "'x'"});
+}
+
+TEST_F(RecordingSetTest, NanCell) {
+  ReplaceLine("points/p000.csv", 5, "0.0003,1,nan,1,0,0,0,50");
+  ExpectError(absl::StatusCode::kInvalidArgument, {"p000.csv:5", "field 'ib_a'"});
+}
+
+TEST_F(RecordingSetTest, InfCell) {
+  ReplaceLine("points/p000.csv", 6, "0.0004,1,1,inf,0,0,0,50");
+  ExpectError(absl::StatusCode::kInvalidArgument, {"p000.csv:6", "field 'ic_a'"});
+}
+
+TEST_F(RecordingSetTest, OverflowCell) {
+  ReplaceLine("points/p000.csv", 6, "0.0004,1,1,1e999,0,0,0,50");
+  ExpectError(absl::StatusCode::kInvalidArgument, {"p000.csv:6", "field 'ic_a'"});
+}
+
+TEST_F(RecordingSetTest, MissingColumn) {
+  Replace("points/p000.csv", "theta_e_rad,", "");
+  ExpectError(absl::StatusCode::kInvalidArgument, {"p000.csv:1", "field 'theta_e_rad'"});
+}
+
+TEST_F(RecordingSetTest, UnknownColumn) {
+  Replace("points/p000.csv", "udc_v\n", "udc_v,extra_v\n");
+  ExpectError(absl::StatusCode::kInvalidArgument, {"p000.csv:1", "field 'extra_v'"});
+}
+
+TEST_F(RecordingSetTest, MissingCell) {
+  ReplaceLine("points/p000.csv", 7, "0.0005,1,1,1,0");
+  ExpectError(absl::StatusCode::kInvalidArgument, {"p000.csv:7", "field 'ualpha_ref_v'"});
+}
+
+TEST_F(RecordingSetTest, NonMonotonicTime) {
+  ReplaceLine("points/p000.csv", 11, "0.0008,1,1,1,0,0,0,50");
+  ExpectError(absl::StatusCode::kInvalidArgument, {"p000.csv:11", "field 't_s'", "not increasing"});
+}
+
+TEST_F(RecordingSetTest, UnevenTime) {
+  ReplaceLine("points/p000.csv", 11, "0.00092,1,1,1,0,0,0,50");
+  ExpectError(absl::StatusCode::kInvalidArgument, {"p000.csv:11", "field 't_s'", "unevenly"});
+}
+
+TEST_F(RecordingSetTest, SampleRateDisagreesWithManifest) {
+  Replace("manifest.json", "\"f_sample_hz\": 10000.0", "\"f_sample_hz\": 20000.0");
+  ExpectError(absl::StatusCode::kInvalidArgument,
+              {"p000.csv:3", "field 't_s'", "f_sample_hz"});
+}
+
+TEST_F(RecordingSetTest, TooFewInjectionPeriods) {
+  ASSERT_TRUE(WriteRecordingSet(dir_.string(), MakeSet(190)).ok());
+  ExpectError(absl::StatusCode::kInvalidArgument, {"p000.csv", "field 't_s'", "injection periods"});
+}
+
+TEST_F(RecordingSetTest, IllegalSerial) {
+  Replace("manifest.json", "IPM-TEST-001", "IPM TEST/001");
+  ExpectError(absl::StatusCode::kInvalidArgument,
+              {LineOf("manifest.json", "\"serial\""), "field 'serial'"});
+}
+
+TEST_F(RecordingSetTest, EmptySerial) {
+  Replace("manifest.json", "IPM-TEST-001", "");
+  ExpectError(absl::StatusCode::kInvalidArgument, {"manifest.json", "field 'serial'"});
+}
+
+TEST_F(RecordingSetTest, UnknownFormatVersion) {
+  Replace("manifest.json", "fluxcal.recording.v1", "fluxcal.recording.v9");
+  ExpectError(absl::StatusCode::kInvalidArgument,
+              {LineOf("manifest.json", "\"format\""), "field 'format'", "v9"});
+}
+
+TEST_F(RecordingSetTest, MissingReferencedWaveform) {
+  fs::remove(dir_ / "points/p001.csv");
+  ExpectError(absl::StatusCode::kNotFound, {"manifest.json", "field 'points[1].file'", "p001.csv"});
+}
+
+TEST_F(RecordingSetTest, MissingSteadyStateFile) {
+  fs::remove(dir_ / "steady_state.csv");
+  ExpectError(absl::StatusCode::kNotFound, {"manifest.json", "field 'steady_state'"});
+}
+
+TEST_F(RecordingSetTest, MissingManifest) {
+  fs::remove(dir_ / "manifest.json");
+  ExpectError(absl::StatusCode::kNotFound, {"manifest.json"});
+}
+
+TEST_F(RecordingSetTest, MissingRequiredPolePairs) {
+  Replace("manifest.json", "\"pole_pairs\": 4,", "");
+  ExpectError(absl::StatusCode::kInvalidArgument, {"manifest.json", "field 'motor.pole_pairs'"});
+}
+
+TEST_F(RecordingSetTest, WrongJsonType) {
+  Replace("manifest.json", "\"amplitude_v\": 5.0", "\"amplitude_v\": \"five\"");
+  ExpectError(absl::StatusCode::kInvalidArgument, {"manifest.json", "field 'injection.amplitude_v'"});
+}
+
+TEST_F(RecordingSetTest, JsonSyntaxError) {
+  Replace("manifest.json", "\"serial\":", "\"serial\"");
+  ExpectError(absl::StatusCode::kInvalidArgument,
+              {LineOf("manifest.json", "\"serial\""), "syntax"});
+}
+
+TEST_F(RecordingSetTest, PathEscapingTheSet) {
+  Replace("manifest.json", "\"points/p001.csv\"", "\"../p001.csv\"");
+  ExpectError(absl::StatusCode::kInvalidArgument, {"manifest.json", "field 'points[1].file'"});
+}
+
+TEST_F(RecordingSetTest, DuplicatePointId) {
+  Replace("manifest.json", "\"id\": \"p001\"", "\"id\": \"p000\"");
+  ExpectError(absl::StatusCode::kInvalidArgument, {"manifest.json", "field 'points[1].id'", "duplicate"});
+}
+
+TEST_F(RecordingSetTest, SteadyStateBadCell) {
+  ReplaceLine("steady_state.csv", 3, "0,40,fast,-12.5,22.25,,");
+  ExpectError(absl::StatusCode::kInvalidArgument, {"steady_state.csv:3", "field 'speed_rpm'"});
+}
+
+TEST_F(RecordingSetTest, HfResultsNegativeInductance) {
+  ReplaceLine("hf_results.csv", 2, "-20,40,0,-1.8e-4,3.5e-4,,");
+  ExpectError(absl::StatusCode::kInvalidArgument, {"hf_results.csv:2", "field 'ld_h'"});
+}
+
+TEST(ExampleSets, ReadAllThree) {
+  const fs::path root = fs::path(FLUXCAL_SHARED_DIR) / "examples";
+  if (!fs::exists(root)) GTEST_SKIP() << "shared examples not present at " << root;
+  for (const char* name : {"clean", "dead_time", "cross_saturation"}) {
+    auto r = ReadRecordingSet((root / name).string());
+    ASSERT_TRUE(r.ok()) << name << ": " << r.status();
+    EXPECT_EQ(r->manifest.points.size(), 42u) << name;
+    for (const auto& w : r->waveforms) EXPECT_EQ(w.size(), 1000u) << name;
+    EXPECT_GT(r->steady_state.size(), 0u) << name;
+  }
+}
+
+TEST(Serial, Rules) {
+  EXPECT_TRUE(IsValidSerial("IPM-2026-000123"));
+  EXPECT_TRUE(IsValidSerial("a.b_c-D9"));
+  EXPECT_FALSE(IsValidSerial(""));
+  EXPECT_FALSE(IsValidSerial(std::string(65, 'a')));
+  EXPECT_TRUE(IsValidSerial(std::string(64, 'a')));
+  EXPECT_FALSE(IsValidSerial("a b"));
+  EXPECT_FALSE(IsValidSerial("a/b"));
+}
+
+}  // namespace
+}  // namespace fluxcal::io
