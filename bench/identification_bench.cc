@@ -1,0 +1,62 @@
+// Throughput of the HF demodulators on one core, in samples per second
+// (a sample = ia, ib, ic, theta_e). Run:
+//   ./build/bench/identification_bench --benchmark_min_time=1
+#include <cmath>
+#include <numbers>
+#include <random>
+#include <vector>
+
+#include "benchmark/benchmark.h"
+#include "identification/demod.h"
+
+namespace {
+
+struct Data {
+  std::vector<double> ia, ib, ic, th;
+};
+
+Data MakeData(size_t n, double speed_rad_s) {
+  Data d;
+  std::mt19937_64 rng(1);
+  std::normal_distribution<double> nd(0, 0.05);
+  const double w = 2 * std::numbers::pi * 500;
+  for (size_t k = 0; k < n; ++k) {
+    const double t = k * 1e-4;
+    const double th = 0.4 + speed_rad_s * t;
+    const double a = 6 * std::cos(w * t) + 2 * std::cos(2 * th - w * t) + 30 * std::cos(th);
+    const double b = 6 * std::sin(w * t) + 2 * std::sin(2 * th - w * t) + 30 * std::sin(th);
+    d.ia.push_back(a + nd(rng));
+    d.ib.push_back(-0.5 * a + 0.8660254 * b + nd(rng));
+    d.ic.push_back(-0.5 * a - 0.8660254 * b + nd(rng));
+    d.th.push_back(std::remainder(th, 2 * std::numbers::pi));
+  }
+  return d;
+}
+
+void BM_Lsq(benchmark::State& state) {
+  const Data d = MakeData(static_cast<size_t>(state.range(0)), 418.9);
+  fluxcal::ident::PhaseSamples s{d.ia.data(), d.ib.data(), d.ic.data(), d.th.data(), d.ia.size(),
+                                 10000.0, 500.0};
+  for (auto _ : state) {
+    auto e = fluxcal::ident::LsqDemodulate(s);
+    benchmark::DoNotOptimize(e);
+  }
+  state.SetItemsProcessed(state.iterations() * state.range(0));
+}
+BENCHMARK(BM_Lsq)->Arg(1000)->Arg(100000);
+
+void BM_Paper(benchmark::State& state) {
+  const Data d = MakeData(static_cast<size_t>(state.range(0)), 418.9);
+  fluxcal::ident::PhaseSamples s{d.ia.data(), d.ib.data(), d.ic.data(), d.th.data(), d.ia.size(),
+                                 10000.0, 500.0};
+  for (auto _ : state) {
+    auto e = fluxcal::ident::PaperDemodulate(s, true);
+    benchmark::DoNotOptimize(e);
+  }
+  state.SetItemsProcessed(state.iterations() * state.range(0));
+}
+BENCHMARK(BM_Paper)->Arg(1000)->Arg(100000);
+
+}  // namespace
+
+BENCHMARK_MAIN();
