@@ -146,6 +146,7 @@ struct PointRun {
   double mean_ud_cmd = 0, mean_uq_cmd = 0;    // controller frame, fundamental
   double mean_ud_applied = 0, mean_uq_applied = 0;   // true frame, incl. errors
   double mean_torque_nm = 0;
+  double avg_id = 0, avg_iq = 0, avg_psd = 0, avg_psq = 0, dpsd = 0, dpsq = 0;
   bool clipped = false;
 };
 
@@ -165,7 +166,9 @@ PointRun RunPoint(const TwinConfig& cfg, const PlantModel& m, double id_ref, dou
   const double vi = inject ? cfg.injection.amplitude_v : 0.0;
   const size_t period = std::max<size_t>(1, static_cast<size_t>(std::llround(fs / cfg.injection.frequency_hz)));
   const int delay_sub = static_cast<int>(std::llround(cfg.effects.delay_s / h));
-  const double dtheta_enc = 2 * kPi * pp / cfg.sensors.encoder_counts_per_mech_rev;
+  const double dtheta_enc = cfg.sensors.encoder_counts_per_mech_rev > 0
+                                  ? 2 * kPi * pp / cfg.sensors.encoder_counts_per_mech_rev
+                                  : 0.0;
   std::normal_distribution<double> noise(0.0, cfg.sensors.noise_a);
   std::normal_distribution<double> unoise(0.0, cfg.sensors.udc_noise_v);
 
@@ -274,7 +277,11 @@ PointRun RunPoint(const TwinConfig& cfg, const PlantModel& m, double id_ref, dou
       std::pair<double, double> u = per >= 0 ? cmds[per] : cmd_hist.front();
       const double th_j = th + we * h * j;
       if (k >= n_settle) {
-        const double cj = std::cos(th_j), sj = std::sin(th_j);
+        // Exact mean of the held alpha-beta voltage in the rotating frame
+        // over the sub-step: e^{-j theta_mid} sin(y)/y, y = w_e h / 2.
+        const double y = 0.5 * we * h;
+        const double sinc = std::abs(y) < 1e-12 ? 1.0 : std::sin(y) / y;
+        const double cj = sinc * std::cos(th_j + y), sj = sinc * std::sin(th_j + y);
         double eal, ebe;
         const double al = cj * x.i.d - sj * x.i.q, be = sj * x.i.d + cj * x.i.q;
         DeadTimeError(m, al, -0.5 * al + 0.5 * kSqrt3 * be, -0.5 * al - 0.5 * kSqrt3 * be, &eal, &ebe);
@@ -282,7 +289,15 @@ PointRun RunPoint(const TwinConfig& cfg, const PlantModel& m, double id_ref, dou
         acc_uq_app += -sj * (u.first + eal) + cj * (u.second + ebe);
         ++acc_app;
       }
+      const State before = x;
       Rk4(m, &x, th_j, we, h, u.first, u.second);
+      if (k >= n_settle) {
+        if (k == n_settle && j == 0) { out.dpsd = -before.psd; out.dpsq = -before.psq; }
+        out.avg_id += 0.5 * (before.i.d + x.i.d);
+        out.avg_iq += 0.5 * (before.i.q + x.i.q);
+        out.avg_psd += 0.5 * (before.psd + x.psd);
+        out.avg_psq += 0.5 * (before.psq + x.psq);
+      }
     }
   }
   const double nr = static_cast<double>(std::max<size_t>(1, n_rec));
@@ -291,6 +306,10 @@ PointRun RunPoint(const TwinConfig& cfg, const PlantModel& m, double id_ref, dou
   out.mean_ud_cmd /= nr;
   out.mean_uq_cmd /= nr;
   out.mean_torque_nm /= nr;
+  const double na = static_cast<double>(std::max<size_t>(1, acc_app));
+  out.avg_id /= na; out.avg_iq /= na; out.avg_psd /= na; out.avg_psq /= na;
+  out.dpsd = (out.dpsd + x.psd) / (nr * ts);
+  out.dpsq = (out.dpsq + x.psq) / (nr * ts);
   out.mean_ud_applied = acc_ud_app / std::max<size_t>(1, acc_app);
   out.mean_uq_applied = acc_uq_app / std::max<size_t>(1, acc_app);
   return out;
@@ -490,6 +509,12 @@ absl::StatusOr<SimulationResult> Simulate(const TwinConfig& cfg, const Plan& pla
       set.steady_state.push_back(row);
       res.truth_steady_state.push_back(MakeTruth(cfg, m, "", run.mean_id_true, run.mean_iq_true,
                                                  ss.speed_rpm, ss.temperature_c, 0.0));
+      res.truth_steady_state.back().applied_ud_v = run.mean_ud_applied;
+      res.truth_steady_state.back().applied_uq_v = run.mean_uq_applied;
+      auto& tb = res.truth_steady_state.back();
+      tb.avg_id_a = run.avg_id; tb.avg_iq_a = run.avg_iq;
+      tb.avg_psi_d_wb = run.avg_psd; tb.avg_psi_q_wb = run.avg_psq;
+      tb.dpsi_d_dt = run.dpsd; tb.dpsi_q_dt = run.dpsq;
     }
   }
   return res;

@@ -73,7 +73,7 @@ struct DriveParams {
 struct SensorParams {
   double noise_a = 0.05;               // current noise sigma per phase
   double adc_lsb_a = 250.0 * 2 / 4096; // 12 bit over +-250 A
-  int encoder_counts_per_mech_rev = 4096;
+  int encoder_counts_per_mech_rev = 4096;   // 0: ideal angle sensor
   double udc_noise_v = 0.02;
 };
 
@@ -127,6 +127,11 @@ struct TruthPoint {
   double id_true_a = 0, iq_true_a = 0, speed_rpm = 0, temperature_c = 25;
   double psi_d_wb = 0, psi_q_wb = 0, ldd_h = 0, lqq_h = 0, ldq_h = 0;
   double ld_app_h = 0, lq_app_h = 0, torque_nm = 0, psi_pm_wb = 0;
+  // Mean voltage the inverter applied over the window, true dq frame.
+  double applied_ud_v = 0, applied_uq_v = 0;
+  // Time averages over the window (trapezoidal over sub-steps), true frame.
+  double avg_id_a = 0, avg_iq_a = 0, avg_psi_d_wb = 0, avg_psi_q_wb = 0;
+  double dpsi_d_dt = 0, dpsi_q_dt = 0;   // (psi_end - psi_start) / window
 };
 
 struct SimulationResult {
