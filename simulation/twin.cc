@@ -242,7 +242,13 @@ PointRun RunPoint(const TwinConfig& cfg, const PlantModel& m, double id_ref, dou
     const double ud = kp_d * ed + int_d - we * cfg.control.lq_nominal_h * ifq;
     const double uq = kp_q * eq + int_q + we * (cfg.control.ld_nominal_h * ifd + psi_pm_nom);
     const double inj_c = std::cos(wi * t), inj_s = std::sin(wi * t);
-    double ual = cm * ud - sm * uq + vi * inj_c, ube = sm * ud + cm * uq + vi * inj_s;
+    // Inverse Park at the angle the rotor will have in the middle of the
+    // period the command is applied in (theta + 1.5 w_e Ts): the usual ECU
+    // delay compensation, so the dq command is the fundamental voltage the
+    // machine sees (up to the hold's sinc gain), as steady_state.csv states.
+    const double thc = th_meas + 1.5 * we * ts;
+    const double cc = std::cos(thc), sc = std::sin(thc);
+    double ual = cc * ud - sc * uq + vi * inj_c, ube = sc * ud + cc * uq + vi * inj_s;
     // Modulator: linear range of space-vector PWM, |u| <= Udc / sqrt(3).
     const double umag = std::hypot(ual, ube);
     if (umag > m.u_max_v) {

@@ -77,12 +77,11 @@ TEST(Twin, SteadyStateSatisfiesMachineEquations) {
   ASSERT_TRUE(r.ok()) << r.status();
   const auto& t = r->truth_steady_state[0];
   const double we = 1500 * 4 * 2 * kPi / 60;
-  // The recorded command leads the voltage the machine sees by the
-  // inverter's 1.5-period delay (rotation by w_e 1.5 Ts in dq) and by the
-  // zero-order hold gain: undo that to compare with u = Rs i + w J psi.
+  // The bench compensates the inverter's 1.5-period delay in its inverse
+  // Park; the zero-order hold still scales the fundamental by sin(x)/x.
   const double ts = 1e-4, x = we * ts / 2;
   const std::complex<double> cmd(r->set.steady_state[0].ud_ref_v, r->set.steady_state[0].uq_ref_v);
-  const std::complex<double> seen = cmd * std::polar(std::sin(x) / x, -1.5 * we * ts);
+  const std::complex<double> seen = cmd * (std::sin(x) / x);
   const double ud = cfg.motor.rs_ohm * t.id_true_a - we * t.psi_q_wb;
   const double uq = cfg.motor.rs_ohm * t.iq_true_a + we * t.psi_d_wb;
   const double mag = std::hypot(ud, uq);

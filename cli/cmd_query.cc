@@ -1,0 +1,111 @@
+// fluxcal query calibration.json --id-a -20 --iq-a 40 [--json]
+// fluxcal query calibration.json --grid ID_MIN:ID_MAX:N,IQ_MIN:IQ_MAX:M  (CSV)
+// Flux linkage, differential and apparent inductance and torque with
+// standard deviations at any (id, iq).
+#include <cstdio>
+#include <iostream>
+
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_format.h"
+#include "absl/strings/str_split.h"
+#include "cli/args.h"
+#include "cli/command.h"
+#include "fitting/calibration.h"
+#include "nlohmann/json.hpp"
+
+namespace fluxcal::cli {
+namespace {
+
+int Fail(const std::string& m, int code = 1) {
+  std::fprintf(stderr, "fluxcal query: %s\n", m.c_str());
+  return code;
+}
+
+nlohmann::json ToJson(double id, double iq, const fit::FluxPrediction& p) {
+  return {{"id_a", id}, {"iq_a", iq}, {"psi_d_wb", p.psi_d_wb}, {"psi_q_wb", p.psi_q_wb},
+          {"ldd_h", p.ldd_h}, {"lqq_h", p.lqq_h}, {"ldq_h", p.ldq_h}, {"ld_app_h", p.ld_app_h},
+          {"lq_app_h", p.lq_app_h}, {"torque_nm", p.torque_nm}, {"psi_d_wb_std", p.psi_d_wb_std},
+          {"psi_q_wb_std", p.psi_q_wb_std}, {"ldd_h_std", p.ldd_h_std}, {"lqq_h_std", p.lqq_h_std},
+          {"ldq_h_std", p.ldq_h_std}, {"ld_app_h_std", p.ld_app_h_std}, {"lq_app_h_std", p.lq_app_h_std},
+          {"torque_nm_std", p.torque_nm_std}, {"extrapolated", p.extrapolated}};
+}
+
+const char* kCsvHeader =
+    "id_a,iq_a,psi_d_wb,psi_q_wb,ldd_h,lqq_h,ldq_h,ld_app_h,lq_app_h,torque_nm,psi_d_wb_std,"
+    "psi_q_wb_std,ldd_h_std,lqq_h_std,ldq_h_std,torque_nm_std,extrapolated\n";
+
+std::string CsvRow(double id, double iq, const fit::FluxPrediction& p) {
+  return absl::StrFormat("%g,%g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.3g,%.3g,%.3g,%.3g,%.3g,%.3g,%d\n",
+                         id, iq, p.psi_d_wb, p.psi_q_wb, p.ldd_h, p.lqq_h, p.ldq_h, p.ld_app_h,
+                         p.lq_app_h, p.torque_nm, p.psi_d_wb_std, p.psi_q_wb_std, p.ldd_h_std,
+                         p.lqq_h_std, p.ldq_h_std, p.torque_nm_std, p.extrapolated ? 1 : 0);
+}
+
+bool ParseAxis(const std::string& s, double* lo, double* hi, int* n) {
+  std::vector<std::string> f = absl::StrSplit(s, ':');
+  return f.size() == 3 && absl::SimpleAtod(f[0], lo) && absl::SimpleAtod(f[1], hi) &&
+         absl::SimpleAtoi(f[2], n) && *n >= 1 && *n <= 10000;
+}
+
+}  // namespace
+
+int RunQueryLocal(const std::vector<std::string>& argv) {
+  auto args = ParseArgs(argv, {"id-a", "iq-a", "grid"}, {"json", "csv"});
+  if (!args.ok()) return Fail(std::string(args.status().message()), 2);
+  if (args->positional.size() != 1) {
+    return Fail("usage: fluxcal query calibration.json (--id-a A --iq-a A | --grid "
+                "IDMIN:IDMAX:N,IQMIN:IQMAX:M) [--json|--csv]", 2);
+  }
+  auto cal = fit::LoadCalibrationFile(args->positional[0]);
+  if (!cal.ok()) return Fail(std::string(cal.status().message()));
+  if (auto g = args->Get("grid")) {
+    std::vector<std::string> axes = absl::StrSplit(*g, ',');
+    double a0, a1, b0, b1;
+    int na, nb;
+    if (axes.size() != 2 || !ParseAxis(axes[0], &a0, &a1, &na) || !ParseAxis(axes[1], &b0, &b1, &nb)) {
+      return Fail("flag --grid: expected IDMIN:IDMAX:N,IQMIN:IQMAX:M", 2);
+    }
+    nlohmann::json arr = nlohmann::json::array();
+    std::string csv = kCsvHeader;
+    for (int i = 0; i < na; ++i) {
+      for (int j = 0; j < nb; ++j) {
+        const double id = na == 1 ? a0 : a0 + (a1 - a0) * i / (na - 1);
+        const double iq = nb == 1 ? b0 : b0 + (b1 - b0) * j / (nb - 1);
+        const auto p = cal->Predict(id, iq);
+        if (args->Has("json")) arr.push_back(ToJson(id, iq, p)); else csv += CsvRow(id, iq, p);
+      }
+    }
+    if (args->Has("json")) std::cout << nlohmann::json{{"serial", cal->serial()}, {"points", arr}}.dump(2) << "\n";
+    else std::cout << csv;
+    return 0;
+  }
+  auto id = args->GetDouble("id-a");
+  auto iq = args->GetDouble("iq-a");
+  if (!id.ok() || !iq.ok() || !id->has_value() || !iq->has_value()) {
+    return Fail("need --id-a and --iq-a (finite numbers) or --grid", 2);
+  }
+  const auto p = cal->Predict(**id, **iq);
+  if (args->Has("json")) {
+    std::cout << ToJson(**id, **iq, p).dump(2) << "\n";
+  } else if (args->Has("csv")) {
+    std::cout << kCsvHeader << CsvRow(**id, **iq, p);
+  } else {
+    std::printf("serial %s at id = %g A, iq = %g A%s\n", cal->serial().c_str(), **id, **iq,
+                p.extrapolated ? " (extrapolated)" : "");
+    std::printf("  psi_d = %.6g +- %.2g Wb   psi_q = %.6g +- %.2g Wb\n", p.psi_d_wb, p.psi_d_wb_std,
+                p.psi_q_wb, p.psi_q_wb_std);
+    std::printf("  Ldd = %.5g mH  Lqq = %.5g mH  Ldq = %.4g mH (differential)\n", p.ldd_h * 1e3,
+                p.lqq_h * 1e3, p.ldq_h * 1e3);
+    std::printf("  Ld_app = %.5g mH  Lq_app = %.5g mH (apparent)   torque = %.4g +- %.2g N m\n",
+                p.ld_app_h * 1e3, p.lq_app_h * 1e3, p.torque_nm, p.torque_nm_std);
+  }
+  return 0;
+}
+
+namespace {
+int RunQuery(const std::vector<std::string>& argv) { return RunQueryLocal(argv); }
+}  // namespace
+
+FLUXCAL_REGISTER_COMMAND("query", "flux linkage and inductance of a calibration at any (id, iq)", RunQuery);
+
+}  // namespace fluxcal::cli

@@ -1,0 +1,167 @@
+#include "fitting/calibration.h"
+
+#include <cmath>
+#include <fstream>
+#include <sstream>
+
+#include <Eigen/Dense>
+
+#include "absl/strings/str_cat.h"
+#include "io/csv.h"
+#include "nlohmann/json.hpp"
+
+namespace fluxcal::fit {
+
+Calibration::Calibration(std::string serial, Family family, std::vector<double> params,
+                         std::vector<double> covariance, int pole_pairs, double rs_ohm,
+                         double id_min_a, double id_max_a, double iq_min_a, double iq_max_a)
+    : serial_(std::move(serial)), family_(family), params_(std::move(params)),
+      covariance_(std::move(covariance)), pole_pairs_(pole_pairs), rs_ohm_(rs_ohm),
+      id_min_a_(id_min_a), id_max_a_(id_max_a), iq_min_a_(iq_min_a), iq_max_a_(iq_max_a) {}
+
+sim::FluxLinkage Calibration::Flux(double id, double iq, double) const {
+  sim::FluxLinkage f;
+  FamilyFlux(family_, id, iq, params_.data(), &f.psi_d_wb, &f.psi_q_wb);
+  return f;
+}
+
+sim::DifferentialInductance Calibration::Inductance(double id, double iq, double) const {
+  sim::DifferentialInductance l;
+  FamilyInductance(family_, id, iq, params_.data(), &l.ldd_h, &l.lqq_h, &l.ldq_h);
+  return l;
+}
+
+bool Calibration::InMeasuredRegion(double id, double iq) const {
+  // Measured region: the box spanned by the data, with 2 % margin. The
+  // machine's symmetry psi(id, -iq) = (psi_d, -psi_q) mirrors it to iq < 0.
+  const double mi = 0.02 * (id_max_a_ - id_min_a_ + 1.0), mq = 0.02 * (iq_max_a_ - iq_min_a_ + 1.0);
+  const double aq = iq_min_a_ >= 0 ? std::abs(iq) : iq;
+  return id >= id_min_a_ - mi && id <= id_max_a_ + mi && aq >= iq_min_a_ - mq && aq <= iq_max_a_ + mq;
+}
+
+FluxPrediction Calibration::Predict(double id, double iq) const {
+  // Outputs y(p) = (psi_d, psi_q, Ldd, Lqq, Ldq, Ld_app, Lq_app, T).
+  auto eval = [&](const std::vector<double>& p, double* y) {
+    double pd, pq, a, b, c;
+    FamilyFlux(family_, id, iq, p.data(), &pd, &pq);
+    FamilyInductance(family_, id, iq, p.data(), &a, &b, &c);
+    y[0] = pd; y[1] = pq; y[2] = a; y[3] = b; y[4] = c;
+    y[5] = std::abs(id) > 1e-9 ? (pd - p[0]) / id : a;
+    y[6] = std::abs(iq) > 1e-9 ? pq / iq : b;
+    y[7] = 1.5 * pole_pairs_ * (pd * iq - pq * id);
+  };
+  double y[8];
+  eval(params_, y);
+  FluxPrediction out;
+  out.psi_d_wb = y[0]; out.psi_q_wb = y[1]; out.ldd_h = y[2]; out.lqq_h = y[3]; out.ldq_h = y[4];
+  out.ld_app_h = y[5]; out.lq_app_h = y[6]; out.torque_nm = y[7];
+  out.extrapolated = !InMeasuredRegion(id, iq);
+  const size_t n = params_.size();
+  if (covariance_.size() == n * n) {
+    Eigen::MatrixXd J(8, n);
+    for (size_t k = 0; k < n; ++k) {
+      std::vector<double> pp = params_, pm = params_;
+      const double h = 1e-6 * std::max(std::abs(params_[k]), 1e-9);
+      pp[k] += h; pm[k] -= h;
+      double yp[8], ym[8];
+      eval(pp, yp);
+      eval(pm, ym);
+      for (int r = 0; r < 8; ++r) J(r, k) = (yp[r] - ym[r]) / (2 * h);
+    }
+    const Eigen::Map<const Eigen::MatrixXd> C(covariance_.data(), n, n);
+    const Eigen::MatrixXd V = J * C * J.transpose();
+    auto sd = [&](int r) { return std::sqrt(std::max(0.0, V(r, r))); };
+    out.psi_d_wb_std = sd(0); out.psi_q_wb_std = sd(1); out.ldd_h_std = sd(2);
+    out.lqq_h_std = sd(3); out.ldq_h_std = sd(4); out.ld_app_h_std = sd(5);
+    out.lq_app_h_std = sd(6); out.torque_nm_std = sd(7);
+  }
+  return out;
+}
+
+nlohmann::json Calibration::ToJson() const {
+  nlohmann::json j;
+  j["format"] = "fluxcal.calibration.v1";
+  j["serial"] = serial_;
+  j["version"] = version;
+  j["model"] = family_.Name();
+  j["pole_pairs"] = pole_pairs_;
+  j["rs_ohm"] = rs_ohm_;
+  j["psi_pm_wb"] = psi_pm_wb();
+  j["params"] = params_;
+  j["covariance"] = covariance_;
+  j["region"] = {{"id_min_a", id_min_a_}, {"id_max_a", id_max_a_},
+                 {"iq_min_a", iq_min_a_}, {"iq_max_a", iq_max_a_}};
+  j["fit"] = {{"observations", summary.observations}, {"chi2", summary.chi2}, {"bic", summary.bic},
+              {"rms_relative", summary.rms_relative}, {"termination", summary.termination},
+              {"usable", summary.usable}, {"candidates", summary.candidates}};
+  return j;
+}
+
+absl::StatusOr<Calibration> Calibration::FromJson(const nlohmann::json& j) {
+  try {
+    if (j.value("format", "") != "fluxcal.calibration.v1") {
+      return absl::InvalidArgumentError("field 'format': expected 'fluxcal.calibration.v1'");
+    }
+    Family fam;
+    const std::string model = j.at("model").get<std::string>();
+    if (model == "analytic") {
+      fam.kind = Family::kAnalytic;
+    } else if (model.rfind("poly", 0) == 0) {
+      fam.kind = Family::kPoly;
+      fam.degree = std::stoi(model.substr(4));
+      if (fam.degree < 2 || fam.degree > 12) return absl::InvalidArgumentError("field 'model': bad degree");
+    } else {
+      return absl::InvalidArgumentError(absl::StrCat("field 'model': unknown model '", model, "'"));
+    }
+    auto params = j.at("params").get<std::vector<double>>();
+    if (static_cast<int>(params.size()) != fam.NumParams()) {
+      return absl::InvalidArgumentError(absl::StrCat("field 'params': expected ", fam.NumParams(),
+                                                     " values for ", model, ", got ", params.size()));
+    }
+    auto cov = j.value("covariance", std::vector<double>{});
+    if (!cov.empty() && cov.size() != params.size() * params.size()) {
+      return absl::InvalidArgumentError("field 'covariance': wrong size");
+    }
+    const auto& r = j.at("region");
+    Calibration c(j.at("serial").get<std::string>(), fam, params, cov, j.at("pole_pairs").get<int>(),
+                  j.at("rs_ohm").get<double>(), r.at("id_min_a").get<double>(),
+                  r.at("id_max_a").get<double>(), r.at("iq_min_a").get<double>(),
+                  r.at("iq_max_a").get<double>());
+    c.version = j.value("version", 0);
+    if (j.contains("fit")) {
+      const auto& f = j["fit"];
+      c.summary.observations = f.value("observations", 0);
+      c.summary.chi2 = f.value("chi2", 0.0);
+      c.summary.bic = f.value("bic", 0.0);
+      c.summary.rms_relative = f.value("rms_relative", 0.0);
+      c.summary.termination = f.value("termination", "");
+      c.summary.usable = f.value("usable", false);
+      c.summary.candidates = f.value("candidates", std::vector<std::string>{});
+    }
+    return c;
+  } catch (const nlohmann::json::exception& e) {
+    return absl::InvalidArgumentError(absl::StrCat("calibration JSON: ", e.what()));
+  } catch (const std::exception& e) {
+    return absl::InvalidArgumentError(absl::StrCat("calibration JSON: ", e.what()));
+  }
+}
+
+absl::StatusOr<Calibration> LoadCalibrationFile(const std::string& path) {
+  auto text = io::ReadFileToString(path);
+  if (!text.ok()) return text.status();
+  nlohmann::json j;
+  try {
+    j = nlohmann::json::parse(*text);
+  } catch (const nlohmann::json::parse_error& e) {
+    return absl::InvalidArgumentError(absl::StrCat(path, ": ", e.what()));
+  }
+  auto c = Calibration::FromJson(j);
+  if (!c.ok()) return absl::InvalidArgumentError(absl::StrCat(path, ": ", c.status().message()));
+  return c;
+}
+
+absl::Status SaveCalibrationFile(const std::string& path, const Calibration& cal) {
+  return io::WriteFileAtomically(path, cal.ToJson().dump(2) + "\n");
+}
+
+}  // namespace fluxcal::fit

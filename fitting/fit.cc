@@ -1,0 +1,373 @@
+#include "fitting/fit.h"
+
+#include <algorithm>
+#include <cmath>
+#include <complex>
+#include <limits>
+#include <numbers>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "ceres/ceres.h"
+#include "identification/identify.h"
+
+namespace fluxcal::fit {
+namespace {
+
+constexpr double kPi = std::numbers::pi;
+
+// Residual of one differential-inductance component: (L_model - L_obs)/sigma,
+// L_model = d^2 W'/di di (flux_family.h). component: 0 Ldd, 1 Lqq, 2 Ldq.
+class InductanceResidual {
+ public:
+  InductanceResidual(Family f, double id, double iq, int component, double value, double sigma)
+      : f_(f), id_(id), iq_(iq), c_(component), v_(value), s_(sigma) {}
+  template <typename T>
+  bool operator()(const T* const* pp, T* r) const {
+    const T* p = pp[0];
+    T ldd, lqq, ldq;
+    FamilyInductance(f_, T(id_), T(iq_), p, &ldd, &lqq, &ldq);
+    const T m = c_ == 0 ? ldd : (c_ == 1 ? lqq : ldq);
+    r[0] = (m - v_) / s_;
+    return true;
+  }
+ private:
+  Family f_;
+  double id_, iq_;
+  int c_;
+  double v_, s_;
+};
+
+// The wrong model a MATLAB script often uses: psi = psi_pm + L_hf i with the
+// differential inductance taken as apparent. Only for the comparison test.
+class ApparentResidual {
+ public:
+  ApparentResidual(Family f, double id, double iq, int component, double value, double sigma)
+      : f_(f), id_(id), iq_(iq), c_(component), v_(value), s_(sigma) {}
+  template <typename T>
+  bool operator()(const T* const* pp, T* r) const {
+    const T* p = pp[0];
+    T pd, pq;
+    FamilyFlux(f_, T(id_), T(iq_), p, &pd, &pq);
+    T m;
+    if (c_ == 0) m = std::abs(id_) > 1e-6 ? (pd - p[0]) / T(id_) : T(v_);
+    else if (c_ == 1) m = std::abs(iq_) > 1e-6 ? pq / T(iq_) : T(v_);
+    else m = T(v_);
+    r[0] = (m - v_) / s_;
+    return true;
+  }
+ private:
+  Family f_;
+  double id_, iq_;
+  int c_;
+  double v_, s_;
+};
+
+// Steady-state flux linkage component (from voltages at speed).
+class FluxResidual {
+ public:
+  FluxResidual(Family f, double id, double iq, int component, double value, double sigma)
+      : f_(f), id_(id), iq_(iq), c_(component), v_(value), s_(sigma) {}
+  template <typename T>
+  bool operator()(const T* const* pp, T* r) const {
+    const T* p = pp[0];
+    T pd, pq;
+    FamilyFlux(f_, T(id_), T(iq_), p, &pd, &pq);
+    r[0] = ((c_ == 0 ? pd : pq) - v_) / s_;
+    return true;
+  }
+ private:
+  Family f_;
+  double id_, iq_;
+  int c_;
+  double v_, s_;
+};
+
+// Torque T = 1.5 p (psi_d iq - psi_q id) (docs/recording-format.md).
+class TorqueResidual {
+ public:
+  TorqueResidual(Family f, int pp, double id, double iq, double value, double sigma)
+      : f_(f), pp_(pp), id_(id), iq_(iq), v_(value), s_(sigma) {}
+  template <typename T>
+  bool operator()(const T* const* pp, T* r) const {
+    const T* p = pp[0];
+    T pd, pq;
+    FamilyFlux(f_, T(id_), T(iq_), p, &pd, &pq);
+    r[0] = (1.5 * pp_ * (pd * iq_ - pq * id_) - v_) / s_;
+    return true;
+  }
+ private:
+  Family f_;
+  int pp_;
+  double id_, iq_, v_, s_;
+};
+
+// Prior on psi_pm = p[0].
+class PriorResidual {
+ public:
+  PriorResidual(double v, double s) : v_(v), s_(s) {}
+  template <typename T>
+  bool operator()(const T* const* pp, T* r) const {
+    const T* p = pp[0];
+    r[0] = (p[0] - v_) / s_;
+    return true;
+  }
+ private:
+  double v_, s_;
+};
+
+// Dynamic-size parameter blocks: the number of parameters depends on the
+// family, so the functors are wrapped in DynamicAutoDiffCostFunction.
+template <typename F>
+ceres::CostFunction* Make(F* f, int n) {
+  auto* c = new ceres::DynamicAutoDiffCostFunction<F, 8>(f);
+  c->AddParameterBlock(n);
+  c->SetNumResiduals(1);
+  return c;
+}
+
+struct Built {
+  std::vector<double> params;
+  std::unique_ptr<ceres::Problem> problem;
+  int residuals = 0;
+};
+
+std::vector<double> InitialParams(const Family& f, const FitData& d) {
+  const double psi_pm = d.psi_pm_prior_wb.value_or(0.01);
+  if (f.kind == Family::kAnalytic) {
+    // Start from the inductance data themselves.
+    double ld = 0, lq = 0;
+    for (const auto& o : d.inductances) { ld += o.ldd_h; lq += o.lqq_h; }
+    const double n = std::max<size_t>(1, d.inductances.size());
+    if (d.inductances.empty()) { ld = 1.8e-4; lq = 3.5e-4; } else { ld /= n; lq /= n; }
+    return {psi_pm, ld, lq, 400.0, 300.0, 0.0, 100.0};
+  }
+  std::vector<double> p(f.NumParams(), 0.0);
+  p[0] = psi_pm;
+  return p;
+}
+
+Built Build(const Family& fam, const FitData& d, const FitOptions& o) {
+  Built b;
+  b.params = InitialParams(fam, d);
+  b.problem = std::make_unique<ceres::Problem>();
+  const int n = fam.NumParams();
+  double* p = b.params.data();
+  auto add = [&](ceres::CostFunction* c, bool robust) {
+    b.problem->AddResidualBlock(c, robust ? new ceres::CauchyLoss(o.robust_scale) : nullptr, p);
+    ++b.residuals;
+  };
+  for (const auto& obs : d.inductances) {
+    const double sd = std::max(obs.ldd_h_std, o.relative_sigma_floor * std::abs(obs.ldd_h));
+    const double sq = std::max(obs.lqq_h_std, o.relative_sigma_floor * std::abs(obs.lqq_h));
+    if (o.differential_as_apparent) {
+      add(Make(new ApparentResidual(fam, obs.id_a, obs.iq_a, 0, obs.ldd_h, sd), n), true);
+      add(Make(new ApparentResidual(fam, obs.id_a, obs.iq_a, 1, obs.lqq_h, sq), n), true);
+      continue;
+    }
+    add(Make(new InductanceResidual(fam, obs.id_a, obs.iq_a, 0, obs.ldd_h, sd), n), true);
+    add(Make(new InductanceResidual(fam, obs.id_a, obs.iq_a, 1, obs.lqq_h, sq), n), true);
+    if (obs.ldq_h) {
+      const double mean = 0.5 * (obs.ldd_h + obs.lqq_h);
+      const double sx = std::max(obs.ldq_h_std, o.relative_sigma_floor * mean);
+      add(Make(new InductanceResidual(fam, obs.id_a, obs.iq_a, 2, *obs.ldq_h, sx), n), true);
+    }
+  }
+  for (const auto& s : d.steady_state) {
+    double pd, pq;
+    SteadyStateFlux(s, d.pole_pairs, d.rs_ohm, d.f_pwm_hz, &pd, &pq);
+    const double we = std::abs(s.speed_rpm) * d.pole_pairs * 2 * kPi / 60.0;
+    // Voltage noise ~0.05 V plus 0.5 % for the nominal Rs and delay model.
+    const double sigma = 0.05 / std::max(we, 1.0) + 0.005 * std::hypot(pd, pq);
+    add(Make(new FluxResidual(fam, s.id_a, s.iq_a, 0, pd, sigma), n), true);
+    add(Make(new FluxResidual(fam, s.id_a, s.iq_a, 1, pq, sigma), n), true);
+    if (s.torque_nm) {
+      const double st = 0.02 + 0.005 * std::abs(*s.torque_nm);
+      add(Make(new TorqueResidual(fam, d.pole_pairs, s.id_a, s.iq_a, *s.torque_nm, st), n), true);
+    }
+  }
+  if (d.psi_pm_prior_wb) {
+    add(Make(new PriorResidual(*d.psi_pm_prior_wb, o.psi_pm_prior_relative_std * *d.psi_pm_prior_wb), n),
+        false);
+  }
+  if (fam.kind == Family::kAnalytic) {
+    // Physical bounds; ix_a is a fixed shape constant (with g ~ 0 it would be
+    // unidentifiable).
+    b.problem->SetParameterLowerBound(p, 1, 1e-6);
+    b.problem->SetParameterLowerBound(p, 2, 1e-6);
+    b.problem->SetParameterLowerBound(p, 3, 20.0);
+    b.problem->SetParameterLowerBound(p, 4, 20.0);
+    b.problem->SetParameterUpperBound(p, 3, 1e5);
+    b.problem->SetParameterUpperBound(p, 4, 1e5);
+    b.problem->SetManifold(p, new ceres::SubsetManifold(n, {6}));
+  }
+  return b;
+}
+
+struct Solved {
+  Family family;
+  std::vector<double> params, covariance;
+  double chi2 = 0, bic = 0;
+  int n_obs = 0, k = 0;
+  std::string termination;
+  bool usable = false;
+};
+
+Solved Solve(const Family& fam, const FitData& d, const FitOptions& o) {
+  Built b = Build(fam, d, o);
+  ceres::Solver::Options so;
+  so.linear_solver_type = ceres::DENSE_QR;
+  so.max_num_iterations = 200;
+  so.function_tolerance = 1e-12;
+  so.parameter_tolerance = 1e-12;
+  so.gradient_tolerance = 1e-14;
+  so.logging_type = ceres::SILENT;
+  ceres::Solver::Summary sum;
+  ceres::Solve(so, b.problem.get(), &sum);
+  Solved s;
+  s.family = fam;
+  s.params = b.params;
+  s.termination = ceres::TerminationTypeToString(sum.termination_type);
+  s.usable = sum.IsSolutionUsable();
+  s.chi2 = 2.0 * sum.final_cost;
+  s.n_obs = b.residuals;
+  s.k = fam.kind == Family::kAnalytic ? fam.NumParams() - 1 : fam.NumParams();
+  s.bic = s.chi2 + s.k * std::log(std::max(1, s.n_obs));
+  // Parameter covariance (Ceres), scaled by the reduced chi^2 when the fit
+  // is worse than the stated sigmas (honest uncertainty).
+  ceres::Covariance::Options co;
+  co.algorithm_type = ceres::DENSE_SVD;
+  co.null_space_rank = -1;
+  ceres::Covariance cov(co);
+  std::vector<std::pair<const double*, const double*>> blocks = {{b.params.data(), b.params.data()}};
+  const int n = fam.NumParams();
+  s.covariance.assign(n * n, 0.0);
+  if (cov.Compute(blocks, b.problem.get())) {
+    cov.GetCovarianceBlock(b.params.data(), b.params.data(), s.covariance.data());
+    const double dof = std::max(1, s.n_obs - s.k);
+    const double scale = std::max(1.0, s.chi2 / dof);
+    for (auto& c : s.covariance) c *= scale;
+  }
+  return s;
+}
+
+}  // namespace
+
+void SteadyStateFlux(const SteadyStateObservation& s, int pole_pairs, double rs_ohm, double f_pwm_hz,
+                     double* psi_d, double* psi_q) {
+  const double we = s.speed_rpm * pole_pairs * 2 * kPi / 60.0;
+  // steady_state.csv holds the fundamental dq command of a delay-compensated
+  // controller (inverse Park at theta + 1.5 w_e Ts); the zero-order hold
+  // still scales the fundamental the machine sees by sin(x)/x, x = w_e Ts/2
+  // (identification/demod.h, eq. (V1)); 3e-4 at 2000 rpm, 4 pole pairs.
+  const double ts = 1.0 / f_pwm_hz, x = 0.5 * we * ts;
+  const double g = std::abs(x) < 1e-12 ? 1.0 : std::sin(x) / x;
+  const std::complex<double> u = std::complex<double>(s.ud_ref_v, s.uq_ref_v) * g;
+  *psi_d = (u.imag() - rs_ohm * s.iq_a) / we;
+  *psi_q = -(u.real() - rs_ohm * s.id_a) / we;
+}
+
+FitData FitDataFromRecording(const io::RecordingSet& set,
+                             const std::vector<ident::HfPointResult>& identified) {
+  FitData d = FitDataFromHfRows(&set.manifest, set.hf_results);
+  for (const auto& r : identified) {
+    if (!r.reliable && r.flags.size() == 1 && r.flags[0] == "clipping") continue;
+    InductanceObservation o;
+    o.id_a = r.id_a; o.iq_a = r.iq_a;
+    o.ldd_h = r.ld_h; o.lqq_h = r.lq_h;
+    o.ldd_h_std = r.ld_h_std; o.lqq_h_std = r.lq_h_std;
+    if (r.has_ldq) { o.ldq_h = r.ldq_h; o.ldq_h_std = r.ldq_h_std; }
+    d.inductances.push_back(o);
+  }
+  for (const auto& s : set.steady_state) {
+    d.steady_state.push_back({s.id_a, s.iq_a, s.speed_rpm, s.ud_ref_v, s.uq_ref_v, s.torque_nm});
+  }
+  return d;
+}
+
+FitData FitDataFromHfRows(const io::Manifest* m, const std::vector<io::HfResultRow>& rows) {
+  FitData d;
+  if (m) {
+    d.serial = m->serial;
+    d.pole_pairs = m->motor.pole_pairs;
+    d.rs_ohm = m->motor.rs_ohm.value_or(0.0);
+    d.f_pwm_hz = m->drive.f_pwm_hz.value_or(m->drive.f_sample_hz);
+    d.psi_pm_prior_wb = m->motor.psi_pm_wb;
+  }
+  for (const auto& r : rows) {
+    InductanceObservation o;
+    o.id_a = r.id_a; o.iq_a = r.iq_a; o.ldd_h = r.ld_h; o.lqq_h = r.lq_h; o.ldq_h = r.ldq_h;
+    d.inductances.push_back(o);
+  }
+  return d;
+}
+
+absl::StatusOr<Calibration> Fit(const FitData& d, const FitOptions& o) {
+  if (d.inductances.size() < 3 && d.steady_state.size() < 3) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "field 'points': need at least 3 identified points to fit, got ", d.inductances.size()));
+  }
+  for (size_t k = 0; k < d.inductances.size(); ++k) {
+    const auto& obs = d.inductances[k];
+    if (!(obs.ldd_h > 0) || !(obs.lqq_h > 0) || !std::isfinite(obs.id_a) || !std::isfinite(obs.iq_a)) {
+      return absl::InvalidArgumentError(absl::StrCat("points[", k, "]: inductances must be positive and finite"));
+    }
+  }
+  std::vector<Family> candidates;
+  if (o.model == "analytic" || o.model == "auto") candidates.push_back({Family::kAnalytic, 0});
+  if (o.model == "poly" || o.model == "spline" || o.model == "auto") {
+    for (int deg = 3; deg <= 8; ++deg) candidates.push_back({Family::kPoly, deg});
+  } else if (o.model.rfind("poly", 0) == 0 && o.model.size() > 4) {
+    int deg = 0;
+    try { deg = std::stoi(o.model.substr(4)); } catch (...) { deg = 0; }
+    if (deg < 2 || deg > 10) return absl::InvalidArgumentError("flag --model: poly degree must be 2..10");
+    candidates.push_back({Family::kPoly, deg});
+  }
+  if (candidates.empty()) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "flag --model: expected auto, analytic, poly (alias spline) or polyN, got '", o.model, "'"));
+  }
+  std::vector<Solved> solved;
+  for (const auto& f : candidates) {
+    // A flexible family needs more observations than parameters.
+    if (f.NumParams() + 2 > static_cast<int>(2 * d.inductances.size() + 2 * d.steady_state.size())) continue;
+    solved.push_back(Solve(f, d, o));
+  }
+  if (solved.empty()) return absl::InvalidArgumentError("too few observations for any model family");
+  const Solved* best = nullptr;
+  for (const auto& s : solved) {
+    if (s.usable && (best == nullptr || s.bic < best->bic)) best = &s;
+  }
+  if (best == nullptr) return absl::InternalError("no model family converged");
+  double id_min = std::numeric_limits<double>::max(), id_max = -id_min, iq_min = id_min, iq_max = -id_min;
+  for (const auto& obs : d.inductances) {
+    id_min = std::min(id_min, obs.id_a); id_max = std::max(id_max, obs.id_a);
+    iq_min = std::min(iq_min, std::abs(obs.iq_a)); iq_max = std::max(iq_max, std::abs(obs.iq_a));
+  }
+  for (const auto& s : d.steady_state) {
+    id_min = std::min(id_min, s.id_a); id_max = std::max(id_max, s.id_a);
+    iq_min = std::min(iq_min, std::abs(s.iq_a)); iq_max = std::max(iq_max, std::abs(s.iq_a));
+  }
+  Calibration cal(d.serial, best->family, best->params, best->covariance, d.pole_pairs, d.rs_ohm,
+                  id_min, id_max, iq_min, iq_max);
+  cal.summary.observations = best->n_obs;
+  cal.summary.chi2 = best->chi2;
+  cal.summary.bic = best->bic;
+  cal.summary.termination = best->termination;
+  cal.summary.usable = best->usable;
+  double rel = 0;
+  int nrel = 0;
+  for (const auto& obs : d.inductances) {
+    const auto L = cal.Inductance(obs.id_a, obs.iq_a);
+    rel += std::pow(L.ldd_h / obs.ldd_h - 1, 2) + std::pow(L.lqq_h / obs.lqq_h - 1, 2);
+    nrel += 2;
+  }
+  cal.summary.rms_relative = nrel ? std::sqrt(rel / nrel) : 0.0;
+  for (const auto& s : solved) {
+    cal.summary.candidates.push_back(absl::StrFormat("%s bic=%.2f chi2=%.2f k=%d%s", s.family.Name(),
+                                                     s.bic, s.chi2, s.k, &s == best ? " (selected)" : ""));
+  }
+  return cal;
+}
+
+}  // namespace fluxcal::fit

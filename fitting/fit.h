@@ -1,0 +1,78 @@
+// Joint Ceres fit of a conservative flux-linkage model to every kind of data
+// a recording set carries (docs/fitting.md):
+//   - differential inductances (Ldd, Lqq, Ldq) per operating point, weighted
+//     by their standard errors (floored at a model-adequacy level);
+//   - steady-state flux linkages from ud, uq at speed (corrected for the
+//     inverter's one-period delay and zero-order hold);
+//   - torque where present;
+//   - psi_pm from the manifest as a prior.
+// Build / Solve / Report are separate; model selection by BIC across the
+// analytic family and polynomial co-energies of rising degree.
+#ifndef FLUXCAL_FITTING_FIT_H_
+#define FLUXCAL_FITTING_FIT_H_
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "fitting/calibration.h"
+#include "io/recording_set.h"
+
+namespace fluxcal::ident {
+struct HfPointResult;
+}
+
+namespace fluxcal::fit {
+
+struct InductanceObservation {
+  double id_a = 0, iq_a = 0;
+  double ldd_h = 0, lqq_h = 0;
+  std::optional<double> ldq_h;
+  double ldd_h_std = 0, lqq_h_std = 0, ldq_h_std = 0;
+};
+
+struct SteadyStateObservation {
+  double id_a = 0, iq_a = 0, speed_rpm = 0, ud_ref_v = 0, uq_ref_v = 0;
+  std::optional<double> torque_nm;
+};
+
+struct FitData {
+  std::string serial;
+  int pole_pairs = 4;
+  double rs_ohm = 0.0;                      // nominal, for the steady-state fluxes
+  double f_pwm_hz = 10000.0;                // for the inverter-delay correction
+  std::optional<double> psi_pm_prior_wb;
+  std::vector<InductanceObservation> inductances;
+  std::vector<SteadyStateObservation> steady_state;
+};
+
+struct FitOptions {
+  // "auto" (BIC over all), "analytic", "poly" (BIC over degrees), "polyN".
+  std::string model = "auto";
+  // Relative floor on inductance standard errors: the data are not more
+  // precise than the model family can represent (0.2 %).
+  double relative_sigma_floor = 0.002;
+  double psi_pm_prior_relative_std = 0.05;
+  // Robust loss scale in standard deviations (Cauchy).
+  double robust_scale = 3.0;
+  // Treat the differential inductance as apparent (psi = psi_pm + L i):
+  // only for demonstrating the error (tests); never in production.
+  bool differential_as_apparent = false;
+};
+
+// Observations from identification results / a set's hf_results rows.
+FitData FitDataFromRecording(const io::RecordingSet& set,
+                             const std::vector<ident::HfPointResult>& identified);
+FitData FitDataFromHfRows(const io::Manifest* manifest, const std::vector<io::HfResultRow>& rows);
+
+absl::StatusOr<Calibration> Fit(const FitData& data, const FitOptions& options = {});
+
+// Flux linkage measured by a steady-state row: psi_d = (uq' - Rs iq)/w,
+// psi_q = -(ud' - Rs id)/w with u' the command corrected for the delay.
+void SteadyStateFlux(const SteadyStateObservation& s, int pole_pairs, double rs_ohm,
+                     double f_pwm_hz, double* psi_d_wb, double* psi_q_wb);
+
+}  // namespace fluxcal::fit
+
+#endif  // FLUXCAL_FITTING_FIT_H_
