@@ -1,0 +1,168 @@
+// Fits against the twin with known truth: accuracy of differential
+// inductance and flux linkage, leave-one-out, reciprocity, robustness to a
+// gross outlier, steady-state voltages, and exact JSON round trip.
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <numbers>
+
+#include "fitting/fit.h"
+#include "gtest/gtest.h"
+#include "identification/identify.h"
+#include "nlohmann/json.hpp"
+#include "simulation/twin.h"
+
+namespace fluxcal::fit {
+namespace {
+
+constexpr double kPi = std::numbers::pi;
+
+struct Case {
+  sim::TwinConfig cfg;
+  sim::SimulationResult sim;
+  FitData data;
+};
+
+// Default plan, cross saturation on, bench-like noise.
+const Case& TwinCase() {
+  static const Case* c = [] {
+    auto* c = new Case;
+    c->cfg.seed = 21;
+    c->cfg.sensors.noise_a = 0.08;
+    c->cfg.effects.cross_saturation = 3e-5;
+    auto r = sim::Simulate(c->cfg, sim::DefaultPlan());
+    EXPECT_TRUE(r.ok());
+    c->sim = std::move(*r);
+    auto ids = ident::IdentifySet(c->sim.set, {});
+    EXPECT_TRUE(ids.ok());
+    c->data = FitDataFromRecording(c->sim.set, *ids);
+    return c;
+  }();
+  return *c;
+}
+
+double PsiScale(const sim::TruthPoint& t) { return std::max(std::hypot(t.psi_d_wb, t.psi_q_wb), t.psi_pm_wb); }
+
+TEST(Fit, RecoversTruthWithinHalfPercent) {
+  const Case& c = TwinCase();
+  for (const char* model : {"auto", "analytic", "poly"}) {
+    FitOptions o;
+    o.model = model;
+    auto cal = Fit(c.data, o);
+    ASSERT_TRUE(cal.ok()) << cal.status();
+    double e_l = 0, e_psi = 0;
+    int n = 0;
+    for (const auto& t : c.sim.truth_points) {
+      const auto p = cal->Predict(t.id_true_a, t.iq_true_a);
+      e_l += std::pow(p.ldd_h / t.ldd_h - 1, 2) + std::pow(p.lqq_h / t.lqq_h - 1, 2);
+      e_psi = std::max({e_psi, std::abs(p.psi_d_wb - t.psi_d_wb) / PsiScale(t),
+                        std::abs(p.psi_q_wb - t.psi_q_wb) / PsiScale(t)});
+      ++n;
+    }
+    const double rms = std::sqrt(e_l / (2 * n));
+    EXPECT_LT(rms, 0.005) << model << ": differential inductance RMS error " << rms;
+    EXPECT_LT(e_psi, 0.005) << model << ": worst flux-linkage error " << e_psi;
+  }
+}
+
+TEST(Fit, LeaveOneOutWithinOnePercent) {
+  const Case& c = TwinCase();
+  for (size_t k : {7u, 14u, 21u, 28u}) {
+    FitData d = c.data;
+    d.inductances.erase(d.inductances.begin() + k);
+    auto cal = Fit(d, {});
+    ASSERT_TRUE(cal.ok());
+    const auto& t = c.sim.truth_points[k];
+    const auto p = cal->Predict(t.id_true_a, t.iq_true_a);
+    EXPECT_NEAR(p.ldd_h / t.ldd_h, 1.0, 0.01) << t.id;
+    EXPECT_NEAR(p.lqq_h / t.lqq_h, 1.0, 0.01) << t.id;
+  }
+}
+
+TEST(Fit, ReciprocalAndPositiveDefinite) {
+  auto cal = Fit(TwinCase().data, {});
+  ASSERT_TRUE(cal.ok());
+  for (double id = -100; id <= 0; id += 10) {
+    for (double iq = 0; iq <= 100; iq += 10) {
+      const double h = 1e-3;
+      const double dpd_diq = (cal->Flux(id, iq + h).psi_d_wb - cal->Flux(id, iq - h).psi_d_wb) / (2 * h);
+      const double dpq_did = (cal->Flux(id + h, iq).psi_q_wb - cal->Flux(id - h, iq).psi_q_wb) / (2 * h);
+      const auto L = cal->Inductance(id, iq);
+      // Both equal the Hessian's off-diagonal (finite-difference error only).
+      EXPECT_NEAR(dpd_diq, dpq_did, 1e-9 * L.lqq_h / 1e-3 * 1e-3 + 1e-10);
+      EXPECT_NEAR(dpd_diq, L.ldq_h, 1e-9);
+      EXPECT_GT(L.ldd_h, 0);
+      EXPECT_GT(L.ldd_h * L.lqq_h - L.ldq_h * L.ldq_h, 0) << "at " << id << ", " << iq;
+    }
+  }
+}
+
+TEST(Fit, GrossOutlierMovesNothing) {
+  const Case& c = TwinCase();
+  auto base = Fit(c.data, {});
+  FitData d = c.data;
+  d.inductances[10].ldd_h *= 1.3;
+  d.inductances[10].lqq_h *= 1.3;
+  auto bad = Fit(d, {});
+  ASSERT_TRUE(base.ok() && bad.ok());
+  for (size_t k = 0; k < c.sim.truth_points.size(); ++k) {
+    if (k == 10) continue;
+    const auto& t = c.sim.truth_points[k];
+    const auto a = base->Predict(t.id_true_a, t.iq_true_a), b = bad->Predict(t.id_true_a, t.iq_true_a);
+    EXPECT_NEAR(b.ldd_h / a.ldd_h, 1.0, 0.002) << t.id;
+    EXPECT_NEAR(b.lqq_h / a.lqq_h, 1.0, 0.002) << t.id;
+  }
+}
+
+// Predicted steady-state voltage u = Rs i + w J psi(i) vs the recorded one.
+double WorstVoltageError(const Calibration& cal, const Case& c) {
+  double worst = 0;
+  for (const auto& row : c.sim.set.steady_state) {
+    const double we = row.speed_rpm * 4 * 2 * kPi / 60;
+    const auto f = cal.Flux(row.id_a, row.iq_a);
+    const double ud = c.cfg.motor.rs_ohm * row.id_a - we * f.psi_q_wb;
+    const double uq = c.cfg.motor.rs_ohm * row.iq_a + we * f.psi_d_wb;
+    const double x = we * 1e-4 / 2, g = std::sin(x) / x;
+    worst = std::max(worst, std::hypot(ud - g * row.ud_ref_v, uq - g * row.uq_ref_v) /
+                                std::hypot(row.ud_ref_v, row.uq_ref_v));
+  }
+  return worst;
+}
+
+TEST(Fit, SteadyStateVoltagesAndTheApparentMistake) {
+  const Case& c = TwinCase();
+  FitData d = c.data;
+  d.steady_state.clear();   // predict them, don't fit them
+  auto good = Fit(d, {});
+  FitOptions wrong;
+  wrong.differential_as_apparent = true;
+  auto bad = Fit(d, wrong);
+  ASSERT_TRUE(good.ok() && bad.ok());
+  const double e_good = WorstVoltageError(*good, c), e_bad = WorstVoltageError(*bad, c);
+  EXPECT_LT(e_good, 0.005) << "flux-linkage model";
+  EXPECT_GT(e_bad, 2 * e_good) << "differential used as apparent: " << e_bad;
+  EXPECT_GT(e_bad, 0.01);
+}
+
+TEST(Calibration, JsonRoundTripExact) {
+  auto cal = Fit(TwinCase().data, {});
+  ASSERT_TRUE(cal.ok());
+  const auto j = cal->ToJson();
+  auto back = Calibration::FromJson(nlohmann::json::parse(j.dump()));
+  ASSERT_TRUE(back.ok()) << back.status();
+  EXPECT_EQ(back->params(), cal->params());
+  EXPECT_EQ(back->covariance(), cal->covariance());
+  EXPECT_EQ(back->ToJson().dump(), j.dump());
+  EXPECT_FALSE(Calibration::FromJson(nlohmann::json{{"format", "x"}}).ok());
+}
+
+TEST(Calibration, ExtrapolationFlagged) {
+  auto cal = Fit(TwinCase().data, {});
+  ASSERT_TRUE(cal.ok());
+  EXPECT_FALSE(cal->Predict(-50, 50).extrapolated);
+  EXPECT_TRUE(cal->Predict(-250, 50).extrapolated);
+  EXPECT_GT(cal->Predict(-50, 50).ldd_h_std, 0.0);
+}
+
+}  // namespace
+}  // namespace fluxcal::fit
