@@ -1,0 +1,103 @@
+// fluxcal export calibration.json --table mtpa|mtpv|fw --format csv|json|h|cdfx|dcm
+//                [--points N] [--speed-points M] [--speed-max-rpm R] [--i-max-a A]
+//                [--udc-v V] [--svg FILE] --out FILE [--json]
+// Builds an ECU lookup table from a fitted calibration and writes it with
+// CRC-32 and SHA-256 of its payload (docs/tables.md).
+#include <cstdio>
+#include <iostream>
+
+#include "absl/strings/numbers.h"
+#include "cli/args.h"
+#include "cli/command.h"
+#include "fitting/calibration.h"
+#include "io/csv.h"
+#include "nlohmann/json.hpp"
+#include "tables/tables.h"
+
+namespace fluxcal::cli {
+namespace {
+
+int Fail(const std::string& m, int code = 1) {
+  std::fprintf(stderr, "fluxcal export: %s\n", m.c_str());
+  return code;
+}
+
+int RunExport(const std::vector<std::string>& argv) {
+  auto args = ParseArgs(argv, {"table", "format", "points", "speed-points", "speed-max-rpm", "i-max-a",
+                               "udc-v", "out", "svg"},
+                        {"json"});
+  if (!args.ok()) return Fail(std::string(args.status().message()), 2);
+  if (args->positional.size() != 1 || !args->Get("out")) {
+    return Fail("usage: fluxcal export calibration.json --table mtpa|mtpv|fw --format "
+                "csv|json|h|cdfx|dcm [--points N] --out FILE", 2);
+  }
+  auto cal = fit::LoadCalibrationFile(args->positional[0]);
+  if (!cal.ok()) return Fail(std::string(cal.status().message()));
+  auto fmt = tables::ParseFormat(args->Get("format").value_or("csv"));
+  if (!fmt.ok()) return Fail(std::string(fmt.status().message()), 2);
+  tables::TableSpec spec;
+  spec.kind = args->Get("table").value_or("mtpa");
+  spec.serial = cal->serial();
+  spec.calibration_version = cal->version;
+  spec.model = cal->family().Name();
+  tables::MachineLimits lim;
+  lim.pole_pairs = cal->pole_pairs();
+  lim.rs_ohm = cal->rs_ohm();
+  auto get_int = [&](const char* flag, int* v) {
+    if (auto s = args->Get(flag)) return absl::SimpleAtoi(*s, v);
+    return true;
+  };
+  if (!get_int("points", &spec.points) || !get_int("speed-points", &spec.speed_points)) {
+    return Fail("flags --points/--speed-points: expected integers", 2);
+  }
+  for (auto [flag, dst] : {std::pair<const char*, double*>{"speed-max-rpm", &spec.speed_max_rpm},
+                           {"i-max-a", &lim.i_max_a}, {"udc-v", &lim.udc_v}}) {
+    auto v = args->GetDouble(flag);
+    if (!v.ok()) return Fail(std::string(v.status().message()), 2);
+    if (v->has_value()) *dst = **v;
+  }
+  std::fprintf(stderr, "export: building %s table (%d points) for %s\n", spec.kind.c_str(), spec.points,
+               spec.serial.c_str());
+  auto table = tables::BuildTable(*cal, lim, spec);
+  if (!table.ok()) return Fail(std::string(table.status().message()), 2);
+  auto out = tables::Export(*table, *fmt);
+  if (!out.ok()) return Fail(std::string(out.status().message()));
+  if (auto st = io::WriteFileAtomically(*args->Get("out"), out->bytes); !st.ok()) return Fail(std::string(st.message()));
+  if (auto svg = args->Get("svg")) {
+    std::string text;
+    if (spec.kind == "fw") {
+      text = tables::PlotMapSvg(*table, "id_a");
+    } else {
+      tables::TableSpec ms = spec;
+      ms.kind = "mtpa";
+      auto mtpa = spec.kind == "mtpa" ? *table : *tables::BuildTable(*cal, lim, ms);
+      ms.kind = "mtpv";
+      auto mtpv = tables::BuildTable(*cal, lim, ms);
+      text = tables::PlotCurvesSvg(*cal, lim, mtpa, mtpv.ok() ? &*mtpv : nullptr);
+    }
+    if (auto st = io::WriteFileAtomically(*svg, text); !st.ok()) return Fail(std::string(st.message()));
+  }
+  size_t clamped = 0;
+  for (auto c : table->clamped) clamped += c;
+  char crc[16];
+  std::snprintf(crc, sizeof crc, "%08x", out->crc32);
+  if (args->Has("json")) {
+    std::cout << nlohmann::json{{"out", *args->Get("out")}, {"table", spec.kind}, {"format", args->Get("format").value_or("csv")},
+                                {"serial", spec.serial}, {"calibration_version", spec.calibration_version},
+                                {"rows", table->clamped.size()}, {"clamped_rows", clamped},
+                                {"crc32", crc}, {"sha256", out->sha256}, {"bytes", out->bytes.size()}}
+                     .dump(2)
+              << "\n";
+  } else {
+    std::printf("%s: %s table, %zu cells (%zu clamped at limits), crc32 %s sha256 %s\n",
+                args->Get("out")->c_str(), spec.kind.c_str(), table->clamped.size(), clamped, crc,
+                out->sha256.c_str());
+  }
+  return 0;
+}
+
+}  // namespace
+
+FLUXCAL_REGISTER_COMMAND("export", "export MTPA / MTPV / field-weakening tables for ECU flashing", RunExport);
+
+}  // namespace fluxcal::cli

@@ -1,0 +1,548 @@
+#include "tables/tables.h"
+
+#include <zlib.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <ctime>
+#include <numbers>
+
+#include "absl/strings/ascii.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "absl/strings/str_join.h"
+#include "nlohmann/json.hpp"
+#include "tables/sha256.h"
+
+namespace fluxcal::tables {
+namespace {
+
+constexpr double kPi = std::numbers::pi;
+constexpr double kGolden = 0.61803398874989484820;
+
+// iq (sign s) on the constant-torque locus through id: T(id, iq) = t.
+// Newton with a bisection safeguard; dT/diq = 1.5 p (psi_d + Ldq iq - Lqq id).
+bool SolveIqForTorque(const sim::MagneticModel& m, const MachineLimits& lim, double id, double t,
+                      double s, double* iq_out) {
+  const double target = std::abs(t);
+  double lo = 0.0, hi = std::max(10.0, lim.i_max_a);
+  auto torque = [&](double iq) { return s * TorqueNm(m, lim.pole_pairs, id, s * iq, lim.temperature_c); };
+  int grow = 0;
+  while (torque(hi) < target) {
+    hi *= 2;
+    if (++grow > 8) return false;
+  }
+  double iq = std::clamp(target / std::max(1e-9, torque(hi)) * hi, lo, hi);
+  for (int it = 0; it < 60; ++it) {
+    const double f = torque(iq) - target;
+    if (std::abs(f) < 1e-10 * (1.0 + target)) break;
+    if (f > 0) hi = iq; else lo = iq;
+    const auto F = m.Flux(id, s * iq, lim.temperature_c);
+    const auto L = m.Inductance(id, s * iq, lim.temperature_c);
+    const double d = 1.5 * lim.pole_pairs * (F.psi_d_wb + L.ldq_h * s * iq - L.lqq_h * id);
+    double next = iq - f / (d > 1e-12 ? d : 1e-12);
+    if (!(next > lo && next < hi)) next = 0.5 * (lo + hi);
+    if (hi - lo < 1e-12) break;
+    iq = next;
+  }
+  *iq_out = s * iq;
+  return true;
+}
+
+// Minimises f on [a, b]: coarse scan, then golden section around the best.
+template <typename F>
+double MinimiseScalar(F f, double a, double b, int scan = 24, int iters = 48) {
+  double best = a, fbest = f(a);
+  for (int k = 1; k <= scan; ++k) {
+    const double x = a + (b - a) * k / scan;
+    const double fx = f(x);
+    if (fx < fbest) { fbest = fx; best = x; }
+  }
+  double lo = std::max(a, best - (b - a) / scan), hi = std::min(b, best + (b - a) / scan);
+  double x1 = hi - kGolden * (hi - lo), x2 = lo + kGolden * (hi - lo);
+  double f1 = f(x1), f2 = f(x2);
+  for (int k = 0; k < iters; ++k) {
+    if (f1 < f2) { hi = x2; x2 = x1; f2 = f1; x1 = hi - kGolden * (hi - lo); f1 = f(x1); }
+    else { lo = x1; x1 = x2; f1 = f2; x2 = lo + kGolden * (hi - lo); f2 = f(x2); }
+  }
+  return 0.5 * (lo + hi);
+}
+
+std::string NowUtc() {
+  const std::time_t t = std::time(nullptr);
+  char buf[32];
+  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", std::gmtime(&t));
+  return buf;
+}
+
+std::vector<double> Linspace(double a, double b, int n) {
+  std::vector<double> v(n);
+  for (int k = 0; k < n; ++k) v[k] = n == 1 ? a : a + (b - a) * k / (n - 1);
+  return v;
+}
+
+}  // namespace
+
+double MachineLimits::UMaxV() const { return modulation_limit * udc_v / std::sqrt(3.0); }
+
+double TorqueNm(const sim::MagneticModel& m, int pp, double id, double iq, double temperature_c) {
+  const auto f = m.Flux(id, iq, temperature_c);
+  return 1.5 * pp * (f.psi_d_wb * iq - f.psi_q_wb * id);
+}
+
+double VoltageV(const sim::MagneticModel& m, const MachineLimits& lim, double id, double iq, double we) {
+  const auto f = m.Flux(id, iq, lim.temperature_c);
+  return std::hypot(lim.rs_ohm * id - we * f.psi_q_wb, lim.rs_ohm * iq + we * f.psi_d_wb);
+}
+
+namespace {
+
+// Least-current point for torque t under the limits; false if infeasible.
+bool TrySolve(const sim::MagneticModel& m, const MachineLimits& lim, double t, double we,
+              OperatingPoint* op) {
+  *op = OperatingPoint{};
+  if (t == 0.0 && we <= 0) return true;
+  const double s = t < 0 ? -1.0 : 1.0;
+  const double id_min = -lim.i_max_a;
+  auto iq_of = [&](double id, double* iq) { return SolveIqForTorque(m, lim, id, t, s, iq); };
+  auto cur2 = [&](double id) {
+    double iq;
+    if (!iq_of(id, &iq)) return 1e30;
+    return id * id + iq * iq;
+  };
+  // Unconstrained least current (MTPA) along the constant-torque locus.
+  double id = t == 0.0 ? 0.0 : MinimiseScalar(cur2, id_min, 0.0);
+  double iq = 0.0;
+  if (t != 0.0 && !iq_of(id, &iq)) return false;
+  auto volt = [&](double d, double q) { return we > 0 ? VoltageV(m, lim, d, q, we) : 0.0; };
+  if (we > 0 && volt(id, iq) > lim.UMaxV()) {
+    // Field weakening: move along the locus towards negative id until the
+    // voltage limit is met (voltage falls monotonically along it there).
+    double lo = id_min, hi = id, iql;
+    if (!iq_of(lo, &iql) || volt(lo, iql) > lim.UMaxV()) return false;
+    for (int k = 0; k < 50; ++k) {
+      const double mid = 0.5 * (lo + hi);
+      double q;
+      if (iq_of(mid, &q) && volt(mid, q) <= lim.UMaxV()) lo = mid; else hi = mid;
+    }
+    id = lo;
+    if (!iq_of(id, &iq)) return false;
+  }
+  if (std::hypot(id, iq) > lim.i_max_a * (1 + 1e-9)) return false;
+  op->id_a = id;
+  op->iq_a = iq;
+  op->torque_nm = TorqueNm(m, lim.pole_pairs, id, iq, lim.temperature_c);
+  return true;
+}
+
+// As SolveLeastCurrent, with the limit torque at this speed already known.
+OperatingPoint SolveWithMax(const sim::MagneticModel& m, const MachineLimits& lim, double t,
+                            double we, double tmax) {
+  OperatingPoint op;
+  if (std::abs(t) <= tmax && TrySolve(m, lim, t, we, &op)) return op;
+  // Infeasible: deliver the largest torque of the same sign within limits.
+  const double s = t < 0 ? -1.0 : 1.0;
+  double tt = s * tmax;
+  for (int k = 0; k < 8 && !TrySolve(m, lim, tt, we, &op); ++k) tt *= 1 - 1e-6 * (1 << (2 * k));
+  op.clamped = true;
+  return op;
+}
+
+}  // namespace
+
+OperatingPoint SolveLeastCurrent(const sim::MagneticModel& m, const MachineLimits& lim, double t,
+                                 double we) {
+  OperatingPoint op;
+  if (TrySolve(m, lim, t, we, &op)) return op;
+  return SolveWithMax(m, lim, t, we, MaxTorqueNm(m, lim, we));
+}
+
+double MaxTorqueNm(const sim::MagneticModel& m, const MachineLimits& lim, double we) {
+  // Bisection on the torque request: feasible if its least-current point
+  // (under the voltage limit at we) stays within the current limit.
+  auto feasible = [&](double t) {
+    const double s = 1.0;
+    auto cur2 = [&](double id) {
+      double iq;
+      if (!SolveIqForTorque(m, lim, id, t, s, &iq)) return 1e30;
+      if (we > 0 && VoltageV(m, lim, id, iq, we) > lim.UMaxV()) return 1e30;
+      return id * id + iq * iq;
+    };
+    const double id = MinimiseScalar(cur2, -lim.i_max_a, 0.0, 48, 40);
+    return cur2(id) <= lim.i_max_a * lim.i_max_a;
+  };
+  double lo = 0.0, hi = 1.0;
+  while (feasible(hi) && hi < 1e5) { lo = hi; hi *= 2; }
+  for (int k = 0; k < 40; ++k) {
+    const double mid = 0.5 * (lo + hi);
+    if (feasible(mid)) lo = mid; else hi = mid;
+  }
+  return lo;
+}
+
+absl::StatusOr<Table> BuildTable(const sim::MagneticModel& m, const MachineLimits& lim,
+                                 const TableSpec& spec) {
+  if (spec.points < 2 || spec.points > 4096) {
+    return absl::InvalidArgumentError(absl::StrCat("flag --points: must be 2..4096, got ", spec.points));
+  }
+  if (!(lim.i_max_a > 0) || !(lim.udc_v > 0)) {
+    return absl::InvalidArgumentError("limits: i_max_a and udc_v must be positive");
+  }
+  Table t;
+  t.kind = spec.kind;
+  t.serial = spec.serial;
+  t.calibration_version = spec.calibration_version;
+  t.model = spec.model;
+  t.created_utc = NowUtc();
+  const double tmax = MaxTorqueNm(m, lim, 0.0);
+  if (spec.kind == "mtpa") {
+    const auto tq = spec.include_generating ? Linspace(-tmax, tmax, spec.points) : Linspace(0, tmax, spec.points);
+    Output id{"id_a", {}}, iq{"iq_a", {}};
+    for (double x : tq) {
+      const auto op = SolveWithMax(m, lim, x, 0.0, tmax);
+      id.values.push_back(op.id_a);
+      iq.values.push_back(op.iq_a);
+      t.clamped.push_back(op.clamped);
+    }
+    t.axes = {{"torque_nm", tq}};
+    t.outputs = {id, iq};
+  } else if (spec.kind == "mtpv") {
+    // Flux-magnitude axis from the smallest to the largest |psi| met inside
+    // the current limit on the motoring half plane.
+    double lmin = 1e9, lmax = 0;
+    for (double a = 0; a <= kPi; a += kPi / 90) {
+      const double id = -lim.i_max_a * std::sin(a * 0.5), iq = lim.i_max_a * std::cos(a * 0.5);
+      const auto f = m.Flux(id, iq, lim.temperature_c);
+      lmin = std::min(lmin, std::hypot(f.psi_d_wb, f.psi_q_wb));
+      lmax = std::max(lmax, std::hypot(f.psi_d_wb, f.psi_q_wb));
+    }
+    lmin = std::max(lmin, 0.05 * lmax);
+    const auto lam = Linspace(lmin, lmax, spec.points);
+    Output id{"id_a", {}}, iq{"iq_a", {}}, tq{"torque_nm", {}};
+    for (double l : lam) {
+      // For each id, the iq >= 0 with |psi(id, iq)| = l (|psi| grows with
+      // iq); maximise torque over id.
+      auto iq_of = [&](double d, double* q) {
+        double lo = 0, hi = 4 * lim.i_max_a;
+        auto mag = [&](double x) {
+          const auto f = m.Flux(d, x, lim.temperature_c);
+          return std::hypot(f.psi_d_wb, f.psi_q_wb);
+        };
+        if (mag(lo) > l || mag(hi) < l) return false;
+        for (int k = 0; k < 60; ++k) {
+          const double mid = 0.5 * (lo + hi);
+          (mag(mid) < l ? lo : hi) = mid;
+        }
+        *q = 0.5 * (lo + hi);
+        return true;
+      };
+      auto neg_t = [&](double d) {
+        double q;
+        if (!iq_of(d, &q)) return 1e30;
+        return -TorqueNm(m, lim.pole_pairs, d, q, lim.temperature_c);
+      };
+      const double d = MinimiseScalar(neg_t, -2 * lim.i_max_a, 0.0);
+      double q = 0;
+      const bool ok = iq_of(d, &q);
+      id.values.push_back(d);
+      iq.values.push_back(q);
+      tq.values.push_back(ok ? TorqueNm(m, lim.pole_pairs, d, q, lim.temperature_c) : 0.0);
+      t.clamped.push_back(!ok || std::hypot(d, q) > lim.i_max_a);
+    }
+    t.axes = {{"psi_wb", lam}};
+    t.outputs = {id, iq, tq};
+  } else if (spec.kind == "fw") {
+    const auto tq = spec.include_generating ? Linspace(-tmax, tmax, spec.points) : Linspace(0, tmax, spec.points);
+    const auto n = Linspace(0, spec.speed_max_rpm, spec.speed_points);
+    Output id{"id_a", {}}, iq{"iq_a", {}};
+    std::vector<double> tlim(n.size());
+    for (size_t j = 0; j < n.size(); ++j) tlim[j] = MaxTorqueNm(m, lim, n[j] * lim.pole_pairs * 2 * kPi / 60.0);
+    for (double x : tq) {
+      for (size_t j = 0; j < n.size(); ++j) {
+        const double we = n[j] * lim.pole_pairs * 2 * kPi / 60.0;
+        const auto op = SolveWithMax(m, lim, x, we, tlim[j]);
+        id.values.push_back(op.id_a);
+        iq.values.push_back(op.iq_a);
+        t.clamped.push_back(op.clamped);
+      }
+    }
+    t.axes = {{"torque_nm", tq}, {"speed_rpm", n}};
+    t.outputs = {id, iq};
+  } else {
+    return absl::InvalidArgumentError(absl::StrCat("flag --table: expected mtpa, mtpv or fw, got '", spec.kind, "'"));
+  }
+  Seal(&t);
+  return t;
+}
+
+std::string PayloadBytes(const Table& t) {
+  std::string out;
+  auto put = [&](const std::vector<double>& v) {
+    for (double x : v) {
+      uint64_t bits;
+      std::memcpy(&bits, &x, 8);
+      for (int b = 0; b < 8; ++b) out.push_back(static_cast<char>((bits >> (8 * b)) & 0xff));
+    }
+  };
+  for (const auto& a : t.axes) put(a.values);
+  for (const auto& o : t.outputs) put(o.values);
+  return out;
+}
+
+void Seal(Table* t) {
+  const std::string p = PayloadBytes(*t);
+  t->crc32 = static_cast<uint32_t>(::crc32(0L, reinterpret_cast<const Bytef*>(p.data()),
+                                           static_cast<uInt>(p.size())));
+  t->sha256 = Sha256Hex(p);
+}
+
+absl::StatusOr<Format> ParseFormat(const std::string& name) {
+  if (name == "csv") return Format::kCsv;
+  if (name == "json") return Format::kJson;
+  if (name == "h") return Format::kCHeader;
+  if (name == "cdfx") return Format::kCdfx;
+  if (name == "dcm") return Format::kDcm;
+  return absl::InvalidArgumentError(
+      absl::StrCat("flag --format: expected csv, json, h, cdfx or dcm, got '", name, "'"));
+}
+
+namespace {
+
+std::string Num(double v) { return absl::StrFormat("%.17g", v); }
+
+std::string UnitOf(const std::string& name) {
+  if (name.size() > 3 && name.substr(name.size() - 3) == "_nm") return "Nm";
+  if (name.size() > 4 && name.substr(name.size() - 4) == "_rpm") return "rpm";
+  if (name.size() > 3 && name.substr(name.size() - 3) == "_wb") return "Wb";
+  if (name.size() > 2 && name.substr(name.size() - 2) == "_a") return "A";
+  return "-";
+}
+
+std::string Ident(const Table& t, const std::string& name) {
+  return absl::AsciiStrToUpper(absl::StrCat("FLUXCAL_", t.kind, "_", name));
+}
+
+std::string Csv(const Table& t) {
+  std::string s = absl::StrFormat("# fluxcal %s table, serial %s, calibration version %d, model %s, created %s\n"
+                                  "# crc32 %08x sha256 %s (payload: docs/tables.md)\n",
+                                  t.kind, t.serial, t.calibration_version, t.model, t.created_utc, t.crc32, t.sha256);
+  std::vector<std::string> head;
+  for (const auto& a : t.axes) head.push_back(a.name);
+  for (const auto& o : t.outputs) head.push_back(o.name);
+  head.push_back("clamped");
+  s += absl::StrJoin(head, ",") + "\n";
+  const size_t n0 = t.axes[0].values.size();
+  const size_t n1 = t.axes.size() > 1 ? t.axes[1].values.size() : 1;
+  for (size_t i = 0; i < n0; ++i) {
+    for (size_t j = 0; j < n1; ++j) {
+      std::vector<std::string> row = {Num(t.axes[0].values[i])};
+      if (t.axes.size() > 1) row.push_back(Num(t.axes[1].values[j]));
+      for (const auto& o : t.outputs) row.push_back(Num(o.values[i * n1 + j]));
+      row.push_back(t.clamped[i * n1 + j] ? "1" : "0");
+      s += absl::StrJoin(row, ",") + "\n";
+    }
+  }
+  return s;
+}
+
+std::string Json(const Table& t) {
+  nlohmann::json j;
+  j["format"] = "fluxcal.table.v1";
+  j["kind"] = t.kind;
+  j["serial"] = t.serial;
+  j["calibration_version"] = t.calibration_version;
+  j["model"] = t.model;
+  j["created_utc"] = t.created_utc;
+  j["crc32"] = absl::StrFormat("%08x", t.crc32);
+  j["sha256"] = t.sha256;
+  for (const auto& a : t.axes) j["axes"].push_back({{"name", a.name}, {"unit", UnitOf(a.name)}, {"values", a.values}});
+  for (const auto& o : t.outputs) j["outputs"].push_back({{"name", o.name}, {"unit", UnitOf(o.name)}, {"values", o.values}});
+  j["clamped"] = t.clamped;
+  return j.dump(1) + "\n";
+}
+
+std::string CHeader(const Table& t) {
+  const std::string g = Ident(t, "TABLE_H_");
+  std::string s = absl::StrFormat(
+      "/* fluxcal %s table for serial %s, calibration version %d, model %s, created %s.\n"
+      " * Units: SI (A, N m, rpm, Wb). Row-major over the axes, first axis slowest.\n"
+      " * CRC-32 and SHA-256 over the payload defined in fluxcal docs/tables.md. */\n"
+      "#ifndef %s\n#define %s\n\n#include <stdint.h>\n\n",
+      t.kind, t.serial, t.calibration_version, t.model, t.created_utc, g, g);
+  auto arr = [&](const std::string& name, const std::vector<double>& v) {
+    s += absl::StrFormat("#define %s_LEN %d\n", Ident(t, name), v.size());
+    s += absl::StrFormat("static const double %s[%d] = {\n", absl::AsciiStrToLower(Ident(t, name)), v.size());
+    for (size_t k = 0; k < v.size(); ++k) s += absl::StrCat("  ", Num(v[k]), k + 1 < v.size() ? ",\n" : "\n");
+    s += "};\n\n";
+  };
+  for (const auto& a : t.axes) arr(a.name, a.values);
+  for (const auto& o : t.outputs) arr(o.name, o.values);
+  s += absl::StrFormat("static const uint32_t %s = 0x%08xu;\n", absl::AsciiStrToLower(Ident(t, "crc32")), t.crc32);
+  s += absl::StrFormat("static const char %s[] = \"%s\";\n\n#endif\n", absl::AsciiStrToLower(Ident(t, "sha256")), t.sha256);
+  return s;
+}
+
+std::string Cdfx(const Table& t) {
+  // ASAM CDF 2.0: one SW-INSTANCE per output, CURVE (1 axis) or MAP (2 axes).
+  std::string s =
+      "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n"
+      "<!DOCTYPE MSRSW PUBLIC \"-//ASAM//DTD CALIBRATION DATA FORMAT:V2.0.0:LAI:IAI:XML:CDF200.XSD//EN\" \"cdf_v2.0.0.sl.dtd\">\n"
+      "<MSRSW>\n  <SHORT-NAME>fluxcal</SHORT-NAME>\n  <CATEGORY>CDF20</CATEGORY>\n  <SW-SYSTEMS>\n    <SW-SYSTEM>\n";
+  s += absl::StrFormat("      <SHORT-NAME>%s</SHORT-NAME>\n", t.serial.empty() ? "fluxcal" : t.serial);
+  s += absl::StrFormat("      <DESC>fluxcal %s table, calibration version %d, model %s, created %s, crc32 %08x, sha256 %s</DESC>\n",
+                       t.kind, t.calibration_version, t.model, t.created_utc, t.crc32, t.sha256);
+  s += "      <SW-INSTANCE-TREE>\n        <SHORT-NAME>fluxcal</SHORT-NAME>\n        <CATEGORY>NO_VCD</CATEGORY>\n";
+  const bool map = t.axes.size() > 1;
+  const size_t n0 = t.axes[0].values.size(), n1 = map ? t.axes[1].values.size() : 1;
+  for (const auto& o : t.outputs) {
+    s += absl::StrFormat("        <SW-INSTANCE>\n          <SHORT-NAME>%s</SHORT-NAME>\n          <CATEGORY>%s</CATEGORY>\n",
+                         Ident(t, o.name), map ? "MAP" : "CURVE");
+    s += absl::StrFormat("          <SW-VALUE-CONT>\n            <UNIT-DISPLAY-NAME>%s</UNIT-DISPLAY-NAME>\n            <SW-VALUES-PHYS>\n",
+                         UnitOf(o.name));
+    for (size_t i = 0; i < n0; ++i) {
+      if (map) s += "              <VG>\n";
+      for (size_t j = 0; j < n1; ++j) s += absl::StrCat(map ? "                " : "              ", "<V>", Num(o.values[i * n1 + j]), "</V>\n");
+      if (map) s += "              </VG>\n";
+    }
+    s += "            </SW-VALUES-PHYS>\n          </SW-VALUE-CONT>\n          <SW-AXIS-CONTS>\n";
+    for (const auto& a : t.axes) {
+      s += absl::StrFormat("            <SW-AXIS-CONT>\n              <CATEGORY>STD_AXIS</CATEGORY>\n              <UNIT-DISPLAY-NAME>%s</UNIT-DISPLAY-NAME>\n              <SW-VALUES-PHYS>\n", UnitOf(a.name));
+      for (double v : a.values) s += absl::StrCat("                <V>", Num(v), "</V>\n");
+      s += "              </SW-VALUES-PHYS>\n            </SW-AXIS-CONT>\n";
+    }
+    s += "          </SW-AXIS-CONTS>\n        </SW-INSTANCE>\n";
+  }
+  s += "      </SW-INSTANCE-TREE>\n    </SW-SYSTEM>\n  </SW-SYSTEMS>\n</MSRSW>\n";
+  return s;
+}
+
+std::string Dcm(const Table& t) {
+  // DAMOS DCM 2.0: KENNLINIE (curve) / KENNFELD (map) blocks, 6 values a line.
+  std::string s = absl::StrFormat("* fluxcal %s table, serial %s, calibration version %d, model %s\n"
+                                  "* created %s, crc32 %08x, sha256 %s\n\nKONSERVIERUNG_FORMAT 2.0\n\n",
+                                  t.kind, t.serial, t.calibration_version, t.model, t.created_utc, t.crc32, t.sha256);
+  auto line = [&](const std::string& key, const std::vector<double>& v, size_t from, size_t n) {
+    for (size_t k = 0; k < n; k += 6) {
+      s += absl::StrCat("   ", key);
+      for (size_t m = k; m < std::min(n, k + 6); ++m) s += absl::StrCat(" ", Num(v[from + m]));
+      s += "\n";
+    }
+  };
+  const bool map = t.axes.size() > 1;
+  const size_t n0 = t.axes[0].values.size(), n1 = map ? t.axes[1].values.size() : 1;
+  for (const auto& o : t.outputs) {
+    if (!map) {
+      s += absl::StrFormat("KENNLINIE %s %d\n   LANGNAME \"%s over %s\"\n   EINHEIT_X \"%s\"\n   EINHEIT_W \"%s\"\n",
+                           Ident(t, o.name), n0, o.name, t.axes[0].name, UnitOf(t.axes[0].name), UnitOf(o.name));
+      line("ST/X", t.axes[0].values, 0, n0);
+      line("WERT", o.values, 0, n0);
+    } else {
+      // X = second axis (speed), Y = first axis (torque): one WERT row per Y.
+      s += absl::StrFormat("KENNFELD %s %d %d\n   LANGNAME \"%s over %s x %s\"\n   EINHEIT_X \"%s\"\n   EINHEIT_Y \"%s\"\n   EINHEIT_W \"%s\"\n",
+                           Ident(t, o.name), n1, n0, o.name, t.axes[0].name, t.axes[1].name,
+                           UnitOf(t.axes[1].name), UnitOf(t.axes[0].name), UnitOf(o.name));
+      line("ST/X", t.axes[1].values, 0, n1);
+      for (size_t i = 0; i < n0; ++i) {
+        s += absl::StrCat("   ST/Y ", Num(t.axes[0].values[i]), "\n");
+        line("WERT", o.values, i * n1, n1);
+      }
+    }
+    s += "END\n\n";
+  }
+  return s;
+}
+
+}  // namespace
+
+absl::StatusOr<Exported> Export(const Table& t, Format f) {
+  if (t.axes.empty() || t.outputs.empty()) return absl::InvalidArgumentError("empty table");
+  Exported e;
+  switch (f) {
+    case Format::kCsv: e.bytes = Csv(t); break;
+    case Format::kJson: e.bytes = Json(t); break;
+    case Format::kCHeader: e.bytes = CHeader(t); break;
+    case Format::kCdfx: e.bytes = Cdfx(t); break;
+    case Format::kDcm: e.bytes = Dcm(t); break;
+  }
+  e.crc32 = t.crc32;
+  e.sha256 = t.sha256;
+  return e;
+}
+
+std::string PlotCurvesSvg(const sim::MagneticModel& m, const MachineLimits& lim, const Table& mtpa,
+                          const Table* mtpv) {
+  const double W = 640, H = 480, x0 = 60, y0 = 20, pw = 560, ph = 420;
+  const double id_min = -lim.i_max_a, id_max = 0.1 * lim.i_max_a, iq_min = 0, iq_max = 1.1 * lim.i_max_a;
+  auto X = [&](double id) { return x0 + (id - id_min) / (id_max - id_min) * pw; };
+  auto Y = [&](double iq) { return y0 + ph - (iq - iq_min) / (iq_max - iq_min) * ph; };
+  std::string s = absl::StrFormat("<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"%g\" height=\"%g\" font-family=\"sans-serif\" font-size=\"11\">\n", W, H);
+  s += absl::StrFormat("<rect x=\"%g\" y=\"%g\" width=\"%g\" height=\"%g\" fill=\"white\" stroke=\"black\"/>\n", x0, y0, pw, ph);
+  s += absl::StrFormat("<text x=\"%g\" y=\"%g\">id [A]</text><text x=\"5\" y=\"%g\">iq [A]</text>\n", x0 + pw / 2, H - 5, y0 + ph / 2);
+  for (int k = 0; k <= 4; ++k) {
+    const double id = id_min + (id_max - id_min) * k / 4, iq = iq_min + (iq_max - iq_min) * k / 4;
+    s += absl::StrFormat("<text x=\"%g\" y=\"%g\">%.0f</text><text x=\"20\" y=\"%g\">%.0f</text>\n", X(id) - 10, y0 + ph + 14, id, Y(iq) + 4, iq);
+  }
+  // Torque contours: constant-torque loci solved directly.
+  const double tmax = MaxTorqueNm(m, lim, 0);
+  for (int c = 1; c <= 6; ++c) {
+    const double t = tmax * c / 6;
+    std::string pts;
+    for (int k = 0; k <= 60; ++k) {
+      const double id = id_min + (0 - id_min) * k / 60;
+      double iq;
+      if (SolveIqForTorque(m, lim, id, t, 1.0, &iq) && iq <= iq_max) pts += absl::StrFormat("%.1f,%.1f ", X(id), Y(iq));
+    }
+    s += absl::StrFormat("<polyline points=\"%s\" fill=\"none\" stroke=\"#999\"/>\n", pts);
+    s += absl::StrFormat("<text x=\"%g\" y=\"%g\" fill=\"#666\">%.1f N m</text>\n", X(-0.15 * lim.i_max_a), y0 + 12 * c, t);
+  }
+  std::string circ;
+  for (int k = 0; k <= 90; ++k) {
+    const double a = kPi / 2 * k / 90;
+    circ += absl::StrFormat("%.1f,%.1f ", X(-lim.i_max_a * std::sin(a)), Y(lim.i_max_a * std::cos(a)));
+  }
+  s += absl::StrFormat("<polyline points=\"%s\" fill=\"none\" stroke=\"black\" stroke-dasharray=\"4 3\"/>\n", circ);
+  auto curve = [&](const Table& t, const char* color, const char* label) {
+    std::string pts;
+    const auto& id = t.outputs[0].values;
+    const auto& iq = t.outputs[1].values;
+    for (size_t k = 0; k < id.size(); ++k)
+      if (iq[k] >= 0) pts += absl::StrFormat("%.1f,%.1f ", X(id[k]), Y(iq[k]));
+    s += absl::StrFormat("<polyline points=\"%s\" fill=\"none\" stroke=\"%s\" stroke-width=\"2\"/>\n", pts, color);
+    s += absl::StrFormat("<text x=\"%g\" y=\"%g\" fill=\"%s\">%s</text>\n", x0 + 10, y0 + ph - (label[1] == 'T' && label[3] == 'V' ? 30 : 15), color, label);
+  };
+  curve(mtpa, "#c00", "MTPA");
+  if (mtpv) curve(*mtpv, "#00c", "MTPV");
+  s += "</svg>\n";
+  return s;
+}
+
+std::string PlotMapSvg(const Table& fw, const std::string& output_name) {
+  const Output* o = nullptr;
+  for (const auto& out : fw.outputs) if (out.name == output_name) o = &out;
+  if (o == nullptr || fw.axes.size() != 2) return "";
+  const size_t n0 = fw.axes[0].values.size(), n1 = fw.axes[1].values.size();
+  const double x0 = 60, y0 = 20, pw = 560, ph = 420;
+  double lo = *std::min_element(o->values.begin(), o->values.end());
+  double hi = *std::max_element(o->values.begin(), o->values.end());
+  if (hi <= lo) hi = lo + 1;
+  std::string s = "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"700\" height=\"480\" font-family=\"sans-serif\" font-size=\"11\">\n";
+  const double cw = pw / n1, ch = ph / n0;
+  for (size_t i = 0; i < n0; ++i) {
+    for (size_t j = 0; j < n1; ++j) {
+      const double v = (o->values[i * n1 + j] - lo) / (hi - lo);
+      const int r = static_cast<int>(255 * v), b = static_cast<int>(255 * (1 - v));
+      s += absl::StrFormat("<rect x=\"%.2f\" y=\"%.2f\" width=\"%.2f\" height=\"%.2f\" fill=\"rgb(%d,60,%d)\"/>\n",
+                           x0 + j * cw, y0 + ph - (i + 1) * ch, cw + 0.3, ch + 0.3, r, b);
+    }
+  }
+  s += absl::StrFormat("<text x=\"%g\" y=\"470\">speed [rpm] 0 .. %.0f</text>\n", x0 + pw / 2 - 60, fw.axes[1].values.back());
+  s += absl::StrFormat("<text x=\"2\" y=\"%g\">torque [N m]</text>\n", y0 + ph / 2);
+  s += absl::StrFormat("<text x=\"630\" y=\"30\">%s</text><text x=\"630\" y=\"45\">max %.1f</text><text x=\"630\" y=\"60\">min %.1f</text>\n",
+                       output_name, hi, lo);
+  s += "</svg>\n";
+  return s;
+}
+
+}  // namespace fluxcal::tables
