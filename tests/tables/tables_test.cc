@@ -1,0 +1,233 @@
+// Tables against brute force and physics, and every exporter through a
+// parser (tinyxml2 for CDFX, hand parsers for DCM, CSV and the C header).
+#include <cmath>
+#include <map>
+#include <numbers>
+#include <regex>
+#include <sstream>
+
+#include "gtest/gtest.h"
+#include "nlohmann/json.hpp"
+#include "simulation/twin.h"
+#include "tables/sha256.h"
+#include "tables/tables.h"
+#include "tinyxml2.h"
+
+namespace fluxcal::tables {
+namespace {
+
+constexpr double kPi = std::numbers::pi;
+
+// A saturated motor with cross saturation (the twin's analytic family).
+sim::AnalyticMotor Motor() {
+  sim::MotorParams p;
+  p.sat.g_cross_h = 3e-5;
+  return sim::AnalyticMotor(p);
+}
+
+// The wrong model: psi = psi_pm + L_diff(i) i, the differential inductance at
+// each operating point used as if it were apparent.
+class DifferentialAsApparent : public sim::MagneticModel {
+ public:
+  explicit DifferentialAsApparent(const sim::MagneticModel& t) : t_(t) {}
+  sim::FluxLinkage Flux(double id, double iq, double T) const override {
+    const auto L = t_.Inductance(id, iq, T);
+    return {t_.Flux(0, 0, T).psi_d_wb + L.ldd_h * id + L.ldq_h * iq, L.ldq_h * id + L.lqq_h * iq};
+  }
+  sim::DifferentialInductance Inductance(double id, double iq, double T) const override {
+    return t_.Inductance(id, iq, T);
+  }
+ private:
+  const sim::MagneticModel& t_;
+};
+
+TEST(Sha256, NistVectors) {
+  EXPECT_EQ(Sha256Hex(""), "e3b0c44298fc1c149afbf4c8996fb92427ae41e4649b934ca495991b7852b855");
+  EXPECT_EQ(Sha256Hex("abc"), "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad");
+  EXPECT_EQ(Sha256Hex("abcdbcdecdefdefgefghfghighijhijkijkljklmklmnlmnomnopnopq"),
+            "248d6a61d20638b8e5c026930c3e6039a33ce45964ff2167f6ecedd419db06c1");
+}
+
+TEST(Mtpa, WithinPointOnePercentOfBruteForce) {
+  const auto m = Motor();
+  MachineLimits lim;
+  TableSpec spec;
+  spec.points = 17;
+  auto t = BuildTable(m, lim, spec);
+  ASSERT_TRUE(t.ok()) << t.status();
+  const auto& tq = t->axes[0].values;
+  const double tmax = *std::max_element(tq.begin(), tq.end());
+  for (size_t k = 0; k < tq.size(); ++k) {
+    const double id = t->outputs[0].values[k], iq = t->outputs[1].values[k];
+    EXPECT_NEAR(TorqueNm(m, 4, id, iq), tq[k], 1e-3 * tmax) << "row " << k;
+    if (std::abs(tq[k]) < 0.05 * tmax) continue;
+    // Brute force: the least |i| on a dense grid among points within 0.05 %
+    // of the requested torque.
+    double best = 1e9;
+    for (double a = -150; a <= 0; a += 0.25) {
+      for (double b = 0; b <= 150; b += 0.25) {
+        const double q = tq[k] < 0 ? -b : b;
+        if (std::abs(TorqueNm(m, 4, a, q) - tq[k]) < 5e-4 * std::abs(tq[k])) best = std::min(best, std::hypot(a, q));
+      }
+    }
+    EXPECT_LE(std::hypot(id, iq), best * 1.001) << "row " << k << " torque " << tq[k];
+  }
+}
+
+TEST(FieldWeakening, RespectsLimitsAndDeliversTorque) {
+  const auto m = Motor();
+  MachineLimits lim;
+  TableSpec spec;
+  spec.kind = "fw";
+  spec.points = 9;
+  spec.speed_points = 7;
+  spec.speed_max_rpm = 4000;
+  auto t = BuildTable(m, lim, spec);
+  ASSERT_TRUE(t.ok());
+  const size_t n1 = t->axes[1].values.size();
+  for (size_t i = 0; i < t->axes[0].values.size(); ++i) {
+    for (size_t j = 0; j < n1; ++j) {
+      const double id = t->outputs[0].values[i * n1 + j], iq = t->outputs[1].values[i * n1 + j];
+      const double we = t->axes[1].values[j] * 4 * 2 * kPi / 60;
+      EXPECT_LE(std::hypot(id, iq), lim.i_max_a * 1.0001);
+      EXPECT_LE(VoltageV(m, lim, id, iq, we), lim.UMaxV() * 1.0001);
+      if (!t->clamped[i * n1 + j]) {
+        EXPECT_NEAR(TorqueNm(m, 4, id, iq), t->axes[0].values[i], 1e-3 * t->axes[0].values.back());
+      }
+    }
+  }
+}
+
+// Using the differential inductance as apparent gives a measurably worse
+// MTPA table on a saturated motor: the torque it delivers is wrong.
+TEST(Mtpa, DifferentialAsApparentIsWorse) {
+  const auto m = Motor();
+  DifferentialAsApparent wrong(m);
+  MachineLimits lim;
+  TableSpec spec;
+  spec.points = 9;
+  spec.include_generating = false;
+  auto good = BuildTable(m, lim, spec);
+  auto bad = BuildTable(wrong, lim, spec);
+  ASSERT_TRUE(good.ok() && bad.ok());
+  double worst = 0, tmax = good->axes[0].values.back();
+  for (size_t k = 1; k < bad->axes[0].values.size(); ++k) {
+    const double delivered = TorqueNm(m, 4, bad->outputs[0].values[k], bad->outputs[1].values[k]);
+    worst = std::max(worst, std::abs(delivered - bad->axes[0].values[k]) / tmax);
+  }
+  std::printf("differential-as-apparent MTPA: worst torque error %.2f %% of the maximum\n", 100 * worst);
+  EXPECT_GT(worst, 0.02);
+}
+
+Table SmallTable(const std::string& kind) {
+  static const auto m = Motor();
+  TableSpec spec;
+  spec.kind = kind;
+  spec.points = 5;
+  spec.speed_points = 4;
+  spec.speed_max_rpm = 3000;
+  spec.serial = "IPM-T-1";
+  spec.calibration_version = 3;
+  spec.model = "analytic";
+  return *BuildTable(m, MachineLimits{}, spec);
+}
+
+std::vector<double> Numbers(const std::string& s) {
+  std::vector<double> v;
+  std::istringstream in(s);
+  double x;
+  while (in >> x) v.push_back(x);
+  return v;
+}
+
+TEST(Export, CsvRoundTrip) {
+  const Table t = SmallTable("fw");
+  auto e = Export(t, Format::kCsv);
+  ASSERT_TRUE(e.ok());
+  std::istringstream in(e->bytes);
+  std::string line;
+  std::vector<std::vector<double>> rows;
+  while (std::getline(in, line)) {
+    if (line.empty() || line[0] == '#' || line[0] == 't') continue;
+    for (auto& c : line) if (c == ',') c = ' ';
+    rows.push_back(Numbers(line));
+  }
+  ASSERT_EQ(rows.size(), 20u);
+  for (size_t r = 0; r < rows.size(); ++r) {
+    EXPECT_EQ(rows[r][2], t.outputs[0].values[r]);
+    EXPECT_EQ(rows[r][3], t.outputs[1].values[r]);
+  }
+}
+
+TEST(Export, JsonRoundTrip) {
+  const Table t = SmallTable("mtpa");
+  auto e = Export(t, Format::kJson);
+  ASSERT_TRUE(e.ok());
+  const auto j = nlohmann::json::parse(e->bytes);
+  EXPECT_EQ(j["outputs"][0]["values"].get<std::vector<double>>(), t.outputs[0].values);
+  EXPECT_EQ(j["sha256"], t.sha256);
+  // The checksum a flashing station recomputes from the parsed values.
+  Table back = t;
+  back.outputs[0].values = j["outputs"][0]["values"].get<std::vector<double>>();
+  Seal(&back);
+  EXPECT_EQ(back.sha256, t.sha256);
+}
+
+TEST(Export, CHeaderRoundTrip) {
+  const Table t = SmallTable("mtpa");
+  auto e = Export(t, Format::kCHeader);
+  ASSERT_TRUE(e.ok());
+  std::smatch m;
+  const std::regex arr("static const double fluxcal_mtpa_id_a\\[(\\d+)\\] = \\{([^}]*)\\}");
+  ASSERT_TRUE(std::regex_search(e->bytes, m, arr));
+  std::string body = m[2];
+  for (auto& c : body) if (c == ',') c = ' ';
+  EXPECT_EQ(Numbers(body), t.outputs[0].values);
+  EXPECT_NE(e->bytes.find(t.sha256), std::string::npos);
+}
+
+TEST(Export, CdfxRoundTripThroughXmlParser) {
+  const Table t = SmallTable("fw");
+  auto e = Export(t, Format::kCdfx);
+  ASSERT_TRUE(e.ok());
+  tinyxml2::XMLDocument doc;
+  ASSERT_EQ(doc.Parse(e->bytes.c_str()), tinyxml2::XML_SUCCESS);
+  auto* tree = doc.FirstChildElement("MSRSW")->FirstChildElement("SW-SYSTEMS")->FirstChildElement("SW-SYSTEM")
+                   ->FirstChildElement("SW-INSTANCE-TREE");
+  ASSERT_NE(tree, nullptr);
+  auto* inst = tree->FirstChildElement("SW-INSTANCE");
+  EXPECT_STREQ(inst->FirstChildElement("SHORT-NAME")->GetText(), "FLUXCAL_FW_ID_A");
+  EXPECT_STREQ(inst->FirstChildElement("CATEGORY")->GetText(), "MAP");
+  std::vector<double> vals;
+  for (auto* vg = inst->FirstChildElement("SW-VALUE-CONT")->FirstChildElement("SW-VALUES-PHYS")->FirstChildElement("VG");
+       vg; vg = vg->NextSiblingElement("VG")) {
+    for (auto* v = vg->FirstChildElement("V"); v; v = v->NextSiblingElement("V")) vals.push_back(std::stod(v->GetText()));
+  }
+  EXPECT_EQ(vals, t.outputs[0].values);
+}
+
+TEST(Export, DcmRoundTrip) {
+  for (const char* kind : {"mtpa", "fw"}) {
+    const Table t = SmallTable(kind);
+    auto e = Export(t, Format::kDcm);
+    ASSERT_TRUE(e.ok());
+    // Minimal DCM reader: block header, ST/X, ST/Y, WERT until END.
+    std::istringstream in(e->bytes);
+    std::string line, name;
+    std::map<std::string, std::vector<double>> wert, stx;
+    while (std::getline(in, line)) {
+      std::istringstream ls(line);
+      std::string key;
+      ls >> key;
+      if (key == "KENNLINIE" || key == "KENNFELD") ls >> name;
+      else if (key == "WERT") { double x; while (ls >> x) wert[name].push_back(x); }
+      else if (key == "ST/X") { double x; while (ls >> x) stx[name].push_back(x); }
+    }
+    const std::string id = std::string("FLUXCAL_") + (std::string(kind) == "fw" ? "FW" : "MTPA") + "_ID_A";
+    EXPECT_EQ(wert[id], t.outputs[0].values) << kind;
+    EXPECT_EQ(stx[id], t.axes.back().values) << kind;
+  }
+}
+
+}  // namespace
+}  // namespace fluxcal::tables
