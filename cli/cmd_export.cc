@@ -9,6 +9,7 @@
 #include "absl/strings/numbers.h"
 #include "cli/args.h"
 #include "cli/command.h"
+#include "cli/support_remote.h"
 #include "fitting/calibration.h"
 #include "io/csv.h"
 #include "nlohmann/json.hpp"
@@ -23,6 +24,9 @@ int Fail(const std::string& m, int code = 1) {
 }
 
 int RunExport(const std::vector<std::string>& argv) {
+  for (const auto& a : argv) {
+    if (a == "--server" || a.rfind("--server=", 0) == 0) return RunRemoteExport(argv);
+  }
   auto args = ParseArgs(argv, {"table", "format", "points", "speed-points", "speed-max-rpm", "i-max-a",
                                "udc-v", "out", "svg"},
                         {"json"});

@@ -10,6 +10,7 @@
 #include "absl/strings/str_split.h"
 #include "cli/args.h"
 #include "cli/command.h"
+#include "cli/support_remote.h"
 #include "fitting/calibration.h"
 #include "nlohmann/json.hpp"
 
@@ -103,7 +104,14 @@ int RunQueryLocal(const std::vector<std::string>& argv) {
 }
 
 namespace {
-int RunQuery(const std::vector<std::string>& argv) { return RunQueryLocal(argv); }
+int RunQuery(const std::vector<std::string>& argv) {
+  // With --server the positional argument is a serial and the service
+  // answers from its stored calibration; otherwise a calibration file.
+  for (const auto& a : argv) {
+    if (a == "--server" || a.rfind("--server=", 0) == 0) return RunRemoteQuery(argv);
+  }
+  return RunQueryLocal(argv);
+}
 }  // namespace
 
 FLUXCAL_REGISTER_COMMAND("query", "flux linkage and inductance of a calibration at any (id, iq)", RunQuery);

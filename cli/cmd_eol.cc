@@ -1,0 +1,235 @@
+// fluxcal eol <recording-set> --server ADDR [--station ID] [--model M]
+//             [--tables-dir DIR] [--json]
+// The EOL station flow: identify every point locally, stream the results
+// for the serial, ask for a fit and its verdict, fetch the ECU tables.
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+
+#include <grpcpp/grpcpp.h>
+
+#include "cli/args.h"
+#include "cli/command.h"
+#include "cli/support_remote.h"
+#include "identification/identify.h"
+#include "io/csv.h"
+#include "io/recording_set.h"
+#include "nlohmann/json.hpp"
+
+namespace fluxcal::cli {
+namespace {
+
+int RunEol(const std::vector<std::string>& argv) {
+  auto args = ParseArgs(argv, {"server", "station", "model", "tables-dir"}, {"json"});
+  if (!args.ok() || args->positional.size() != 1 || !args->Get("server")) {
+    std::fprintf(stderr, "usage: fluxcal eol <recording-set> --server ADDR [--station ID] [--model M] "
+                         "[--tables-dir DIR] [--json]\n");
+    return 2;
+  }
+  auto set = io::ReadRecordingSet(args->positional[0]);
+  if (!set.ok()) {
+    std::fprintf(stderr, "fluxcal eol: %s\n", std::string(set.status().message()).c_str());
+    return 1;
+  }
+  const std::string serial = set->manifest.serial;
+  std::fprintf(stderr, "eol %s: identifying %zu points\n", serial.c_str(), set->waveforms.size());
+  auto ids = ident::IdentifySet(*set, {});
+  if (!ids.ok()) {
+    std::fprintf(stderr, "fluxcal eol: %s\n", std::string(ids.status().message()).c_str());
+    return 1;
+  }
+  auto stub = MakeStub(*args->Get("server"));
+  // Stream the per-point results (one message per point, as a station does
+  // while the motor is on the bench).
+  v1::IngestHfResultsResponse ing;
+  {
+    grpc::ClientContext ctx;
+    ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
+    auto writer = stub->IngestHfResults(&ctx, &ing);
+    bool first = true;
+    for (const auto& r : *ids) {
+      v1::IngestHfResultsRequest m;
+      if (first) {
+        m.set_serial(serial);
+        m.set_station_id(args->Get("station").value_or("eol"));
+        auto* mo = m.mutable_motor();
+        mo->set_pole_pairs(set->manifest.motor.pole_pairs);
+        mo->set_rs_ohm(set->manifest.motor.rs_ohm.value_or(0));
+        mo->set_psi_pm_wb(set->manifest.motor.psi_pm_wb.value_or(0));
+        first = false;
+      }
+      auto* p = m.add_points();
+      p->set_point_id(r.point); p->set_id_a(r.id_a); p->set_iq_a(r.iq_a); p->set_speed_rpm(r.speed_rpm);
+      p->set_ld_h(r.ld_h); p->set_lq_h(r.lq_h);
+      if (r.has_ldq) p->set_ldq_h(r.ldq_h);
+      p->set_ld_h_std(r.ld_h_std); p->set_lq_h_std(r.lq_h_std); p->set_ldq_h_std(r.ldq_h_std);
+      p->set_temperature_c(r.temperature_c); p->set_reliable(r.reliable);
+      if (!writer->Write(m)) break;
+    }
+    writer->WritesDone();
+    auto s = writer->Finish();
+    if (!s.ok()) return ReportRpcError("eol", s);
+  }
+  std::fprintf(stderr, "eol %s: %d points stored (run %lld, %d rejected); fitting\n", serial.c_str(), ing.accepted(),
+               static_cast<long long>(ing.run_id()), ing.rejects_size());
+  v1::FitRequest fr;
+  fr.set_serial(serial);
+  fr.set_model(args->Get("model").value_or("auto"));
+  v1::FitResponse fit;
+  {
+    grpc::ClientContext ctx;
+    ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(120));
+    auto s = stub->Fit(&ctx, fr, &fit);
+    if (!s.ok()) return ReportRpcError("eol", s);
+  }
+  nlohmann::json out = {{"serial", serial}, {"run_id", ing.run_id()}, {"accepted", ing.accepted()},
+                        {"rejected", ing.rejects_size()}, {"version", fit.calibration().version()},
+                        {"model", fit.calibration().model()}, {"verdict", fit.calibration().verdict()},
+                        {"pass", fit.pass()}, {"psi_pm_wb", fit.calibration().psi_pm_wb()},
+                        {"rms_relative", fit.calibration().rms_relative()}, {"tables", nlohmann::json::array()}};
+  if (auto dir = args->Get("tables-dir"); dir && fit.pass()) {
+    std::filesystem::create_directories(*dir);
+    for (auto [table, format] : {std::pair<const char*, const char*>{"mtpa", "cdfx"}, {"fw", "dcm"}}) {
+      v1::ExportTableRequest er;
+      er.set_serial(serial);
+      er.set_version(fit.calibration().version());
+      er.set_table(table);
+      er.set_format(format);
+      v1::ExportTableResponse resp;
+      grpc::ClientContext ctx;
+      ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(120));
+      auto s = stub->ExportTable(&ctx, er, &resp);
+      if (!s.ok()) return ReportRpcError("eol", s);
+      const std::string path = *dir + "/" + serial + "_v" + std::to_string(resp.version()) + "_" + table + "." + format;
+      if (auto st = io::WriteFileAtomically(path, resp.data()); !st.ok()) {
+        std::fprintf(stderr, "fluxcal eol: %s\n", std::string(st.message()).c_str());
+        return 1;
+      }
+      out["tables"].push_back({{"path", path}, {"crc32", resp.crc32()}, {"sha256", resp.sha256()}});
+    }
+  }
+  if (args->Has("json")) {
+    std::cout << out.dump(2) << "\n";
+  } else {
+    std::printf("%s: calibration v%d (%s), verdict %s, psi_pm %.5g Wb, fit rms %.3f %%\n", serial.c_str(),
+                fit.calibration().version(), fit.calibration().model().c_str(), fit.calibration().verdict().c_str(),
+                fit.calibration().psi_pm_wb(), 100 * fit.calibration().rms_relative());
+    for (const auto& t : out["tables"]) std::printf("  %s crc32 %s\n", t["path"].get<std::string>().c_str(), t["crc32"].get<std::string>().c_str());
+  }
+  return fit.pass() ? 0 : 3;
+}
+
+int RunList(const std::vector<std::string>& argv) {
+  auto args = ParseArgs(argv, {"server", "prefix", "page-size"}, {"json", "failed"});
+  if (!args.ok() || !args->Get("server")) {
+    std::fprintf(stderr, "usage: fluxcal list --server ADDR [--prefix P] [--failed] [--json]\n");
+    return 2;
+  }
+  auto stub = MakeStub(*args->Get("server"));
+  nlohmann::json all = nlohmann::json::array();
+  std::string token;
+  do {
+    v1::ListMotorsRequest req;
+    req.set_serial_prefix(args->Get("prefix").value_or(""));
+    req.set_only_failed(args->Has("failed"));
+    req.set_page_size(200);
+    req.set_page_token(token);
+    v1::ListMotorsResponse resp;
+    grpc::ClientContext ctx;
+    ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
+    auto s = stub->ListMotors(&ctx, req, &resp);
+    if (!s.ok()) return ReportRpcError("list", s);
+    for (const auto& m : resp.motors()) {
+      all.push_back({{"serial", m.serial()}, {"latest_version", m.latest_version()}, {"verdict", m.verdict()},
+                     {"runs", m.runs()}, {"updated_utc", m.updated_utc()}});
+    }
+    token = resp.next_page_token();
+  } while (!token.empty());
+  if (args->Has("json")) {
+    std::cout << nlohmann::json{{"motors", all}}.dump(2) << "\n";
+  } else {
+    std::printf("%-24s %7s %5s  %-20s %s\n", "serial", "version", "runs", "updated", "verdict");
+    for (const auto& m : all) {
+      std::printf("%-24s %7d %5d  %-20s %s\n", m["serial"].get<std::string>().c_str(), m["latest_version"].get<int>(),
+                  m["runs"].get<int>(), m["updated_utc"].get<std::string>().c_str(), m["verdict"].get<std::string>().c_str());
+    }
+  }
+  return 0;
+}
+
+int RunHistory(const std::vector<std::string>& argv) {
+  auto args = ParseArgs(argv, {"server"}, {"json"});
+  if (!args.ok() || args->positional.size() != 1 || !args->Get("server")) {
+    std::fprintf(stderr, "usage: fluxcal history SERIAL --server ADDR [--json]\n");
+    return 2;
+  }
+  auto stub = MakeStub(*args->Get("server"));
+  v1::HistoryRequest req;
+  req.set_serial(args->positional[0]);
+  v1::HistoryResponse resp;
+  grpc::ClientContext ctx;
+  ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
+  auto s = stub->History(&ctx, req, &resp);
+  if (!s.ok()) return ReportRpcError("history", s);
+  nlohmann::json ev = nlohmann::json::array();
+  for (const auto& e : resp.events()) {
+    ev.push_back({{"created_utc", e.created_utc()}, {"kind", e.kind()}, {"run_id", e.run_id()},
+                  {"version", e.version()}, {"detail", e.detail()}});
+  }
+  if (args->Has("json")) {
+    std::cout << nlohmann::json{{"serial", resp.serial()}, {"events", ev}}.dump(2) << "\n";
+  } else {
+    for (const auto& e : ev) {
+      std::printf("%s  %-12s run %-5lld v%-3d %s\n", e["created_utc"].get<std::string>().c_str(),
+                  e["kind"].get<std::string>().c_str(), static_cast<long long>(e["run_id"].get<int64_t>()),
+                  e["version"].get<int>(), e["detail"].get<std::string>().c_str());
+    }
+  }
+  return 0;
+}
+
+int RunFleet(const std::vector<std::string>& argv) {
+  auto args = ParseArgs(argv, {"server"}, {"json"});
+  if (!args.ok() || !args->Get("server")) {
+    std::fprintf(stderr, "usage: fluxcal fleet --server ADDR [--json]\n");
+    return 2;
+  }
+  auto stub = MakeStub(*args->Get("server"));
+  v1::FleetStatisticsRequest req;
+  v1::FleetStatisticsResponse resp;
+  grpc::ClientContext ctx;
+  ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
+  auto s = stub->FleetStatistics(&ctx, req, &resp);
+  if (!s.ok()) return ReportRpcError("fleet", s);
+  nlohmann::json pts = nlohmann::json::array();
+  for (const auto& p : resp.points()) {
+    pts.push_back({{"id_a", p.id_a()}, {"iq_a", p.iq_a()}, {"serials", p.serials()},
+                   {"ldd_h_mean", p.ldd_h_mean()}, {"ldd_h_std", p.ldd_h_std()}, {"lqq_h_mean", p.lqq_h_mean()},
+                   {"lqq_h_std", p.lqq_h_std()}, {"psi_d_wb_mean", p.psi_d_wb_mean()},
+                   {"psi_d_wb_std", p.psi_d_wb_std()}, {"torque_nm_mean", p.torque_nm_mean()},
+                   {"torque_nm_std", p.torque_nm_std()},
+                   {"outliers", std::vector<std::string>(p.outliers().begin(), p.outliers().end())}});
+  }
+  if (args->Has("json")) {
+    std::cout << nlohmann::json{{"points", pts}}.dump(2) << "\n";
+  } else {
+    for (const auto& p : pts) {
+      std::printf("(%6.1f, %6.1f) A: %d serials, Ldd %.4f +- %.4f mH, Lqq %.4f +- %.4f mH, torque %.3f +- %.3f N m, outliers %s\n",
+                  p["id_a"].get<double>(), p["iq_a"].get<double>(), p["serials"].get<int>(),
+                  1e3 * p["ldd_h_mean"].get<double>(), 1e3 * p["ldd_h_std"].get<double>(),
+                  1e3 * p["lqq_h_mean"].get<double>(), 1e3 * p["lqq_h_std"].get<double>(),
+                  p["torque_nm_mean"].get<double>(), p["torque_nm_std"].get<double>(), p["outliers"].dump().c_str());
+    }
+  }
+  return 0;
+}
+
+}  // namespace
+
+FLUXCAL_REGISTER_COMMAND("eol", "EOL station: identify, stream to the service, fit, verdict, fetch tables", RunEol);
+FLUXCAL_REGISTER_COMMAND("list", "list motors known to the service", RunList);
+FLUXCAL_REGISTER_COMMAND("history", "a serial's runs and calibration versions", RunHistory);
+FLUXCAL_REGISTER_COMMAND("fleet", "fleet statistics per operating point, outlier serials", RunFleet);
+
+}  // namespace fluxcal::cli

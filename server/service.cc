@@ -1,0 +1,371 @@
+#include "server/service.h"
+
+#include <zlib.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <random>
+
+#include <grpcpp/ext/proto_server_reflection_plugin.h>
+#include <grpcpp/health_check_service_interface.h>
+#include <grpcpp/grpcpp.h>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "identification/identify.h"
+#include "io/recording_set.h"
+#include "server/validation.h"
+#include "storage/operations.h"
+#include "tables/sha256.h"
+
+namespace fluxcal::server {
+
+grpc::Status ToGrpcStatus(const absl::Status& s) {
+  if (s.ok()) return grpc::Status::OK;
+  grpc::StatusCode c = grpc::StatusCode::INTERNAL;
+  switch (s.code()) {
+    case absl::StatusCode::kInvalidArgument: c = grpc::StatusCode::INVALID_ARGUMENT; break;
+    case absl::StatusCode::kNotFound: c = grpc::StatusCode::NOT_FOUND; break;
+    case absl::StatusCode::kAlreadyExists: c = grpc::StatusCode::ALREADY_EXISTS; break;
+    case absl::StatusCode::kFailedPrecondition: c = grpc::StatusCode::FAILED_PRECONDITION; break;
+    case absl::StatusCode::kResourceExhausted: c = grpc::StatusCode::RESOURCE_EXHAUSTED; break;
+    case absl::StatusCode::kUnavailable: c = grpc::StatusCode::UNAVAILABLE; break;
+    case absl::StatusCode::kDeadlineExceeded: c = grpc::StatusCode::DEADLINE_EXCEEDED; break;
+    case absl::StatusCode::kCancelled: c = grpc::StatusCode::CANCELLED; break;
+    case absl::StatusCode::kDataLoss: c = grpc::StatusCode::DATA_LOSS; break;
+    default: break;
+  }
+  return grpc::Status(c, std::string(s.message()));
+}
+
+namespace {
+
+storage::HfPointRow ToRow(const v1::HfPoint& p) {
+  storage::HfPointRow r;
+  r.point_id = p.point_id();
+  r.id_a = p.id_a(); r.iq_a = p.iq_a(); r.speed_rpm = p.speed_rpm();
+  r.ld_h = p.ld_h(); r.lq_h = p.lq_h();
+  if (p.has_ldq_h()) r.ldq_h = p.ldq_h();
+  r.ld_h_std = p.ld_h_std(); r.lq_h_std = p.lq_h_std(); r.ldq_h_std = p.ldq_h_std();
+  r.temperature_c = p.temperature_c();
+  r.reliable = p.reliable();
+  return r;
+}
+
+void ToProto(const storage::CalibrationRow& c, v1::CalibrationRecord* r) {
+  r->set_serial(c.serial);
+  r->set_version(c.version);
+  r->set_created_utc(c.created_utc);
+  r->set_model(c.model);
+  r->set_psi_pm_wb(c.psi_pm_wb);
+  r->set_rms_relative(c.rms_relative);
+  r->set_verdict(c.verdict);
+  r->set_calibration_json(c.calibration_json);
+  r->set_run_id(c.run_id);
+}
+
+}  // namespace
+
+grpc::Status CalibrationServiceImpl::IngestHfResults(grpc::ServerContext* ctx,
+                                                     grpc::ServerReader<v1::IngestHfResultsRequest>* reader,
+                                                     v1::IngestHfResultsResponse* response) {
+  v1::IngestHfResultsRequest msg;
+  std::string serial, station;
+  v1::MotorInfo motor;
+  bool have_motor = false;
+  std::vector<storage::HfPointRow> rows;
+  int index = 0;
+  while (reader->Read(&msg)) {
+    if (ctx->IsCancelled()) return grpc::Status(grpc::StatusCode::CANCELLED, "client cancelled the stream");
+    if (serial.empty()) {
+      if (auto s = ValidateSerial(msg.serial()); !s.ok()) return ToGrpcStatus(s);
+      serial = msg.serial();
+      station = msg.station_id();
+    } else if (!msg.serial().empty() && msg.serial() != serial) {
+      return ToGrpcStatus(absl::InvalidArgumentError(
+          absl::StrCat("serial: a stream carries one serial; got '", msg.serial(), "' after '", serial, "'")));
+    }
+    if (msg.has_motor()) {
+      if (auto s = ValidateMotor(msg.motor()); !s.ok()) return ToGrpcStatus(s);
+      motor = msg.motor();
+      have_motor = true;
+    }
+    for (const auto& p : msg.points()) {
+      if (index >= kMaxPointsPerStream) {
+        return ToGrpcStatus(absl::InvalidArgumentError(
+            absl::StrCat("points: stream exceeds ", kMaxPointsPerStream, " points")));
+      }
+      if (auto s = ValidatePoint(p, index); !s.ok()) {
+        auto* r = response->add_rejects();
+        r->set_index(index);
+        r->set_point_id(p.point_id());
+        const std::string m(s.message());
+        r->set_field(m.substr(0, m.find(':')));
+        r->set_message(m);
+      } else {
+        rows.push_back(ToRow(p));
+      }
+      ++index;
+    }
+  }
+  if (serial.empty()) return ToGrpcStatus(absl::InvalidArgumentError("serial: the stream carried no message"));
+  if (ctx->IsCancelled()) return grpc::Status(grpc::StatusCode::CANCELLED, "client cancelled the stream");
+  storage::MotorRow m{serial, 4, 0.0, 0.0};
+  if (have_motor) {
+    m.pole_pairs = motor.pole_pairs(); m.rs_ohm = motor.rs_ohm(); m.psi_pm_wb = motor.psi_pm_wb();
+  } else if (auto known = store_->GetMotor(serial); known.ok()) {
+    m = *known;
+  } else {
+    return ToGrpcStatus(absl::InvalidArgumentError(
+        absl::StrCat("motor: required for serial '", serial, "' (not known to the store yet)")));
+  }
+  if (rows.empty()) {
+    return ToGrpcStatus(absl::InvalidArgumentError(
+        absl::StrCat("points: no valid point in the stream (", response->rejects_size(), " rejected)")));
+  }
+  auto run = store_->IngestHfRun(m, station, "hf_run", rows);
+  if (!run.ok()) return ToGrpcStatus(run.status());
+  response->set_serial(serial);
+  response->set_run_id(*run);
+  response->set_accepted(static_cast<int>(rows.size()));
+  return grpc::Status::OK;
+}
+
+grpc::Status CalibrationServiceImpl::IngestRecording(grpc::ServerContext* ctx,
+                                                     grpc::ServerReader<v1::RecordingChunk>* reader,
+                                                     v1::IngestRecordingResponse* response) {
+  v1::RecordingChunk chunk;
+  std::string serial, station;
+  std::map<std::string, std::string> files;
+  long long total = 0;
+  while (reader->Read(&chunk)) {
+    if (serial.empty()) {
+      if (auto s = ValidateSerial(chunk.serial()); !s.ok()) return ToGrpcStatus(s);
+      serial = chunk.serial();
+      station = chunk.station_id();
+    }
+    const std::string& p = chunk.path();
+    if (p.empty() || p[0] == '/' || p.find("..") != std::string::npos) {
+      return ToGrpcStatus(absl::InvalidArgumentError(absl::StrCat("path: illegal file path '", p, "'")));
+    }
+    total += static_cast<long long>(chunk.data().size());
+    if (total > kMaxRecordingBytes) {
+      return ToGrpcStatus(absl::InvalidArgumentError(absl::StrCat("data: recording exceeds ", kMaxRecordingBytes, " bytes")));
+    }
+    files[p] += chunk.data();
+  }
+  if (serial.empty()) return ToGrpcStatus(absl::InvalidArgumentError("serial: the stream carried no chunk"));
+  if (ctx->IsCancelled()) return grpc::Status(grpc::StatusCode::CANCELLED, "client cancelled the stream");
+  // Materialise, validate and identify like a local set.
+  namespace fs = std::filesystem;
+  std::mt19937_64 rng(std::random_device{}());
+  const fs::path dir = fs::temp_directory_path() / absl::StrFormat("fluxcal-ingest-%016x", rng());
+  std::error_code ec;
+  std::string archive;
+  for (const auto& [path, data] : files) {
+    const fs::path f = dir / path;
+    fs::create_directories(f.parent_path(), ec);
+    std::ofstream(f, std::ios::binary) << data;
+    absl::StrAppend(&archive, path, "\n", data.size(), "\n", data);
+  }
+  auto cleanup = [&] { fs::remove_all(dir, ec); };
+  auto set = io::ReadRecordingSet(dir.string());
+  if (!set.ok()) {
+    cleanup();
+    std::string msg(set.status().message());
+    const std::string prefix = dir.string() + "/";
+    for (size_t pos; (pos = msg.find(prefix)) != std::string::npos;) msg.erase(pos, prefix.size());
+    return ToGrpcStatus(absl::InvalidArgumentError(msg));
+  }
+  if (set->manifest.serial != serial) {
+    cleanup();
+    return ToGrpcStatus(absl::InvalidArgumentError(
+        absl::StrCat("serial: stream serial '", serial, "' differs from the manifest's '", set->manifest.serial, "'")));
+  }
+  auto ids = ident::IdentifySet(*set, {});
+  cleanup();
+  if (!ids.ok()) return ToGrpcStatus(absl::InvalidArgumentError(std::string(ids.status().message())));
+  std::vector<storage::HfPointRow> rows;
+  for (const auto& r : *ids) {
+    storage::HfPointRow h;
+    h.point_id = r.point; h.id_a = r.id_a; h.iq_a = r.iq_a; h.speed_rpm = r.speed_rpm;
+    h.ld_h = r.ld_h; h.lq_h = r.lq_h;
+    if (r.has_ldq) h.ldq_h = r.ldq_h;
+    h.ld_h_std = r.ld_h_std; h.lq_h_std = r.lq_h_std; h.ldq_h_std = r.ldq_h_std;
+    h.temperature_c = r.temperature_c; h.reliable = r.reliable;
+    rows.push_back(h);
+  }
+  uLongf zlen = compressBound(archive.size());
+  std::vector<uint8_t> z(zlen);
+  if (compress2(z.data(), &zlen, reinterpret_cast<const Bytef*>(archive.data()), archive.size(), 6) != Z_OK) {
+    return ToGrpcStatus(absl::InternalError("zlib: compression failed"));
+  }
+  z.resize(zlen);
+  const std::string sha = tables::Sha256Hex(archive);
+  const auto& mm = set->manifest.motor;
+  storage::MotorRow motor{serial, mm.pole_pairs, mm.rs_ohm.value_or(0.0), mm.psi_pm_wb.value_or(0.0)};
+  auto run = store_->IngestHfRun(motor, station, "recording", rows, sha, z, static_cast<int64_t>(archive.size()));
+  if (!run.ok()) return ToGrpcStatus(run.status());
+  response->set_serial(serial);
+  response->set_run_id(*run);
+  response->set_points(static_cast<int>(rows.size()));
+  response->set_recording_sha256(sha);
+  response->set_recording_bytes(static_cast<int64_t>(archive.size()));
+  response->set_stored_bytes(static_cast<int64_t>(z.size()));
+  return grpc::Status::OK;
+}
+
+grpc::Status CalibrationServiceImpl::Fit(grpc::ServerContext*, const v1::FitRequest* req, v1::FitResponse* resp) {
+  if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
+  storage::FitTolerances tol;
+  if (req->max_rms_relative() < 0 || !std::isfinite(req->max_rms_relative()) ||
+      req->psi_pm_tolerance_relative() < 0 || !std::isfinite(req->psi_pm_tolerance_relative())) {
+    return ToGrpcStatus(absl::InvalidArgumentError("max_rms_relative, psi_pm_tolerance_relative: must be >= 0"));
+  }
+  if (req->max_rms_relative() > 0) tol.max_rms_relative = req->max_rms_relative();
+  if (req->psi_pm_tolerance_relative() > 0) tol.psi_pm_tolerance_relative = req->psi_pm_tolerance_relative();
+  auto row = storage::FitSerial(*store_, req->serial(), req->model(), tol);
+  if (!row.ok()) return ToGrpcStatus(row.status());
+  ToProto(*row, resp->mutable_calibration());
+  resp->set_pass(row->verdict == "pass");
+  return grpc::Status::OK;
+}
+
+grpc::Status CalibrationServiceImpl::GetCalibration(grpc::ServerContext*, const v1::GetCalibrationRequest* req,
+                                                    v1::CalibrationRecord* resp) {
+  if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
+  if (req->version() < 0) return ToGrpcStatus(absl::InvalidArgumentError("version: must be >= 0 (0 = latest)"));
+  auto row = store_->GetCalibration(req->serial(), req->version());
+  if (!row.ok()) return ToGrpcStatus(row.status());
+  ToProto(*row, resp);
+  return grpc::Status::OK;
+}
+
+grpc::Status CalibrationServiceImpl::ListMotors(grpc::ServerContext*, const v1::ListMotorsRequest* req,
+                                                v1::ListMotorsResponse* resp) {
+  int size = req->page_size() == 0 ? 50 : req->page_size();
+  if (size < 0 || size > 1000) return ToGrpcStatus(absl::InvalidArgumentError("page_size: must be 0..1000"));
+  int offset = 0;
+  if (!req->page_token().empty()) {
+    try {
+      offset = std::stoi(req->page_token());
+    } catch (...) {
+      offset = -1;
+    }
+    if (offset < 0) return ToGrpcStatus(absl::InvalidArgumentError("page_token: not a token from this service"));
+  }
+  auto rows = store_->ListMotors(req->serial_prefix(), req->only_failed(), offset, size + 1);
+  if (!rows.ok()) return ToGrpcStatus(rows.status());
+  for (size_t k = 0; k < rows->size() && static_cast<int>(k) < size; ++k) {
+    auto* m = resp->add_motors();
+    const auto& r = (*rows)[k];
+    m->set_serial(r.serial); m->set_latest_version(r.latest_version); m->set_verdict(r.verdict);
+    m->set_runs(r.runs); m->set_updated_utc(r.updated_utc);
+  }
+  if (static_cast<int>(rows->size()) > size) resp->set_next_page_token(std::to_string(offset + size));
+  return grpc::Status::OK;
+}
+
+grpc::Status CalibrationServiceImpl::History(grpc::ServerContext*, const v1::HistoryRequest* req,
+                                             v1::HistoryResponse* resp) {
+  if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
+  auto rows = store_->History(req->serial());
+  if (!rows.ok()) return ToGrpcStatus(rows.status());
+  resp->set_serial(req->serial());
+  for (const auto& r : *rows) {
+    auto* e = resp->add_events();
+    e->set_created_utc(r.created_utc); e->set_kind(r.kind); e->set_run_id(r.run_id);
+    e->set_version(r.version); e->set_detail(r.detail);
+  }
+  return grpc::Status::OK;
+}
+
+grpc::Status CalibrationServiceImpl::QueryFlux(grpc::ServerContext*, const v1::QueryFluxRequest* req,
+                                               v1::QueryFluxResponse* resp) {
+  if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
+  if (req->points_size() > 100000) return ToGrpcStatus(absl::InvalidArgumentError("points: at most 100000 per call"));
+  for (int k = 0; k < req->points_size(); ++k) {
+    if (auto s = ValidateOperatingPoint(req->points(k), k); !s.ok()) return ToGrpcStatus(s);
+  }
+  auto cal = storage::LoadCalibration(*store_, req->serial(), req->version());
+  if (!cal.ok()) return ToGrpcStatus(cal.status());
+  resp->set_serial(req->serial());
+  resp->set_version(cal->version);
+  for (const auto& p : req->points()) {
+    const auto x = cal->Predict(p.id_a(), p.iq_a());
+    auto* v = resp->add_values();
+    v->set_id_a(p.id_a()); v->set_iq_a(p.iq_a());
+    v->set_psi_d_wb(x.psi_d_wb); v->set_psi_q_wb(x.psi_q_wb);
+    v->set_ldd_h(x.ldd_h); v->set_lqq_h(x.lqq_h); v->set_ldq_h(x.ldq_h);
+    v->set_ld_app_h(x.ld_app_h); v->set_lq_app_h(x.lq_app_h); v->set_torque_nm(x.torque_nm);
+    v->set_psi_d_wb_std(x.psi_d_wb_std); v->set_psi_q_wb_std(x.psi_q_wb_std);
+    v->set_ldd_h_std(x.ldd_h_std); v->set_lqq_h_std(x.lqq_h_std); v->set_torque_nm_std(x.torque_nm_std);
+    v->set_extrapolated(x.extrapolated);
+  }
+  return grpc::Status::OK;
+}
+
+grpc::Status CalibrationServiceImpl::ExportTable(grpc::ServerContext*, const v1::ExportTableRequest* req,
+                                                 v1::ExportTableResponse* resp) {
+  if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
+  tables::TableSpec spec;
+  spec.kind = req->table().empty() ? "mtpa" : req->table();
+  if (req->points() != 0) spec.points = req->points();
+  if (req->speed_points() != 0) spec.speed_points = req->speed_points();
+  if (req->speed_max_rpm() != 0) spec.speed_max_rpm = req->speed_max_rpm();
+  if (spec.points < 2 || spec.points > 4096) return ToGrpcStatus(absl::InvalidArgumentError("points: must be 2..4096"));
+  if (spec.speed_points < 2 || spec.speed_points > 1024) return ToGrpcStatus(absl::InvalidArgumentError("speed_points: must be 2..1024"));
+  if (!(spec.speed_max_rpm > 0 && spec.speed_max_rpm <= 1e5)) return ToGrpcStatus(absl::InvalidArgumentError("speed_max_rpm: must be in (0, 100000]"));
+  tables::MachineLimits lim;
+  if (req->i_max_a() != 0) lim.i_max_a = req->i_max_a();
+  if (req->udc_v() != 0) lim.udc_v = req->udc_v();
+  if (!(lim.i_max_a > 0 && lim.i_max_a <= 1e4)) return ToGrpcStatus(absl::InvalidArgumentError("i_max_a: must be in (0, 10000]"));
+  if (!(lim.udc_v > 0 && lim.udc_v <= 5000)) return ToGrpcStatus(absl::InvalidArgumentError("udc_v: must be in (0, 5000]"));
+  auto r = storage::ExportTable(*store_, req->serial(), req->version(), spec, lim,
+                                req->format().empty() ? "csv" : req->format());
+  if (!r.ok()) return ToGrpcStatus(r.status());
+  resp->set_serial(req->serial());
+  resp->set_version(r->version);
+  resp->set_data(r->exported.bytes);
+  resp->set_crc32(absl::StrFormat("%08x", r->exported.crc32));
+  resp->set_sha256(r->exported.sha256);
+  resp->set_clamped_cells(r->clamped_cells);
+  return grpc::Status::OK;
+}
+
+grpc::Status CalibrationServiceImpl::FleetStatistics(grpc::ServerContext*, const v1::FleetStatisticsRequest* req,
+                                                     v1::FleetStatisticsResponse* resp) {
+  std::vector<std::pair<double, double>> pts;
+  for (int k = 0; k < req->points_size(); ++k) {
+    if (auto s = ValidateOperatingPoint(req->points(k), k); !s.ok()) return ToGrpcStatus(s);
+    pts.push_back({req->points(k).id_a(), req->points(k).iq_a()});
+  }
+  if (pts.empty()) pts = {{-20, 40}, {-60, 80}, {0, 100}};
+  const double sigma = req->outlier_sigma() > 0 ? req->outlier_sigma() : 3.0;
+  auto stats = storage::FleetStatistics(*store_, pts, sigma);
+  if (!stats.ok()) return ToGrpcStatus(stats.status());
+  for (const auto& s : *stats) {
+    auto* p = resp->add_points();
+    p->set_id_a(s.id_a); p->set_iq_a(s.iq_a); p->set_serials(s.serials);
+    p->set_ldd_h_mean(s.ldd_mean); p->set_ldd_h_std(s.ldd_std);
+    p->set_lqq_h_mean(s.lqq_mean); p->set_lqq_h_std(s.lqq_std);
+    p->set_psi_d_wb_mean(s.psi_d_mean); p->set_psi_d_wb_std(s.psi_d_std);
+    p->set_torque_nm_mean(s.torque_mean); p->set_torque_nm_std(s.torque_std);
+    for (const auto& o : s.outliers) p->add_outliers(o);
+  }
+  return grpc::Status::OK;
+}
+
+std::unique_ptr<grpc::Server> StartServer(CalibrationServiceImpl* service, const std::string& address,
+                                          int* bound_port) {
+  grpc::EnableDefaultHealthCheckService(true);
+  grpc::reflection::InitProtoReflectionServerBuilderPlugin();
+  grpc::ServerBuilder b;
+  b.AddListeningPort(address, grpc::InsecureServerCredentials(), bound_port);
+  b.RegisterService(service);
+  b.SetMaxReceiveMessageSize(64 << 20);
+  return b.BuildAndStart();
+}
+
+}  // namespace fluxcal::server

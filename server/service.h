@@ -1,0 +1,58 @@
+// The gRPC service: thin. Each handler converts protobuf to plain types,
+// validates (server/validation.h), calls one library function
+// (storage/operations.h, storage/store.h, identification/) and maps the
+// status in one place (ToGrpcStatus).
+#ifndef FLUXCAL_SERVER_SERVICE_H_
+#define FLUXCAL_SERVER_SERVICE_H_
+
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+
+#include "absl/status/status.h"
+#include "fluxcal/v1/calibration.grpc.pb.h"
+#include "storage/store.h"
+
+namespace grpc {
+class Server;
+}
+
+namespace fluxcal::server {
+
+grpc::Status ToGrpcStatus(const absl::Status& s);
+
+class CalibrationServiceImpl final : public fluxcal::v1::CalibrationService::Service {
+ public:
+  explicit CalibrationServiceImpl(storage::Store* store) : store_(store) {}
+
+  grpc::Status IngestHfResults(grpc::ServerContext* ctx, grpc::ServerReader<v1::IngestHfResultsRequest>* reader,
+                               v1::IngestHfResultsResponse* response) override;
+  grpc::Status IngestRecording(grpc::ServerContext* ctx, grpc::ServerReader<v1::RecordingChunk>* reader,
+                               v1::IngestRecordingResponse* response) override;
+  grpc::Status Fit(grpc::ServerContext* ctx, const v1::FitRequest* req, v1::FitResponse* resp) override;
+  grpc::Status GetCalibration(grpc::ServerContext* ctx, const v1::GetCalibrationRequest* req,
+                              v1::CalibrationRecord* resp) override;
+  grpc::Status ListMotors(grpc::ServerContext* ctx, const v1::ListMotorsRequest* req,
+                          v1::ListMotorsResponse* resp) override;
+  grpc::Status History(grpc::ServerContext* ctx, const v1::HistoryRequest* req, v1::HistoryResponse* resp) override;
+  grpc::Status QueryFlux(grpc::ServerContext* ctx, const v1::QueryFluxRequest* req,
+                         v1::QueryFluxResponse* resp) override;
+  grpc::Status ExportTable(grpc::ServerContext* ctx, const v1::ExportTableRequest* req,
+                           v1::ExportTableResponse* resp) override;
+  grpc::Status FleetStatistics(grpc::ServerContext* ctx, const v1::FleetStatisticsRequest* req,
+                               v1::FleetStatisticsResponse* resp) override;
+
+ private:
+  storage::Store* store_;
+};
+
+// Builds and starts a server (health checking and reflection on) listening
+// on `address` ("127.0.0.1:50051"; port 0 picks one, returned in
+// *bound_port).
+std::unique_ptr<grpc::Server> StartServer(CalibrationServiceImpl* service, const std::string& address,
+                                          int* bound_port);
+
+}  // namespace fluxcal::server
+
+#endif  // FLUXCAL_SERVER_SERVICE_H_

@@ -1,0 +1,70 @@
+#include "server/validation.h"
+
+#include <cmath>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "io/recording_set.h"
+
+namespace fluxcal::server {
+namespace {
+
+absl::Status Bad(const std::string& field, const std::string& what, double got) {
+  return absl::InvalidArgumentError(absl::StrFormat("%s: %s, got %.9g", field, what, got));
+}
+
+// Physical plausibility ranges (SI): an EV traction motor's currents stay
+// below 10 kA, speeds below 100 000 rpm, inductances below 1 H.
+absl::Status Range(const std::string& field, double v, double lo, double hi, const std::string& what) {
+  if (!std::isfinite(v)) return Bad(field, "must be a finite number", v);
+  if (v < lo || v > hi) return Bad(field, what, v);
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+absl::Status ValidateSerial(const std::string& serial, const std::string& field) {
+  if (serial.empty()) return absl::InvalidArgumentError(absl::StrCat(field, ": must not be empty"));
+  if (!io::IsValidSerial(serial)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(field, ": illegal serial '", serial.substr(0, 80), "' (1 to 64 characters of A-Z a-z 0-9 - _ .)"));
+  }
+  return absl::OkStatus();
+}
+
+absl::Status ValidateMotor(const fluxcal::v1::MotorInfo& m) {
+  if (m.pole_pairs() < 1 || m.pole_pairs() > 100) {
+    return Bad("motor.pole_pairs", "must be 1..100", m.pole_pairs());
+  }
+  if (auto s = Range("motor.rs_ohm", m.rs_ohm(), 0, 10, "must be 0..10 Ohm"); !s.ok()) return s;
+  return Range("motor.psi_pm_wb", m.psi_pm_wb(), 0, 10, "must be 0..10 Wb");
+}
+
+absl::Status ValidatePoint(const fluxcal::v1::HfPoint& p, int i) {
+  const std::string f = absl::StrCat("points[", i, "]");
+  if (auto s = Range(f + ".id_a", p.id_a(), -1e4, 1e4, "must be within +-10 kA"); !s.ok()) return s;
+  if (auto s = Range(f + ".iq_a", p.iq_a(), -1e4, 1e4, "must be within +-10 kA"); !s.ok()) return s;
+  if (auto s = Range(f + ".speed_rpm", p.speed_rpm(), -1e5, 1e5, "must be within +-100000 rpm"); !s.ok()) return s;
+  if (!std::isfinite(p.ld_h()) || p.ld_h() <= 0 || p.ld_h() >= 1) {
+    return Bad(f + ".ld_h", "must be positive and below 1 H", p.ld_h());
+  }
+  if (!std::isfinite(p.lq_h()) || p.lq_h() <= 0 || p.lq_h() >= 1) {
+    return Bad(f + ".lq_h", "must be positive and below 1 H", p.lq_h());
+  }
+  if (p.has_ldq_h()) {
+    if (auto s = Range(f + ".ldq_h", p.ldq_h(), -1, 1, "must be within +-1 H"); !s.ok()) return s;
+  }
+  for (auto [name, v] : {std::pair<const char*, double>{".ld_h_std", p.ld_h_std()},
+                         {".lq_h_std", p.lq_h_std()}, {".ldq_h_std", p.ldq_h_std()}}) {
+    if (auto s = Range(f + name, v, 0, 1, "must be 0..1 H"); !s.ok()) return s;
+  }
+  return Range(f + ".temperature_c", p.temperature_c(), -60, 250, "must be -60..250 degC");
+}
+
+absl::Status ValidateOperatingPoint(const fluxcal::v1::OperatingPoint& p, int i) {
+  const std::string f = absl::StrCat("points[", i, "]");
+  if (auto s = Range(f + ".id_a", p.id_a(), -1e4, 1e4, "must be within +-10 kA"); !s.ok()) return s;
+  return Range(f + ".iq_a", p.iq_a(), -1e4, 1e4, "must be within +-10 kA");
+}
+
+}  // namespace fluxcal::server
