@@ -9,7 +9,7 @@ PKGS=(
   libsqlite3-dev sqlite3 zlib1g-dev
   nlohmann-json3-dev libtinyxml2-dev
   libgtest-dev libgmock-dev libbenchmark-dev
-  python3 python3-grpcio python3-grpc-tools
+  python3 python3-grpcio python3-protobuf
 )
 missing=()
 for p in "${PKGS[@]}"; do

@@ -1,0 +1,322 @@
+// The service end to end over loopback: validation rules (status code and
+// message), NOT_FOUND, 8 concurrent station streams, fit, export, query, and
+// kill -9 of a real `fluxcal serve` mid-stream.
+#include <signal.h>
+#include <sqlite3.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <filesystem>
+#include <thread>
+
+#include <grpcpp/grpcpp.h>
+
+#include "gtest/gtest.h"
+#include "server/service.h"
+#include "simulation/twin.h"
+#include "storage/store.h"
+
+namespace fluxcal::server {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string TempPath(const std::string& name) {
+  return (fs::temp_directory_path() / ("fluxcal_srv_" + std::to_string(::getpid()) + "_" + name)).string();
+}
+
+// 36 points of the paper's grid from the twin's analytic motor.
+std::vector<v1::HfPoint> GridPoints(double scale = 1.0) {
+  sim::MotorParams mp;
+  sim::AnalyticMotor m(mp);
+  std::vector<v1::HfPoint> out;
+  for (int a = 0; a < 6; ++a) {
+    for (int b = 0; b < 6; ++b) {
+      v1::HfPoint p;
+      p.set_point_id("p" + std::to_string(6 * a + b));
+      p.set_id_a(-100 + 20 * a);
+      p.set_iq_a(20 * b);
+      const auto L = m.Inductance(p.id_a(), p.iq_a());
+      p.set_ld_h(scale * L.ldd_h); p.set_lq_h(scale * L.lqq_h); p.set_ldq_h(L.ldq_h);
+      p.set_ld_h_std(1e-7); p.set_lq_h_std(1e-7); p.set_ldq_h_std(1e-7);
+      p.set_temperature_c(25); p.set_reliable(true);
+      out.push_back(p);
+    }
+  }
+  return out;
+}
+
+class ServiceTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    db_ = TempPath(::testing::UnitTest::GetInstance()->current_test_info()->name() + std::string(".db"));
+    fs::remove(db_);
+    auto s = storage::Store::Open(db_);
+    ASSERT_TRUE(s.ok());
+    store_ = std::move(*s);
+    service_ = std::make_unique<CalibrationServiceImpl>(store_.get());
+    int port = 0;
+    server_ = StartServer(service_.get(), "127.0.0.1:0", &port);
+    ASSERT_GT(port, 0);
+    stub_ = v1::CalibrationService::NewStub(
+        grpc::CreateChannel("127.0.0.1:" + std::to_string(port), grpc::InsecureChannelCredentials()));
+  }
+  void TearDown() override {
+    server_->Shutdown();
+    store_.reset();
+    for (auto sfx : {"", "-wal", "-shm"}) fs::remove(db_ + sfx);
+  }
+  grpc::Status Ingest(const std::string& serial, const std::vector<v1::HfPoint>& pts,
+                      v1::IngestHfResultsResponse* resp, bool with_motor = true) {
+    grpc::ClientContext ctx;
+    auto w = stub_->IngestHfResults(&ctx, resp);
+    v1::IngestHfResultsRequest first;
+    first.set_serial(serial);
+    if (with_motor) {
+      first.mutable_motor()->set_pole_pairs(4);
+      first.mutable_motor()->set_rs_ohm(0.011);
+      first.mutable_motor()->set_psi_pm_wb(0.0114);
+    }
+    w->Write(first);
+    for (const auto& p : pts) {
+      v1::IngestHfResultsRequest m;
+      *m.add_points() = p;
+      w->Write(m);
+    }
+    w->WritesDone();
+    return w->Finish();
+  }
+  std::string db_;
+  std::unique_ptr<storage::Store> store_;
+  std::unique_ptr<CalibrationServiceImpl> service_;
+  std::unique_ptr<grpc::Server> server_;
+  std::unique_ptr<v1::CalibrationService::Stub> stub_;
+};
+
+void ExpectStatus(const grpc::Status& s, grpc::StatusCode code, const std::string& fragment) {
+  EXPECT_EQ(s.error_code(), code) << s.error_message();
+  EXPECT_NE(s.error_message().find(fragment), std::string::npos) << "message: " << s.error_message();
+}
+
+TEST_F(ServiceTest, StreamLevelValidation) {
+  v1::IngestHfResultsResponse r;
+  ExpectStatus(Ingest("", GridPoints(), &r), grpc::StatusCode::INVALID_ARGUMENT, "serial: must not be empty");
+  ExpectStatus(Ingest("bad serial!", GridPoints(), &r), grpc::StatusCode::INVALID_ARGUMENT, "serial: illegal serial");
+  ExpectStatus(Ingest("IPM-NEW", GridPoints(), &r, false), grpc::StatusCode::INVALID_ARGUMENT, "motor: required");
+  {
+    grpc::ClientContext ctx;
+    v1::IngestHfResultsResponse rr;
+    auto w = stub_->IngestHfResults(&ctx, &rr);
+    v1::IngestHfResultsRequest a, b;
+    a.set_serial("IPM-A"); a.mutable_motor()->set_pole_pairs(4);
+    b.set_serial("IPM-B");
+    w->Write(a);
+    w->Write(b);
+    w->WritesDone();
+    ExpectStatus(w->Finish(), grpc::StatusCode::INVALID_ARGUMENT, "one serial");
+  }
+  {
+    grpc::ClientContext ctx;
+    v1::IngestHfResultsResponse rr;
+    auto w = stub_->IngestHfResults(&ctx, &rr);
+    v1::IngestHfResultsRequest a;
+    a.set_serial("IPM-A");
+    a.mutable_motor()->set_pole_pairs(0);
+    w->Write(a);
+    w->WritesDone();
+    ExpectStatus(w->Finish(), grpc::StatusCode::INVALID_ARGUMENT, "motor.pole_pairs");
+  }
+}
+
+// Each point rule rejects the point, names field and index, stores the rest.
+TEST_F(ServiceTest, PointValidationRules) {
+  struct Case { std::function<void(v1::HfPoint*)> breakit; std::string field; };
+  const std::vector<Case> cases = {
+      {[](v1::HfPoint* p) { p->set_ld_h(std::nan("")); }, "points[3].ld_h"},
+      {[](v1::HfPoint* p) { p->set_lq_h(INFINITY); }, "points[3].lq_h"},
+      {[](v1::HfPoint* p) { p->set_ld_h(-1e-4); }, "points[3].ld_h: must be positive"},
+      {[](v1::HfPoint* p) { p->set_lq_h(2.0); }, "points[3].lq_h: must be positive and below 1 H"},
+      {[](v1::HfPoint* p) { p->set_id_a(2e4); }, "points[3].id_a"},
+      {[](v1::HfPoint* p) { p->set_speed_rpm(-2e5); }, "points[3].speed_rpm"},
+      {[](v1::HfPoint* p) { p->set_ld_h_std(-1); }, "points[3].ld_h_std"},
+      {[](v1::HfPoint* p) { p->set_temperature_c(900); }, "points[3].temperature_c"},
+  };
+  for (const auto& c : cases) {
+    auto pts = GridPoints();
+    c.breakit(&pts[3]);
+    v1::IngestHfResultsResponse r;
+    ASSERT_TRUE(Ingest("IPM-V", pts, &r).ok());
+    EXPECT_EQ(r.accepted(), 35);
+    ASSERT_EQ(r.rejects_size(), 1);
+    EXPECT_EQ(r.rejects(0).index(), 3);
+    EXPECT_EQ(r.rejects(0).point_id(), "p3");
+    EXPECT_NE(r.rejects(0).message().find(c.field), std::string::npos) << r.rejects(0).message();
+  }
+  // A stream with only invalid points is refused whole.
+  auto pts = GridPoints();
+  for (auto& p : pts) p.set_ld_h(-1);
+  v1::IngestHfResultsResponse r;
+  ExpectStatus(Ingest("IPM-V", pts, &r), grpc::StatusCode::INVALID_ARGUMENT, "no valid point");
+}
+
+TEST_F(ServiceTest, UnknownSerialIsNotFound) {
+  grpc::ClientContext c1, c2, c3, c4;
+  v1::FitRequest f;
+  f.set_serial("IPM-NONE");
+  v1::FitResponse fr;
+  ExpectStatus(stub_->Fit(&c1, f, &fr), grpc::StatusCode::NOT_FOUND, "IPM-NONE");
+  v1::QueryFluxRequest q;
+  q.set_serial("IPM-NONE");
+  v1::QueryFluxResponse qr;
+  ExpectStatus(stub_->QueryFlux(&c2, q, &qr), grpc::StatusCode::NOT_FOUND, "IPM-NONE");
+  v1::ExportTableRequest e;
+  e.set_serial("IPM-NONE");
+  v1::ExportTableResponse er;
+  ExpectStatus(stub_->ExportTable(&c3, e, &er), grpc::StatusCode::NOT_FOUND, "IPM-NONE");
+  v1::HistoryRequest h;
+  h.set_serial("IPM-NONE");
+  v1::HistoryResponse hr;
+  ExpectStatus(stub_->History(&c4, h, &hr), grpc::StatusCode::NOT_FOUND, "IPM-NONE");
+}
+
+TEST_F(ServiceTest, UnaryValidation) {
+  grpc::ClientContext c1, c2, c3;
+  v1::ListMotorsRequest l;
+  l.set_page_size(5000);
+  v1::ListMotorsResponse lr;
+  ExpectStatus(stub_->ListMotors(&c1, l, &lr), grpc::StatusCode::INVALID_ARGUMENT, "page_size");
+  v1::QueryFluxRequest q;
+  q.set_serial("IPM-Q");
+  q.add_points()->set_id_a(std::nan(""));
+  v1::QueryFluxResponse qr;
+  ExpectStatus(stub_->QueryFlux(&c2, q, &qr), grpc::StatusCode::INVALID_ARGUMENT, "points[0].id_a");
+  v1::ExportTableRequest e;
+  e.set_serial("IPM-Q");
+  e.set_points(1);
+  v1::ExportTableResponse er;
+  ExpectStatus(stub_->ExportTable(&c3, e, &er), grpc::StatusCode::INVALID_ARGUMENT, "points");
+}
+
+TEST_F(ServiceTest, EightConcurrentStationsThenFitExportQuery) {
+  std::vector<std::thread> threads;
+  std::vector<grpc::Status> st(8);
+  std::vector<v1::IngestHfResultsResponse> resp(8);
+  for (int k = 0; k < 8; ++k) {
+    threads.emplace_back([&, k] { st[k] = Ingest("IPM-C-" + std::to_string(k), GridPoints(1 + 0.01 * k), &resp[k]); });
+  }
+  for (auto& t : threads) t.join();
+  for (int k = 0; k < 8; ++k) {
+    ASSERT_TRUE(st[k].ok()) << st[k].error_message();
+    EXPECT_EQ(resp[k].accepted(), 36);
+  }
+  grpc::ClientContext lc;
+  v1::ListMotorsRequest lr;
+  lr.set_serial_prefix("IPM-C-");
+  lr.set_page_size(5);
+  v1::ListMotorsResponse list;
+  ASSERT_TRUE(stub_->ListMotors(&lc, lr, &list).ok());
+  EXPECT_EQ(list.motors_size(), 5);
+  EXPECT_EQ(list.next_page_token(), "5");
+  // Fit twice: versions 1 and 2, never overwritten.
+  for (int v = 1; v <= 2; ++v) {
+    grpc::ClientContext fc;
+    v1::FitRequest f;
+    f.set_serial("IPM-C-3");
+    v1::FitResponse fr;
+    ASSERT_TRUE(stub_->Fit(&fc, f, &fr).ok());
+    EXPECT_EQ(fr.calibration().version(), v);
+    EXPECT_TRUE(fr.pass()) << fr.calibration().verdict();
+  }
+  grpc::ClientContext qc;
+  v1::QueryFluxRequest q;
+  q.set_serial("IPM-C-3");
+  auto* p = q.add_points();
+  p->set_id_a(-40);
+  p->set_iq_a(60);
+  v1::QueryFluxResponse qr;
+  ASSERT_TRUE(stub_->QueryFlux(&qc, q, &qr).ok());
+  sim::AnalyticMotor truth{sim::MotorParams{}};
+  EXPECT_NEAR(qr.values(0).ldd_h() / (1.03 * truth.Inductance(-40, 60).ldd_h), 1.0, 0.005);
+  grpc::ClientContext ec;
+  v1::ExportTableRequest e;
+  e.set_serial("IPM-C-3");
+  e.set_table("mtpa");
+  e.set_format("dcm");
+  e.set_points(16);
+  v1::ExportTableResponse er;
+  ASSERT_TRUE(stub_->ExportTable(&ec, e, &er).ok());
+  EXPECT_EQ(er.version(), 2);
+  EXPECT_EQ(er.sha256().size(), 64u);
+  EXPECT_NE(er.data().find("KENNLINIE FLUXCAL_MTPA_ID_A 16"), std::string::npos);
+}
+
+// kill -9 of a real server while a stream is open: every acknowledged
+// stream is intact, the open one left nothing, the file is consistent.
+TEST(KillNine, AcknowledgedStreamsSurvive) {
+  const std::string db = TempPath("kill9.db");
+  for (auto sfx : {"", "-wal", "-shm"}) fs::remove(db + sfx);
+  const int port = 50000 + (::getpid() % 5000);
+  const std::string addr = "127.0.0.1:" + std::to_string(port);
+  const pid_t child = fork();
+  if (child == 0) {
+    execl(FLUXCAL_BINARY, FLUXCAL_BINARY, "serve", "--db", db.c_str(), "--listen", addr.c_str(), nullptr);
+    _exit(127);
+  }
+  auto stub = v1::CalibrationService::NewStub(grpc::CreateChannel(addr, grpc::InsecureChannelCredentials()));
+  auto send = [&](const std::string& serial, grpc::ClientContext* ctx, v1::IngestHfResultsResponse* r,
+                  bool finish) -> std::unique_ptr<grpc::ClientWriter<v1::IngestHfResultsRequest>> {
+    auto w = stub->IngestHfResults(ctx, r);
+    v1::IngestHfResultsRequest m;
+    m.set_serial(serial);
+    m.mutable_motor()->set_pole_pairs(4);
+    for (const auto& p : GridPoints()) *m.add_points() = p;
+    w->Write(m);
+    if (finish) {
+      w->WritesDone();
+      EXPECT_TRUE(w->Finish().ok());
+    }
+    return w;
+  };
+  // Wait for the server to come up.
+  for (int k = 0; k < 100; ++k) {
+    grpc::ClientContext c;
+    c.set_deadline(std::chrono::system_clock::now() + std::chrono::milliseconds(100));
+    v1::ListMotorsResponse lr;
+    if (stub->ListMotors(&c, v1::ListMotorsRequest(), &lr).ok()) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  for (int k = 0; k < 3; ++k) {
+    grpc::ClientContext ctx;
+    v1::IngestHfResultsResponse r;
+    send("IPM-K-" + std::to_string(k), &ctx, &r, true);
+    EXPECT_EQ(r.accepted(), 36);
+  }
+  grpc::ClientContext open_ctx;
+  v1::IngestHfResultsResponse open_r;
+  auto open = send("IPM-K-OPEN", &open_ctx, &open_r, false);   // never finished
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  kill(child, SIGKILL);
+  int status = 0;
+  waitpid(child, &status, 0);
+  open_ctx.TryCancel();
+  sqlite3* h = nullptr;
+  ASSERT_EQ(sqlite3_open(db.c_str(), &h), SQLITE_OK);
+  auto scalar = [&](const char* sql) {
+    sqlite3_stmt* s = nullptr;
+    sqlite3_prepare_v2(h, sql, -1, &s, nullptr);
+    std::string out;
+    if (sqlite3_step(s) == SQLITE_ROW) out = reinterpret_cast<const char*>(sqlite3_column_text(s, 0));
+    sqlite3_finalize(s);
+    return out;
+  };
+  EXPECT_EQ(scalar("PRAGMA integrity_check"), "ok");
+  EXPECT_EQ(scalar("SELECT COUNT(*) FROM runs"), "3");
+  EXPECT_EQ(scalar("SELECT COUNT(*) FROM hf_points"), "108");
+  EXPECT_EQ(scalar("SELECT COUNT(*) FROM motors WHERE serial = 'IPM-K-OPEN'"), "0");
+  sqlite3_close(h);
+  for (auto sfx : {"", "-wal", "-shm"}) fs::remove(db + sfx);
+}
+
+}  // namespace
+}  // namespace fluxcal::server
