@@ -1,0 +1,94 @@
+// Diagnosis: compare the nominal model of a recording set with the
+// recordings, locate significant mismatches, explain them with candidate
+// physics (docs/diagnosis-report.md effect names), refit, and report in the
+// fluxcal.diagnosis.v1 format. Method and statistics: docs/diagnosis.md.
+#ifndef FLUXCAL_DIAGNOSIS_DIAGNOSE_H_
+#define FLUXCAL_DIAGNOSIS_DIAGNOSE_H_
+
+#include <map>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json_fwd.hpp>
+
+#include "absl/status/statusor.h"
+#include "io/recording_set.h"
+
+namespace fluxcal::diag {
+
+struct Mismatch {
+  std::string signal;          // hf_current | dc_voltage | steady_state_voltage | torque
+  std::string where;           // human description of the region
+  std::vector<std::string> points;
+  double significance_sigma = 0;
+};
+
+struct Finding {
+  std::string effect;
+  std::string explanation;
+  std::map<std::string, double> parameters, parameter_std;
+  double residual_rms_before = 0, residual_rms_after = 0, delta_bic = 0;
+};
+
+struct ModelSummary {
+  std::string model;
+  double residual_rms = 0, bic = 0, chi2 = 0;
+};
+
+struct CorrectedPoint {
+  std::string point;
+  double id_a = 0, iq_a = 0;
+  double ldd_h = 0, lqq_h = 0, ldq_h = 0;              // final model
+  double ldd_h_identified = 0, lqq_h_identified = 0;   // as identified
+};
+
+struct DiagnosisReport {
+  std::string serial;
+  std::string verdict;   // no_mismatch | explained | partly_explained | unexplained
+  ModelSummary baseline, final_model;
+  std::vector<Mismatch> mismatches;          // located against the baseline
+  std::vector<Mismatch> remaining;           // still significant after the refit
+  std::vector<Finding> findings;             // in acceptance order
+  std::vector<CorrectedPoint> corrected;     // inductances of the final model
+  // Per-observable normalised residuals before/after, for plots.
+  struct Residual {
+    std::string point, signal;
+    double id_a = 0, iq_a = 0, speed_rpm = 0, before = 0, after = 0;
+  };
+  std::vector<Residual> residuals;
+  double seconds = 0;
+};
+
+struct DiagnoseOptions {
+  double bic_threshold = 10.0;      // docs/diagnosis-report.md
+  double parameter_sigma = 3.0;     // parameter distance from neutral
+  double mismatch_sigma = 5.0;      // a located region's significance
+  double min_relative_improvement = 0.10;   // residual RMS drop to accept an effect
+};
+
+absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const DiagnoseOptions& options = {});
+
+nlohmann::json ToJson(const DiagnosisReport& r);
+std::string ToText(const DiagnosisReport& r);
+// Residual maps over the current plane, before and after (SVG).
+std::string ResidualMapSvg(const DiagnosisReport& r, bool after);
+
+// The paper's Table 1 check (Wu, Wu, Zhu 2013): HF-identified Lq against
+// Lq = u_d*/(w_e i_q) from steady-state control at id = 0. The steady-state
+// value is an apparent inductance; comparing it with the differential one
+// leaves a mismatch that grows with current (`differential_inductance`).
+struct Table1Row {
+  double iq_a = 0, lq_hf_h = 0, lq_ss_h = 0;
+};
+struct Table1Result {
+  double rms_before = 0, rms_after = 0;      // relative, vs steady-state values
+  std::vector<double> lq_app_from_hf_h;      // apparent from integrating Lqq
+  double trend_slope_per_a = 0, trend_sigma = 0;   // mismatch growth with current
+  std::string finding;                       // "differential_inductance" or ""
+};
+absl::StatusOr<std::vector<Table1Row>> ReadTable1(const std::string& path);
+Table1Result DiagnoseTable1(const std::vector<Table1Row>& rows);
+
+}  // namespace fluxcal::diag
+
+#endif  // FLUXCAL_DIAGNOSIS_DIAGNOSE_H_

@@ -1,0 +1,179 @@
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <sstream>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "absl/strings/str_join.h"
+#include "absl/strings/str_split.h"
+#include "absl/strings/numbers.h"
+#include "diagnosis/diagnose.h"
+#include "io/csv.h"
+#include "nlohmann/json.hpp"
+
+namespace fluxcal::diag {
+
+nlohmann::json ToJson(const DiagnosisReport& r) {
+  using nlohmann::json;
+  json j;
+  j["format"] = "fluxcal.diagnosis.v1";
+  j["serial"] = r.serial;
+  j["verdict"] = r.verdict;
+  j["baseline"] = {{"model", r.baseline.model}, {"residual_rms", r.baseline.residual_rms}, {"bic", r.baseline.bic}};
+  j["mismatches"] = json::array();
+  for (const auto& m : r.mismatches) {
+    j["mismatches"].push_back({{"signal", m.signal}, {"where", m.where}, {"points", m.points},
+                               {"significance_sigma", m.significance_sigma}});
+  }
+  j["findings"] = json::array();
+  for (const auto& f : r.findings) {
+    j["findings"].push_back({{"effect", f.effect}, {"explanation", f.explanation},
+                             {"parameters", f.parameters.empty() ? json::object() : json(f.parameters)},
+                             {"parameter_std", f.parameter_std.empty() ? json::object() : json(f.parameter_std)},
+                             {"residual_rms_before", f.residual_rms_before}, {"residual_rms_after", f.residual_rms_after},
+                             {"delta_bic", f.delta_bic}});
+  }
+  j["final"] = {{"model", r.final_model.model}, {"residual_rms", r.final_model.residual_rms}, {"bic", r.final_model.bic}};
+  // Compatible extensions (docs/diagnosis.md): what is still significant
+  // after the refit, and the corrected differential inductances.
+  j["remaining_mismatches"] = json::array();
+  for (const auto& m : r.remaining) {
+    j["remaining_mismatches"].push_back({{"signal", m.signal}, {"where", m.where}, {"points", m.points},
+                                         {"significance_sigma", m.significance_sigma}});
+  }
+  j["corrected_inductances"] = json::array();
+  for (const auto& c : r.corrected) {
+    j["corrected_inductances"].push_back({{"point", c.point}, {"id_a", c.id_a}, {"iq_a", c.iq_a}, {"ldd_h", c.ldd_h},
+                                          {"lqq_h", c.lqq_h}, {"ldq_h", c.ldq_h}, {"ldd_h_identified", c.ldd_h_identified},
+                                          {"lqq_h_identified", c.lqq_h_identified}});
+  }
+  j["seconds"] = r.seconds;
+  return j;
+}
+
+std::string ToText(const DiagnosisReport& r) {
+  std::string s = absl::StrFormat("Diagnosis of %s: %s.\n", r.serial, r.verdict);
+  s += absl::StrFormat("The nominal model (manifest Rs and psi_pm, self-axis saturation only, dead time compensated, "
+                       "ideal sensors) leaves a relative residual of %.3g %%.\n", 100 * r.baseline.residual_rms);
+  if (r.mismatches.empty()) {
+    s += "No region of the operating space or signal departs from it beyond the noise estimated from the data.\n";
+  }
+  for (const auto& m : r.mismatches) {
+    s += absl::StrFormat("  Mismatch in %s at %s: %.1f sigma%s%s.\n", m.signal, m.where, m.significance_sigma,
+                         m.points.empty() ? "" : ", worst points ", absl::StrJoin(m.points, ", "));
+  }
+  for (size_t k = 0; k < r.findings.size(); ++k) {
+    const auto& f = r.findings[k];
+    std::vector<std::string> ps;
+    for (const auto& [name, v] : f.parameters) {
+      const auto it = f.parameter_std.find(name);
+      ps.push_back(it == f.parameter_std.end() ? absl::StrFormat("%s = %.4g", name, v)
+                                               : absl::StrFormat("%s = %.4g +- %.2g", name, v, it->second));
+    }
+    s += absl::StrFormat("%zu. %s: %s. %s Residual %.3g %% -> %.3g %% (delta BIC %.1f).\n", k + 1, f.effect,
+                         f.explanation, ps.empty() ? "" : absl::StrCat("Fitted ", absl::StrJoin(ps, ", "), "."),
+                         100 * f.residual_rms_before, 100 * f.residual_rms_after, f.delta_bic);
+  }
+  if (!r.findings.empty()) {
+    s += absl::StrFormat("With %s the residual is %.3g %% (%.1fx lower).\n", r.final_model.model,
+                         100 * r.final_model.residual_rms,
+                         r.final_model.residual_rms > 0 ? r.baseline.residual_rms / r.final_model.residual_rms : 0.0);
+  }
+  for (const auto& m : r.remaining) {
+    s += absl::StrFormat("  Still unexplained: %s at %s (%.1f sigma).\n", m.signal, m.where, m.significance_sigma);
+  }
+  s += absl::StrFormat("(%.2f s)\n", r.seconds);
+  return s;
+}
+
+std::string ResidualMapSvg(const DiagnosisReport& r, bool after) {
+  // Normalised HF residual per standstill point over the (id, iq) plane.
+  const double x0 = 60, y0 = 30, w = 480, h = 400;
+  std::string s = "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"640\" height=\"480\" font-family=\"sans-serif\" font-size=\"11\">\n";
+  s += absl::StrFormat("<text x=\"60\" y=\"18\">%s: normalised residual %s (circle area ~ |z|; red = signal hf_current, blue = dc_voltage)</text>\n",
+                       r.serial, after ? "after" : "before");
+  s += absl::StrFormat("<rect x=\"%g\" y=\"%g\" width=\"%g\" height=\"%g\" fill=\"none\" stroke=\"black\"/>\n", x0, y0, w, h);
+  s += "<text x=\"270\" y=\"460\">id [A] (-110 .. 10)</text><text x=\"5\" y=\"230\">iq [A]</text>\n";
+  for (const auto& z : r.residuals) {
+    if (z.speed_rpm != 0 || (z.signal != "hf_current" && z.signal != "dc_voltage")) continue;
+    const double v = after ? z.after : z.before;
+    const double cx = x0 + (z.id_a + 110) / 120 * w + (z.signal == "dc_voltage" ? 8 : 0);
+    const double cy = y0 + h - (z.iq_a + 10) / 120 * h;
+    s += absl::StrFormat("<circle cx=\"%.1f\" cy=\"%.1f\" r=\"%.1f\" fill=\"%s\" fill-opacity=\"0.6\"><title>%s %s z=%.2f</title></circle>\n",
+                         cx, cy, std::min(30.0, 3 + 3 * std::sqrt(v)), z.signal == "dc_voltage" ? "#36c" : "#c33",
+                         z.point, z.signal, v);
+  }
+  s += "</svg>\n";
+  return s;
+}
+
+absl::StatusOr<std::vector<Table1Row>> ReadTable1(const std::string& path) {
+  auto text = io::ReadFileToString(path);
+  if (!text.ok()) return text.status();
+  std::vector<Table1Row> rows;
+  int line_no = 0;
+  bool header = false;
+  for (absl::string_view line : absl::StrSplit(*text, '\n')) {
+    ++line_no;
+    if (line.empty() || line[0] == '#') continue;
+    if (!header) {
+      if (line != "iq_a,lq_hf_h,lq_ss_h") {
+        return absl::InvalidArgumentError(absl::StrCat(path, ":", line_no, ": field 'header': expected iq_a,lq_hf_h,lq_ss_h"));
+      }
+      header = true;
+      continue;
+    }
+    std::vector<std::string> f = absl::StrSplit(line, ',');
+    Table1Row r;
+    if (f.size() != 3 || !absl::SimpleAtod(f[0], &r.iq_a) || !absl::SimpleAtod(f[1], &r.lq_hf_h) ||
+        !absl::SimpleAtod(f[2], &r.lq_ss_h)) {
+      return absl::InvalidArgumentError(absl::StrCat(path, ":", line_no, ": field 'iq_a': expected three numbers"));
+    }
+    rows.push_back(r);
+  }
+  return rows;
+}
+
+Table1Result DiagnoseTable1(const std::vector<Table1Row>& rows) {
+  Table1Result out;
+  // Before: the HF (differential) Lq taken as the steady-state (apparent) one.
+  // After: Lq_app(iq) = (1/iq) int_0^iq Lqq(i) di, the differential values
+  // integrated by the trapezoidal rule on the table's own grid (at iq = 0 the
+  // apparent equals the differential inductance).
+  double s_before = 0, s_after = 0;
+  double integral = 0;
+  std::vector<double> resid;
+  for (size_t k = 0; k < rows.size(); ++k) {
+    if (k > 0) integral += 0.5 * (rows[k].lq_hf_h + rows[k - 1].lq_hf_h) * (rows[k].iq_a - rows[k - 1].iq_a);
+    const double app = rows[k].iq_a > 0 ? integral / rows[k].iq_a : rows[k].lq_hf_h;
+    out.lq_app_from_hf_h.push_back(app);
+    const double b = rows[k].lq_hf_h / rows[k].lq_ss_h - 1, a = app / rows[k].lq_ss_h - 1;
+    s_before += b * b;
+    s_after += a * a;
+    resid.push_back(b);
+  }
+  const double n = std::max<size_t>(1, rows.size());
+  out.rms_before = std::sqrt(s_before / n);
+  out.rms_after = std::sqrt(s_after / n);
+  // Locate: does the mismatch grow with current? Least-squares slope of the
+  // relative residual against iq with its standard error from the scatter.
+  double sx = 0, sy = 0, sxx = 0, sxy = 0;
+  for (size_t k = 0; k < rows.size(); ++k) {
+    sx += rows[k].iq_a; sy += resid[k]; sxx += rows[k].iq_a * rows[k].iq_a; sxy += rows[k].iq_a * resid[k];
+  }
+  const double den = n * sxx - sx * sx;
+  out.trend_slope_per_a = den > 0 ? (n * sxy - sx * sy) / den : 0.0;
+  const double icpt = (sy - out.trend_slope_per_a * sx) / n;
+  double ss = 0;
+  for (size_t k = 0; k < rows.size(); ++k) {
+    const double e = resid[k] - icpt - out.trend_slope_per_a * rows[k].iq_a;
+    ss += e * e;
+  }
+  const double se = n > 2 && den > 0 ? std::sqrt(ss / (n - 2) * n / den) : 0.0;
+  out.trend_sigma = se > 0 ? std::abs(out.trend_slope_per_a) / se : 0.0;
+  if (out.rms_after < out.rms_before && out.trend_slope_per_a < 0) out.finding = "differential_inductance";
+  return out;
+}
+
+}  // namespace fluxcal::diag

@@ -1,0 +1,90 @@
+#!/usr/bin/env bash
+# The README's first command: the main job end to end on the embedded
+# default (SQLite). Installs dependencies, builds, starts the service on a
+# SQLite file, simulates EOL runs of several serials with production spread,
+# streams them, fits, exports tables in every format, runs engineer queries,
+# diagnoses a run, prints where every output is, stops the service.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+OUT=${OUT:-out/demo}
+PORT=${PORT:-50561}
+SERIALS=${SERIALS:-6}
+
+step() { printf '\n== %s\n' "$*" >&2; }
+
+step "build (installs missing Debian packages first)"
+bash scripts/build.sh
+F=$PWD/build/cli/fluxcal
+
+rm -rf "$OUT"
+mkdir -p "$OUT/sets" "$OUT/tables" "$OUT/queries" "$OUT/plots"
+step "start the calibration service on $OUT/fluxcal.db (127.0.0.1:$PORT)"
+"$F" serve --db "$OUT/fluxcal.db" --listen "127.0.0.1:$PORT" 2> "$OUT/serve.log" &
+SERVER=$!
+trap 'kill $SERVER 2>/dev/null || true; wait $SERVER 2>/dev/null || true' EXIT
+for _ in $(seq 50); do
+  "$F" list --server "127.0.0.1:$PORT" >/dev/null 2>&1 && break
+  sleep 0.2
+done
+
+step "simulate $SERIALS EOL runs with the digital twin (production spread; the last one with an uncompensated dead time)"
+for i in $(seq 1 "$SERIALS"); do
+  serial=$(printf 'IPM-DEMO-%04d' "$i")
+  effects=""
+  [ "$i" -eq "$SERIALS" ] && effects="dead_time_s=2.5e-6"
+  "$F" simulate --serial "$serial" --seed "$i" --spread ${effects:+--effects $effects} \
+    --out "$OUT/sets/$serial" 2>&1 | tail -n 1 >&2
+done
+
+step "EOL flow per serial: identify locally, stream to the service, fit, verdict, fetch tables"
+for set in "$OUT"/sets/*/; do
+  set=${set%/}
+  "$F" eol "$set" --server "127.0.0.1:$PORT" --station demo-eol-1 --tables-dir "$OUT/tables" \
+    --json > "$OUT/queries/eol_$(basename "$set").json" || true
+  python3 -c "import json,sys; d=json.load(open(sys.argv[1])); print('  %s v%d %-9s %s' % (d['serial'], d['version'], d['model'], d['verdict']))" \
+    "$OUT/queries/eol_$(basename "$set").json" >&2
+done
+
+first=IPM-DEMO-0001
+step "flashing station: every table in every format for $first"
+for table in mtpa mtpv fw; do
+  for fmt in csv json h cdfx dcm; do
+    "$F" export "$first" --server "127.0.0.1:$PORT" --table "$table" --format "$fmt" \
+      --out "$OUT/tables/${first}_${table}.${fmt}" >&2
+  done
+done
+
+step "engineer queries"
+"$F" list --server "127.0.0.1:$PORT" | tee "$OUT/queries/list.txt" >&2
+"$F" history "$first" --server "127.0.0.1:$PORT" --json > "$OUT/queries/history_$first.json"
+"$F" query "$first" --server "127.0.0.1:$PORT" --id-a -20 --iq-a 40 | tee "$OUT/queries/query_$first.txt" >&2
+"$F" fleet --server "127.0.0.1:$PORT" | tee "$OUT/queries/fleet.txt" >&2
+
+step "local tools: identify, fit, query grid and plots on $first"
+"$F" identify "$OUT/sets/$first" --csv > "$OUT/queries/identify_$first.csv" 2>/dev/null
+"$F" fit "$OUT/sets/$first" --out "$OUT/calibration_$first.json" 2>/dev/null >&2
+"$F" query "$OUT/calibration_$first.json" --grid -100:0:11,0:100:11 > "$OUT/queries/grid_$first.csv"
+"$F" export "$OUT/calibration_$first.json" --table mtpa --format csv --out "$OUT/tables/local_mtpa.csv" \
+  --svg "$OUT/plots/${first}_mtpa_mtpv.svg" >&2
+"$F" export "$OUT/calibration_$first.json" --table fw --format csv --out "$OUT/tables/local_fw.csv" \
+  --svg "$OUT/plots/${first}_fw_id.svg" >&2
+
+last=$(printf 'IPM-DEMO-%04d' "$SERIALS")
+if "$F" help 2>&1 | grep -q diagnose; then
+  step "diagnosis of $last (the twin concealed a dead time in it)"
+  "$F" diagnose "$OUT/sets/$last" --plots "$OUT/plots/diagnosis_$last" > "$OUT/diagnosis_$last.txt" || true
+  "$F" diagnose "$OUT/sets/$last" --json > "$OUT/diagnosis_$last.json" || true
+  cat "$OUT/diagnosis_$last.txt" >&2
+fi
+
+step "summary"
+cat >&2 <<SUMMARY
+  store:          $OUT/fluxcal.db (SQLite, WAL)   service log: $OUT/serve.log
+  recording sets: $OUT/sets/ (truth files beside them: $OUT/sets/*.truth.json)
+  EOL results:    $OUT/queries/eol_*.json
+  ECU tables:     $OUT/tables/ ($(ls "$OUT/tables" | wc -l) files: CSV, JSON, C header, CDFX, DCM)
+  queries:        $OUT/queries/ (list, history, query, fleet, identify, grid)
+  calibration:    $OUT/calibration_$first.json
+  plots:          $OUT/plots/
+  report:         $OUT/diagnosis_$last.txt / .json (if diagnosis is built)
+SUMMARY
