@@ -392,6 +392,25 @@ Complex DeadTimeUnit(double ia, double ib, double ic, double udc, double ts) {
   return Complex((2 * ea - eb - ec) / 3.0, (eb - ec) / kSqrt3);
 }
 
+// Mean of tanh(i/i_th) over a PWM period in which the current moves
+// linearly from i0 to i1: (i_th / (i1 - i0)) [ln cosh(i1/i_th) - ln cosh(i0/i_th)].
+// The HF ripple moves a phase current by ~2 A within one period, as much as
+// the soft-sign width, so the start-of-period sample is not enough.
+double MeanSoftSign(double i0, double i1) {
+  const double d = i1 - i0;
+  auto lc = [](double x) { const double a = std::abs(x); return a + std::log1p(std::exp(-2 * a)) - std::log(2.0); };
+  if (std::abs(d) < 1e-6 * kIth) return std::tanh(0.5 * (i0 + i1) / kIth);
+  return kIth / d * (lc(i1 / kIth) - lc(i0 / kIth));
+}
+
+Complex DeadTimeInterval(const io::Waveform& w, size_t s, double udc, double ts) {
+  const size_t e = s + 1 < w.size() ? s + 1 : s;
+  const double k = udc / ts;
+  const double ea = k * MeanSoftSign(w.ia_a[s], w.ia_a[e]), eb = k * MeanSoftSign(w.ib_a[s], w.ib_a[e]),
+               ec = k * MeanSoftSign(w.ic_a[s], w.ic_a[e]);
+  return Complex((2 * ea - eb - ec) / 3.0, (eb - ec) / kSqrt3);
+}
+
 absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident::HfPointResult>* ids) {
   const auto& mf = set.manifest;
   Model m;
@@ -439,7 +458,7 @@ absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident:
     Complex acc_u = 0;
     for (size_t s = 0; s < n; ++s) {
       const double udc = std::isnan(w.udc_v[s]) ? udc_nom : w.udc_v[s];
-      const Complex e = DeadTimeUnit(w.ia_a[s], w.ib_a[s], w.ic_a[s], udc, m.ts);
+      const Complex e = DeadTimeInterval(w, s, udc, m.ts);
       const double t = static_cast<double>(s) / fs;
       hf += e * std::polar(1.0, -m.w_i * t);
       neg += e * std::polar(1.0, m.w_i * t - 2 * w.theta_e_rad[s]);
@@ -447,8 +466,12 @@ absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident:
       acc_u += Complex(w.ualpha_ref_v[s], w.ubeta_ref_v[s]) * std::polar(1.0, -w.theta_e_rad[s]);
       if ((s + 1) % period == 0) { per_period.push_back(acc_u / static_cast<double>(period)); acc_u = 0; }
     }
-    o.dead_hf = ident::EffectiveVoltage(hf / static_cast<double>(n), m.w_i, f_pwm);
-    o.dead_neg = ident::EffectiveVoltage(neg / static_cast<double>(n), 2 * o.w_e - m.w_i, f_pwm);
+    // The error of interval [t_k, t_k+1) acts in that interval, one period
+    // earlier than a command issued at t_k: EffectiveVoltage's 1.5-period
+    // delay less one period.
+    const double w2 = 2 * o.w_e - m.w_i;
+    o.dead_hf = ident::EffectiveVoltage(hf / static_cast<double>(n), m.w_i, f_pwm) * std::polar(1.0, m.w_i * m.ts);
+    o.dead_neg = ident::EffectiveVoltage(neg / static_cast<double>(n), w2, f_pwm) * std::polar(1.0, w2 * m.ts);
     m.hf.push_back(o);
     if (o.locked && per_period.size() >= 4) {
       DcObs d;
