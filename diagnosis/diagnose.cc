@@ -49,7 +49,7 @@ struct HfObs {
 };
 struct DcObs {
   std::string point;
-  double id_a, iq_a;
+  double id_a, iq_a, theta;
   Complex u, dead;                  // dead: command change per second of dead time
   double sigma, scale;
 };
@@ -154,10 +154,16 @@ struct Model {
       *i1 = a1 + m2 * std::conj(a0) * e2;
     }
   }
+  // The controller holds the *measured* current; with unequal sensor gains
+  // i_s,meas = i_s + m2 conj(i_s), so in dq the true current is
+  // i = i_meas - m2 e^{-j 2 theta} conj(i_meas) to first order.
+  Complex TrueCurrent(const double* const* p, Complex i_meas, double theta) const {
+    return i_meas - M2(p) * std::polar(1.0, -2 * theta) * std::conj(i_meas);
+  }
   Complex PredictDc(const double* const* p, const DcObs& o) const {
     // Holding a DC current at standstill needs u = Rs i (the rotation by an
     // angle offset cancels), plus what counteracts the dead time.
-    return Rs(p) * Complex(o.id_a, o.iq_a) + DeadTime(p) * o.dead;
+    return Rs(p) * TrueCurrent(p, Complex(o.id_a, o.iq_a), o.theta) + DeadTime(p) * o.dead;
   }
   Complex PredictSs(const double* const* p, const SsObs& o) const {
     const Complex rot = std::polar(1.0, Offset(p));
@@ -477,6 +483,7 @@ absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident:
       DcObs d;
       d.point = id.point;
       d.id_a = id.id_a; d.iq_a = id.iq_a;
+      d.theta = w.theta_e_rad[0];
       Complex mean = 0;
       for (const auto& u : per_period) mean += u;
       mean /= static_cast<double>(per_period.size());

@@ -222,7 +222,9 @@ PointRun RunPoint(const TwinConfig& cfg, const PlantModel& m, double id_ref, dou
     const double ma = sense(ia, cfg.effects.gain_a), mb = sense(ib, cfg.effects.gain_b),
                  mc = sense(ic, cfg.effects.gain_c);
     double th_meas = th + cfg.effects.offset_rad;
-    if (dtheta_enc > 0) th_meas = std::floor(WrapAngle(th_meas) / dtheta_enc) * dtheta_enc;
+    // Encoder counts, read to the nearest count (an encoder whose zero is
+    // aligned mid-count, as EOL benches calibrate it: no half-count bias).
+    if (dtheta_enc > 0) th_meas = std::round(WrapAngle(th_meas) / dtheta_enc) * dtheta_enc;
     th_meas = WrapAngle(th_meas);
     // --- Controller on injection-free feedback (moving average over one
     // injection period of the measured dq current).
