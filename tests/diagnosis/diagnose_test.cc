@@ -76,12 +76,24 @@ TEST(Matrix, EachEffectAlone) {
     EXPECT_EQ(r.findings[0].effect, effect) << "the concealed effect is accepted first";
     // Tolerances of the issue: dead time 20 %, offset 0.5 electrical
     // degrees, sensor gains 0.5 %, resistances 15 %.
-    if (effect == "dead_time") EXPECT_NEAR(f->parameters.at("dead_time_s") / e.dead_time_s, 1.0, 0.2);
-    if (effect == "stator_resistance") EXPECT_NEAR(f->parameters.at("rs_ohm") / *e.rs_ohm, 1.0, 0.15);
-    if (effect == "hf_resistance") EXPECT_NEAR(f->parameters.at("r_hf_ohm") / e.r_hf_ohm, 1.0, 0.15);
-    if (effect == "position_offset") EXPECT_NEAR(f->parameters.at("offset_rad"), e.offset_rad, 0.5 * M_PI / 180);
-    if (effect == "magnet_temperature") EXPECT_NEAR(f->parameters.at("psi_pm_wb") / *e.psi_pm_wb, 1.0, 0.01);
-    if (effect == "sampling_delay") EXPECT_NEAR(f->parameters.at("delay_s") / e.delay_s, 1.0, 0.2);
+    if (effect == "dead_time") {
+      EXPECT_NEAR(f->parameters.at("dead_time_s") / e.dead_time_s, 1.0, 0.2);
+    }
+    if (effect == "stator_resistance") {
+      EXPECT_NEAR(f->parameters.at("rs_ohm") / *e.rs_ohm, 1.0, 0.15);
+    }
+    if (effect == "hf_resistance") {
+      EXPECT_NEAR(f->parameters.at("r_hf_ohm") / e.r_hf_ohm, 1.0, 0.15);
+    }
+    if (effect == "position_offset") {
+      EXPECT_NEAR(f->parameters.at("offset_rad"), e.offset_rad, 0.5 * M_PI / 180);
+    }
+    if (effect == "magnet_temperature") {
+      EXPECT_NEAR(f->parameters.at("psi_pm_wb") / *e.psi_pm_wb, 1.0, 0.01);
+    }
+    if (effect == "sampling_delay") {
+      EXPECT_NEAR(f->parameters.at("delay_s") / e.delay_s, 1.0, 0.2);
+    }
     if (effect == "current_sensor_gain") {
       // Gains are identifiable relative to their mean.
       const double mean = (e.gain_a + e.gain_b + e.gain_c) / 3;
