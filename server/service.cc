@@ -13,7 +13,9 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "diagnosis/diagnose.h"
 #include "identification/identify.h"
+#include "nlohmann/json.hpp"
 #include "io/recording_set.h"
 #include "server/validation.h"
 #include "storage/operations.h"
@@ -354,6 +356,66 @@ grpc::Status CalibrationServiceImpl::FleetStatistics(grpc::ServerContext*, const
     p->set_torque_nm_mean(s.torque_mean); p->set_torque_nm_std(s.torque_std);
     for (const auto& o : s.outliers) p->add_outliers(o);
   }
+  return grpc::Status::OK;
+}
+
+namespace {
+
+// Inverse of the archive IngestRecording stores: "path\nsize\nbytes" records.
+absl::StatusOr<std::string> Unpack(const std::vector<uint8_t>& z, const std::string& dir) {
+  std::string out;
+  uLongf cap = static_cast<uLongf>(std::max<size_t>(z.size() * 8, 1 << 20));
+  for (int attempt = 0; attempt < 8; ++attempt, cap *= 4) {
+    out.resize(cap);
+    uLongf len = cap;
+    const int rc = uncompress(reinterpret_cast<Bytef*>(out.data()), &len, z.data(), z.size());
+    if (rc == Z_OK) { out.resize(len); break; }
+    if (rc != Z_BUF_ERROR) return absl::DataLossError("stored recording: zlib error");
+    if (attempt == 7) return absl::DataLossError("stored recording: too large");
+  }
+  namespace fs = std::filesystem;
+  size_t pos = 0;
+  while (pos < out.size()) {
+    const size_t a = out.find('\n', pos);
+    const size_t b = a == std::string::npos ? a : out.find('\n', a + 1);
+    if (b == std::string::npos) return absl::DataLossError("stored recording: corrupt archive");
+    const std::string path = out.substr(pos, a - pos);
+    const size_t size = std::stoull(out.substr(a + 1, b - a - 1));
+    if (b + 1 + size > out.size()) return absl::DataLossError("stored recording: truncated archive");
+    const fs::path f = fs::path(dir) / path;
+    std::error_code ec;
+    fs::create_directories(f.parent_path(), ec);
+    std::ofstream(f, std::ios::binary).write(out.data() + b + 1, static_cast<std::streamsize>(size));
+    pos = b + 1 + size;
+  }
+  return dir;
+}
+
+}  // namespace
+
+grpc::Status CalibrationServiceImpl::Diagnose(grpc::ServerContext*, const v1::DiagnoseRequest* req,
+                                              v1::DiagnoseResponse* resp) {
+  if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
+  auto sha = store_->LatestRecordingSha(req->serial());
+  if (!sha.ok()) return ToGrpcStatus(sha.status());
+  auto blob = store_->GetRecording(*sha);
+  if (!blob.ok()) return ToGrpcStatus(blob.status());
+  std::mt19937_64 rng(std::random_device{}());
+  const std::string dir = (std::filesystem::temp_directory_path() / absl::StrFormat("fluxcal-diag-%016x", rng())).string();
+  auto unpacked = Unpack(*blob, dir);
+  std::error_code ec;
+  if (!unpacked.ok()) {
+    std::filesystem::remove_all(dir, ec);
+    return ToGrpcStatus(unpacked.status());
+  }
+  auto set = io::ReadRecordingSet(dir);
+  absl::StatusOr<diag::DiagnosisReport> rep = set.ok() ? diag::Diagnose(*set) : absl::StatusOr<diag::DiagnosisReport>(set.status());
+  std::filesystem::remove_all(dir, ec);
+  if (!rep.ok()) return ToGrpcStatus(rep.status());
+  resp->set_serial(req->serial());
+  resp->set_verdict(rep->verdict);
+  resp->set_report_json(diag::ToJson(*rep).dump());
+  for (const auto& f : rep->findings) resp->add_effects(f.effect);
   return grpc::Status::OK;
 }
 

@@ -42,6 +42,7 @@ class CalibrationServiceImpl final : public fluxcal::v1::CalibrationService::Ser
                            v1::ExportTableResponse* resp) override;
   grpc::Status FleetStatistics(grpc::ServerContext* ctx, const v1::FleetStatisticsRequest* req,
                                v1::FleetStatisticsResponse* resp) override;
+  grpc::Status Diagnose(grpc::ServerContext* ctx, const v1::DiagnoseRequest* req, v1::DiagnoseResponse* resp) override;
 
  private:
   storage::Store* store_;

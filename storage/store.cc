@@ -318,4 +318,17 @@ absl::StatusOr<std::vector<uint8_t>> Store::GetRecording(const std::string& sha)
   return q->Blob(0);
 }
 
+absl::StatusOr<std::string> Store::LatestRecordingSha(const std::string& serial) {
+  std::lock_guard<std::mutex> lock(write_mu_);
+  auto q = writer_->Prepare(
+      "SELECT recording_sha256 FROM runs WHERE serial = ? AND recording_sha256 IS NOT NULL "
+      "ORDER BY run_id DESC LIMIT 1");
+  if (!q.ok()) return q.status();
+  (void)q->Bind(1, serial);
+  auto r = q->Step();
+  if (!r.ok()) return r.status();
+  if (!*r) return absl::NotFoundError(absl::StrCat("serial '", serial, "' has no stored raw recording"));
+  return q->Text(0);
+}
+
 }  // namespace fluxcal::storage

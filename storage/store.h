@@ -85,6 +85,8 @@ class Store {
                                                           int offset, int limit);
   absl::StatusOr<std::vector<HistoryRow>> History(const std::string& serial);
   absl::StatusOr<std::vector<uint8_t>> GetRecording(const std::string& sha256);
+  // SHA-256 of the serial's latest stored raw recording.
+  absl::StatusOr<std::string> LatestRecordingSha(const std::string& serial);
 
  private:
   explicit Store(std::string path, std::unique_ptr<Database> writer)
