@@ -33,8 +33,10 @@ Data MakeData(size_t n, double speed_rad_s) {
   return d;
 }
 
+// range(0): samples; range(1): 1 = rotating at 1000 rpm (4 pole pairs),
+// 0 = locked rotor (the angle sensor reads one count).
 void BM_Lsq(benchmark::State& state) {
-  const Data d = MakeData(static_cast<size_t>(state.range(0)), 418.9);
+  const Data d = MakeData(static_cast<size_t>(state.range(0)), state.range(1) ? 418.9 : 0.0);
   fluxcal::ident::PhaseSamples s{d.ia.data(), d.ib.data(), d.ic.data(), d.th.data(), d.ia.size(),
                                  10000.0, 500.0};
   for (auto _ : state) {
@@ -43,10 +45,10 @@ void BM_Lsq(benchmark::State& state) {
   }
   state.SetItemsProcessed(state.iterations() * state.range(0));
 }
-BENCHMARK(BM_Lsq)->Arg(1000)->Arg(100000);
+BENCHMARK(BM_Lsq)->Args({1000, 0})->Args({100000, 0})->Args({1000, 1})->Args({100000, 1});
 
 void BM_Paper(benchmark::State& state) {
-  const Data d = MakeData(static_cast<size_t>(state.range(0)), 418.9);
+  const Data d = MakeData(static_cast<size_t>(state.range(0)), state.range(1) ? 418.9 : 0.0);
   fluxcal::ident::PhaseSamples s{d.ia.data(), d.ib.data(), d.ic.data(), d.th.data(), d.ia.size(),
                                  10000.0, 500.0};
   for (auto _ : state) {
@@ -55,7 +57,7 @@ void BM_Paper(benchmark::State& state) {
   }
   state.SetItemsProcessed(state.iterations() * state.range(0));
 }
-BENCHMARK(BM_Paper)->Arg(1000)->Arg(100000);
+BENCHMARK(BM_Paper)->Args({1000, 0})->Args({100000, 0})->Args({1000, 1})->Args({100000, 1});
 
 }  // namespace
 

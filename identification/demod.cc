@@ -1,5 +1,6 @@
 #include "identification/demod.h"
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 #include <vector>
@@ -81,13 +82,17 @@ absl::StatusOr<PhasorEstimate> LsqDemodulate(const PhaseSamples& s) {
   double yy = 0;
   const double cw = std::cos(w * ts), sw = std::sin(w * ts);
   double pr = 1.0, pi = 0.0;  // e^{jwt} by recurrence, resynchronised below
+  double last_theta = std::nan(""), st = 0, ct = 1, c2 = 1, s2 = 0;
   for (size_t k = 0; k < n; ++k) {
     if ((k & 1023) == 0) FastSinCos(w * ts * static_cast<double>(k), &pi, &pr);
     const double yr = (2.0 * s.ia_a[k] - s.ib_a[k] - s.ic_a[k]) * (1.0 / 3.0);
     const double yi = (s.ib_a[k] - s.ic_a[k]) * (1.0 / kSqrt3);
-    double st, ct;
-    FastSinCos(s.theta_e_rad[k], &st, &ct);
-    const double c2 = ct * ct - st * st, s2 = 2.0 * ct * st;  // e^{j2theta}
+    if (s.theta_e_rad[k] != last_theta) {   // a locked rotor reads one count: reuse
+      FastSinCos(s.theta_e_rad[k], &st, &ct);
+      c2 = ct * ct - st * st;   // e^{j2theta}
+      s2 = 2.0 * ct * st;
+      last_theta = s.theta_e_rad[k];
+    }
     // b1 = e^{j2theta} conj(p)
     const double b1r = c2 * pr + s2 * pi, b1i = s2 * pr - c2 * pi;
     const double tau = static_cast<double>(k) * ts - t_mid;
@@ -155,77 +160,88 @@ absl::StatusOr<PhasorEstimate> PaperDemodulate(const PhaseSamples& s, bool compe
         "field 't_s': ", s.n, " samples are too few for the delay filters (need ",
         2 * m + 3 * p, ")"));
   }
-  const size_t n = s.n;
-  std::vector<Complex> x(n), y(n);
-  for (size_t k = 0; k < n; ++k) {
-    x[k] = Complex((2.0 * s.ia_a[k] - s.ib_a[k] - s.ic_a[k]) / 3.0,
-                   (s.ib_a[k] - s.ic_a[k]) / kSqrt3);
-  }
-  // Two cascaded delay filters D(x)_k = x_k - x_{k-M}; valid from k = 2M.
-  for (size_t k = 2 * m; k < n; ++k) {
-    y[k] = x[k] - 2.0 * x[k - m] + x[k - 2 * m];
-  }
+  // Delay filters valid from k0 = 2M; whole injection periods after that.
   const size_t k0 = 2 * m;
-  // Whole injection periods after the delay-filter transient.
-  const size_t periods = (n - k0) / p;
+  const size_t periods = (s.n - k0) / p;
   const size_t k1 = k0 + periods * p;
   out.samples_used = k1 - k0;
   out.periods_used = static_cast<double>(periods);
-  out.w_e_rad_s = EstimateSpeedRadPerS(s.theta_e_rad, n, s.f_sample_hz);
-  const double w2 = 2.0 * out.w_e_rad_s - w;  // negative-sequence frequency
+  out.w_e_rad_s = EstimateSpeedRadPerS(s.theta_e_rad, s.n, s.f_sample_hz);
+  const double w2 = 2.0 * out.w_e_rad_s - w;   // negative-sequence frequency
   const double tau = static_cast<double>(m) * ts;
   auto H = [&](double freq) { return Complex(1.0) - std::exp(Complex(0.0, -freq * tau)); };
-  const Complex g0 = compensate ? H(w) * H(w) : Complex(4.0);
+  const Complex h0 = H(w) * H(w);
+  const Complex g0 = compensate ? h0 : Complex(4.0);
   const Complex g1 = compensate ? H(w2) * H(w2) : Complex(4.0);
 
-  // Synchronous frame at +w_i, low-pass = moving average over one period;
-  // the phasor is the mean of the low-pass output. With the moving average
-  // over whole periods the mean of its output equals a triangular-weighted
-  // mean of the demodulated signal; batch means over single periods give the
-  // scatter for the standard error.
-  auto demod = [&](auto basis, Complex gain, Complex* phasor, double* var) {
-    std::vector<Complex> batch(periods);
-    Complex lpf_sum = 0.0, lpf_mean = 0.0;
-    Complex run = 0.0;
-    size_t lpf_count = 0;
-    for (size_t k = k0; k < k1; ++k) {
-      const Complex z = y[k] * std::conj(basis(k));
-      batch[(k - k0) / p] += z;
-      run += z;
-      if (k >= k0 + p) run -= y[k - p] * std::conj(basis(k - p));
-      if (k + 1 >= k0 + p) {  // moving average full
-        lpf_sum += run / static_cast<double>(p);
-        ++lpf_count;
-      }
+  // The pipeline is linear, so it is evaluated in one pass as weighted sums:
+  //   y_k  = x_k - 2 x_{k-M} + x_{k-2M}              (two delay filters)
+  //   LPF  = moving average over one period; phasor = mean of the LPF output
+  //        = sum_k w_k z_k with w_k = (number of full windows holding k)/(P L)
+  //   I0'  = sum w_k y_k conj(b0_k),   b0 = e^{j w t}
+  //   I1'  = sum w_k (y_k - h0 I0 b0_k) conj(b1_k),   b1 = e^{j(2 theta - w t)}
+  // i.e. exactly the cascade of docs/identification.md Sec. 4, without
+  // storing intermediate signals.
+  const size_t lpf_outputs = (k1 - k0) - p + 1;
+  const double wnorm = 1.0 / (static_cast<double>(p) * static_cast<double>(lpf_outputs));
+  auto clarke = [&](size_t k) {
+    return Complex((2.0 * s.ia_a[k] - s.ib_a[k] - s.ic_a[k]) * (1.0 / 3.0),
+                   (s.ib_a[k] - s.ic_a[k]) * (1.0 / kSqrt3));
+  };
+  double a0r = 0, a0i = 0, a1r = 0, a1i = 0, c01r = 0, c01i = 0;
+  std::vector<Complex> bz0(periods), bz1(periods), bb01(periods);
+  const double cw = std::cos(w * ts), sw = std::sin(w * ts);
+  double pr = 0, pi = 0;
+  double last_theta = std::nan(""), c2 = 1, s2 = 0;
+  for (size_t k = k0; k < k1; ++k) {
+    if (((k - k0) & 1023) == 0) FastSinCos(w * ts * static_cast<double>(k), &pi, &pr);
+    const Complex y = clarke(k) - 2.0 * clarke(k - m) + clarke(k - 2 * m);
+    const double th = s.theta_e_rad[k];
+    if (th != last_theta) {   // a locked rotor reads the same count: reuse
+      double st, ct;
+      FastSinCos(th, &st, &ct);
+      c2 = ct * ct - st * st;
+      s2 = 2.0 * ct * st;
+      last_theta = th;
     }
-    lpf_mean = lpf_sum / static_cast<double>(lpf_count);
-    *phasor = lpf_mean / gain;
-    Complex bm = 0.0;
-    for (auto& b : batch) { b /= static_cast<double>(p); bm += b; }
-    bm /= static_cast<double>(periods);
-    double v = 0.0;
-    for (const auto& b : batch) v += std::norm(b - bm);
+    // b1 = e^{j 2 theta} conj(b0)
+    const double b1r = c2 * pr + s2 * pi, b1i = s2 * pr - c2 * pi;
+    const size_t r = k - k0;
+    const double wk = static_cast<double>(std::min({r + 1, static_cast<size_t>(p), k1 - k, lpf_outputs})) * wnorm;
+    // y conj(b0), y conj(b1), b0 conj(b1)
+    const double z0r = y.real() * pr + y.imag() * pi, z0i = y.imag() * pr - y.real() * pi;
+    const double z1r = y.real() * b1r + y.imag() * b1i, z1i = y.imag() * b1r - y.real() * b1i;
+    const double x01r = pr * b1r + pi * b1i, x01i = pi * b1r - pr * b1i;
+    a0r += wk * z0r; a0i += wk * z0i;
+    a1r += wk * z1r; a1i += wk * z1i;
+    c01r += wk * x01r; c01i += wk * x01i;
+    const size_t b = r / p;
+    bz0[b] += Complex(z0r, z0i);
+    bz1[b] += Complex(z1r, z1i);
+    bb01[b] += Complex(x01r, x01i);
+    const double npr = pr * cw - pi * sw;
+    pi = pr * sw + pi * cw;
+    pr = npr;
+  }
+  const Complex i0 = Complex(a0r, a0i) / g0;
+  // High-pass: remove the positive sequence as it appears after the filters.
+  const Complex h0_used = compensate ? g0 : h0;
+  const Complex i1 = (Complex(a1r, a1i) - h0_used * i0 * Complex(c01r, c01i)) / g1;
+  // Standard errors from the scatter of per-period (batch) means.
+  auto batch_var = [&](auto value, Complex gain) {
+    Complex mean = 0;
+    for (size_t b = 0; b < periods; ++b) mean += value(b);
+    mean /= static_cast<double>(periods);
+    double v = 0;
+    for (size_t b = 0; b < periods; ++b) v += std::norm(value(b) - mean);
     v /= static_cast<double>(periods > 1 ? periods - 1 : 1);
-    *var = v / static_cast<double>(periods) / std::norm(gain);
+    return v / static_cast<double>(periods) / std::norm(gain);
   };
-  auto b0 = [&](size_t k) { return std::exp(Complex(0.0, w * ts * static_cast<double>(k))); };
-  Complex i0;
-  double var0 = 0;
-  demod(b0, g0, &i0, &var0);
-  // High-pass: remove the positive sequence (as it appears after the delay
-  // filters) before the negative-sequence frame.
-  const Complex i0_filtered = (compensate ? g0 : H(w) * H(w)) * i0;
-  for (size_t k = k0; k < k1; ++k) y[k] -= i0_filtered * b0(k);
-  auto b1 = [&](size_t k) {
-    return std::exp(Complex(0.0, 2.0 * s.theta_e_rad[k] - w * ts * static_cast<double>(k)));
-  };
-  Complex i1;
-  double var1 = 0;
-  demod(b1, g1, &i1, &var1);
+  const double pp = static_cast<double>(p);
+  out.var_i0_a2 = batch_var([&](size_t b) { return bz0[b] / pp; }, g0);
+  out.var_i1_a2 = batch_var([&](size_t b) { return (bz1[b] - h0_used * i0 * bb01[b]) / pp; }, g1);
   out.i0_a = i0;
   out.i1_a = i1;
-  out.var_i0_a2 = var0;
-  out.var_i1_a2 = var1;
   return out;
 }
 
