@@ -28,6 +28,8 @@ struct Vec2 {
 // Everything the ODE right-hand side needs for one operating point.
 struct PlantModel {
   double p[kSaturationParams];   // saturation parameters with psi_pm(T)
+  const MagneticModel* map = nullptr;   // replaces p when set
+  double map_temperature_c = 25.0, map_psi_shift_wb = 0.0;
   double rs_ohm;
   double r_hf_ohm;
   double hf_corner_rad_s = 2 * kPi * 50.0;   // eddy branch: high-pass corner
@@ -38,7 +40,13 @@ struct PlantModel {
 
   // psi(i, theta) including the spatial-harmonic term amp cos(n theta) i.
   void Flux(double id, double iq, double th, double* pd, double* pq) const {
-    SaturationFlux(id, iq, p, pd, pq);
+    if (map) {
+      const auto f = map->Flux(id, iq, map_temperature_c);
+      *pd = f.psi_d_wb + map_psi_shift_wb;
+      *pq = f.psi_q_wb;
+    } else {
+      SaturationFlux(id, iq, p, pd, pq);
+    }
     if (order != 0) {
       const double h = amplitude_h * std::cos(order * th);
       *pd += h * id;
@@ -46,7 +54,14 @@ struct PlantModel {
     }
   }
   void Jacobian(double id, double iq, double th, double* ldd, double* lqq, double* ldq) const {
-    SaturationInductance(id, iq, p, ldd, lqq, ldq);
+    if (map) {
+      const auto l = map->Inductance(id, iq, map_temperature_c);
+      *ldd = l.ldd_h;
+      *lqq = l.lqq_h;
+      *ldq = l.ldq_h;
+    } else {
+      SaturationInductance(id, iq, p, ldd, lqq, ldq);
+    }
     if (order != 0) {
       const double h = amplitude_h * std::cos(order * th);
       *ldd += h;
@@ -339,6 +354,13 @@ PlantModel MakePlant(const TwinConfig& cfg, double temperature_c) {
   m.p[0] = psi_pm25 * (1.0 + cfg.motor.psi_pm_temp_coeff_per_k * (temperature_c - 25.0));
   if (cfg.effects.cross_saturation != 0.0) m.p[5] = cfg.effects.cross_saturation;
   m.rs_ohm = cfg.effects.rs_ohm.value_or(cfg.motor.rs_ohm);
+  if (cfg.magnetics) {
+    m.map = cfg.magnetics.get();
+    m.map_temperature_c = temperature_c;
+    const double map_pm = cfg.magnetics->Flux(0, 0, 25.0).psi_d_wb;
+    m.map_psi_shift_wb = cfg.effects.psi_pm_wb ? *cfg.effects.psi_pm_wb - map_pm : 0.0;
+    m.p[0] = map_pm + m.map_psi_shift_wb;   // reported psi_pm
+  }
   m.r_hf_ohm = cfg.effects.r_hf_ohm;
   m.order = cfg.effects.order;
   m.amplitude_h = cfg.effects.amplitude_h;

@@ -8,6 +8,7 @@
 
 #include <cstdint>
 #include <map>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -112,6 +113,10 @@ Plan DefaultPlan();
 struct TwinConfig {
   std::string serial = "IPM-SIM-000001";
   MotorParams motor;
+  // Optional second magnetics family (e.g. a GriddedFluxMap): when set, the
+  // plant's flux linkage comes from it instead of motor.sat (motor.sat
+  // psi_pm_wb still states the manifest's nominal value).
+  std::shared_ptr<const MagneticModel> magnetics;
   DriveParams drive;
   SensorParams sensors;
   ControlParams control;

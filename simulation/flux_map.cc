@@ -1,0 +1,159 @@
+#include "simulation/flux_map.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "absl/strings/str_cat.h"
+
+namespace fluxcal::sim {
+namespace {
+
+// Quintic Hermite basis on [0, 1]: index 0..2 = value, first, second
+// derivative at t = 0; 3..5 = value, first, second derivative at t = 1.
+// f[k][n]: n-th derivative (n = 0, 1, 2) of basis function k at t.
+void Quintic(double t, double f[6][3]) {
+  const double t2 = t * t, t3 = t2 * t, t4 = t3 * t, t5 = t4 * t;
+  f[0][0] = 1 - 10 * t3 + 15 * t4 - 6 * t5;   f[0][1] = -30 * t2 + 60 * t3 - 30 * t4;  f[0][2] = -60 * t + 180 * t2 - 120 * t3;
+  f[1][0] = t - 6 * t3 + 8 * t4 - 3 * t5;     f[1][1] = 1 - 18 * t2 + 32 * t3 - 15 * t4; f[1][2] = -36 * t + 96 * t2 - 60 * t3;
+  f[2][0] = 0.5 * t2 - 1.5 * t3 + 1.5 * t4 - 0.5 * t5;  f[2][1] = t - 4.5 * t2 + 6 * t3 - 2.5 * t4;  f[2][2] = 1 - 9 * t + 18 * t2 - 10 * t3;
+  f[3][0] = 10 * t3 - 15 * t4 + 6 * t5;       f[3][1] = 30 * t2 - 60 * t3 + 30 * t4;   f[3][2] = 60 * t - 180 * t2 + 120 * t3;
+  f[4][0] = -4 * t3 + 7 * t4 - 3 * t5;        f[4][1] = -12 * t2 + 28 * t3 - 15 * t4;  f[4][2] = -24 * t + 84 * t2 - 60 * t3;
+  f[5][0] = 0.5 * t3 - t4 + 0.5 * t5;         f[5][1] = 1.5 * t2 - 4 * t3 + 2.5 * t4;  f[5][2] = 3 * t - 12 * t2 + 10 * t3;
+}
+
+size_t Cell(const std::vector<double>& a, double v) {
+  const auto it = std::upper_bound(a.begin(), a.end(), v);
+  size_t i = it == a.begin() ? 0 : static_cast<size_t>(it - a.begin()) - 1;
+  return std::min(i, a.size() - 2);   // outside: extrapolate the edge cell's patch
+}
+
+}  // namespace
+
+absl::StatusOr<GriddedFluxMap> GriddedFluxMap::FromFluxGrid(std::vector<double> x, std::vector<double> y,
+                                                            const std::vector<double>& pd,
+                                                            const std::vector<double>& pq, double tc) {
+  const size_t nx = x.size(), ny = y.size();
+  if (nx < 4 || ny < 4) return absl::InvalidArgumentError("flux map: need at least 4 x 4 nodes");
+  if (pd.size() != nx * ny || pq.size() != nx * ny) {
+    return absl::InvalidArgumentError(absl::StrCat("flux map: expected ", nx * ny, " values per table"));
+  }
+  for (size_t k = 1; k < nx; ++k) if (!(x[k] > x[k - 1])) return absl::InvalidArgumentError("flux map: id axis not increasing");
+  for (size_t k = 1; k < ny; ++k) if (!(y[k] > y[k - 1])) return absl::InvalidArgumentError("flux map: iq axis not increasing");
+  if (y[0] != 0.0) return absl::InvalidArgumentError("flux map: iq axis must start at 0 (symmetry mirrors it)");
+  GriddedFluxMap m;
+  m.x_ = std::move(x);
+  m.y_ = std::move(y);
+  m.temp_coeff_ = tc;
+  const auto& X = m.x_;
+  const auto& Y = m.y_;
+  auto idx = [&](size_t i, size_t j) { return i * ny + j; };
+  auto dx = [&](const std::vector<double>& v, size_t i, size_t j) {
+    const size_t a = i == 0 ? 0 : i - 1, b = i + 1 == nx ? i : i + 1;
+    return (v[idx(b, j)] - v[idx(a, j)]) / (X[b] - X[a]);
+  };
+  // d/diq with the mirror image below iq = 0: even functions have zero
+  // slope there, odd ones are antisymmetric.
+  auto dy = [&](const std::vector<double>& v, size_t i, size_t j, bool odd) {
+    if (j == 0) return odd ? (v[idx(i, 1)] - (-v[idx(i, 1)])) / (2 * Y[1]) : 0.0;
+    const size_t b = j + 1 == ny ? j : j + 1;
+    return (v[idx(i, b)] - v[idx(i, j - 1)]) / (Y[b] - Y[j - 1]);
+  };
+  for (auto& row : m.d_) for (auto& v : row) v.assign(nx * ny, 0.0);
+  auto& D = m.d_;
+  D[1][0] = pd;   // W'_id = psi_d (even in iq)
+  D[0][1] = pq;   // W'_iq = psi_q (odd in iq)
+  for (size_t i = 1; i < nx; ++i) {
+    D[0][0][idx(i, 0)] = D[0][0][idx(i - 1, 0)] + 0.5 * (pd[idx(i, 0)] + pd[idx(i - 1, 0)]) * (X[i] - X[i - 1]);
+  }
+  for (size_t i = 0; i < nx; ++i)
+    for (size_t j = 1; j < ny; ++j)
+      D[0][0][idx(i, j)] = D[0][0][idx(i, j - 1)] + 0.5 * (pq[idx(i, j)] + pq[idx(i, j - 1)]) * (Y[j] - Y[j - 1]);
+  for (size_t i = 0; i < nx; ++i) {
+    for (size_t j = 0; j < ny; ++j) {
+      D[2][0][idx(i, j)] = dx(pd, i, j);                                       // Ldd (even)
+      D[0][2][idx(i, j)] = dy(pq, i, j, true);                                 // Lqq (even)
+      D[1][1][idx(i, j)] = j == 0 ? 0.0 : 0.5 * (dy(pd, i, j, false) + dx(pq, i, j));   // Ldq (odd)
+    }
+  }
+  for (size_t i = 0; i < nx; ++i) {
+    for (size_t j = 0; j < ny; ++j) {
+      D[2][1][idx(i, j)] = j == 0 ? 0.0 : 0.5 * (dy(D[2][0], i, j, false) + dx(D[1][1], i, j));   // odd
+      D[1][2][idx(i, j)] = 0.5 * (dx(D[0][2], i, j) + dy(D[1][1], i, j, true));                     // even
+    }
+  }
+  for (size_t i = 0; i < nx; ++i)
+    for (size_t j = 0; j < ny; ++j)
+      D[2][2][idx(i, j)] = 0.5 * (dy(D[2][1], i, j, true) + dx(D[1][2], i, j));                      // even
+  double wx, wy, a, b, c;
+  m.Eval(0.0, 0.0, &wx, &wy, &a, &b, &c);
+  m.psi_pm_wb_ = wx;
+  return m;
+}
+
+GriddedFluxMap GriddedFluxMap::FromModel(const MagneticModel& src, double id_min, double id_max, int n_id,
+                                         double iq_max, int n_iq) {
+  std::vector<double> x(n_id), y(n_iq), pd, pq;
+  for (int i = 0; i < n_id; ++i) x[i] = id_min + (id_max - id_min) * i / (n_id - 1);
+  for (int j = 0; j < n_iq; ++j) y[j] = iq_max * j / (n_iq - 1);
+  for (double a : x) {
+    for (double b : y) {
+      const auto f = src.Flux(a, b);
+      pd.push_back(f.psi_d_wb);
+      pq.push_back(f.psi_q_wb);
+    }
+  }
+  return *FromFluxGrid(x, y, pd, pq);
+}
+
+void GriddedFluxMap::Eval(double id, double iq, double* wx, double* wy, double* wxx, double* wyy,
+                          double* wxy) const {
+  const size_t ny = y_.size();
+  const size_t i = Cell(x_, id), j = Cell(y_, iq);
+  const double hx = x_[i + 1] - x_[i], hy = y_[j + 1] - y_[j];
+  double fu[6][3], fv[6][3];
+  Quintic((id - x_[i]) / hx, fu);
+  Quintic((iq - y_[j]) / hy, fv);
+  // W = sum over corners (a, b) and orders (p, q) of
+  //   hx^p hy^q D[p][q](corner) H_{3a+p}(u) H_{3b+q}(v).
+  double r[5] = {0, 0, 0, 0, 0};   // W_u, W_v, W_uu, W_vv, W_uv
+  const double sx[3] = {1, hx, hx * hx}, sy[3] = {1, hy, hy * hy};
+  for (int a = 0; a < 2; ++a) {
+    for (int b = 0; b < 2; ++b) {
+      const size_t n = (i + a) * ny + (j + b);
+      for (int p = 0; p < 3; ++p) {
+        for (int q = 0; q < 3; ++q) {
+          const double c = d_[p][q][n] * sx[p] * sy[q];
+          const double* U = fu[3 * a + p];
+          const double* V = fv[3 * b + q];
+          r[0] += c * U[1] * V[0];
+          r[1] += c * U[0] * V[1];
+          r[2] += c * U[2] * V[0];
+          r[3] += c * U[0] * V[2];
+          r[4] += c * U[1] * V[1];
+        }
+      }
+    }
+  }
+  *wx = r[0] / hx;
+  *wy = r[1] / hy;
+  *wxx = r[2] / (hx * hx);
+  *wyy = r[3] / (hy * hy);
+  *wxy = r[4] / (hx * hy);
+}
+
+FluxLinkage GriddedFluxMap::Flux(double id, double iq, double temperature_c) const {
+  // Symmetry: psi_d(id, -iq) = psi_d(id, iq), psi_q(id, -iq) = -psi_q(id, iq).
+  const double s = iq < 0 ? -1.0 : 1.0;
+  double wx, wy, a, b, c;
+  Eval(id, s * iq, &wx, &wy, &a, &b, &c);
+  return {wx + psi_pm_wb_ * temp_coeff_ * (temperature_c - 25.0), s * wy};
+}
+
+DifferentialInductance GriddedFluxMap::Inductance(double id, double iq, double) const {
+  const double s = iq < 0 ? -1.0 : 1.0;
+  double wx, wy, wxx, wyy, wxy;
+  Eval(id, s * iq, &wx, &wy, &wxx, &wyy, &wxy);
+  return {wxx, wyy, s * wxy};
+}
+
+}  // namespace fluxcal::sim
