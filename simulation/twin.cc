@@ -735,6 +735,91 @@ absl::StatusOr<Plan> LoadPlanJson(const std::string& path) {
   return plan;
 }
 
+absl::StatusOr<std::vector<ReplayPoint>> ReplayOpenLoop(const io::RecordingSet& set, const MagneticModel& model,
+                                                        const ReplayOptions& opt) {
+  const auto& mf = set.manifest;
+  const double fs = mf.drive.f_sample_hz;
+  const double f_pwm = mf.drive.f_pwm_hz.value_or(fs);
+  if (std::abs(f_pwm - fs) > 1e-9 * fs) {
+    return absl::UnimplementedError("replay: f_pwm_hz must equal f_sample_hz");
+  }
+  const double ts = 1.0 / fs;
+  const int S = std::max(1, opt.substeps);
+  const double h = ts / S;
+  std::vector<ReplayPoint> out;
+  for (size_t p = 0; p < set.waveforms.size(); ++p) {
+    const auto& w = set.waveforms[p];
+    const size_t n = w.size();
+    PlantModel m;
+    ToArray(SaturationParams{}, m.p);
+    m.map = &model;
+    m.map_temperature_c = mf.points[p].temperature_c.value_or(25.0);
+    m.rs_ohm = opt.rs_ohm;
+    m.r_hf_ohm = opt.effects.r_hf_ohm;
+    m.order = opt.effects.order;
+    m.amplitude_h = opt.effects.amplitude_h;
+    m.dead_time_s = opt.effects.dead_time_s;
+    m.dead_time_i_th_a = opt.effects.dead_time_i_th_a;
+    m.udc_v = mf.drive.udc_v.value_or(50.0);
+    m.ts_s = ts;
+    m.u_max_v = 1e9;   // the recorded commands are already limited
+    auto true_theta = [&](size_t k) { return w.theta_e_rad[k] - opt.effects.offset_rad; };
+    // Unwrapped angle and its per-sample rate (the plant needs w_e).
+    std::vector<double> th(n);
+    th[0] = true_theta(0);
+    for (size_t k = 1; k < n; ++k) {
+      double d = std::remainder(true_theta(k) - true_theta(k - 1), 2 * kPi);
+      th[k] = th[k - 1] + d;
+    }
+    // Initial state from the current measured at sample 1 (sensor gains
+    // undone): the interval before it holds row 0's command, the first one
+    // whose value is recorded.
+    if (n < 3) return absl::InvalidArgumentError("replay: too few samples");
+    const double ia = w.ia_a[1] / opt.effects.gain_a, ib = w.ib_a[1] / opt.effects.gain_b,
+                 ic = w.ic_a[1] / opt.effects.gain_c;
+    const double al = (2 * ia - ib - ic) / 3.0, be = (ib - ic) / kSqrt3;
+    const double c0 = std::cos(th[1]), s0 = std::sin(th[1]);
+    State x;
+    x.i = Vec2{c0 * al + s0 * be, -s0 * al + c0 * be};
+    m.Flux(x.i.d, x.i.q, th[1], &x.psd, &x.psq);
+    x.lpd = x.i.d;
+    x.lpq = x.i.q;
+    ReplayPoint rp;
+    rp.point = mf.points[p].id;
+    rp.ia_a.push_back(w.ia_a[0]);   // sample 0 is not simulated
+    rp.ib_a.push_back(w.ib_a[0]);
+    rp.ic_a.push_back(w.ic_a[0]);
+    double se = 0;
+    for (size_t k = 1; k < n; ++k) {
+      const double c = std::cos(th[k]), s = std::sin(th[k]);
+      const double a = c * x.i.d - s * x.i.q, b = s * x.i.d + c * x.i.q;
+      const double sa = opt.effects.gain_a * a;
+      const double sb = opt.effects.gain_b * (-0.5 * a + 0.5 * kSqrt3 * b);
+      const double sc = opt.effects.gain_c * (-0.5 * a - 0.5 * kSqrt3 * b);
+      rp.ia_a.push_back(sa);
+      rp.ib_a.push_back(sb);
+      rp.ic_a.push_back(sc);
+      se += (sa - w.ia_a[k]) * (sa - w.ia_a[k]) + (sb - w.ib_a[k]) * (sb - w.ib_a[k]) +
+            (sc - w.ic_a[k]) * (sc - w.ic_a[k]);
+      if (k + 1 == n) break;
+      const double we = (th[k + 1] - th[k]) / ts;
+      // Interval [t_k, t_k+1) holds the command of row k-1 (row 0 for the
+      // first interval, whose predecessor was not recorded), shifted by the
+      // sampling_delay effect in sub-steps.
+      const int delay_sub = static_cast<int>(std::llround(opt.effects.delay_s / h));
+      for (int j = 0; j < S; ++j) {
+        const long sub = static_cast<long>(k) * S + j - delay_sub;
+        long row = (sub >= 0 ? sub / S : (sub - S + 1) / S) - 1;
+        row = std::clamp<long>(row, 0, static_cast<long>(n) - 1);   // before row 0: row 0
+        Rk4(m, &x, th[k] + we * h * j, we, h, w.ualpha_ref_v[row], w.ubeta_ref_v[row]);
+      }
+    }
+    rp.residual_rms_a = std::sqrt(se / (3.0 * (n - 1)));
+    out.push_back(std::move(rp));
+  }
+  return out;
+}
+
 MotorParams PerturbForProduction(const MotorParams& nominal, uint64_t seed) {
   std::mt19937_64 rng(seed * 0x9E3779B97F4A7C15ull + 12345);
   std::normal_distribution<double> n(0.0, 1.0);

@@ -157,6 +157,25 @@ std::string TruthJson(const TwinConfig& config, const SimulationResult& result);
 absl::Status LoadMotorJson(const std::string& path, TwinConfig* config);
 absl::StatusOr<Plan> LoadPlanJson(const std::string& path);
 
+// Open-loop replay of a recording: the recorded voltage commands, applied
+// one PWM period late as in the bench (docs/simulation.md), drive the model
+// plant along the recorded angle trajectory (less the effect's offset), from
+// the current measured in the first sample. Returns the simulated measured
+// phase currents aligned sample by sample with the recording. Deterministic
+// (no noise). What diagnosis would fit through at waveform level.
+struct ReplayPoint {
+  std::string point;
+  std::vector<double> ia_a, ib_a, ic_a;
+  double residual_rms_a = 0;   // vs the recorded currents
+};
+struct ReplayOptions {
+  double rs_ohm = 0.011;
+  Effects effects;             // drive/sensor effects to include
+  int substeps = 10;
+};
+absl::StatusOr<std::vector<ReplayPoint>> ReplayOpenLoop(const io::RecordingSet& set, const MagneticModel& model,
+                                                        const ReplayOptions& options);
+
 // A serial-specific production spread: a few percent on saturation
 // parameters, psi_pm and Rs, reproducible from the seed.
 MotorParams PerturbForProduction(const MotorParams& nominal, uint64_t seed);

@@ -345,3 +345,36 @@ TEST(FluxMap, RoundTripIdentificationOnMapMotor) {
 
 }  // namespace
 }  // namespace fluxcal::sim
+
+namespace fluxcal::sim {
+namespace {
+
+// Open-loop replay of recorded commands through the model plant reproduces
+// the recorded currents with the true motor, and departs from them with a
+// wrong one.
+TEST(Replay, ReproducesRecordingWithTrueModelOnly) {
+  TwinConfig cfg;
+  cfg.sensors.noise_a = 0.05;
+  Plan plan = SmallPlan({Pt("p0", -40, 60, 0, 1.1), Pt("p1", -20, 40, 500, 0.3)});
+  auto r = Simulate(cfg, plan);
+  ASSERT_TRUE(r.ok());
+  AnalyticMotor truth(cfg.motor);
+  ReplayOptions opt;
+  opt.rs_ohm = cfg.motor.rs_ohm;
+  auto good = ReplayOpenLoop(r->set, truth, opt);
+  ASSERT_TRUE(good.ok()) << good.status();
+  MotorParams wrong_p = cfg.motor;
+  wrong_p.sat.lq0_h *= 1.1;
+  AnalyticMotor wrong(wrong_p);
+  auto bad = ReplayOpenLoop(r->set, wrong, opt);
+  ASSERT_TRUE(bad.ok());
+  for (size_t k = 0; k < good->size(); ++k) {
+    // Sensor noise 0.05 A and ADC steps 0.12 A bound what replay can match.
+    EXPECT_LT((*good)[k].residual_rms_a, 0.15) << (*good)[k].point;
+    EXPECT_GT((*bad)[k].residual_rms_a, 3 * (*good)[k].residual_rms_a) << (*bad)[k].point;
+    ASSERT_EQ((*good)[k].ia_a.size(), r->set.waveforms[k].size());
+  }
+}
+
+}  // namespace
+}  // namespace fluxcal::sim
