@@ -10,6 +10,7 @@
 #include "gtest/gtest.h"
 #include "identification/identify.h"
 #include "nlohmann/json.hpp"
+#include "simulation/flux_map.h"
 #include "simulation/twin.h"
 
 namespace fluxcal::fit {
@@ -162,6 +163,39 @@ TEST(Calibration, ExtrapolationFlagged) {
   EXPECT_FALSE(cal->Predict(-50, 50).extrapolated);
   EXPECT_TRUE(cal->Predict(-250, 50).extrapolated);
   EXPECT_GT(cal->Predict(-50, 50).ldd_h_std, 0.0);
+}
+
+}  // namespace
+}  // namespace fluxcal::fit
+
+namespace fluxcal::fit {
+namespace {
+
+// The second magnetics family as the true motor: a gridded flux map.
+TEST(Fit, GriddedMapMotorWithinHalfPercent) {
+  sim::MotorParams mp;
+  mp.sat.g_cross_h = 3e-5;
+  sim::AnalyticMotor source(mp);
+  sim::TwinConfig cfg;
+  cfg.seed = 22;
+  cfg.sensors.noise_a = 0.08;
+  cfg.magnetics = std::make_shared<sim::GriddedFluxMap>(sim::GriddedFluxMap::FromModel(source, -160, 40, 41, 160, 33));
+  auto r = sim::Simulate(cfg, sim::DefaultPlan());
+  ASSERT_TRUE(r.ok());
+  auto ids = ident::IdentifySet(r->set, {});
+  ASSERT_TRUE(ids.ok());
+  auto cal = Fit(FitDataFromRecording(r->set, *ids), {});
+  ASSERT_TRUE(cal.ok()) << cal.status();
+  double e = 0, e_psi = 0;
+  for (const auto& t : r->truth_points) {
+    const auto p = cal->Predict(t.id_true_a, t.iq_true_a);
+    e += std::pow(p.ldd_h / t.ldd_h - 1, 2) + std::pow(p.lqq_h / t.lqq_h - 1, 2);
+    e_psi = std::max(e_psi, std::hypot(p.psi_d_wb - t.psi_d_wb, p.psi_q_wb - t.psi_q_wb) /
+                                std::max(std::hypot(t.psi_d_wb, t.psi_q_wb), t.psi_pm_wb));
+  }
+  const double rms = std::sqrt(e / (2 * r->truth_points.size()));
+  EXPECT_LT(rms, 0.005) << cal->family().Name();
+  EXPECT_LT(e_psi, 0.005) << cal->family().Name();
 }
 
 }  // namespace
