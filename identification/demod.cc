@@ -83,12 +83,13 @@ absl::StatusOr<PhasorEstimate> LsqDemodulate(const PhaseSamples& s) {
   const double cw = std::cos(w * ts), sw = std::sin(w * ts);
   double pr = 1.0, pi = 0.0;  // e^{jwt} by recurrence, resynchronised below
   double last_theta = std::nan(""), st = 0, ct = 1, c2 = 1, s2 = 0;
+  AngleRotor rotor;
   for (size_t k = 0; k < n; ++k) {
     if ((k & 1023) == 0) FastSinCos(w * ts * static_cast<double>(k), &pi, &pr);
     const double yr = (2.0 * s.ia_a[k] - s.ib_a[k] - s.ic_a[k]) * (1.0 / 3.0);
     const double yi = (s.ib_a[k] - s.ic_a[k]) * (1.0 / kSqrt3);
     if (s.theta_e_rad[k] != last_theta) {   // a locked rotor reads one count: reuse
-      FastSinCos(s.theta_e_rad[k], &st, &ct);
+      rotor.Next(s.theta_e_rad[k], &st, &ct);
       c2 = ct * ct - st * st;   // e^{j2theta}
       s2 = 2.0 * ct * st;
       last_theta = s.theta_e_rad[k];
@@ -193,13 +194,15 @@ absl::StatusOr<PhasorEstimate> PaperDemodulate(const PhaseSamples& s, bool compe
   const double cw = std::cos(w * ts), sw = std::sin(w * ts);
   double pr = 0, pi = 0;
   double last_theta = std::nan(""), c2 = 1, s2 = 0;
+  AngleRotor rotor;
+  size_t batch = 0, in_batch = 0;
   for (size_t k = k0; k < k1; ++k) {
     if (((k - k0) & 1023) == 0) FastSinCos(w * ts * static_cast<double>(k), &pi, &pr);
     const Complex y = clarke(k) - 2.0 * clarke(k - m) + clarke(k - 2 * m);
     const double th = s.theta_e_rad[k];
     if (th != last_theta) {   // a locked rotor reads the same count: reuse
       double st, ct;
-      FastSinCos(th, &st, &ct);
+      rotor.Next(th, &st, &ct);
       c2 = ct * ct - st * st;
       s2 = 2.0 * ct * st;
       last_theta = th;
@@ -215,10 +218,10 @@ absl::StatusOr<PhasorEstimate> PaperDemodulate(const PhaseSamples& s, bool compe
     a0r += wk * z0r; a0i += wk * z0i;
     a1r += wk * z1r; a1i += wk * z1i;
     c01r += wk * x01r; c01i += wk * x01i;
-    const size_t b = r / p;
-    bz0[b] += Complex(z0r, z0i);
-    bz1[b] += Complex(z1r, z1i);
-    bb01[b] += Complex(x01r, x01i);
+    bz0[batch] += Complex(z0r, z0i);
+    bz1[batch] += Complex(z1r, z1i);
+    bb01[batch] += Complex(x01r, x01i);
+    if (++in_batch == p) { in_batch = 0; ++batch; }
     const double npr = pr * cw - pi * sw;
     pi = pr * sw + pi * cw;
     pr = npr;
