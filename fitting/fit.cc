@@ -9,6 +9,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "ceres/ceres.h"
+#include <Eigen/Dense>
 #include "identification/identify.h"
 
 namespace fluxcal::fit {
@@ -130,6 +131,7 @@ struct Built {
   std::vector<double> params;
   std::unique_ptr<ceres::Problem> problem;
   int residuals = 0;
+  bool has_prior = false;
 };
 
 std::vector<double> InitialParams(const Family& f, const FitData& d) {
@@ -187,6 +189,7 @@ Built Build(const Family& fam, const FitData& d, const FitOptions& o) {
     }
   }
   if (d.psi_pm_prior_wb) {
+    b.has_prior = true;
     add(Make(new PriorResidual(*d.psi_pm_prior_wb, o.psi_pm_prior_relative_std * *d.psi_pm_prior_wb), n),
         false);
   }
@@ -213,8 +216,65 @@ struct Solved {
   bool usable = false;
 };
 
+// The polynomial co-energy is linear in its coefficients, and so is every
+// residual above (flux, inductance, torque, prior): r(p) = r0 + J p with J
+// constant. Ceres evaluates r0 and J from the same cost functors
+// (Problem::Evaluate at p = 0), then iteratively reweighted least squares
+// with the Cauchy weights w = 1 / (1 + (r/c)^2) minimises the same robust
+// cost as the Ceres solve, in a fraction of the time.
+Solved SolveLinear(const Family& fam, Built& b, const FitOptions& o) {
+  Solved s;
+  s.family = fam;
+  std::fill(b.params.begin(), b.params.end(), 0.0);
+  ceres::Problem::EvaluateOptions eo;
+  eo.apply_loss_function = false;
+  double cost = 0;
+  std::vector<double> r0;
+  ceres::CRSMatrix crs;
+  b.problem->Evaluate(eo, &cost, &r0, nullptr, &crs);
+  const int n = crs.num_rows, k = crs.num_cols;
+  Eigen::MatrixXd J = Eigen::MatrixXd::Zero(n, k);
+  for (int r = 0; r < n; ++r)
+    for (int i = crs.rows[r]; i < crs.rows[r + 1]; ++i) J(r, crs.cols[i]) = crs.values[i];
+  const Eigen::Map<const Eigen::VectorXd> r0v(r0.data(), n);
+  // Which residual rows carry the robust loss: all but the prior (last row
+  // when a prior exists; Build adds it last).
+  const int robust_rows = n - (b.has_prior ? 1 : 0);
+  Eigen::VectorXd p = Eigen::VectorXd::Zero(k), w = Eigen::VectorXd::Ones(n);
+  const double c2 = o.robust_scale * o.robust_scale;
+  for (int it = 0; it < 30; ++it) {
+    const Eigen::MatrixXd Jw = w.cwiseSqrt().asDiagonal() * J;
+    const Eigen::VectorXd rw = w.cwiseSqrt().asDiagonal() * r0v;
+    const Eigen::VectorXd np = (Jw.transpose() * Jw).ldlt().solve(-Jw.transpose() * rw);
+    const double step = (np - p).norm();
+    p = np;
+    const Eigen::VectorXd r = r0v + J * p;
+    for (int i = 0; i < robust_rows; ++i) w(i) = 1.0 / (1.0 + r(i) * r(i) / c2);
+    if (step < 1e-12 * (1.0 + p.norm())) break;
+  }
+  const Eigen::VectorXd r = r0v + J * p;
+  double chi2 = 0;
+  for (int i = 0; i < n; ++i) chi2 += i < robust_rows ? c2 * std::log1p(r(i) * r(i) / c2) : r(i) * r(i);
+  for (int i = 0; i < k; ++i) b.params[i] = p(i);
+  s.params = b.params;
+  s.chi2 = chi2;
+  s.n_obs = b.residuals;
+  s.k = k;
+  s.bic = chi2 + k * std::log(std::max(1, n));
+  s.usable = p.allFinite();
+  s.termination = "CONVERGENCE (linear IRLS)";
+  const Eigen::MatrixXd Jw = w.cwiseSqrt().asDiagonal() * J;
+  const Eigen::MatrixXd cov = (Jw.transpose() * Jw).ldlt().solve(Eigen::MatrixXd::Identity(k, k));
+  const double scale = std::max(1.0, chi2 / std::max(1, n - k));
+  s.covariance.assign(k * k, 0.0);
+  for (int i = 0; i < k; ++i)
+    for (int j = 0; j < k; ++j) s.covariance[i * k + j] = cov(i, j) * scale;
+  return s;
+}
+
 Solved Solve(const Family& fam, const FitData& d, const FitOptions& o) {
   Built b = Build(fam, d, o);
+  if (fam.kind == Family::kPoly) return SolveLinear(fam, b, o);
   ceres::Solver::Options so;
   so.linear_solver_type = ceres::DENSE_QR;
   so.max_num_iterations = 200;
