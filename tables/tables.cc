@@ -100,8 +100,10 @@ double VoltageV(const sim::MagneticModel& m, const MachineLimits& lim, double id
 namespace {
 
 // Least-current point for torque t under the limits; false if infeasible.
+// `mtpa_id` (optional): the least-current id of this torque without a
+// voltage limit, when already known (it does not depend on speed).
 bool TrySolve(const sim::MagneticModel& m, const MachineLimits& lim, double t, double we,
-              OperatingPoint* op) {
+              OperatingPoint* op, const double* mtpa_id = nullptr) {
   *op = OperatingPoint{};
   if (t == 0.0 && we <= 0) return true;
   const double s = t < 0 ? -1.0 : 1.0;
@@ -113,7 +115,7 @@ bool TrySolve(const sim::MagneticModel& m, const MachineLimits& lim, double t, d
     return id * id + iq * iq;
   };
   // Unconstrained least current (MTPA) along the constant-torque locus.
-  double id = t == 0.0 ? 0.0 : MinimiseScalar(cur2, id_min, 0.0);
+  double id = t == 0.0 ? 0.0 : (mtpa_id ? *mtpa_id : MinimiseScalar(cur2, id_min, 0.0));
   double iq = 0.0;
   if (t != 0.0 && !iq_of(id, &iq)) return false;
   auto volt = [&](double d, double q) { return we > 0 ? VoltageV(m, lim, d, q, we) : 0.0; };
@@ -139,9 +141,9 @@ bool TrySolve(const sim::MagneticModel& m, const MachineLimits& lim, double t, d
 
 // As SolveLeastCurrent, with the limit torque at this speed already known.
 OperatingPoint SolveWithMax(const sim::MagneticModel& m, const MachineLimits& lim, double t,
-                            double we, double tmax) {
+                            double we, double tmax, const double* mtpa_id = nullptr) {
   OperatingPoint op;
-  if (std::abs(t) <= tmax && TrySolve(m, lim, t, we, &op)) return op;
+  if (std::abs(t) <= tmax && TrySolve(m, lim, t, we, &op, mtpa_id)) return op;
   // Infeasible: deliver the largest torque of the same sign within limits.
   const double s = t < 0 ? -1.0 : 1.0;
   double tt = s * tmax;
@@ -170,13 +172,13 @@ double MaxTorqueNm(const sim::MagneticModel& m, const MachineLimits& lim, double
       if (we > 0 && VoltageV(m, lim, id, iq, we) > lim.UMaxV()) return 1e30;
       return id * id + iq * iq;
     };
-    const double id = MinimiseScalar(cur2, -lim.i_max_a, 0.0, 32, 30);
+    const double id = MinimiseScalar(cur2, -lim.i_max_a, 0.0, 24, 30);
     return cur2(id) <= lim.i_max_a * lim.i_max_a;
   };
   double lo = 0.0, hi = 1.0;
   while (feasible(hi) && hi < 1e5) { lo = hi; hi *= 2; }
-  // 30 halvings: the limit torque to ~1e-9 of its value.
-  for (int k = 0; k < 30; ++k) {
+  // 26 halvings: the limit torque to ~1e-8 of its value.
+  for (int k = 0; k < 26; ++k) {
     const double mid = 0.5 * (lo + hi);
     if (feasible(mid)) lo = mid; else hi = mid;
   }
@@ -261,9 +263,12 @@ absl::StatusOr<Table> BuildTable(const sim::MagneticModel& m, const MachineLimit
     std::vector<double> tlim(n.size());
     for (size_t j = 0; j < n.size(); ++j) tlim[j] = MaxTorqueNm(m, lim, n[j] * lim.pole_pairs * 2 * kPi / 60.0);
     for (double x : tq) {
+      // The MTPA point of this torque row is the same at every speed.
+      OperatingPoint mtpa;
+      const bool have_mtpa = TrySolve(m, lim, x, 0.0, &mtpa);
       for (size_t j = 0; j < n.size(); ++j) {
         const double we = n[j] * lim.pole_pairs * 2 * kPi / 60.0;
-        const auto op = SolveWithMax(m, lim, x, we, tlim[j]);
+        const auto op = SolveWithMax(m, lim, x, we, tlim[j], have_mtpa ? &mtpa.id_a : nullptr);
         id.values.push_back(op.id_a);
         iq.values.push_back(op.iq_a);
         t.clamped.push_back(op.clamped);
