@@ -28,7 +28,10 @@ Data MakeData(size_t n, double speed_rad_s) {
     d.ia.push_back(a + nd(rng));
     d.ib.push_back(-0.5 * a + 0.8660254 * b + nd(rng));
     d.ic.push_back(-0.5 * a - 0.8660254 * b + nd(rng));
-    d.th.push_back(std::remainder(th, 2 * std::numbers::pi));
+    // As an encoder reports it: 4096 counts per mechanical revolution, 4
+    // pole pairs (the recordings' angles are quantised like this).
+    const double count = 2 * std::numbers::pi * 4 / 4096;
+    d.th.push_back(std::remainder(std::round(th / count) * count, 2 * std::numbers::pi));
   }
   return d;
 }

@@ -41,7 +41,7 @@ inline void FastSinCos(double x, double* s, double* c) {
 // and in between the previous value rotated by e^{j (theta_k - theta_k-1)}
 // with a short Taylor series when the step is small (|d| < 0.2 rad: the
 // degree-9/10 truncation is < 2e-15). Accumulated rounding over 256 steps
-// stays below 1e-13. Falls back to FastSinCos for large steps (wraps).
+// stays below 1e-10. Falls back to FastSinCos for large steps (wraps).
 class AngleRotor {
  public:
   void Next(double theta, double* s, double* c) {
@@ -49,9 +49,15 @@ class AngleRotor {
     if (count_++ % 256 == 0 || !(std::abs(d) < 0.2)) {
       FastSinCos(theta, &s_, &c_);
     } else if (d != 0.0) {
-      const double d2 = d * d;
-      const double sd = d * (1.0 + d2 * (-1.0 / 6 + d2 * (1.0 / 120 + d2 * (-1.0 / 5040 + d2 * (1.0 / 362880)))));
-      const double cd = 1.0 + d2 * (-0.5 + d2 * (1.0 / 24 + d2 * (-1.0 / 720 + d2 * (1.0 / 40320 - d2 / 3628800.0))));
+      // An encoder's steps repeat (to rounding of the wrapped angles): reuse
+      // the rotation; a 1e-13 rad mismatch over 256 steps is < 3e-11.
+      if (std::abs(d - last_d_) > 1e-13) {
+        const double d2 = d * d;
+        sd_ = d * (1.0 + d2 * (-1.0 / 6 + d2 * (1.0 / 120 + d2 * (-1.0 / 5040 + d2 * (1.0 / 362880)))));
+        cd_ = 1.0 + d2 * (-0.5 + d2 * (1.0 / 24 + d2 * (-1.0 / 720 + d2 * (1.0 / 40320 - d2 / 3628800.0))));
+        last_d_ = d;
+      }
+      const double sd = sd_, cd = cd_;
       const double ns = s_ * cd + c_ * sd;
       c_ = c_ * cd - s_ * sd;
       s_ = ns;
@@ -62,7 +68,7 @@ class AngleRotor {
   }
 
  private:
-  double last_ = 0.0, s_ = 0.0, c_ = 1.0;
+  double last_ = 0.0, s_ = 0.0, c_ = 1.0, last_d_ = 0.0, sd_ = 0.0, cd_ = 1.0;
   unsigned long count_ = 0;
 };
 

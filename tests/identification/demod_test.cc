@@ -218,7 +218,7 @@ TEST(FastTrig, AngleRotorTracksStd) {
     rotor.Next(th, &s, &c);
     worst = std::max({worst, std::abs(s - std::sin(th)), std::abs(c - std::cos(th))});
   }
-  EXPECT_LT(worst, 1e-12);
+  EXPECT_LT(worst, 1e-10);
 }
 
 }  // namespace
