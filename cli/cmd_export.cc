@@ -47,6 +47,9 @@ int RunExport(const std::vector<std::string>& argv) {
   tables::MachineLimits lim;
   lim.pole_pairs = cal->pole_pairs();
   lim.rs_ohm = cal->rs_ohm();
+  // Default current limit: what the measurements cover, so that a table does
+  // not rest on extrapolated magnetics unless asked to (--i-max-a).
+  if (cal->MeasuredCurrentLimitA() > 0) lim.i_max_a = cal->MeasuredCurrentLimitA();
   auto get_int = [&](const char* flag, int* v) {
     if (auto s = args->Get(flag)) return absl::SimpleAtoi(*s, v);
     return true;

@@ -39,6 +39,23 @@ bool Calibration::InMeasuredRegion(double id, double iq) const {
   return id >= id_min_a_ - mi && id <= id_max_a_ + mi && aq >= iq_min_a_ - mq && aq <= iq_max_a_ + mq;
 }
 
+bool Calibration::PhysicalOver(double factor) const {
+  const double lo = std::min(id_min_a_, 0.0) * factor, hi = std::max(id_max_a_, 0.0);
+  const double qmax = std::max(iq_max_a_, 1.0) * factor;
+  for (int a = 0; a <= 12; ++a) {
+    const double id = lo + (hi - lo) * a / 12;
+    for (int b = 0; b <= 12; ++b) {
+      const auto L = Inductance(id, qmax * b / 12);
+      if (!(L.ldd_h > 0) || !(L.lqq_h > 0) || !(L.ldd_h * L.lqq_h - L.ldq_h * L.ldq_h > 0)) return false;
+    }
+  }
+  return true;
+}
+
+double Calibration::MeasuredCurrentLimitA() const {
+  return std::min(std::abs(std::min(id_min_a_, 0.0)), iq_max_a_);
+}
+
 FluxPrediction Calibration::Predict(double id, double iq) const {
   // Outputs y(p) = (psi_d, psi_q, Ldd, Lqq, Ldq, Ld_app, Lq_app, T).
   auto eval = [&](const std::vector<double>& p, double* y) {

@@ -55,6 +55,17 @@ class Calibration : public sim::MagneticModel {
   double rs_ohm() const { return rs_ohm_; }
   double psi_pm_wb() const { return params_.empty() ? 0.0 : params_[0]; }
   bool InMeasuredRegion(double id_a, double iq_a) const;
+  double id_min_a() const { return id_min_a_; }
+  double id_max_a() const { return id_max_a_; }
+  double iq_max_a() const { return iq_max_a_; }
+  // Inductance positive definite (Ldd > 0, Lqq > 0, det > 0) on a grid over
+  // the measured region widened by `factor` (towards negative id and larger
+  // |iq|): the extrapolation a table generator may lean on stays physical.
+  // (Saturation beyond the region is guaranteed by the analytic family only.)
+  bool PhysicalOver(double factor) const;
+  // Largest current magnitude whose quarter circle stays in the measured
+  // region (min(|id_min|, iq_max)); the tables' default current limit.
+  double MeasuredCurrentLimitA() const;
   FitSummary summary;
   int version = 0;   // assigned by storage
 

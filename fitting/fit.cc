@@ -394,11 +394,6 @@ absl::StatusOr<Calibration> Fit(const FitData& d, const FitOptions& o) {
     solved.push_back(Solve(f, d, o));
   }
   if (solved.empty()) return absl::InvalidArgumentError("too few observations for any model family");
-  const Solved* best = nullptr;
-  for (const auto& s : solved) {
-    if (s.usable && (best == nullptr || s.bic < best->bic)) best = &s;
-  }
-  if (best == nullptr) return absl::InternalError("no model family converged");
   double id_min = std::numeric_limits<double>::max(), id_max = -id_min, iq_min = id_min, iq_max = -id_min;
   for (const auto& obs : d.inductances) {
     id_min = std::min(id_min, obs.id_a); id_max = std::max(id_max, obs.id_a);
@@ -408,6 +403,19 @@ absl::StatusOr<Calibration> Fit(const FitData& d, const FitOptions& o) {
     id_min = std::min(id_min, s.id_a); id_max = std::max(id_max, s.id_a);
     iq_min = std::min(iq_min, std::abs(s.iq_a)); iq_max = std::max(iq_max, std::abs(s.iq_a));
   }
+  // A candidate must also extrapolate physically: positive-definite
+  // inductance over the measured region widened by 50 % (tables reach the
+  // current limit beyond the measured grid). Polynomials of high degree often
+  // do not; the analytic family does by construction.
+  std::vector<bool> physical(solved.size());
+  const Solved* best = nullptr;
+  for (size_t k = 0; k < solved.size(); ++k) {
+    const auto& s = solved[k];
+    physical[k] = Calibration(d.serial, s.family, s.params, {}, d.pole_pairs, d.rs_ohm, id_min, id_max,
+                              iq_min, iq_max).PhysicalOver(1.5);
+    if (s.usable && physical[k] && (best == nullptr || s.bic < best->bic)) best = &s;
+  }
+  if (best == nullptr) return absl::InternalError("no model family converged to a physical surface");
   Calibration cal(d.serial, best->family, best->params, best->covariance, d.pole_pairs, d.rs_ohm,
                   id_min, id_max, iq_min, iq_max);
   cal.summary.observations = best->n_obs;
@@ -423,9 +431,11 @@ absl::StatusOr<Calibration> Fit(const FitData& d, const FitOptions& o) {
     nrel += 2;
   }
   cal.summary.rms_relative = nrel ? std::sqrt(rel / nrel) : 0.0;
-  for (const auto& s : solved) {
-    cal.summary.candidates.push_back(absl::StrFormat("%s bic=%.2f chi2=%.2f k=%d%s", s.family.Name(),
-                                                     s.bic, s.chi2, s.k, &s == best ? " (selected)" : ""));
+  for (size_t k = 0; k < solved.size(); ++k) {
+    const auto& s = solved[k];
+    cal.summary.candidates.push_back(absl::StrFormat(
+        "%s bic=%.2f chi2=%.2f k=%d%s", s.family.Name(), s.bic, s.chi2, s.k,
+        &s == best ? " (selected)" : (physical[k] ? "" : " (rejected: unphysical extrapolation)")));
   }
   return cal;
 }

@@ -320,9 +320,12 @@ grpc::Status CalibrationServiceImpl::ExportTable(grpc::ServerContext*, const v1:
   if (spec.speed_points < 2 || spec.speed_points > 1024) return ToGrpcStatus(absl::InvalidArgumentError("speed_points: must be 2..1024"));
   if (!(spec.speed_max_rpm > 0 && spec.speed_max_rpm <= 1e5)) return ToGrpcStatus(absl::InvalidArgumentError("speed_max_rpm: must be in (0, 100000]"));
   tables::MachineLimits lim;
-  if (req->i_max_a() != 0) lim.i_max_a = req->i_max_a();
+  lim.i_max_a = req->i_max_a();   // 0: the calibration's measured current limit
+  if (lim.i_max_a == 0) lim.i_max_a = -1;
   if (req->udc_v() != 0) lim.udc_v = req->udc_v();
-  if (!(lim.i_max_a > 0 && lim.i_max_a <= 1e4)) return ToGrpcStatus(absl::InvalidArgumentError("i_max_a: must be in (0, 10000]"));
+  if (!(lim.i_max_a == -1 || (lim.i_max_a > 0 && lim.i_max_a <= 1e4))) {
+    return ToGrpcStatus(absl::InvalidArgumentError("i_max_a: must be in (0, 10000] (0: measured limit)"));
+  }
   if (!(lim.udc_v > 0 && lim.udc_v <= 5000)) return ToGrpcStatus(absl::InvalidArgumentError("udc_v: must be in (0, 5000]"));
   auto r = storage::ExportTable(*store_, req->serial(), req->version(), spec, lim,
                                 req->format().empty() ? "csv" : req->format());

@@ -94,6 +94,7 @@ absl::StatusOr<ExportResult> ExportTable(Store& store, const std::string& serial
   spec.calibration_version = cal->version;
   spec.model = cal->family().Name();
   tables::MachineLimits lim = lim_in;
+  if (lim.i_max_a <= 0) lim.i_max_a = cal->MeasuredCurrentLimitA() > 0 ? cal->MeasuredCurrentLimitA() : 150.0;
   lim.pole_pairs = cal->pole_pairs();
   lim.rs_ohm = cal->rs_ohm();
   auto t = tables::BuildTable(*cal, lim, spec);
