@@ -64,6 +64,7 @@ int RunDiagnose(const std::vector<std::string>& argv) {
     std::filesystem::create_directories(*dir);
     (void)io::WriteFileAtomically(*dir + "/residual_before.svg", diag::ResidualMapSvg(*rep, false));
     (void)io::WriteFileAtomically(*dir + "/residual_after.svg", diag::ResidualMapSvg(*rep, true));
+    (void)io::WriteFileAtomically(*dir + "/replay_spectrum.svg", diag::SpectrumSvg(*rep));
     std::fprintf(stderr, "diagnose: plots in %s\n", dir->c_str());
   }
   if (args->Has("json")) std::cout << diag::ToJson(*rep).dump(2) << "\n";

@@ -56,6 +56,12 @@ struct DiagnosisReport {
     double id_a = 0, iq_a = 0, speed_rpm = 0, before = 0, after = 0;
   };
   std::vector<Residual> residuals;
+  // Waveform evidence: every recorded test replayed open-loop through the
+  // twin (recorded commands, recorded angle) with the nominal and with the
+  // final model; RMS of simulated minus recorded phase currents, and the
+  // residual's spectrum (stationary frame, complex, signed frequency).
+  double waveform_rms_before_a = 0, waveform_rms_after_a = 0;
+  std::vector<double> spectrum_hz, spectrum_before_a, spectrum_after_a;
   double seconds = 0;
 };
 
@@ -64,6 +70,7 @@ struct DiagnoseOptions {
   double parameter_sigma = 3.0;     // parameter distance from neutral
   double mismatch_sigma = 5.0;      // a located region's significance
   double min_relative_improvement = 0.10;   // residual RMS drop to accept an effect
+  bool waveform_replay = true;              // replay evidence and spectra
 };
 
 absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const DiagnoseOptions& options = {});
@@ -72,6 +79,8 @@ nlohmann::json ToJson(const DiagnosisReport& r);
 std::string ToText(const DiagnosisReport& r);
 // Residual maps over the current plane, before and after (SVG).
 std::string ResidualMapSvg(const DiagnosisReport& r, bool after);
+// Spectrum of the replay residual, before and after (SVG).
+std::string SpectrumSvg(const DiagnosisReport& r);
 
 // The paper's Table 1 check (Wu, Wu, Zhu 2013): HF-identified Lq against
 // Lq = u_d*/(w_e i_q) from steady-state control at id = 0. The steady-state

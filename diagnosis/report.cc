@@ -48,6 +48,12 @@ nlohmann::json ToJson(const DiagnosisReport& r) {
                                           {"lqq_h", c.lqq_h}, {"ldq_h", c.ldq_h}, {"ldd_h_identified", c.ldd_h_identified},
                                           {"lqq_h_identified", c.lqq_h_identified}});
   }
+  j["waveform"] = {{"replay", "open-loop: recorded commands and angles through the twin"},
+                   {"residual_rms_before_a", r.waveform_rms_before_a},
+                   {"residual_rms_after_a", r.waveform_rms_after_a},
+                   {"spectrum_hz", r.spectrum_hz},
+                   {"spectrum_before_a", r.spectrum_before_a},
+                   {"spectrum_after_a", r.spectrum_after_a}};
   j["seconds"] = r.seconds;
   return j;
 }
@@ -83,6 +89,11 @@ std::string ToText(const DiagnosisReport& r) {
   for (const auto& m : r.remaining) {
     s += absl::StrFormat("  Still unexplained: %s at %s (%.1f sigma).\n", m.signal, m.where, m.significance_sigma);
   }
+  if (!r.spectrum_hz.empty()) {
+    s += absl::StrFormat("Replaying every test through the twin with the recorded commands: phase-current residual "
+                         "%.3g A RMS with the nominal model, %.3g A with the final one.\n",
+                         r.waveform_rms_before_a, r.waveform_rms_after_a);
+  }
   s += absl::StrFormat("(%.2f s)\n", r.seconds);
   return s;
 }
@@ -105,6 +116,31 @@ std::string ResidualMapSvg(const DiagnosisReport& r, bool after) {
                          z.point, z.signal, v);
   }
   s += "</svg>\n";
+  return s;
+}
+
+std::string SpectrumSvg(const DiagnosisReport& r) {
+  const double x0 = 60, y0 = 30, w = 560, h = 380;
+  double top = 1e-9;
+  for (double v : r.spectrum_before_a) top = std::max(top, v);
+  for (double v : r.spectrum_after_a) top = std::max(top, v);
+  std::string s = "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"660\" height=\"460\" font-family=\"sans-serif\" font-size=\"11\">\n";
+  s += absl::StrFormat("<text x=\"60\" y=\"18\">%s: spectrum of the replay residual (complex alpha-beta), red = nominal, "
+                       "blue = final; log scale, top %.3g A</text>\n", r.serial, top);
+  s += absl::StrFormat("<rect x=\"%g\" y=\"%g\" width=\"%g\" height=\"%g\" fill=\"none\" stroke=\"black\"/>\n", x0, y0, w, h);
+  const size_t n = r.spectrum_hz.size();
+  auto y = [&](double v) { return y0 + h - h * std::max(0.0, std::log10(std::max(v, top * 1e-4) / (top * 1e-4))) / 4.0; };
+  for (size_t k = 0; k < n; ++k) {
+    const double x = x0 + w * (k + 0.5) / n;
+    s += absl::StrFormat("<line x1=\"%.1f\" y1=\"%.1f\" x2=\"%.1f\" y2=\"%.1f\" stroke=\"#c33\" stroke-width=\"3\"/>\n",
+                         x - 1.5, y0 + h, x - 1.5, y(r.spectrum_before_a[k]));
+    s += absl::StrFormat("<line x1=\"%.1f\" y1=\"%.1f\" x2=\"%.1f\" y2=\"%.1f\" stroke=\"#36c\" stroke-width=\"3\"/>\n",
+                         x + 1.5, y0 + h, x + 1.5, y(r.spectrum_after_a[k]));
+    if (static_cast<int>(r.spectrum_hz[k]) % 500 == 0) {
+      s += absl::StrFormat("<text x=\"%.1f\" y=\"%g\">%.0f</text>\n", x - 10, y0 + h + 14, r.spectrum_hz[k]);
+    }
+  }
+  s += "<text x=\"300\" y=\"450\">frequency [Hz]</text>\n</svg>\n";
   return s;
 }
 

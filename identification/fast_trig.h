@@ -28,13 +28,13 @@ inline void FastSinCos(double x, double* s, double* c) {
       1.0 + r2 * (-0.5 + r2 * (1.0 / 24 + r2 * (-1.0 / 720 + r2 * (1.0 / 40320 +
           r2 * (-1.0 / 3628800 + r2 * (1.0 / 479001600.0 + r2 * (-1.0 / 87178291200.0 +
           r2 * (1.0 / 20922789888000.0))))))));
+  // Quadrant fix-up without a switch: at speed the quadrant changes every
+  // few samples and a mispredicted branch would cost more than the select.
   const long quadrant = static_cast<long>(q) & 3;
-  switch (quadrant) {
-    case 0: *s = sr; *c = cr; break;
-    case 1: *s = cr; *c = -sr; break;
-    case 2: *s = -sr; *c = -cr; break;
-    default: *s = -cr; *c = sr; break;
-  }
+  const bool swap = (quadrant & 1) != 0;
+  const double a = swap ? cr : sr, b = swap ? sr : cr;
+  *s = (quadrant & 2) ? -a : a;
+  *c = ((quadrant + 1) & 2) ? -b : b;
 }
 
 // e^{j theta_k} along a sampled angle: exact FastSinCos every 256 samples,
@@ -46,18 +46,15 @@ class AngleRotor {
  public:
   void Next(double theta, double* s, double* c) {
     const double d = theta - last_;
-    if (count_++ % 256 == 0 || !(std::abs(d) < 0.2)) {
+    if ((count_++ & 255u) == 0 || !(std::abs(d) < 0.2)) {
       FastSinCos(theta, &s_, &c_);
-    } else if (d != 0.0) {
-      // An encoder's steps repeat (to rounding of the wrapped angles): reuse
-      // the rotation; a 1e-13 rad mismatch over 256 steps is < 3e-11.
-      if (std::abs(d - last_d_) > 1e-13) {
-        const double d2 = d * d;
-        sd_ = d * (1.0 + d2 * (-1.0 / 6 + d2 * (1.0 / 120 + d2 * (-1.0 / 5040 + d2 * (1.0 / 362880)))));
-        cd_ = 1.0 + d2 * (-0.5 + d2 * (1.0 / 24 + d2 * (-1.0 / 720 + d2 * (1.0 / 40320 - d2 / 3628800.0))));
-        last_d_ = d;
-      }
-      const double sd = sd_, cd = cd_;
+    } else {
+      // Branch-free small-angle rotation: encoder steps alternate between
+      // neighbouring counts, so caching one step mispredicts; the degree-9/10
+      // polynomial costs less than the mispredicted branch.
+      const double d2 = d * d;
+      const double sd = d * (1.0 + d2 * (-1.0 / 6 + d2 * (1.0 / 120 + d2 * (-1.0 / 5040 + d2 * (1.0 / 362880)))));
+      const double cd = 1.0 + d2 * (-0.5 + d2 * (1.0 / 24 + d2 * (-1.0 / 720 + d2 * (1.0 / 40320 - d2 / 3628800.0))));
       const double ns = s_ * cd + c_ * sd;
       c_ = c_ * cd - s_ * sd;
       s_ = ns;
@@ -68,7 +65,7 @@ class AngleRotor {
   }
 
  private:
-  double last_ = 0.0, s_ = 0.0, c_ = 1.0, last_d_ = 0.0, sd_ = 0.0, cd_ = 1.0;
+  double last_ = 0.0, s_ = 0.0, c_ = 1.0;
   unsigned long count_ = 0;
 };
 

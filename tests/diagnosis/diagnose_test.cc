@@ -153,6 +153,15 @@ TEST(Examples, IndependentSets) {
       }
     }
     EXPECT_LT(r->seconds, 10.0) << "36-point set diagnosed in < 10 s";
+    // Waveform evidence: replaying every test through the twin, the final
+    // model reproduces the recorded currents far better when it found
+    // something, and no worse when it found nothing.
+    if (want.empty()) {
+      EXPECT_NEAR(r->waveform_rms_after_a, r->waveform_rms_before_a, 1e-9) << name;
+    } else {
+      EXPECT_LT(r->waveform_rms_after_a, r->waveform_rms_before_a / 3) << name;
+    }
+    EXPECT_EQ(r->spectrum_hz.size(), r->spectrum_after_a.size());
   }
 }
 
