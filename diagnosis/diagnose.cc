@@ -50,7 +50,9 @@ struct Candidate {
 struct HfObs {
   std::string point;
   double id_a, iq_a, w_e, theta, speed_rpm;
-  Complex i0, i1, v_eff, dead_hf, dead_neg;   // dead-time HF voltage error per second of Td, on the
+  Complex i0, i1, v_eff, dead_hf, dead_neg;
+  Complex mean_e2;   // window mean of e^{-j 2 theta}: what a stationary-frame
+                     // component at -w_i contributes to the I1 projection   // dead-time HF voltage error per second of Td, on the
                                             // positive- and negative-sequence bases
   double sigma0, sigma1, scale;
   bool locked;
@@ -156,7 +158,7 @@ struct Model {
     // Unequal sensor gains: i_meas = i + m2 conj(i) (m1 = 1 absorbed in L).
     const Complex m2 = M2(p);
     if (m2 != 0.0) {
-      const Complex e2 = std::polar(1.0, -2 * o.theta);
+      const Complex e2 = o.mean_e2;
       const Complex a0 = *i0, a1 = *i1;
       *i0 = a0 + m2 * std::conj(a1) * e2;
       *i1 = a1 + m2 * std::conj(a0) * e2;
@@ -450,6 +452,7 @@ absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident:
     o.locked = o.speed_rpm == 0;
     o.theta = w.theta_e_rad[0];
     o.i0 = id.i0_a; o.i1 = id.i1_a; o.v_eff = id.v_eff_v;
+    o.mean_e2 = 0.0;
     // Noise from the data (LSQ standard error) plus a model floor of 0.25 %
     // of |I0|: the identification's own systematic accuracy on clean twin
     // and independent data (docs/identification.md).
@@ -475,6 +478,7 @@ absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident:
       const Complex e = DeadTimeInterval(w, s, udc, m.ts);
       const double t = static_cast<double>(s) / fs;
       hf += e * std::polar(1.0, -m.w_i * t);
+      o.mean_e2 += std::polar(1.0, -2 * w.theta_e_rad[s]);
       neg += e * std::polar(1.0, m.w_i * t - 2 * w.theta_e_rad[s]);
       dc += e * std::polar(1.0, -w.theta_e_rad[s]);
       acc_u += Complex(w.ualpha_ref_v[s], w.ubeta_ref_v[s]) * std::polar(1.0, -w.theta_e_rad[s]);
@@ -484,6 +488,7 @@ absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident:
     // earlier than a command issued at t_k: EffectiveVoltage's 1.5-period
     // delay less one period.
     const double w2 = 2 * o.w_e - m.w_i;
+    o.mean_e2 /= static_cast<double>(n);
     o.dead_hf = ident::EffectiveVoltage(hf / static_cast<double>(n), m.w_i, f_pwm) * std::polar(1.0, m.w_i * m.ts);
     o.dead_neg = ident::EffectiveVoltage(neg / static_cast<double>(n), w2, f_pwm) * std::polar(1.0, w2 * m.ts);
     m.hf.push_back(o);

@@ -102,8 +102,9 @@ TEST(Matrix, EachEffectAlone) {
       EXPECT_NEAR(f->parameters.at("gain_c"), e.gain_c / mean, 0.005);
     }
     // At least 3x lower residual. Known gap: unequal sensor gains reach
-    // ~2.6x, because at speed their stationary-frame component is outside the
-    // demodulator's basis (docs/diagnosis.md); asserted at 2.5x there.
+    // ~2.8x on these short (25-period) records (5.5x on 50 periods): their
+    // mean gain is not separable from Rs and the inductances, and what it
+    // leaves in the standstill voltages stays (docs/diagnosis.md).
     const double want_ratio = effect == "current_sensor_gain" ? 2.5 : 3.0;
     EXPECT_GE(r.baseline.residual_rms / r.final_model.residual_rms, want_ratio)
         << effect << ": residual " << r.baseline.residual_rms << " -> " << r.final_model.residual_rms;
