@@ -35,7 +35,7 @@ inline double IPow(double x, int n) {
 
 // ---- Parameter blocks (scaled to order one) -----------------------------
 enum Block { kBase, kCross, kDead, kRs, kRhf, kOffset, kGain, kPsi, kDelay, kHarm, kNumBlocks };
-constexpr int kBlockSize[kNumBlocks] = {10, 8, 1, 1, 1, 1, 2, 1, 1, 1};
+constexpr int kBlockSize[kNumBlocks] = {10, 8, 1, 1, 1, 1, 3, 1, 1, 1};
 // Cross terms x^a y^b of the co-energy (a >= 1, b >= 2 even): they vanish
 // with iq = 0 or id = 0 as the machine's symmetry requires.
 constexpr int kCrossTerms[8][2] = {{1, 2}, {2, 2}, {3, 2}, {1, 4}, {2, 4}, {4, 2}, {5, 2}, {3, 4}};
@@ -118,6 +118,8 @@ struct Model {
   double DeadTime(const double* const* p) const { return 1e-6 * p[kDead][0]; }
   double Offset(const double* const* p) const { return 1e-2 * p[kOffset][0]; }
   Complex M2(const double* const* p) const { return 1e-2 * Complex(p[kGain][0], p[kGain][1]); }
+  // Mean sensor gain m1 (measured = m1 i + m2 conj(i) in alpha-beta).
+  double M1(const double* const* p) const { return 1.0 + 1e-2 * p[kGain][2]; }
 
   // Eqs. (E1)-(E2) of identification/inductance.h with a voltage on both
   // sequences: V = R I0 + j w (S I0 + D conj(I1)), Vn = R I1 + j w2 (S I1 + D conj(I0)).
@@ -157,18 +159,19 @@ struct Model {
     *i1 *= std::conj(rot * rot);
     // Unequal sensor gains: i_meas = i + m2 conj(i) (m1 = 1 absorbed in L).
     const Complex m2 = M2(p);
-    if (m2 != 0.0) {
+    const double m1 = M1(p);
+    if (m2 != 0.0 || m1 != 1.0) {
       const Complex e2 = o.mean_e2;
       const Complex a0 = *i0, a1 = *i1;
-      *i0 = a0 + m2 * std::conj(a1) * e2;
-      *i1 = a1 + m2 * std::conj(a0) * e2;
+      *i0 = m1 * a0 + m2 * std::conj(a1) * e2;
+      *i1 = m1 * a1 + m2 * std::conj(a0) * e2;
     }
   }
   // The controller holds the *measured* current; with unequal sensor gains
   // i_s,meas = i_s + m2 conj(i_s), so in dq the true current is
   // i = i_meas - m2 e^{-j 2 theta} conj(i_meas) to first order.
   Complex TrueCurrent(const double* const* p, Complex i_meas, double theta) const {
-    return i_meas - M2(p) * std::polar(1.0, -2 * theta) * std::conj(i_meas);
+    return (i_meas - M2(p) * std::polar(1.0, -2 * theta) * std::conj(i_meas)) / M1(p);
   }
   Complex PredictDc(const double* const* p, const DcObs& o) const {
     // Holding a DC current at standstill needs u = Rs i (the rotation by an
@@ -177,14 +180,14 @@ struct Model {
   }
   Complex PredictSs(const double* const* p, const SsObs& o) const {
     const Complex rot = std::polar(1.0, Offset(p));
-    const Complex it = rot * Complex(o.id_a, o.iq_a);
+    const Complex it = rot * Complex(o.id_a, o.iq_a) / M1(p);
     double pd, pq;
     Flux(p, it.real(), it.imag(), &pd, &pq);
     const Complex u_true(Rs(p) * it.real() - o.w_e * pq, Rs(p) * it.imag() + o.w_e * pd);
     return std::conj(rot) * u_true * std::polar(1.0, o.w_e * 1e-6 * p[kDelay][0]) + DeadTime(p) * o.dead;
   }
   double PredictTorque(const double* const* p, const SsObs& o) const {
-    const Complex it = std::polar(1.0, Offset(p)) * Complex(o.id_a, o.iq_a);
+    const Complex it = std::polar(1.0, Offset(p)) * Complex(o.id_a, o.iq_a) / M1(p);
     double pd, pq;
     Flux(p, it.real(), it.imag(), &pd, &pq);
     return 1.5 * pole_pairs * (pd * it.imag() - pq * it.real());
@@ -585,15 +588,18 @@ Finding Describe(const Candidate& c, const Model& m, const FitOut& f) {
                       "constant angle: the angle sensor reads true + offset";
   } else if (c.effect == "current_sensor_gain") {
     const Complex m2 = 1e-2 * Complex(p[kGain][0], p[kGain][1]);
+    const double m1 = 1 + 1e-2 * p[kGain][2];
     const double phi[3] = {0, 2 * kPi / 3, 4 * kPi / 3};
     const char* names[3] = {"gain_a", "gain_b", "gain_c"};
     const double sdr = 1e-2 * std::max(sd(kGain, 0), sd(kGain, 1));
     for (int x = 0; x < 3; ++x) {
-      out.parameters[names[x]] = 1 + 2 * std::real(m2 * std::polar(1.0, -2 * phi[x]));
-      out.parameter_std[names[x]] = 2 * sdr;
+      // g_x = m1 + delta_x, delta_x = 2 Re(m2 e^{-j 2 phi_x}) (sum delta = 0).
+      out.parameters[names[x]] = m1 + 2 * std::real(m2 * std::polar(1.0, -2 * phi[x]));
+      out.parameter_std[names[x]] = std::hypot(2 * sdr, 1e-2 * sd(kGain, 2));
     }
-    out.explanation = "a spurious HF component fixed in the stationary frame (not following 2 theta_e): the phase "
-                      "current sensors have unequal gains (given relative to their mean)";
+    out.explanation = "a spurious HF component fixed in the stationary frame (not following 2 theta_e) and held "
+                      "currents off by a sensor gain: the phase current sensors have unequal gains (their mean "
+                      "is separated from Rs by the nominal Rs)";
   } else if (c.effect == "magnet_temperature") {
     out.parameters["psi_pm_wb"] = m.psi_nom * (1 + 1e-2 * p[kPsi][0]);
     out.parameter_std["psi_pm_wb"] = m.psi_nom * 1e-2 * sd(kPsi, 0);
@@ -684,7 +690,7 @@ double ReplayResidual(const io::RecordingSet& set, const Model& m, const Params&
   const Complex m2 = m.M2(ptr.data());
   const double phi[3] = {0, 2 * kPi / 3, 4 * kPi / 3};
   double* g[3] = {&opt.effects.gain_a, &opt.effects.gain_b, &opt.effects.gain_c};
-  for (int x = 0; x < 3; ++x) *g[x] = 1 + 2 * std::real(m2 * std::polar(1.0, -2 * phi[x]));
+  for (int x = 0; x < 3; ++x) *g[x] = m.M1(ptr.data()) + 2 * std::real(m2 * std::polar(1.0, -2 * phi[x]));
   auto rep = sim::ReplayOpenLoop(set, model, opt);
   spectrum->assign(freqs.size(), 0.0);
   if (!rep.ok()) return std::nan("");
