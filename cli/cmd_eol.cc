@@ -3,6 +3,7 @@
 // The EOL station flow: identify every point locally, stream the results
 // for the serial, ask for a fit and its verdict, fetch the ECU tables.
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
@@ -49,6 +50,10 @@ int RunEol(const std::vector<std::string>& argv) {
     auto writer = stub->IngestHfResults(&ctx, &ing);
     bool first = true;
     for (const auto& r : *ids) {
+      if (!std::isfinite(r.ld_h) || !std::isfinite(r.id_a)) {
+        std::fprintf(stderr, "eol %s: point %s not identified: %s\n", serial.c_str(), r.point.c_str(), r.failure.c_str());
+        continue;
+      }
       v1::IngestHfResultsRequest m;
       if (first) {
         m.set_serial(serial);

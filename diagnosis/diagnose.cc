@@ -447,6 +447,7 @@ absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident:
   for (size_t k = 0; k < ids->size(); ++k) {
     const auto& id = (*ids)[k];
     const auto& w = set.waveforms[k];
+    if (!std::isfinite(id.ld_h) || !std::isfinite(id.id_a)) continue;   // identification_failed
     HfObs o;
     o.point = id.point;
     o.id_a = id.id_a; o.iq_a = id.iq_a;
@@ -544,8 +545,11 @@ absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident:
   return m;
 }
 
-void InitBase(const Model& m, const std::vector<ident::HfPointResult>& ids, Params* p) {
+void InitBase(const Model& m, const std::vector<ident::HfPointResult>& all_ids, Params* p) {
   // Quartic self-axis surfaces by least squares on the identified values.
+  std::vector<ident::HfPointResult> ok;
+  for (const auto& r : all_ids) if (std::isfinite(r.ld_h) && std::isfinite(r.id_a)) ok.push_back(r);
+  const auto& ids = ok;
   Eigen::MatrixXd A(ids.size(), 5), B(ids.size(), 5);
   Eigen::VectorXd a(ids.size()), b(ids.size());
   for (size_t k = 0; k < ids.size(); ++k) {
@@ -800,6 +804,7 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
   }
   const auto ptr = current.p.Ptrs();
   for (size_t k = 0; k < ids.size(); ++k) {
+    if (!std::isfinite(ids[k].ld_h) || !std::isfinite(ids[k].id_a)) continue;
     CorrectedPoint cp;
     cp.point = ids[k].point;
     cp.id_a = ids[k].id_a;

@@ -332,6 +332,7 @@ FitData FitDataFromRecording(const io::RecordingSet& set,
   FitData d = FitDataFromHfRows(&set.manifest, set.hf_results);
   for (const auto& r : identified) {
     if (!r.reliable && r.flags.size() == 1 && r.flags[0] == "clipping") continue;
+    if (!std::isfinite(r.ld_h) || !std::isfinite(r.lq_h) || !std::isfinite(r.id_a)) continue;
     InductanceObservation o;
     o.id_a = r.id_a; o.iq_a = r.iq_a;
     o.ldd_h = r.ld_h; o.lqq_h = r.lq_h;

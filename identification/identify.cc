@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numbers>
 
 #include "absl/strings/str_cat.h"
@@ -79,6 +80,12 @@ absl::StatusOr<HfPointResult> IdentifyPoint(const io::RecordingSet& set, size_t 
                                 w.size(), fs, fi);
   if (!volt.ok()) return prefix(volt.status());
   const Complex v_eff = EffectiveVoltage(volt->v_cmd_v, wi, f_pwm);
+  // Nothing to invert without an injection and a response above the noise.
+  if (std::abs(volt->v_cmd_v) < 1e-3 * m.injection->amplitude_v ||
+      std::norm(lsq->i0_a) <= 4.0 * lsq->var_i0_a2 || std::abs(lsq->i0_a) < 1e-9) {
+    return prefix(absl::FailedPreconditionError(absl::StrFormat(
+        "no HF response to invert (|V| = %.3g V, |I0| = %.3g A)", std::abs(volt->v_cmd_v), std::abs(lsq->i0_a))));
+  }
 
   HfPointResult r;
   r.point = spec.id;
@@ -171,8 +178,25 @@ absl::StatusOr<std::vector<HfPointResult>> IdentifySet(const io::RecordingSet& s
   for (size_t k = 0; k < set.waveforms.size(); ++k) {
     if (options.progress) options.progress(k, set.waveforms.size());
     auto r = IdentifyPoint(set, k, options);
-    if (!r.ok()) return r.status();
-    out.push_back(std::move(*r));
+    if (r.ok()) {
+      out.push_back(std::move(*r));
+      continue;
+    }
+    // A point whose HF response cannot be inverted (no response, |I1| >=
+    // |I0| for eq. (8), 2 w_e = w_i) is reported, not fatal to the set: its
+    // values are NaN, it is unreliable and says why. Malformed input stays
+    // an error.
+    if (r.status().code() != absl::StatusCode::kFailedPrecondition) return r.status();
+    HfPointResult bad;
+    bad.point = set.manifest.points[k].id;
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    bad.id_a = bad.iq_a = bad.ld_h = bad.lq_h = bad.ldq_h = bad.r_hf_ohm = nan;
+    bad.ld_h_std = bad.lq_h_std = bad.ldq_h_std = bad.r_hf_ohm_std = nan;
+    bad.speed_rpm = set.manifest.points[k].speed_rpm;
+    bad.reliable = false;
+    bad.flags.push_back("identification_failed");
+    bad.failure = std::string(r.status().message());
+    out.push_back(std::move(bad));
   }
   return out;
 }

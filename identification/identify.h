@@ -40,6 +40,7 @@ struct HfPointResult {
   bool clipped = false;
   bool reliable = true;
   std::vector<std::string> flags;       // why a point is unreliable
+  std::string failure;                  // set when the flag identification_failed is
 };
 
 struct IdentifyOptions {
@@ -53,7 +54,9 @@ struct IdentifyOptions {
 absl::StatusOr<HfPointResult> IdentifyPoint(const io::RecordingSet& set, size_t point,
                                             const IdentifyOptions& options);
 
-// Every waveform point of the set, in manifest order. Errors name the point.
+// Every waveform point of the set, in manifest order. Malformed input is an
+// error naming the point; a point whose HF response cannot be inverted comes
+// back with NaN values, reliable = false and the flag identification_failed.
 absl::StatusOr<std::vector<HfPointResult>> IdentifySet(const io::RecordingSet& set,
                                                        const IdentifyOptions& options);
 

@@ -190,6 +190,7 @@ grpc::Status CalibrationServiceImpl::IngestRecording(grpc::ServerContext* ctx,
   if (!ids.ok()) return ToGrpcStatus(absl::InvalidArgumentError(std::string(ids.status().message())));
   std::vector<storage::HfPointRow> rows;
   for (const auto& r : *ids) {
+    if (!std::isfinite(r.ld_h) || !std::isfinite(r.id_a)) continue;   // identification_failed
     storage::HfPointRow h;
     h.point_id = r.point; h.id_a = r.id_a; h.iq_a = r.iq_a; h.speed_rpm = r.speed_rpm;
     h.ld_h = r.ld_h; h.lq_h = r.lq_h;
