@@ -74,6 +74,9 @@ struct SsObs {
 struct Model {
   int pole_pairs = 4;
   double rs_nom = 0.01, psi_nom = 0.01, w_i = 2 * kPi * 500, ts = 1e-4;
+  // Dead time the manifest declares uncompensated (0 when compensated): part
+  // of the nominal drive; the dead_time effect is what acts beyond it.
+  double dead_nom_s = 0.0;
   std::vector<HfObs> hf;
   std::vector<DcObs> dc;
   std::vector<SsObs> ss;
@@ -115,7 +118,7 @@ struct Model {
     *pq = kL0 * kI0 * q;
   }
   double Rs(const double* const* p) const { return rs_nom + 1e-3 * p[kRs][0]; }
-  double DeadTime(const double* const* p) const { return 1e-6 * p[kDead][0]; }
+  double DeadTime(const double* const* p) const { return dead_nom_s + 1e-6 * p[kDead][0]; }
   double Offset(const double* const* p) const { return 1e-2 * p[kOffset][0]; }
   Complex M2(const double* const* p) const { return 1e-2 * Complex(p[kGain][0], p[kGain][1]); }
   // Mean sensor gain m1 (measured = m1 i + m2 conj(i) in alpha-beta).
@@ -436,6 +439,9 @@ absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident:
   m.pole_pairs = mf.motor.pole_pairs;
   m.rs_nom = mf.motor.rs_ohm.value_or(0.0);
   m.psi_nom = mf.motor.psi_pm_wb.value_or(0.01);
+  if (mf.drive.dead_time_compensated.has_value() && !*mf.drive.dead_time_compensated) {
+    m.dead_nom_s = mf.drive.dead_time_s.value_or(0.0);
+  }
   const double fs = mf.drive.f_sample_hz;
   const double f_pwm = mf.drive.f_pwm_hz.value_or(fs);
   m.ts = 1.0 / f_pwm;
@@ -570,7 +576,8 @@ Finding Describe(const Candidate& c, const Model& m, const FitOut& f) {
   auto sd = [&](Block b, int i) { return f.stdev.count(b) ? f.stdev.at(b)[i] : 0.0; };
   const auto& p = f.p.b;
   if (c.effect == "dead_time") {
-    out.parameters["dead_time_s"] = 1e-6 * p[kDead][0];
+    // Effective dead time acting (declared uncompensated part included).
+    out.parameters["dead_time_s"] = m.dead_nom_s + 1e-6 * p[kDead][0];
     out.parameter_std["dead_time_s"] = 1e-6 * sd(kDead, 0);
     out.explanation = "voltage error that follows the sign of each phase current: the held DC commands depart from "
                       "Rs i by a current-sign pattern and the HF response is distorted where a phase current "
@@ -644,6 +651,31 @@ double Significance(const Candidate& c, const FitOut& f, const Model& m) {
     }
     return 3.0 * max_ldq / (0.01 * mean_l);
   }
+  // Materiality: below these sizes no calibration decision changes, however
+  // precisely the data pin them down (a fraction of the tolerances:
+  // dead time 20 %, resistance 15 %, offset 0.5 deg, gains 0.5 %).
+  const auto& q = f.p.b;
+  double size = 0, floor = 0;
+  switch (c.block) {
+    case kDead: size = std::abs(1e-6 * q[kDead][0]); floor = 0.1e-6; break;
+    case kRs: size = std::abs(1e-3 * q[kRs][0]); floor = 0.03 * std::max(m.rs_nom, 1e-3); break;
+    case kRhf: size = std::abs(1e-3 * q[kRhf][0]); floor = 0.002; break;
+    case kOffset: size = std::abs(1e-2 * q[kOffset][0]); floor = 0.25 * kPi / 180; break;
+    case kGain: {
+      const Complex m2 = 1e-2 * Complex(q[kGain][0], q[kGain][1]);
+      const double m1 = 1e-2 * q[kGain][2];
+      for (double phi : {0.0, 2 * kPi / 3, 4 * kPi / 3}) {
+        size = std::max(size, std::abs(m1 + 2 * std::real(m2 * std::polar(1.0, -2 * phi))));
+      }
+      floor = 0.0025;
+      break;
+    }
+    case kPsi: size = std::abs(1e-2 * q[kPsi][0]); floor = 0.005; break;
+    case kDelay: size = std::abs(1e-6 * q[kDelay][0]); floor = 2e-6; break;
+    case kHarm: size = std::abs(1e-6 * q[kHarm][0]); floor = 1e-6; break;
+    default: break;
+  }
+  if (size < floor) return 0.0;
   if (!f.stdev.count(c.block)) return 0.0;
   double best = 0;
   for (int i = 0; i < kBlockSize[c.block]; ++i) {

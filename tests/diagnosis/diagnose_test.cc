@@ -160,6 +160,24 @@ TEST(Examples, IndependentSets) {
   }
 }
 
+// A dead time the manifest declares uncompensated belongs to the nominal
+// model: the same recording is then no longer a mismatch.
+TEST(Nominal, DeclaredUncompensatedDeadTimeIsNotAFinding) {
+  sim::TwinConfig cfg;
+  cfg.seed = 41;
+  cfg.effects.dead_time_s = 2e-6;
+  sim::Plan plan = sim::DefaultPlan();
+  auto sim = sim::Simulate(cfg, plan);
+  ASSERT_TRUE(sim.ok());
+  io::RecordingSet set = sim->set;
+  set.manifest.drive.dead_time_compensated = false;
+  set.manifest.drive.dead_time_s = 2e-6;
+  auto r = Diagnose(set);
+  ASSERT_TRUE(r.ok());
+  EXPECT_EQ(r->verdict, "no_mismatch");
+  EXPECT_TRUE(r->findings.empty());
+}
+
 TEST(Table1, DifferentialInductanceFromPublishedData) {
   auto rows = ReadTable1(std::string(FLUXCAL_SOURCE_DIR) + "/data/paper_table1.csv");
   ASSERT_TRUE(rows.ok()) << rows.status();
