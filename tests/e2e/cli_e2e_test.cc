@@ -1,0 +1,101 @@
+// The command line end to end: simulate -> identify -> fit -> query ->
+// export -> diagnose, each with --json parsed as a single document, and the
+// error path of bad input.
+#include <array>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include "gtest/gtest.h"
+#include "nlohmann/json.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+
+struct Run {
+  int code = 0;
+  std::string out;
+};
+
+// Runs the binary; stdout captured, stderr discarded.
+Run Fluxcal(const std::string& args) {
+  const std::string cmd = std::string(FLUXCAL_BINARY) + " " + args + " 2>/dev/null";
+  Run r;
+  FILE* p = popen(cmd.c_str(), "r");
+  std::array<char, 4096> buf;
+  size_t n;
+  while ((n = fread(buf.data(), 1, buf.size(), p)) > 0) r.out.append(buf.data(), n);
+  const int st = pclose(p);
+  r.code = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+  return r;
+}
+
+nlohmann::json Json(const Run& r) {
+  EXPECT_EQ(r.code, 0) << r.out;
+  return nlohmann::json::parse(r.out);   // throws if not exactly one document
+}
+
+TEST(Cli, EndToEnd) {
+  const fs::path dir = fs::temp_directory_path() / ("fluxcal_e2e_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const std::string set = (dir / "set").string();
+  auto sim = Json(Fluxcal("simulate --out " + set + " --seed 5 --serial IPM-E2E-1 --effects dead_time_s=1.5e-6 --json"));
+  EXPECT_EQ(sim["serial"], "IPM-E2E-1");
+  ASSERT_TRUE(fs::exists(set + "/manifest.json"));
+  ASSERT_TRUE(fs::exists(set + ".truth.json"));
+
+  auto id = Json(Fluxcal("identify " + set + " --json"));
+  ASSERT_EQ(id["points"].size(), 40u);
+  EXPECT_GT(id["points"][0]["ld_h"].get<double>(), 1e-4);
+  auto paper = Json(Fluxcal("identify " + set + " --method paper --json"));
+  EXPECT_TRUE(paper["points"][0]["ldq_h"].is_null());
+  const auto csv = Fluxcal("identify " + set + " --csv");
+  EXPECT_EQ(csv.out.rfind("point,id_a,iq_a,speed_rpm,ld_h,lq_h,ldq_h,r_hf_ohm", 0), 0u);
+
+  const std::string cal = (dir / "cal.json").string();
+  auto fit = Json(Fluxcal("fit " + set + " --out " + cal + " --json"));
+  EXPECT_EQ(fit["format"], "fluxcal.calibration.v1");
+  auto q = Json(Fluxcal("query " + cal + " --id-a -20 --iq-a 40 --json"));
+  EXPECT_GT(q["torque_nm"].get<double>(), 0.0);
+  const auto grid = Fluxcal("query " + cal + " --grid -100:0:3,0:100:3");
+  EXPECT_EQ(std::count(grid.out.begin(), grid.out.end(), '\n'), 10);
+
+  for (const char* fmt : {"csv", "json", "h", "cdfx", "dcm"}) {
+    const std::string out = (dir / (std::string("mtpa.") + fmt)).string();
+    auto e = Json(Fluxcal("export " + cal + " --table mtpa --format " + fmt + " --points 8 --out " + out + " --json"));
+    EXPECT_EQ(e["sha256"].get<std::string>().size(), 64u) << fmt;
+    EXPECT_TRUE(fs::file_size(out) > 100) << fmt;
+  }
+
+  auto diag = Json(Fluxcal("diagnose " + set + " --json"));
+  EXPECT_EQ(diag["format"], "fluxcal.diagnosis.v1");
+  ASSERT_GE(diag["findings"].size(), 1u);
+  EXPECT_EQ(diag["findings"][0]["effect"], "dead_time");
+  fs::remove_all(dir);
+  fs::remove(set + ".truth.json");
+}
+
+TEST(Cli, BadInputNamesTheFile) {
+  const fs::path dir = fs::temp_directory_path() / ("fluxcal_e2e_bad_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  std::ofstream(dir / "manifest.json") << "{\"format\": \"fluxcal.recording.v1\", \"serial\": \"bad serial\"}";
+  const std::string cmd = std::string(FLUXCAL_BINARY) + " identify " + dir.string() + " --json 2>&1";
+  FILE* p = popen(cmd.c_str(), "r");
+  std::string out;
+  std::array<char, 4096> buf;
+  size_t n;
+  while ((n = fread(buf.data(), 1, buf.size(), p)) > 0) out.append(buf.data(), n);
+  const int st = pclose(p);
+  EXPECT_EQ(WEXITSTATUS(st), 1);
+  EXPECT_NE(out.find("manifest.json"), std::string::npos) << out;
+  EXPECT_NE(out.find("field 'serial'"), std::string::npos) << out;
+  EXPECT_EQ(Fluxcal("nosuchcommand").code, 2);
+  EXPECT_EQ(Fluxcal("identify " + dir.string() + " --bogus").code, 2);
+  fs::remove_all(dir);
+}
+
+}  // namespace
