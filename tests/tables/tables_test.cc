@@ -98,6 +98,35 @@ TEST(FieldWeakening, RespectsLimitsAndDeliversTorque) {
   }
 }
 
+// MTPV: on each flux circle |psi| = psi_k the table's point delivers the
+// largest torque (brute force over id on the circle).
+TEST(Mtpv, MaximumTorquePerFluxByBruteForce) {
+  const auto m = Motor();
+  MachineLimits lim;
+  TableSpec spec;
+  spec.kind = "mtpv";
+  spec.points = 9;
+  auto t = BuildTable(m, lim, spec);
+  ASSERT_TRUE(t.ok());
+  int checked = 0;
+  for (size_t k = 0; k < t->axes[0].values.size(); ++k) {
+    if (t->clamped[k]) continue;   // beyond the current limit
+    ++checked;
+    const double lam = t->axes[0].values[k];
+    double best = 0;
+    for (double id = -300; id <= 0; id += 0.25) {
+      // iq on the circle by bisection (|psi| grows with iq).
+      double lo = 0, hi = 600;
+      auto mag = [&](double q) { const auto f = m.Flux(id, q); return std::hypot(f.psi_d_wb, f.psi_q_wb); };
+      if (mag(lo) > lam || mag(hi) < lam) continue;
+      for (int it = 0; it < 60; ++it) { const double mid = 0.5 * (lo + hi); (mag(mid) < lam ? lo : hi) = mid; }
+      best = std::max(best, TorqueNm(m, 4, id, lo));
+    }
+    EXPECT_GE(t->outputs[2].values[k], best * (1 - 1e-3)) << "row " << k << " psi " << lam;
+  }
+  EXPECT_GE(checked, 2) << "rows inside the current limit";
+}
+
 // Using the differential inductance as apparent gives a measurably worse
 // MTPA table on a saturated motor: the torque it delivers is wrong.
 TEST(Mtpa, DifferentialAsApparentIsWorse) {
