@@ -61,6 +61,16 @@ def main():
             raise AssertionError("expected NOT_FOUND")
         except grpc.RpcError as err:
             assert err.code() == grpc.StatusCode.NOT_FOUND, err
+        # Health checking: grpc.health.v1.Health/Check with an empty request
+        # (all services) answers SERVING (field 1 = 1, bytes 08 01).
+        health = channel.unary_unary("/grpc.health.v1.Health/Check",
+                                     request_serializer=lambda b: b, response_deserializer=lambda b: b)
+        assert health(b"", timeout=10) == b"\x08\x01", "health check not SERVING"
+        # Server reflection lists the service (list_services = field 7).
+        refl = channel.stream_stream("/grpc.reflection.v1alpha.ServerReflection/ServerReflectionInfo",
+                                     request_serializer=lambda b: b, response_deserializer=lambda b: b)
+        replies = list(refl(iter([b"\x3a\x00"]), timeout=10))
+        assert any(b"fluxcal.v1.CalibrationService" in r for r in replies), replies
         print("python interop: 1 passed, 0 failed")
     finally:
         server.terminate()
