@@ -870,6 +870,16 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
     for (int f = -50; f <= 50; ++f) rep.spectrum_hz.push_back(50.0 * f);
     rep.waveform_rms_before_a = ReplayResidual(set, m, base.p, m.harm_order, rep.spectrum_hz, &rep.spectrum_before_a);
     rep.waveform_rms_after_a = ReplayResidual(set, m, current.p, m.harm_order, rep.spectrum_hz, &rep.spectrum_after_a);
+    auto significant = [&](const std::vector<double>& sp) {
+      std::vector<double> sorted = sp, out;
+      if (sorted.empty()) return out;
+      std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+      const double floor = sorted[sorted.size() / 2];
+      for (size_t k = 0; k < sp.size(); ++k) if (sp[k] > 10.0 * floor) out.push_back(rep.spectrum_hz[k]);
+      return out;
+    };
+    rep.significant_hz_before = significant(rep.spectrum_before_a);
+    rep.significant_hz_after = significant(rep.spectrum_after_a);
   }
   rep.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return rep;

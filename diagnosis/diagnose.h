@@ -62,6 +62,9 @@ struct DiagnosisReport {
   // residual's spectrum (stationary frame, complex, signed frequency).
   double waveform_rms_before_a = 0, waveform_rms_after_a = 0;
   std::vector<double> spectrum_hz, spectrum_before_a, spectrum_after_a;
+  // Frequencies where the residual stands out: bins above 10x (20 dB) the
+  // median bin of the same spectrum (the data's own broadband floor).
+  std::vector<double> significant_hz_before, significant_hz_after;
   double seconds = 0;
 };
 

@@ -53,7 +53,9 @@ nlohmann::json ToJson(const DiagnosisReport& r) {
                    {"residual_rms_after_a", r.waveform_rms_after_a},
                    {"spectrum_hz", r.spectrum_hz},
                    {"spectrum_before_a", r.spectrum_before_a},
-                   {"spectrum_after_a", r.spectrum_after_a}};
+                   {"spectrum_after_a", r.spectrum_after_a},
+                   {"significant_hz_before", r.significant_hz_before},
+                   {"significant_hz_after", r.significant_hz_after}};
   j["seconds"] = r.seconds;
   return j;
 }
@@ -93,6 +95,13 @@ std::string ToText(const DiagnosisReport& r) {
     s += absl::StrFormat("Replaying every test through the twin with the recorded commands: phase-current residual "
                          "%.3g A RMS with the nominal model, %.3g A with the final one.\n",
                          r.waveform_rms_before_a, r.waveform_rms_after_a);
+    auto hz = [](const std::vector<double>& v) {
+      std::vector<std::string> o;
+      for (double f : v) o.push_back(absl::StrFormat("%.0f", f));
+      return o.empty() ? std::string("nowhere") : absl::StrCat("at ", absl::StrJoin(o, ", "), " Hz");
+    };
+    s += absl::StrFormat("The replay residual stands out (20 dB above its median bin) %s before, %s after.\n",
+                         hz(r.significant_hz_before), hz(r.significant_hz_after));
   }
   s += absl::StrFormat("(%.2f s)\n", r.seconds);
   return s;

@@ -153,8 +153,11 @@ TEST(Examples, IndependentSets) {
     // something, and no worse when it found nothing.
     if (want.empty()) {
       EXPECT_NEAR(r->waveform_rms_after_a, r->waveform_rms_before_a, 1e-9) << name;
+      EXPECT_TRUE(r->significant_hz_before.empty()) << name;
     } else {
       EXPECT_LT(r->waveform_rms_after_a, r->waveform_rms_before_a / 3) << name;
+      EXPECT_FALSE(r->significant_hz_before.empty()) << name << ": located in frequency";
+      EXPECT_LT(r->significant_hz_after.size(), r->significant_hz_before.size()) << name;
     }
     EXPECT_EQ(r->spectrum_hz.size(), r->spectrum_after_a.size());
   }
