@@ -54,7 +54,7 @@ TEST(Matrix, EachEffectAlone) {
   std::mt19937_64 rng(2026);
   std::uniform_real_distribution<double> u(0, 1);
   auto sign = [&] { return u(rng) < 0.5 ? -1.0 : 1.0; };
-  for (int trial = 0; trial < 8; ++trial) {
+  for (int trial = 0; trial < 9; ++trial) {
     sim::TwinConfig cfg;
     cfg.seed = 100 + trial;
     std::string effect;
@@ -68,6 +68,7 @@ TEST(Matrix, EachEffectAlone) {
       case 5: effect = "magnet_temperature"; e.psi_pm_wb = cfg.motor.sat.psi_pm_wb * (1 - 0.05 - 0.05 * u(rng)); break;
       case 6: effect = "sampling_delay"; e.delay_s = 20e-6 + 20e-6 * std::floor(2 * u(rng)); break;
       case 7: effect = "current_sensor_gain"; e.gain_a = 1 + sign() * 0.02; e.gain_b = 1 - 0.015; break;
+      case 8: effect = "spatial_harmonics"; e.order = u(rng) < 0.5 ? 6 : 4; e.amplitude_h = 4e-6 + 4e-6 * u(rng); break;
     }
     const auto r = SimulateAndDiagnose(cfg);
     const Finding* f = Find(r, effect);
@@ -93,6 +94,10 @@ TEST(Matrix, EachEffectAlone) {
     }
     if (effect == "sampling_delay") {
       EXPECT_NEAR(f->parameters.at("delay_s") / e.delay_s, 1.0, 0.2);
+    }
+    if (effect == "spatial_harmonics") {
+      EXPECT_EQ(f->parameters.at("order"), e.order);
+      EXPECT_NEAR(f->parameters.at("amplitude_h") / e.amplitude_h, 1.0, 0.2);
     }
     if (effect == "current_sensor_gain") {
       EXPECT_NEAR(f->parameters.at("gain_a"), e.gain_a, 0.005);
