@@ -7,7 +7,6 @@
 
 #include "gtest/gtest.h"
 #include "identification/demod.h"
-#include "identification/fast_trig.h"
 #include "identification/inductance.h"
 
 namespace fluxcal::ident {
@@ -196,29 +195,6 @@ TEST(Inversion, CrossInductanceFromNegativeSequencePhase) {
   const double shift = std::arg(j1 / i1);
   const double want = std::atan2(2 * ldq, ldd - lqq) - std::atan2(0.0, ldd - lqq);
   EXPECT_NEAR(std::remainder(shift - want, 2 * kPi), 0.0, 1e-9);
-}
-
-TEST(FastTrig, MatchesStd) {
-  double worst = 0;
-  for (double x = -1000; x < 1000; x += 0.0137) {
-    double s, c;
-    FastSinCos(x, &s, &c);
-    worst = std::max({worst, std::abs(s - std::sin(x)), std::abs(c - std::cos(x))});
-  }
-  EXPECT_LT(worst, 1e-13) << "largest deviation from std::sin/cos";
-}
-
-TEST(FastTrig, AngleRotorTracksStd) {
-  // A quantised angle advancing at 1000 rpm (4 pole pairs, 10 kHz), wrapped.
-  AngleRotor rotor;
-  double worst = 0;
-  for (int k = 0; k < 200000; ++k) {
-    const double th = std::remainder(std::round((0.3 + 0.0419 * k) / 0.006136) * 0.006136, 2 * kPi);
-    double s, c;
-    rotor.Next(th, &s, &c);
-    worst = std::max({worst, std::abs(s - std::sin(th)), std::abs(c - std::cos(th))});
-  }
-  EXPECT_LT(worst, 1e-10);
 }
 
 }  // namespace
