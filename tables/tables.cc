@@ -24,22 +24,28 @@ constexpr double kGolden = 0.61803398874989484820;
 
 // iq (sign s) on the constant-torque locus through id: T(id, iq) = t.
 // Newton with a bisection safeguard; dT/diq = 1.5 p (psi_d + Ldq iq - Lqq id).
+// `iq_guess_a` (> 0, magnitude): a start close to the root, e.g. the root at
+// a neighbouring id; otherwise the start scales linearly from the bracket.
 bool SolveIqForTorque(const sim::MagneticModel& m, const MachineLimits& lim, double id, double t,
-                      double s, double* iq_out) {
+                      double s, double* iq_out, double iq_guess_a = 0.0) {
   const double target = std::abs(t);
   double lo = 0.0, hi = std::max(10.0, lim.i_max_a);
   auto torque = [&](double iq) { return s * TorqueNm(m, lim.pole_pairs, id, s * iq, lim.temperature_c); };
   int grow = 0;
-  while (torque(hi) < target) {
+  double t_hi;
+  while ((t_hi = torque(hi)) < target) {
     hi *= 2;
     if (++grow > 8) return false;
   }
-  double iq = std::clamp(target / std::max(1e-9, torque(hi)) * hi, lo, hi);
+  double iq = iq_guess_a > lo && iq_guess_a < hi
+                  ? iq_guess_a
+                  : std::clamp(target / std::max(1e-9, t_hi) * hi, lo, hi);
   for (int it = 0; it < 60; ++it) {
-    const double f = torque(iq) - target;
+    // One flux evaluation per iteration serves both T and dT/diq.
+    const auto F = m.Flux(id, s * iq, lim.temperature_c);
+    const double f = s * 1.5 * lim.pole_pairs * (F.psi_d_wb * s * iq - F.psi_q_wb * id) - target;
     if (std::abs(f) < 1e-10 * (1.0 + target)) break;
     if (f > 0) hi = iq; else lo = iq;
-    const auto F = m.Flux(id, s * iq, lim.temperature_c);
     const auto L = m.Inductance(id, s * iq, lim.temperature_c);
     const double d = 1.5 * lim.pole_pairs * (F.psi_d_wb + L.ldq_h * s * iq - L.lqq_h * id);
     double next = iq - f / (d > 1e-12 ? d : 1e-12);
@@ -119,18 +125,49 @@ bool TrySolve(const sim::MagneticModel& m, const MachineLimits& lim, double t, d
   double iq = 0.0;
   if (t != 0.0 && !iq_of(id, &iq)) return false;
   auto volt = [&](double d, double q) { return we > 0 ? VoltageV(m, lim, d, q, we) : 0.0; };
-  if (we > 0 && volt(id, iq) > lim.UMaxV()) {
-    // Field weakening: move along the locus towards negative id until the
-    // voltage limit is met (voltage falls monotonically along it there).
-    double lo = id_min, hi = id, iql;
-    if (!iq_of(lo, &iql) || volt(lo, iql) > lim.UMaxV()) return false;
-    for (int k = 0; k < 36; ++k) {   // 150 A x 2^-36 ~ 2e-9 A
-      const double mid = 0.5 * (lo + hi);
+  const double u_max = lim.UMaxV();
+  if (we > 0 && volt(id, iq) > u_max) {
+    // Field weakening. Along the constant-torque locus the current grows
+    // away from the MTPA point and the voltage has one minimum (the locus'
+    // MTPV point) at a more negative id; the least-current feasible point is
+    // where the voltage falls to u_max between the two.
+    auto volt_on_locus = [&](double d) {
       double q;
-      if (iq_of(mid, &q) && volt(mid, q) <= lim.UMaxV()) lo = mid; else hi = mid;
+      return iq_of(d, &q) ? volt(d, q) : 1e30;
+    };
+    double lo = id_min;
+    if (volt_on_locus(lo) > u_max) {
+      lo = MinimiseScalar(volt_on_locus, id_min, id);
+      if (volt_on_locus(lo) > u_max) return false;   // beyond the MTPV limit
+    }
+    // Root of g(id) = |u(id, iq(id))| - u_max on [lo feasible, hi = MTPA]
+    // by regula falsi with the Illinois modification (Dowell & Jarratt,
+    // BIT 11, 1971): superlinear, the bracket is kept, and the answer is its
+    // feasible end. Each iq(id) starts from the roots at the bracket's ends.
+    double hi = id, q_lo;
+    if (!iq_of(lo, &q_lo)) return false;
+    double q_hi = iq;
+    double g_lo = volt(lo, q_lo) - u_max, g_hi = volt(hi, q_hi) - u_max;
+    int side = 0;
+    for (int k = 0; k < 100 && hi - lo > 2e-9 && g_lo < -1e-12 * u_max; ++k) {
+      double x = hi - g_hi * (hi - lo) / (g_hi - g_lo);
+      if (!(x > lo && x < hi)) x = 0.5 * (lo + hi);
+      double q;
+      const double guess = std::abs(q_lo + (q_hi - q_lo) * (x - lo) / (hi - lo));
+      if (!SolveIqForTorque(m, lim, x, t, s, &q, guess)) { hi = x; g_hi = 1.0; side = 0; continue; }
+      const double g = volt(x, q) - u_max;
+      if (g <= 0) {
+        lo = x; g_lo = g; q_lo = q;
+        if (side == -1) g_hi *= 0.5;
+        side = -1;
+      } else {
+        hi = x; g_hi = g; q_hi = q;
+        if (side == 1) g_lo *= 0.5;
+        side = 1;
+      }
     }
     id = lo;
-    if (!iq_of(id, &iq)) return false;
+    iq = q_lo;
   }
   if (std::hypot(id, iq) > lim.i_max_a * (1 + 1e-9)) return false;
   op->id_a = id;
@@ -158,22 +195,26 @@ OperatingPoint SolveLeastCurrent(const sim::MagneticModel& m, const MachineLimit
                                  double we) {
   OperatingPoint op;
   if (TrySolve(m, lim, t, we, &op)) return op;
-  return SolveWithMax(m, lim, t, we, MaxTorqueNm(m, lim, we));
+  return SolveWithMax(m, lim, t, we, MaxTorqueNm(m, lim, we, t < 0 ? -1.0 : 1.0));
 }
 
-double MaxTorqueNm(const sim::MagneticModel& m, const MachineLimits& lim, double we) {
-  // Bisection on the torque request: feasible if its least-current point
-  // (under the voltage limit at we) stays within the current limit.
+double MaxTorqueNm(const sim::MagneticModel& m, const MachineLimits& lim, double we,
+                   double sign) {
+  const double s = sign < 0 ? -1.0 : 1.0;
+  // Bisection on the torque request t: feasible if some point of the
+  // constant-torque locus lies inside both limits, i.e. if the minimum over
+  // the locus of h = max(|i| / i_max, |u| / u_max) is at most 1. |i| and |u|
+  // each have a single minimum along the locus (MTPA, MTPV), so h is
+  // quasi-convex and the scan + golden section finds its minimum even when
+  // the feasible arc is short (near the limit torque at high speed).
   auto feasible = [&](double t) {
-    const double s = 1.0;
-    auto cur2 = [&](double id) {
+    auto h = [&](double id) {
       double iq;
       if (!SolveIqForTorque(m, lim, id, t, s, &iq)) return 1e30;
-      if (we > 0 && VoltageV(m, lim, id, iq, we) > lim.UMaxV()) return 1e30;
-      return id * id + iq * iq;
+      const double c = std::hypot(id, iq) / lim.i_max_a;
+      return we > 0 ? std::max(c, VoltageV(m, lim, id, iq, we) / lim.UMaxV()) : c;
     };
-    const double id = MinimiseScalar(cur2, -lim.i_max_a, 0.0, 24, 30);
-    return cur2(id) <= lim.i_max_a * lim.i_max_a;
+    return h(MinimiseScalar(h, -lim.i_max_a, 0.0, 24, 40)) <= 1.0;
   };
   double lo = 0.0, hi = 1.0;
   while (feasible(hi) && hi < 1e5) { lo = hi; hi *= 2; }
@@ -260,15 +301,22 @@ absl::StatusOr<Table> BuildTable(const sim::MagneticModel& m, const MachineLimit
     const auto tq = spec.include_generating ? Linspace(-tmax, tmax, spec.points) : Linspace(0, tmax, spec.points);
     const auto n = Linspace(0, spec.speed_max_rpm, spec.speed_points);
     Output id{"id_a", {}}, iq{"iq_a", {}};
-    std::vector<double> tlim(n.size());
-    for (size_t j = 0; j < n.size(); ++j) tlim[j] = MaxTorqueNm(m, lim, n[j] * lim.pole_pairs * 2 * kPi / 60.0);
+    // Limit torque per speed, motoring and generating (they differ at speed:
+    // the resistive drop subtracts from the voltage when generating).
+    std::vector<double> tlim_motor(n.size()), tlim_gen(n.size());
+    for (size_t j = 0; j < n.size(); ++j) {
+      const double we = n[j] * lim.pole_pairs * 2 * kPi / 60.0;
+      tlim_motor[j] = MaxTorqueNm(m, lim, we, 1.0);
+      tlim_gen[j] = spec.include_generating ? MaxTorqueNm(m, lim, we, -1.0) : 0.0;
+    }
     for (double x : tq) {
       // The MTPA point of this torque row is the same at every speed.
       OperatingPoint mtpa;
       const bool have_mtpa = TrySolve(m, lim, x, 0.0, &mtpa);
       for (size_t j = 0; j < n.size(); ++j) {
         const double we = n[j] * lim.pole_pairs * 2 * kPi / 60.0;
-        const auto op = SolveWithMax(m, lim, x, we, tlim[j], have_mtpa ? &mtpa.id_a : nullptr);
+        const double tlim = x < 0 ? tlim_gen[j] : tlim_motor[j];
+        const auto op = SolveWithMax(m, lim, x, we, tlim, have_mtpa ? &mtpa.id_a : nullptr);
         id.values.push_back(op.id_a);
         iq.values.push_back(op.iq_a);
         t.clamped.push_back(op.clamped);

@@ -77,8 +77,10 @@ struct OperatingPoint {
 };
 OperatingPoint SolveLeastCurrent(const sim::MagneticModel& m, const MachineLimits& lim,
                                  double torque_nm, double we_rad_s);
-// Largest torque at the current limit (and voltage limit when we_rad_s > 0).
-double MaxTorqueNm(const sim::MagneticModel& m, const MachineLimits& lim, double we_rad_s);
+// Largest torque magnitude at the current limit (and voltage limit when
+// we_rad_s > 0), motoring (sign > 0) or generating (sign < 0).
+double MaxTorqueNm(const sim::MagneticModel& m, const MachineLimits& lim, double we_rad_s,
+                   double sign = 1.0);
 
 absl::StatusOr<Table> BuildTable(const sim::MagneticModel& m, const MachineLimits& lim,
                                  const TableSpec& spec);

@@ -98,6 +98,72 @@ TEST(FieldWeakening, RespectsLimitsAndDeliversTorque) {
   }
 }
 
+// Field weakening against brute force on a dense grid of the current disc:
+// an unclamped cell uses no more current than the least-current grid point
+// that delivers its torque (within 0.05 %) inside both limits; a clamped cell
+// delivers at least the largest torque of any grid point inside the limits.
+// Both within 0.1 % (the tolerance).
+TEST(FieldWeakening, WithinPointOnePercentOfBruteForce) {
+  const auto m = Motor();
+  MachineLimits lim;
+  TableSpec spec;
+  spec.kind = "fw";
+  spec.points = 9;
+  spec.speed_points = 8;
+  spec.speed_max_rpm = 7000;   // well past the MTPV onset of this motor
+  auto t = BuildTable(m, lim, spec);
+  ASSERT_TRUE(t.ok()) << t.status();
+  struct GridPoint { double id, iq, psi_d, psi_q; };
+  std::vector<GridPoint> grid;
+  for (double a = -lim.i_max_a; a <= 0; a += 0.25) {
+    for (double b = -lim.i_max_a; b <= lim.i_max_a; b += 0.25) {
+      if (std::hypot(a, b) > lim.i_max_a) continue;
+      const auto f = m.Flux(a, b, lim.temperature_c);
+      grid.push_back({a, b, f.psi_d_wb, f.psi_q_wb});
+    }
+  }
+  const auto& tq = t->axes[0].values;
+  const auto& rpm = t->axes[1].values;
+  const double tmax = *std::max_element(tq.begin(), tq.end());
+  int checked = 0, clamped = 0;
+  for (size_t j = 0; j < rpm.size(); ++j) {
+    const double we = rpm[j] * lim.pole_pairs * 2 * kPi / 60;
+    std::vector<const GridPoint*> feasible;
+    for (const auto& g : grid) {
+      if (std::hypot(lim.rs_ohm * g.id - we * g.psi_q, lim.rs_ohm * g.iq + we * g.psi_d) <=
+          lim.UMaxV())
+        feasible.push_back(&g);
+    }
+    for (size_t i = 0; i < tq.size(); ++i) {
+      if (std::abs(tq[i]) < 0.05 * tmax) continue;
+      const size_t cell = i * rpm.size() + j;
+      const double id = t->outputs[0].values[cell], iq = t->outputs[1].values[cell];
+      const double torque = TorqueNm(m, lim.pole_pairs, id, iq, lim.temperature_c);
+      const double s = tq[i] < 0 ? -1.0 : 1.0;
+      double least_current = 1e9, most_torque = 0;
+      for (const GridPoint* g : feasible) {
+        const double tg = 1.5 * lim.pole_pairs * (g->psi_d * g->iq - g->psi_q * g->id);
+        most_torque = std::max(most_torque, s * tg);
+        if (std::abs(tg - tq[i]) < 5e-4 * std::abs(tq[i]))
+          least_current = std::min(least_current, std::hypot(g->id, g->iq));
+      }
+      if (t->clamped[cell]) {
+        EXPECT_GE(s * torque, most_torque * (1 - 1e-3))
+            << "clamped cell " << tq[i] << " N m at " << rpm[j] << " rpm";
+      } else {
+        ASSERT_LT(least_current, 1e9) << "brute force found no point for " << tq[i] << " N m";
+        EXPECT_LE(std::hypot(id, iq), least_current * 1.001)
+            << "cell " << tq[i] << " N m at " << rpm[j] << " rpm";
+      }
+      ++checked;
+      clamped += t->clamped[cell];
+    }
+  }
+  EXPECT_GT(checked, 50);
+  EXPECT_GT(clamped, 10);             // the limit-torque side is exercised
+  EXPECT_GT(checked - clamped, 10);   // and the least-current side
+}
+
 // MTPV: on each flux circle |psi| = psi_k the table's point delivers the
 // largest torque (brute force over id on the circle).
 TEST(Mtpv, MaximumTorquePerFluxByBruteForce) {
