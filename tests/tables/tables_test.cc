@@ -1,11 +1,16 @@
 // Tables against brute force and physics, and every exporter through a
 // parser (tinyxml2 for CDFX, hand parsers for DCM, CSV and the C header).
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
 #include <map>
 #include <numbers>
 #include <regex>
 #include <sstream>
 
+#include "absl/strings/ascii.h"
+#include "absl/strings/str_format.h"
 #include "gtest/gtest.h"
 #include "nlohmann/json.hpp"
 #include "simulation/twin.h"
@@ -279,6 +284,118 @@ TEST(Export, CHeaderRoundTrip) {
   for (auto& c : body) if (c == ',') c = ' ';
   EXPECT_EQ(Numbers(body), t.outputs[0].values);
   EXPECT_NE(e->bytes.find(t.sha256), std::string::npos);
+}
+
+// The header as an ECU build would use it: compiled by the system C
+// compiler in strict C99 with warnings as errors, and the program's printout
+// of every array, the CRC and the SHA-256 compared with the table.
+TEST(Export, CHeaderCompilesAsC99AndCarriesTheValues) {
+  if (std::system("cc --version > /dev/null 2>&1") != 0) GTEST_SKIP() << "no C compiler (cc)";
+  const Table t = SmallTable("fw");
+  auto e = Export(t, Format::kCHeader);
+  ASSERT_TRUE(e.ok());
+  const std::string dir = ::testing::TempDir() + "/fluxcal_c_header";
+  ASSERT_EQ(std::system(("mkdir -p " + dir).c_str()), 0);
+  { std::ofstream(dir + "/table.h") << e->bytes; }
+  std::string prog = "#include <stdio.h>\n#include \"table.h\"\nint main(void) {\n  int k;\n";
+  std::vector<std::vector<double>> want;
+  auto print = [&](const std::string& name, const std::vector<double>& v) {
+    const std::string lower = "fluxcal_fw_" + name, upper = "FLUXCAL_FW_" + absl::AsciiStrToUpper(name);
+    prog += "  for (k = 0; k < " + upper + "_LEN; ++k) printf(\"%.17g\\n\", " + lower + "[k]);\n";
+    want.push_back(v);
+  };
+  for (const auto& a : t.axes) print(a.name, a.values);
+  for (const auto& o : t.outputs) print(o.name, o.values);
+  prog += "  printf(\"%08lx %s\\n\", (unsigned long)fluxcal_fw_crc32, fluxcal_fw_sha256);\n  return 0;\n}\n";
+  { std::ofstream(dir + "/main.c") << prog; }
+  const std::string cmd = "cd " + dir + " && cc -std=c99 -pedantic -Wall -Wextra -Werror main.c -o main "
+                          "> build.log 2>&1 && ./main > out.txt";
+  ASSERT_EQ(std::system(cmd.c_str()), 0) << "compiling the exported header failed; see " << dir
+                                         << "/build.log\n" << prog;
+  std::ifstream in(dir + "/out.txt");
+  for (const auto& v : want) {
+    for (double x : v) {
+      double got;
+      ASSERT_TRUE(in >> got);
+      EXPECT_EQ(got, x);   // %.17g round-trips a double exactly
+    }
+  }
+  std::string crc, sha;
+  ASSERT_TRUE(in >> crc >> sha);
+  EXPECT_EQ(crc, absl::StrFormat("%08x", t.crc32));
+  EXPECT_EQ(sha, t.sha256);
+}
+
+// The plots are well-formed SVG (an XML parser reads them) and draw the
+// table's data: the MTPA polyline maps back to the table's rows, the dashed
+// current-limit arc lies on |i| = i_max, and the heat map has one cell per
+// table entry whose colour encodes its value.
+TEST(Plots, SvgParsesAndDrawsTheTables) {
+  const auto m = Motor();
+  MachineLimits lim;
+  TableSpec spec;
+  spec.points = 9;
+  auto mtpa = BuildTable(m, lim, spec);
+  ASSERT_TRUE(mtpa.ok());
+  const std::string curves = PlotCurvesSvg(m, lim, *mtpa, nullptr);
+  tinyxml2::XMLDocument doc;
+  ASSERT_EQ(doc.Parse(curves.c_str()), tinyxml2::XML_SUCCESS) << doc.ErrorStr();
+  const tinyxml2::XMLElement* svg = doc.RootElement();
+  ASSERT_STREQ(svg->Name(), "svg");
+  // Plot frame: x0 = 60, y0 = 20, 560 x 420 px over id in [-i_max, 0.1 i_max],
+  // iq in [0, 1.1 i_max] (tables.cc PlotCurvesSvg).
+  auto id_of = [&](double x) { return -lim.i_max_a + (x - 60) / 560 * 1.1 * lim.i_max_a; };
+  auto iq_of = [&](double y) { return (20 + 420 - y) / 420 * 1.1 * lim.i_max_a; };
+  auto points = [](const char* attr) {
+    std::vector<std::pair<double, double>> out;
+    std::string a(attr);
+    for (auto& c : a) if (c == ',') c = ' ';
+    std::istringstream in(a);
+    double x, y;
+    while (in >> x >> y) out.push_back({x, y});
+    return out;
+  };
+  bool saw_mtpa = false, saw_limit = false;
+  for (auto* e = svg->FirstChildElement("polyline"); e; e = e->NextSiblingElement("polyline")) {
+    const char* stroke = e->Attribute("stroke");
+    const auto pts = points(e->Attribute("points"));
+    if (stroke && std::string(stroke) == "#c00") {
+      saw_mtpa = true;
+      std::vector<std::pair<double, double>> rows;
+      for (size_t k = 0; k < mtpa->outputs[0].values.size(); ++k)
+        if (mtpa->outputs[1].values[k] >= 0) rows.push_back({mtpa->outputs[0].values[k], mtpa->outputs[1].values[k]});
+      ASSERT_EQ(pts.size(), rows.size());
+      for (size_t k = 0; k < pts.size(); ++k) {
+        EXPECT_NEAR(id_of(pts[k].first), rows[k].first, 0.2) << "MTPA point " << k;
+        EXPECT_NEAR(iq_of(pts[k].second), rows[k].second, 0.2) << "MTPA point " << k;
+      }
+    }
+    if (e->Attribute("stroke-dasharray")) {
+      saw_limit = true;
+      for (const auto& p : pts)
+        EXPECT_NEAR(std::hypot(id_of(p.first), iq_of(p.second)), lim.i_max_a, 0.5);
+    }
+  }
+  EXPECT_TRUE(saw_mtpa);
+  EXPECT_TRUE(saw_limit);
+
+  const Table fw = SmallTable("fw");
+  const std::string map = PlotMapSvg(fw, "id_a");
+  tinyxml2::XMLDocument mdoc;
+  ASSERT_EQ(mdoc.Parse(map.c_str()), tinyxml2::XML_SUCCESS) << mdoc.ErrorStr();
+  const auto& v = fw.outputs[0].values;
+  const double lo = *std::min_element(v.begin(), v.end()), hi = *std::max_element(v.begin(), v.end());
+  const size_t n1 = fw.axes[1].values.size();
+  size_t cells = 0;
+  for (auto* e = mdoc.RootElement()->FirstChildElement("rect"); e; e = e->NextSiblingElement("rect")) {
+    int r, b;
+    ASSERT_EQ(std::sscanf(e->Attribute("fill"), "rgb(%d,60,%d)", &r, &b), 2);
+    // Cells are written row-major over (torque, speed), like the table.
+    EXPECT_NEAR(lo + (hi - lo) * r / 255.0, v[cells], (hi - lo) / 255.0 + 1e-9) << "cell " << cells;
+    EXPECT_NEAR(e->DoubleAttribute("x"), 60 + (cells % n1) * 560.0 / n1, 0.01);
+    ++cells;
+  }
+  EXPECT_EQ(cells, v.size());
 }
 
 TEST(Export, CdfxRoundTripThroughXmlParser) {
