@@ -56,12 +56,22 @@ struct HfObs {
                                             // positive- and negative-sequence bases
   double sigma0, sigma1, scale;
   bool locked;
+  // Rotating points, per candidate harmonic order n (index in kHarmOrders):
+  // window means P = <e^{j((n+1) theta - w_i t)}>, Q = <e^{-j((n-1) theta + w_i t)}>
+  // that project the harmonic's fundamental-current voltage on the
+  // demodulators' bases (Model::PredictHf).
+  Complex harm_p[4], harm_q[4];
 };
+constexpr int kHarmOrders[4] = {4, 6, 8, 12};
+int HarmIndex(int order) {
+  for (int k = 0; k < 4; ++k) if (kHarmOrders[k] == order) return k;
+  return -1;
+}
 struct DcObs {
   std::string point;
   double id_a, iq_a, theta;
   Complex u, dead;                  // dead: command change per second of dead time
-  double sigma, scale;
+  double sigma;
 };
 struct SsObs {
   double id_a, iq_a, speed_rpm, w_e;
@@ -81,6 +91,7 @@ struct Model {
   std::vector<DcObs> dc;
   std::vector<SsObs> ss;
   int harm_order = 6;
+  double dc_scale_v = 0.1, torque_scale_nm = 0.1;   // RelativeRms
 
   // Differential inductance of the surfaces: base self-axis polynomials
   // Ldd(id), Lqq(iq) plus the cross terms of W'_x = L0 I0^2 sum c x^a y^b.
@@ -141,6 +152,20 @@ struct Model {
     *i0 = Complex(x(0), x(1));
     *i1 = Complex(x(2), x(3));
   }
+  // What an extra delay tau of the held (staircase) command does to the
+  // phasor of the *sampled* HF current. The current of an inductive load
+  // driven by a staircase is piecewise linear with corners at the steps; with
+  // tau = (n + a) T, 0 <= a < 1, each sample falls a fraction 1 - a into a
+  // segment, so the samples interpolate the undelayed corner values:
+  //   i(t_k) = (1 - a) i0(t_{k-n}) + a i0(t_{k-n-1})
+  //   => factor e^{-j w n T} ((1 - a) + a e^{-j w T}).
+  // Not the pure e^{-j w tau}: at half a sample the magnitude is
+  // cos(w T / 2) (-1.2 % at 500 Hz, 10 kHz), which would otherwise be fitted
+  // as a 1 % larger inductance. (R T / L << 1, as for any motor winding.)
+  Complex StaircaseDelay(double w, double tau_s) const {
+    const double q = tau_s / ts, n = std::floor(q), a = q - n;
+    return std::polar(1.0, -w * n * ts) * ((1.0 - a) + a * std::polar(1.0, -w * ts));
+  }
   void PredictHf(const double* const* p, const HfObs& o, Complex* i0, Complex* i1) const {
     const Complex rot = std::polar(1.0, Offset(p));
     const Complex it = rot * Complex(o.id_a, o.iq_a);   // true-frame current
@@ -154,8 +179,25 @@ struct Model {
     const double r = Rs(p) + 1e-3 * p[kRhf][0];
     // Applied HF voltage: extra delay rotates it; an uncompensated dead time
     // subtracts its HF component (computed from the recorded currents).
-    const Complex v = o.v_eff * std::polar(1.0, -w_i * 1e-6 * p[kDelay][0]) - DeadTime(p) * o.dead_hf;
-    const Complex vn = -DeadTime(p) * o.dead_neg;
+    Complex v = o.v_eff * StaircaseDelay(w_i, 1e-6 * p[kDelay][0]) - DeadTime(p) * o.dead_hf;
+    Complex vn = -DeadTime(p) * o.dead_neg;
+    const int hk = HarmIndex(harm_order);
+    if (!o.locked && p[kHarm][0] != 0.0 && hk >= 0) {
+      // At speed the angle-dependent flux h cos(n theta) i of the fundamental
+      // current, (h I/2)(e^{j(n+1)theta} + e^{-j(n-1)theta}) with I the dq
+      // current, induces d/dt of it: voltages at (n+1) w_e and -(n-1) w_e.
+      // Where one falls on the injection (w_i) or the negative sequence
+      // (2 w_e - w_i) -- e.g. order 4 at 1500 rpm with 4 pole pairs and
+      // 500 Hz: 5 w_e = w_i -- it drives HF current like the injection does.
+      // Its share on each basis is the window mean P or Q (docs/diagnosis.md).
+      const double h = 1e-6 * p[kHarm][0];
+      const int n = harm_order;
+      const Complex j(0.0, 1.0);
+      const Complex half = 0.5 * h * it;
+      const Complex up = j * double(n + 1) * o.w_e * half, down = -j * double(n - 1) * o.w_e * half;
+      v -= up * o.harm_p[hk] + down * o.harm_q[hk];
+      vn -= up * std::conj(o.harm_q[hk]) + down * std::conj(o.harm_p[hk]);
+    }
     SolvePhasors(ldd, lqq, ldq, r, v, vn, o.w_e, i0, i1);
     // The measured angle is true + offset: the negative sequence appears
     // rotated by -2 offset in the measured frame.
@@ -250,7 +292,12 @@ struct FitOut {
   bool ok = false;
 };
 
-// Relative residual RMS over every observable (dimensionless).
+// Relative residual RMS over every observable (dimensionless). HF phasors
+// and steady-state voltages are relative to their own magnitude (never near
+// zero); held DC voltages and torques are relative to the RMS magnitude of
+// their kind over the set (Model::dc_scale_v, torque_scale_nm), because a
+// row near zero volts or zero torque would otherwise turn its noise into a
+// large relative error and dominate the RMS.
 double RelativeRms(const Model& m, const Params& p) {
   const auto ptr = p.Ptrs();
   double s = 0;
@@ -261,12 +308,15 @@ double RelativeRms(const Model& m, const Params& p) {
     s += (std::norm(o.i0 - i0) + std::norm(o.i1 - i1)) / (o.scale * o.scale);
     n += 2;
   }
-  for (const auto& o : m.dc) { s += std::norm(o.u - m.PredictDc(ptr.data(), o)) / (o.scale * o.scale); ++n; }
+  for (const auto& o : m.dc) {
+    s += std::norm(o.u - m.PredictDc(ptr.data(), o)) / (m.dc_scale_v * m.dc_scale_v);
+    ++n;
+  }
   for (const auto& o : m.ss) {
     s += std::norm(o.u - m.PredictSs(ptr.data(), o)) / (o.scale * o.scale);
     ++n;
     if (o.has_torque) {
-      const double d = (o.torque - m.PredictTorque(ptr.data(), o)) / (std::abs(o.torque) + 0.1);
+      const double d = (o.torque - m.PredictTorque(ptr.data(), o)) / m.torque_scale_nm;
       s += d * d;
       ++n;
     }
@@ -366,9 +416,17 @@ std::vector<Z> Residuals(const Model& m, const Params& p) {
   return out;
 }
 
-// Regions of the operating space; chi^2 of each against its dof, as a
-// Gaussian significance (chi2 - k)/sqrt(2k).
-std::vector<Mismatch> Locate(const std::vector<Z>& zs, double threshold) {
+// Regions of the operating space where mismatches are located, and the
+// chi^2 of the normalised residuals in each against its degrees of freedom.
+struct RegionStat {
+  std::string signal, where;
+  double chi2 = 0;
+  int k = 0;
+  std::vector<std::pair<double, std::string>> points;   // (z^2 per dof, point)
+  // Gaussian significance of the excess, (chi2 - k) / sqrt(2k).
+  double Sigma() const { return k ? (chi2 - k) / std::sqrt(2.0 * k) : 0.0; }
+};
+std::vector<RegionStat> RegionStats(const std::vector<Z>& zs) {
   struct Region { std::string signal, where; std::function<bool(const Z&)> in; };
   auto mag = [](const Z& z) { return std::hypot(z.id_a, z.iq_a); };
   const std::vector<Region> regions = {
@@ -380,29 +438,56 @@ std::vector<Mismatch> Locate(const std::vector<Z>& zs, double threshold) {
       {"steady_state_voltage", "steady state at speed", [](const Z&) { return true; }},
       {"torque", "steady state at speed", [](const Z&) { return true; }},
   };
-  std::vector<Mismatch> out;
+  std::vector<RegionStat> out;
   for (const auto& r : regions) {
-    double chi2 = 0;
-    int k = 0;
-    std::vector<std::pair<double, std::string>> pts;
+    RegionStat st;
+    st.signal = r.signal;
+    st.where = r.where;
     for (const auto& z : zs) {
       if (z.signal != r.signal || !r.in(z)) continue;
-      chi2 += z.z2;
-      k += z.dof;
-      pts.push_back({z.z2 / z.dof, z.point});
+      st.chi2 += z.z2;
+      st.k += z.dof;
+      st.points.push_back({z.z2 / z.dof, z.point});
     }
-    if (k == 0) continue;
-    const double sig = (chi2 - k) / std::sqrt(2.0 * k);
-    if (sig < threshold) continue;
-    std::sort(pts.rbegin(), pts.rend());
+    out.push_back(std::move(st));
+  }
+  return out;
+}
+
+// Regions whose significance reaches `threshold`.
+std::vector<Mismatch> Locate(const std::vector<Z>& zs, double threshold) {
+  std::vector<Mismatch> out;
+  for (auto& r : RegionStats(zs)) {
+    if (r.k == 0 || r.Sigma() < threshold) continue;
+    std::sort(r.points.rbegin(), r.points.rend());
     Mismatch mm;
     mm.signal = r.signal;
     mm.where = r.where;
-    mm.significance_sigma = sig;
-    for (const auto& [v, name] : pts) if (v > 4.0 && mm.points.size() < 12) mm.points.push_back(name);
+    mm.significance_sigma = r.Sigma();
+    for (const auto& [v, name] : r.points) if (v > 4.0 && mm.points.size() < 12) mm.points.push_back(name);
     out.push_back(mm);
   }
   return out;
+}
+
+// Practical significance of a candidate (beyond BIC and the parameter's
+// distance from neutral): it must explain a real share of what is wrong.
+// Either the relative residual RMS over every observable falls by
+// `min_relative_improvement`, or the candidate removes at least half of the
+// chi^2 excess of a region that is located as mismatched. The second form
+// keeps one unexplained gross region (or noisy torque rows near zero torque,
+// which dominate a relative RMS) from hiding an effect that clearly explains
+// another region.
+bool PracticallySignificant(const std::vector<Z>& before, const std::vector<Z>& after, double rms_before,
+                            double rms_after, const DiagnoseOptions& opt) {
+  if (rms_after <= (1.0 - opt.min_relative_improvement) * rms_before) return true;
+  const auto rb = RegionStats(before), ra = RegionStats(after);
+  for (size_t k = 0; k < rb.size(); ++k) {
+    if (rb[k].k == 0 || rb[k].Sigma() < opt.mismatch_sigma) continue;
+    const double excess_before = rb[k].chi2 - rb[k].k, excess_after = ra[k].chi2 - ra[k].k;
+    if (excess_after <= 0.5 * excess_before) return true;
+  }
+  return false;
 }
 
 // The dead-time voltage error per second of dead time, in the command's
@@ -489,6 +574,13 @@ absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident:
       const double t = static_cast<double>(s) / fs;
       hf += e * std::polar(1.0, -m.w_i * t);
       o.mean_e2 += std::polar(1.0, -2 * w.theta_e_rad[s]);
+      if (!o.locked) {
+        for (int h = 0; h < 4; ++h) {
+          const int nh = kHarmOrders[h];
+          o.harm_p[h] += std::polar(1.0, (nh + 1) * w.theta_e_rad[s] - m.w_i * t);
+          o.harm_q[h] += std::polar(1.0, -(nh - 1) * w.theta_e_rad[s] - m.w_i * t);
+        }
+      }
       neg += e * std::polar(1.0, m.w_i * t - 2 * w.theta_e_rad[s]);
       dc += e * std::polar(1.0, -w.theta_e_rad[s]);
       acc_u += Complex(w.ualpha_ref_v[s], w.ubeta_ref_v[s]) * std::polar(1.0, -w.theta_e_rad[s]);
@@ -499,6 +591,10 @@ absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident:
     // delay less one period.
     const double w2 = 2 * o.w_e - m.w_i;
     o.mean_e2 /= static_cast<double>(n);
+    for (int h = 0; h < 4; ++h) {
+      o.harm_p[h] /= static_cast<double>(n);
+      o.harm_q[h] /= static_cast<double>(n);
+    }
     o.dead_hf = ident::EffectiveVoltage(hf / static_cast<double>(n), m.w_i, f_pwm) * std::polar(1.0, m.w_i * m.ts);
     o.dead_neg = ident::EffectiveVoltage(neg / static_cast<double>(n), w2, f_pwm) * std::polar(1.0, w2 * m.ts);
     m.hf.push_back(o);
@@ -518,7 +614,6 @@ absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident:
       // Batch-means noise plus 5 mV: the command's resolution after the
       // bench's own (nominal) dead-time compensation and quantisation.
       d.sigma = std::sqrt(var + 0.005 * 0.005);
-      d.scale = std::abs(mean) + 0.1;
       m.dc.push_back(d);
     }
   }
@@ -548,6 +643,12 @@ absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident:
     o.torque_sigma = 0.02 + 0.005 * std::abs(o.torque);
     m.ss.push_back(o);
   }
+  double dc2 = 0, t2 = 0;
+  int nt = 0;
+  for (const auto& d : m.dc) dc2 += std::norm(d.u);
+  for (const auto& o : m.ss) if (o.has_torque) { t2 += o.torque * o.torque; ++nt; }
+  if (!m.dc.empty()) m.dc_scale_v = std::max(0.01, std::sqrt(dc2 / m.dc.size()));
+  if (nt) m.torque_scale_nm = std::max(0.1, std::sqrt(t2 / nt));
   return m;
 }
 
@@ -807,9 +908,7 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
       if (!f.ok) continue;
       const double dbic = f.bic - current.bic;
       if (dbic > -opt.bic_threshold || Significance(cands[c], f, m) < opt.parameter_sigma) continue;
-      // Practical significance: an effect worth naming explains at least a
-      // tenth of the residual that is left.
-      if (f.rms > (1.0 - opt.min_relative_improvement) * current.rms) continue;
+      if (!PracticallySignificant(Residuals(m, current.p), Residuals(m, f.p), current.rms, f.rms, opt)) continue;
       if (best < 0 || f.bic < best_fit.bic) { best = static_cast<int>(c); best_fit = f; }
     }
     if (best < 0) break;
@@ -848,15 +947,16 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
   }
   // A located region is explained when the accepted findings removed at
   // least 90 % of its chi^2 excess over its degrees of freedom; what stays
-  // significant is still listed in `remaining`.
+  // significant is still listed in `remaining`. A region that the findings
+  // made significant (not located before) also leaves the verdict partial:
+  // the final model is then wrong somewhere the nominal one was not.
   bool all_explained = true;
-  for (const auto& before : rep.mismatches) {
-    for (const auto& after : rep.remaining) {
-      if (after.signal == before.signal && after.where == before.where &&
-          after.significance_sigma > 0.1 * before.significance_sigma) {
-        all_explained = false;
-      }
+  for (const auto& after : rep.remaining) {
+    double before_sigma = 0;
+    for (const auto& before : rep.mismatches) {
+      if (after.signal == before.signal && after.where == before.where) before_sigma = before.significance_sigma;
     }
+    if (after.significance_sigma > 0.1 * before_sigma) all_explained = false;
   }
   if (rep.findings.empty()) {
     rep.verdict = rep.mismatches.empty() ? "no_mismatch" : "unexplained";

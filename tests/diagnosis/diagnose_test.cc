@@ -5,6 +5,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <random>
 #include <set>
 
@@ -126,6 +127,70 @@ TEST(Matrix, PairsOfEffects) {
     cfg.effects.psi_pm_wb = 0.0106;
     const auto r = SimulateAndDiagnose(cfg);
     EXPECT_TRUE(Named(r).count("stator_resistance") && Named(r).count("magnet_temperature")) << r.verdict;
+  }
+}
+
+// A second motor (data/motors/second_motor.json: other inductances, Rs and
+// psi_pm, a slower controller, more noise) with production spread, on a
+// plan shaped like an EOL run (data/plans/eol_like_plan.json: 36 locked
+// points at scattered rotor angles, 6 rotating points 200-2000 rpm, 20
+// steady-state rows with torque). Each case once went wrong:
+//  - order-4 harmonics: at 1500 rpm (5 w_e = w_i) the harmonic's
+//    fundamental-current voltage lands on the injection frequency;
+//  - a half-sample delay: modelled as a pure phase it biased the
+//    inductances by 1 % and a spurious magnet_temperature followed;
+//  - a 2 % sensor gain and a 5 mOhm HF resistance: missed when noisy torque
+//    rows near zero torque dominated the relative residual.
+TEST(Matrix, SecondMotorEolLikePlan) {
+  const fs::path data = fs::path(FLUXCAL_SOURCE_DIR) / "data";
+  auto plan = sim::LoadPlanJson((data / "plans" / "eol_like_plan.json").string());
+  ASSERT_TRUE(plan.ok()) << plan.status();
+  struct Case {
+    std::string effect;
+    uint64_t seed;
+    std::function<void(sim::Effects*)> set;
+  };
+  const std::vector<Case> cases = {
+      {"", 11, [](sim::Effects*) {}},
+      {"spatial_harmonics", 25, [](sim::Effects* e) { e->order = 4; e->amplitude_h = 1.2e-5; }},
+      {"sampling_delay", 23, [](sim::Effects* e) { e->delay_s = 50e-6; }},
+      {"current_sensor_gain", 36, [](sim::Effects* e) { e->gain_a = 1.02; }},
+      {"hf_resistance", 21, [](sim::Effects* e) { e->r_hf_ohm = 0.005; }},
+  };
+  for (const auto& c : cases) {
+    sim::TwinConfig cfg;
+    ASSERT_TRUE(sim::LoadMotorJson((data / "motors" / "second_motor.json").string(), &cfg).ok());
+    cfg.seed = c.seed;
+    cfg.motor = sim::PerturbForProduction(cfg.motor, c.seed);
+    c.set(&cfg.effects);
+    auto simulated = sim::Simulate(cfg, *plan);
+    ASSERT_TRUE(simulated.ok()) << simulated.status();
+    auto r = Diagnose(simulated->set);
+    ASSERT_TRUE(r.ok()) << r.status();
+    const std::string label = c.effect.empty() ? "clean" : c.effect;
+    if (c.effect.empty()) {
+      EXPECT_EQ(r->verdict, "no_mismatch") << label;
+      EXPECT_TRUE(r->findings.empty()) << label << ": " << r->findings[0].effect;
+      continue;
+    }
+    EXPECT_EQ(r->verdict, "explained") << label;
+    ASSERT_EQ(r->findings.size(), 1u) << label << ": named " << r->findings.size() << " effects, first "
+                                      << (r->findings.empty() ? "-" : r->findings[0].effect);
+    const Finding& f = r->findings[0];
+    EXPECT_EQ(f.effect, c.effect);
+    const auto& e = cfg.effects;
+    if (c.effect == "spatial_harmonics") {
+      EXPECT_EQ(f.parameters.at("order"), 4);
+      EXPECT_NEAR(f.parameters.at("amplitude_h") / e.amplitude_h, 1.0, 0.2);
+    } else if (c.effect == "sampling_delay") {
+      EXPECT_NEAR(f.parameters.at("delay_s") / e.delay_s, 1.0, 0.02);
+    } else if (c.effect == "current_sensor_gain") {
+      EXPECT_NEAR(f.parameters.at("gain_a"), e.gain_a, 0.005);
+      EXPECT_NEAR(f.parameters.at("gain_b"), 1.0, 0.005);
+      EXPECT_NEAR(f.parameters.at("gain_c"), 1.0, 0.005);
+    } else if (c.effect == "hf_resistance") {
+      EXPECT_NEAR(f.parameters.at("r_hf_ohm") / e.r_hf_ohm, 1.0, 0.15);
+    }
   }
 }
 

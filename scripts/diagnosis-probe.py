@@ -1,0 +1,221 @@
+#!/usr/bin/env python3
+"""Probe `fluxcal diagnose` beyond the ctest matrix (docs/diagnosis.md).
+
+Simulates recording sets with the twin for a second motor with production
+spread on an EOL-like plan (data/motors/second_motor.json,
+data/plans/eol_like_plan.json) -- clean sets, every effect at small and
+moderate size with several seeds, pairs, high noise -- edits copies of the
+independent clean example (sensor gains, manifest errors, an offset applied
+consistently), diagnoses every set with `fluxcal diagnose --json`, and
+compares the named effects and the verdict with what was concealed.
+
+Usage: scripts/diagnosis-probe.py [--fluxcal build/cli/fluxcal] [--out out/probe] [--jobs 2]
+Prints one line per set and a count; exit code 0 (a probe, not a test).
+"""
+import argparse
+import csv
+import json
+import math
+import os
+import random
+import shutil
+import subprocess
+import sys
+from concurrent.futures import ThreadPoolExecutor
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+EXAMPLES = os.path.join(ROOT, '..', 'shared', 'examples')
+
+# name, seed, effects, production spread, motor variant
+TWIN = [
+    ('clean_s11', 11, '', True, 'b'), ('clean_s12', 12, '', True, 'b'), ('clean_s13', 13, 'noise_a=0.19', True, 'b'),
+    ('clean_s14', 14, '', True, 'b'), ('clean_s22', 22, '', True, 'b'), ('clean_s36', 36, '', True, 'b'),
+    ('clean_default_s15', 15, '', True, 'default'), ('clean_udc0_s36', 36, '', True, 'b_udc0'),
+    ('dt_0p3u_s52', 52, 'dead_time_s=0.3e-6', True, 'b'), ('dt_0p6u_s21', 21, 'dead_time_s=0.6e-6', True, 'b'),
+    ('dt_0p6u_s22', 22, 'dead_time_s=0.6e-6', True, 'b'),
+    ('dt_2u_s23', 23, 'dead_time_s=2.0e-6,dead_time_i_th_a=1.5', True, 'b'),
+    ('cs_12u_s21', 21, 'cross_saturation=1.2e-5', True, 'b'), ('cs_12u_s22', 22, 'cross_saturation=1.2e-5', True, 'b'),
+    ('cs_12u_n19_s41', 41, 'cross_saturation=1.2e-5,noise_a=0.19', True, 'b'),
+    ('cs_25u_s23', 23, 'cross_saturation=2.5e-5', True, 'b'),
+    ('rs_15m_s21', 21, 'rs_ohm=0.0154', True, 'b'), ('rs_15m_s22', 22, 'rs_ohm=0.0154', True, 'b'),
+    ('rs_18m_s23', 23, 'rs_ohm=0.0180', True, 'b'),
+    ('rhf_5m_s21', 21, 'r_hf_ohm=0.005', True, 'b'), ('rhf_5m_s22', 22, 'r_hf_ohm=0.005', True, 'b'),
+    ('rhf_5m_nospread_s21', 21, 'r_hf_ohm=0.005', False, 'b'),
+    ('rhf_5m_n15_s39', 39, 'r_hf_ohm=0.005,noise_a=0.15', True, 'b'),
+    ('rhf_8m_n15_s40', 40, 'r_hf_ohm=0.008,noise_a=0.15', True, 'b'),
+    ('rhf_15m_s23', 23, 'r_hf_ohm=0.015', True, 'b'), ('rhf_30m_s53', 53, 'r_hf_ohm=0.03', True, 'b'),
+    ('po_1deg_s42', 42, 'offset_rad=0.01745', True, 'b'), ('po_1p5deg_s21', 21, 'offset_rad=0.0262', True, 'b'),
+    ('po_1p5deg_s22', 22, 'offset_rad=0.0262', True, 'b'), ('po_4p5deg_s23', 23, 'offset_rad=0.0785', True, 'b'),
+    ('po_neg_s51', 51, 'offset_rad=-0.05', True, 'b'),
+    ('sg_a1015_s21', 21, 'gain_a=1.015', True, 'b'), ('sg_a1015_s38', 38, 'gain_a=1.015', True, 'b'),
+    ('sg_b0985_s22', 22, 'gain_b=0.985', True, 'b'), ('sg_a102_s35', 35, 'gain_a=1.02', True, 'b'),
+    ('sg_a102_s36', 36, 'gain_a=1.02', True, 'b'), ('sg_a102_nospread_s36', 36, 'gain_a=1.02', False, 'b'),
+    ('sg_a102_n02_s36', 36, 'gain_a=1.02,noise_a=0.02', True, 'b'),
+    ('sg_a102_udc0_s36', 36, 'gain_a=1.02', True, 'b_udc0'), ('sg_c098_s37', 37, 'gain_c=0.98', True, 'b'),
+    ('sg_a103_c098_s23', 23, 'gain_a=1.03,gain_c=0.98', True, 'b'),
+    ('mt_1111_s21', 21, 'psi_pm_wb=0.01111', True, 'b'), ('mt_1111_s22', 22, 'psi_pm_wb=0.01111', True, 'b'),
+    ('mt_1056_s23', 23, 'psi_pm_wb=0.01056', True, 'b'),
+    ('sd_20u_s21', 21, 'delay_s=20e-6', True, 'b'), ('sd_20u_s22', 22, 'delay_s=20e-6', True, 'b'),
+    ('sd_20u_n19_s43', 43, 'delay_s=20e-6,noise_a=0.19', True, 'b'), ('sd_50u_s23', 23, 'delay_s=50e-6', True, 'b'),
+    ('sd_60u_s54', 54, 'delay_s=60e-6', True, 'b'),
+    ('sh_o6_5u_s21', 21, 'order=6,amplitude_h=5e-6', True, 'b'), ('sh_o6_5u_s22', 22, 'order=6,amplitude_h=5e-6', True, 'b'),
+    ('sh_o4_5u_s24', 24, 'order=4,amplitude_h=5e-6', True, 'b'), ('sh_o4_12u_s25', 25, 'order=4,amplitude_h=1.2e-5', True, 'b'),
+    ('sh_o4_12u_nospread_s25', 25, 'order=4,amplitude_h=1.2e-5', False, 'b'),
+    ('sh_o6_12u_s24', 24, 'order=6,amplitude_h=1.2e-5', True, 'b'), ('sh_o6_20u_s24', 24, 'order=6,amplitude_h=2e-5', True, 'b'),
+    ('sh_o8_6u_s24', 24, 'order=8,amplitude_h=6e-6', True, 'b'), ('sh_o12_4u_s24', 24, 'order=12,amplitude_h=4e-6', True, 'b'),
+    ('pair_dt_po_s31', 31, 'dead_time_s=1.0e-6,offset_rad=0.035', True, 'b'),
+    ('pair_cs_mt_s32', 32, 'cross_saturation=1.5e-5,psi_pm_wb=0.0109', True, 'b'),
+    ('pair_rs_sd_s33', 33, 'rs_ohm=0.0160,delay_s=30e-6', True, 'b'),
+    ('pair_sg_dt_s34', 34, 'gain_a=1.02,dead_time_s=0.8e-6', True, 'b'),
+    ('pair_mt_cs_n12_s55', 55, 'psi_pm_wb=0.01090,cross_saturation=2e-5,noise_a=0.12', True, 'b'),
+    ('pair_po_sg_s56', 56, 'offset_rad=0.04,gain_b=1.025', True, 'b'),
+    ('pair_sh6_dt_s57', 57, 'order=6,amplitude_h=8e-6,dead_time_s=1.5e-6', True, 'b'),
+    ('pair_rs_mt_s58', 58, 'rs_ohm=0.016,psi_pm_wb=0.0110', True, 'b'),
+]
+
+
+def edit_csv(path, fn):
+    rows = list(csv.DictReader(open(path)))
+    fields = list(rows[0].keys())
+    rows = [fn(r) for r in rows]
+    with open(path, 'w', newline='') as f:
+        w = csv.DictWriter(f, fieldnames=fields, lineterminator='\n')
+        w.writeheader()
+        w.writerows(rows)
+
+
+def edit_waveforms(d, fn):
+    m = json.load(open(os.path.join(d, 'manifest.json')))
+    for p in m['points']:
+        edit_csv(os.path.join(d, p['file']), fn)
+
+
+def scale(cols, k):
+    def f(r):
+        for c in cols:
+            r[c] = f'{float(r[c]) * k:.6f}'
+        return r
+    return f
+
+
+def edits(out):
+    """Edited copies of the independent clean example: (name, dir, expected effects)."""
+    src = os.path.join(EXAMPLES, 'clean')
+    if not os.path.isdir(src):
+        return []
+    made = []
+
+    def copy(name):
+        d = os.path.join(out, 'edits', name)
+        shutil.rmtree(d, ignore_errors=True)
+        shutil.copytree(src, d)
+        return d
+
+    d = copy('ib_x1.02')
+    edit_waveforms(d, scale(['ib_a'], 1.02))
+    made.append(('edit_ib_x1.02', d, ['current_sensor_gain']))
+    d = copy('ib_x1.01')
+    edit_waveforms(d, scale(['ib_a'], 1.01))
+    made.append(('edit_ib_x1.01', d, ['current_sensor_gain']))
+    d = copy('ib_x1.01_torque_noise')
+    edit_waveforms(d, scale(['ib_a'], 1.01))
+    rng = random.Random(1)
+    edit_csv(os.path.join(d, 'steady_state.csv'),
+             lambda r: {**r, 'torque_nm': f"{float(r['torque_nm']) + rng.gauss(0, 0.01):.6f}"} if r['torque_nm'] else r)
+    made.append(('edit_ib_x1.01_torque_noise', d, ['current_sensor_gain']))
+    d = copy('ia_x1.02_ic_x0.98')
+    edit_waveforms(d, scale(['ia_a'], 1.02))
+    edit_waveforms(d, scale(['ic_a'], 0.98))
+    made.append(('edit_ia_x1.02_ic_x0.98', d, ['current_sensor_gain']))
+    d = copy('manifest_rs_minus20')
+    m = json.load(open(os.path.join(d, 'manifest.json')))
+    m['motor']['rs_ohm'] *= 0.8
+    json.dump(m, open(os.path.join(d, 'manifest.json'), 'w'), indent=1)
+    made.append(('edit_manifest_rs_minus20', d, ['stator_resistance']))
+    d = copy('manifest_psi_plus4')
+    m = json.load(open(os.path.join(d, 'manifest.json')))
+    m['motor']['psi_pm_wb'] *= 1.04
+    json.dump(m, open(os.path.join(d, 'manifest.json'), 'w'), indent=1)
+    made.append(('edit_manifest_psi_plus4', d, ['magnet_temperature']))
+    # An angle sensor offset applied consistently: the angle column and the
+    # steady-state rows (currents and voltages) in the offset frame.
+    d = copy('offset_0.05')
+    off = 0.05
+    edit_waveforms(d, lambda r: {**r, 'theta_e_rad': f"{(float(r['theta_e_rad']) + off) % (2 * math.pi):.6f}"})
+    c, s = math.cos(-off), math.sin(-off)
+
+    def rot(r):
+        for a, b in [('id_a', 'iq_a'), ('ud_ref_v', 'uq_ref_v')]:
+            x, y = float(r[a]), float(r[b])
+            r[a], r[b] = f'{x * c - y * s:.6f}', f'{x * s + y * c:.6f}'
+        return r
+    edit_csv(os.path.join(d, 'steady_state.csv'), rot)
+    made.append(('edit_offset_0.05', d, ['position_offset']))
+    d = copy('ia_dc_offset_0.5')
+    edit_waveforms(d, lambda r: {**r, 'ia_a': f"{float(r['ia_a']) + 0.5:.6f}"})
+    made.append(('edit_ia_dc_offset_0.5 (immaterial)', d, []))
+    return made
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument('--fluxcal', default=os.path.join(ROOT, 'build', 'cli', 'fluxcal'))
+    ap.add_argument('--out', default=os.path.join(ROOT, 'out', 'probe'))
+    ap.add_argument('--jobs', type=int, default=2)
+    a = ap.parse_args()
+    os.makedirs(a.out, exist_ok=True)
+    motor = os.path.join(ROOT, 'data', 'motors', 'second_motor.json')
+    udc0 = os.path.join(a.out, 'second_motor_udc0.json')
+    m = json.load(open(motor))
+    m['sensors']['udc_noise_v'] = 0.0
+    json.dump(m, open(udc0, 'w'), indent=1)
+    motors = {'b': motor, 'b_udc0': udc0, 'default': os.path.join(ROOT, 'data', 'motors', 'default_motor.json')}
+    plan = os.path.join(ROOT, 'data', 'plans', 'eol_like_plan.json')
+
+    def simulate(case):
+        name, seed, effects, spread, variant = case
+        d = os.path.join(a.out, 'sets', name)
+        shutil.rmtree(d, ignore_errors=True)
+        cmd = [a.fluxcal, 'simulate', '--motor', motors[variant], '--plan', plan, '--seed', str(seed), '--out', d]
+        if effects:
+            cmd += ['--effects', effects]
+        if spread:
+            cmd.append('--spread')
+        subprocess.run(cmd, check=True, capture_output=True)
+        truth = json.load(open(d + '.truth.json'))
+        return name, d, sorted({e['effect'] for e in truth['concealed_effects']})
+
+    with ThreadPoolExecutor(a.jobs) as ex:
+        cases = list(ex.map(simulate, TWIN))
+    for name in ['clean', 'dead_time', 'cross_saturation']:
+        t = os.path.join(EXAMPLES, name + '.truth.json')
+        if os.path.exists(t):
+            cases.append(('example_' + name, os.path.join(EXAMPLES, name),
+                          sorted({e['effect'] for e in json.load(open(t))['concealed_effects']})))
+    cases += edits(a.out)
+
+    def diagnose(case):
+        name, d, want = case
+        r = subprocess.run([a.fluxcal, 'diagnose', d, '--json'], capture_output=True, text=True)
+        try:
+            rep = json.loads(r.stdout)
+        except json.JSONDecodeError:
+            return name, want, 'error', [], r.stderr.strip()[-200:]
+        got = [f['effect'] for f in rep['findings']]
+        params = '; '.join(f"{f['effect']}: " + ', '.join(f'{k}={v:.4g}' for k, v in f['parameters'].items())
+                           for f in rep['findings'])
+        return name, want, rep['verdict'], got, params
+
+    with ThreadPoolExecutor(a.jobs) as ex:
+        results = list(ex.map(diagnose, cases))
+    good = 0
+    for name, want, verdict, got, params in results:
+        ok = sorted(got) == want and verdict == ('explained' if want else 'no_mismatch')
+        good += ok
+        print(f"{'ok ' if ok else 'BAD'} {name:36s} concealed={','.join(want) or '-':38s} "
+              f"{verdict}: {params or '-'}")
+    print(f'{good}/{len(results)} as expected')
+
+
+if __name__ == '__main__':
+    sys.exit(main())
