@@ -1,4 +1,4 @@
-// fluxcal fit <recording-set | hf_results.csv> [--model auto|analytic|spline|poly|polyN]
+// fluxcal fit <recording-set | hf_results.csv> [--model auto|analytic|spline|splineR|poly|polyN]
 //             --out calibration.json [--json] [--serial S --pole-pairs P] 
 // Identifies every waveform point (least squares), then fits the
 // flux-linkage surfaces jointly with hf_results and steady-state rows.
@@ -25,7 +25,7 @@ int RunFit(const std::vector<std::string>& argv) {
   auto args = ParseArgs(argv, {"model", "out", "serial", "pole-pairs"}, {"json"});
   if (!args.ok()) return Fail(std::string(args.status().message()), 2);
   if (args->positional.size() != 1 || !args->Get("out")) {
-    return Fail("usage: fluxcal fit <recording-set | hf_results.csv> [--model auto|analytic|spline] "
+    return Fail("usage: fluxcal fit <recording-set | hf_results.csv> [--model auto|analytic|spline|splineR|poly|polyN] "
                 "--out calibration.json [--json]", 2);
   }
   const std::string input = args->positional[0];

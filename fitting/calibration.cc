@@ -101,6 +101,10 @@ nlohmann::json Calibration::ToJson() const {
   j["serial"] = serial_;
   j["version"] = version;
   j["model"] = family_.Name();
+  if (family_.kind == Family::kSpline) {
+    j["spline_knots"] = {{"id_lo_a", family_.spline.id_lo_a}, {"id_hi_a", family_.spline.id_hi_a},
+                         {"iq_hi_a", family_.spline.iq_hi_a}};
+  }
   j["pole_pairs"] = pole_pairs_;
   j["rs_ohm"] = rs_ohm_;
   j["psi_pm_wb"] = psi_pm_wb();
@@ -127,6 +131,19 @@ absl::StatusOr<Calibration> Calibration::FromJson(const nlohmann::json& j) {
       fam.kind = Family::kPoly;
       fam.degree = std::stoi(model.substr(4));
       if (fam.degree < 2 || fam.degree > 12) return absl::InvalidArgumentError("field 'model': bad degree");
+    } else if (model.rfind("spline", 0) == 0) {
+      fam.kind = Family::kSpline;
+      fam.spline.spans = std::stoi(model.substr(6));
+      if (fam.spline.spans < 1 || fam.spline.spans > 8) {
+        return absl::InvalidArgumentError("field 'model': spline spans must be 1..8");
+      }
+      const auto& k = j.at("spline_knots");
+      fam.spline.id_lo_a = k.at("id_lo_a").get<double>();
+      fam.spline.id_hi_a = k.at("id_hi_a").get<double>();
+      fam.spline.iq_hi_a = k.at("iq_hi_a").get<double>();
+      if (!(fam.spline.id_hi_a > fam.spline.id_lo_a) || !(fam.spline.iq_hi_a > 0)) {
+        return absl::InvalidArgumentError("field 'spline_knots': empty knot range");
+      }
     } else {
       return absl::InvalidArgumentError(absl::StrCat("field 'model': unknown model '", model, "'"));
     }

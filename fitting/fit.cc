@@ -216,7 +216,7 @@ struct Solved {
   bool usable = false;
 };
 
-// The polynomial co-energy is linear in its coefficients, and so is every
+// The polynomial and spline co-energies are linear in their coefficients, and so is every
 // residual above (flux, inductance, torque, prior): r(p) = r0 + J p with J
 // constant. Ceres evaluates r0 and J from the same cost functors
 // (Problem::Evaluate at p = 0), then iteratively reweighted least squares
@@ -242,15 +242,30 @@ Solved SolveLinear(const Family& fam, Built& b, const FitOptions& o) {
   const int robust_rows = n - (b.has_prior ? 1 : 0);
   Eigen::VectorXd p = Eigen::VectorXd::Zero(k), w = Eigen::VectorXd::Ones(n);
   const double c2 = o.robust_scale * o.robust_scale;
+  // Minimum-norm solutions (complete orthogonal decomposition): the spline
+  // family has parameter directions the surfaces do not depend on
+  // (Family::NullDirections); they get zero weight and zero variance.
+  // Normal matrix J^T W J as a symmetric rank-n update (half the flops of
+  // the general product; it dominates the fit time).
+  auto normal = [&](const Eigen::MatrixXd& Jw) {
+    Eigen::MatrixXd A = Eigen::MatrixXd::Zero(k, k);
+    A.selfadjointView<Eigen::Lower>().rankUpdate(Jw.transpose());
+    return Eigen::MatrixXd(A.selfadjointView<Eigen::Lower>());
+  };
   for (int it = 0; it < 30; ++it) {
     const Eigen::MatrixXd Jw = w.cwiseSqrt().asDiagonal() * J;
     const Eigen::VectorXd rw = w.cwiseSqrt().asDiagonal() * r0v;
-    const Eigen::VectorXd np = (Jw.transpose() * Jw).ldlt().solve(-Jw.transpose() * rw);
+    const Eigen::MatrixXd A = normal(Jw);
+    const Eigen::VectorXd g = -Jw.transpose() * rw;
+    const Eigen::VectorXd np = fam.NullDirections() > 0 ? Eigen::VectorXd(A.completeOrthogonalDecomposition().solve(g))
+                                                        : Eigen::VectorXd(A.ldlt().solve(g));
     const double step = (np - p).norm();
     p = np;
     const Eigen::VectorXd r = r0v + J * p;
     for (int i = 0; i < robust_rows; ++i) w(i) = 1.0 / (1.0 + r(i) * r(i) / c2);
-    if (step < 1e-12 * (1.0 + p.norm())) break;
+    // Weights settle geometrically; 1e-10 of |p| is far below the
+    // parameters' standard errors.
+    if (step < 1e-10 * (1.0 + p.norm())) break;
   }
   const Eigen::VectorXd r = r0v + J * p;
   double chi2 = 0;
@@ -259,13 +274,15 @@ Solved SolveLinear(const Family& fam, Built& b, const FitOptions& o) {
   s.params = b.params;
   s.chi2 = chi2;
   s.n_obs = b.residuals;
-  s.k = k;
-  s.bic = chi2 + k * std::log(std::max(1, n));
+  s.k = k - fam.NullDirections();
+  s.bic = chi2 + s.k * std::log(std::max(1, n));
   s.usable = p.allFinite();
   s.termination = "CONVERGENCE (linear IRLS)";
   const Eigen::MatrixXd Jw = w.cwiseSqrt().asDiagonal() * J;
-  const Eigen::MatrixXd cov = (Jw.transpose() * Jw).ldlt().solve(Eigen::MatrixXd::Identity(k, k));
-  const double scale = std::max(1.0, chi2 / std::max(1, n - k));
+  const Eigen::MatrixXd A = normal(Jw);
+  const Eigen::MatrixXd cov = fam.NullDirections() > 0 ? Eigen::MatrixXd(A.completeOrthogonalDecomposition().pseudoInverse())
+                                                       : Eigen::MatrixXd(A.ldlt().solve(Eigen::MatrixXd::Identity(k, k)));
+  const double scale = std::max(1.0, chi2 / std::max(1, n - s.k));
   s.covariance.assign(k * k, 0.0);
   for (int i = 0; i < k; ++i)
     for (int j = 0; j < k; ++j) s.covariance[i * k + j] = cov(i, j) * scale;
@@ -274,7 +291,7 @@ Solved SolveLinear(const Family& fam, Built& b, const FitOptions& o) {
 
 Solved Solve(const Family& fam, const FitData& d, const FitOptions& o) {
   Built b = Build(fam, d, o);
-  if (fam.kind == Family::kPoly) return SolveLinear(fam, b, o);
+  if (fam.kind != Family::kAnalytic) return SolveLinear(fam, b, o);
   ceres::Solver::Options so;
   so.linear_solver_type = ceres::DENSE_QR;
   so.max_num_iterations = 200;
@@ -374,27 +391,6 @@ absl::StatusOr<Calibration> Fit(const FitData& d, const FitOptions& o) {
       return absl::InvalidArgumentError(absl::StrCat("points[", k, "]: inductances must be positive and finite"));
     }
   }
-  std::vector<Family> candidates;
-  if (o.model == "analytic" || o.model == "auto") candidates.push_back({Family::kAnalytic, 0});
-  if (o.model == "poly" || o.model == "spline" || o.model == "auto") {
-    for (int deg = 3; deg <= 8; ++deg) candidates.push_back({Family::kPoly, deg});
-  } else if (o.model.rfind("poly", 0) == 0 && o.model.size() > 4) {
-    int deg = 0;
-    try { deg = std::stoi(o.model.substr(4)); } catch (...) { deg = 0; }
-    if (deg < 2 || deg > 10) return absl::InvalidArgumentError("flag --model: poly degree must be 2..10");
-    candidates.push_back({Family::kPoly, deg});
-  }
-  if (candidates.empty()) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "flag --model: expected auto, analytic, poly (alias spline) or polyN, got '", o.model, "'"));
-  }
-  std::vector<Solved> solved;
-  for (const auto& f : candidates) {
-    // A flexible family needs more observations than parameters.
-    if (f.NumParams() + 2 > static_cast<int>(2 * d.inductances.size() + 2 * d.steady_state.size())) continue;
-    solved.push_back(Solve(f, d, o));
-  }
-  if (solved.empty()) return absl::InvalidArgumentError("too few observations for any model family");
   double id_min = std::numeric_limits<double>::max(), id_max = -id_min, iq_min = id_min, iq_max = -id_min;
   for (const auto& obs : d.inductances) {
     id_min = std::min(id_min, obs.id_a); id_max = std::max(id_max, obs.id_a);
@@ -404,6 +400,49 @@ absl::StatusOr<Calibration> Fit(const FitData& d, const FitOptions& o) {
     id_min = std::min(id_min, s.id_a); id_max = std::max(id_max, s.id_a);
     iq_min = std::min(iq_min, std::abs(s.iq_a)); iq_max = std::max(iq_max, std::abs(s.iq_a));
   }
+  // Spline knots span the measured region (with id = 0, where psi_pm is
+  // defined) plus 5 % on each side.
+  auto spline = [&](int spans) {
+    Family f;
+    f.kind = Family::kSpline;
+    f.spline.spans = spans;
+    const double lo = std::min(id_min, 0.0), hi = std::max(id_max, 0.0);
+    const double margin = 0.05 * std::max(hi - lo, 10.0);
+    f.spline.id_lo_a = lo - margin;
+    f.spline.id_hi_a = hi + margin;
+    f.spline.iq_hi_a = 1.05 * std::max(iq_max, 10.0);
+    return f;
+  };
+  auto number_after = [&](const std::string& prefix) {
+    try { return std::stoi(o.model.substr(prefix.size())); } catch (...) { return 0; }
+  };
+  std::vector<Family> candidates;
+  if (o.model == "analytic" || o.model == "auto") candidates.push_back({Family::kAnalytic, 0, {}});
+  if (o.model == "poly" || o.model == "auto") {
+    for (int deg = 3; deg <= 8; ++deg) candidates.push_back({Family::kPoly, deg, {}});
+  } else if (o.model.rfind("poly", 0) == 0 && o.model.size() > 4) {
+    const int deg = number_after("poly");
+    if (deg < 2 || deg > 10) return absl::InvalidArgumentError("flag --model: poly degree must be 2..10");
+    candidates.push_back({Family::kPoly, deg, {}});
+  }
+  if (o.model == "spline" || o.model == "auto") {
+    for (int spans = 1; spans <= 4; ++spans) candidates.push_back(spline(spans));
+  } else if (o.model.rfind("spline", 0) == 0 && o.model.size() > 6) {
+    const int spans = number_after("spline");
+    if (spans < 1 || spans > 8) return absl::InvalidArgumentError("flag --model: spline spans must be 1..8");
+    candidates.push_back(spline(spans));
+  }
+  if (candidates.empty()) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "flag --model: expected auto, analytic, poly, polyN, spline or splineN, got '", o.model, "'"));
+  }
+  std::vector<Solved> solved;
+  for (const auto& f : candidates) {
+    // A flexible family needs more observations than parameters.
+    if (f.NumParams() + 2 > static_cast<int>(2 * d.inductances.size() + 2 * d.steady_state.size())) continue;
+    solved.push_back(Solve(f, d, o));
+  }
+  if (solved.empty()) return absl::InvalidArgumentError("too few observations for any model family");
   // A candidate must also extrapolate physically: positive-definite
   // inductance over the measured region widened by 50 % (tables reach the
   // current limit beyond the measured grid). Polynomials of high degree often

@@ -13,9 +13,20 @@
 //    linear in id alone, so psi_d(0, 0) = psi_pm). L0 = 1e-4 H, I0 = 100 A
 //    scale the coefficients to order one. Flexible: any smooth conservative
 //    map is approximated as N grows; N is chosen by BIC.
+//  kSpline<R>: W' = psi_pm id + L0 I0^2 (S(id, iq) - S_d(0, 0) id),
+//    S a tensor-product quartic B-spline with R uniform spans over the id
+//    range and 2R over [-Q, Q] in iq, its iq basis folded to even functions
+//    (B_j + B_{N-1-j}) so psi_q(id, 0) = 0; the linear term removes S's
+//    slope at the origin so psi_d(0, 0) = psi_pm. Quartic: W' is C3, the
+//    inductance C1. Local, so one region's data do not bend another's. Beyond
+//    the knot range each 1-D basis function continues as its second-order
+//    Taylor polynomial at the edge: the co-energy stays C2 and a gradient
+//    field (inductance symmetric) everywhere, the inductance continues
+//    smoothly instead of oscillating. R is chosen by BIC.
 #ifndef FLUXCAL_FITTING_FLUX_FAMILY_H_
 #define FLUXCAL_FITTING_FLUX_FAMILY_H_
 
+#include <cmath>
 #include <string>
 #include <utility>
 #include <vector>
@@ -73,15 +84,131 @@ void PolyInductance(int n, const T& id, const T& iq, const P* p, T* ldd, T* lqq,
   *ldq = kPolyL0H * dq;
 }
 
-// A family instance: "analytic" or "poly<N>".
-struct Family {
-  enum Kind { kAnalytic, kPoly } kind = kAnalytic;
-  int degree = 0;   // kPoly only
-  int NumParams() const {
-    return kind == kAnalytic ? sim::kSaturationParams : 1 + static_cast<int>(PolyTerms(degree).size());
+// ---- Quartic B-spline co-energy --------------------------------------
+
+inline constexpr int kSplineDegree = 4;
+
+// The knot layout of a spline family: `spans` uniform spans over
+// [id_lo_a, id_hi_a] and 2 spans over [-iq_hi_a, iq_hi_a].
+struct SplineDomain {
+  int spans = 0;
+  double id_lo_a = -100, id_hi_a = 0, iq_hi_a = 100;
+  int NumD() const { return spans + kSplineDegree; }            // id basis
+  int NumQ() const { return 2 * spans + kSplineDegree; }        // iq basis
+  int NumEven() const { return NumQ() / 2; }                    // folded
+  int NumCoefficients() const { return NumD() * NumEven(); }
+};
+
+// Values and first two derivatives of the kSplineDegree + 1 uniform B-spline
+// basis functions that are nonzero at x, on `spans` spans over [lo, hi]
+// (basis i supported on knots lo + (i - p) h .. lo + (i + 1) h). Beyond
+// [lo, hi] each function continues as its second-order Taylor polynomial at
+// the edge. The Cox-de Boor triangle on uniform knots (Piegl & Tiller, The
+// NURBS Book, A2.2) with derivatives from lower degrees: for uniform knots
+// d/dx N_{i,p} = (N_{i,p-1} - N_{i+1,p-1}) / h.
+struct Basis1d {
+  int first = 0;                       // index of v[0]
+  double v[kSplineDegree + 1], d1[kSplineDegree + 1], d2[kSplineDegree + 1];
+};
+inline Basis1d EvalBasis(double x, double lo, double hi, int spans) {
+  constexpr int p = kSplineDegree;
+  const double h = (hi - lo) / spans;
+  double s = (x - lo) / h, delta = 0;   // delta: distance beyond the edge [in h]
+  if (s < 0) { delta = s; s = 0; }
+  if (s > spans) { delta = s - spans; s = spans; }
+  int m = static_cast<int>(std::floor(s));
+  if (m >= spans) m = spans - 1;
+  const double u = s - m;               // in [0, 1]
+  // N[k][r]: degree-k functions nonzero in span m, r = 0..k (function
+  // index m + (p - k) + r in the degree-p numbering).
+  double N[p + 1][p + 1] = {};
+  N[0][0] = 1.0;
+  for (int k = 1; k <= p; ++k) {
+    // Knots at the integers, N[k][r] = N_{j,k} with j = m - k + r:
+    //   N_{j,k}(s) = ((s - j) N_{j,k-1}(s) + (j + k + 1 - s) N_{j+1,k-1}(s)) / k,
+    // s - j = u + k - r, j + k + 1 - s = r + 1 - u; N_{j,k-1} is
+    // N[k-1][r-1] and N_{j+1,k-1} is N[k-1][r].
+    for (int r = 0; r <= k; ++r) {
+      const double lower = r > 0 ? N[k - 1][r - 1] : 0.0;
+      const double upper = r < k ? N[k - 1][r] : 0.0;
+      N[k][r] = ((u + k - r) * lower + (r + 1 - u) * upper) / k;
+    }
   }
+  Basis1d b;
+  b.first = m;
+  for (int r = 0; r <= p; ++r) {
+    // d/ds N_{j,p} = N_{j,p-1} - N_{j+1,p-1} (unit knot spacing), i.e.
+    // N[p-1][r-1] - N[p-1][r]; d2/ds2 = N[p-2][r-2] - 2 N[p-2][r-1] + N[p-2][r].
+    const double a1 = r > 0 ? N[p - 1][r - 1] : 0.0, b1 = r < p ? N[p - 1][r] : 0.0;
+    const double a2 = r > 1 ? N[p - 2][r - 2] : 0.0, b2 = (r >= 1 && r <= p - 1) ? N[p - 2][r - 1] : 0.0,
+                 c2 = r < p - 1 ? N[p - 2][r] : 0.0;
+    b.v[r] = N[p][r];
+    b.d1[r] = (a1 - b1) / h;
+    b.d2[r] = (a2 - 2.0 * b2 + c2) / (h * h);
+    if (delta != 0.0) {
+      const double dx = delta * h;
+      b.v[r] += b.d1[r] * dx + 0.5 * b.d2[r] * dx * dx;
+      b.d1[r] += b.d2[r] * dx;
+    }
+  }
+  return b;
+}
+
+// psi and L of the spline family. p[0] = psi_pm, p[1 + i * NumEven() + e] =
+// coefficient of B_i(id) E_e(iq), E_e = B_e + B_{NumQ()-1-e}.
+template <typename T, typename P>
+void SplineFluxAndInductance(const SplineDomain& dom, double id, double iq, const P* p, T* psi_d,
+                             T* psi_q, T* ldd, T* lqq, T* ldq) {
+  const Basis1d bd = EvalBasis(id, dom.id_lo_a, dom.id_hi_a, dom.spans);
+  const Basis1d bq = EvalBasis(iq, -dom.iq_hi_a, dom.iq_hi_a, 2 * dom.spans);
+  const Basis1d b0d = EvalBasis(0.0, dom.id_lo_a, dom.id_hi_a, dom.spans);
+  const Basis1d b0q = EvalBasis(0.0, -dom.iq_hi_a, dom.iq_hi_a, 2 * dom.spans);
+  const int nq = dom.NumQ(), ne = dom.NumEven();
+  auto even = [&](int j) { return j < ne ? j : nq - 1 - j; };
+  T sd(0.0), sq(0.0), sdd(0.0), sqq(0.0), sdq(0.0), slope0(0.0);
+  for (int a = 0; a <= kSplineDegree; ++a) {
+    for (int c = 0; c <= kSplineDegree; ++c) {
+      const P& k = p[1 + (bd.first + a) * ne + even(bq.first + c)];
+      sd += k * (bd.d1[a] * bq.v[c]);
+      sq += k * (bd.v[a] * bq.d1[c]);
+      sdd += k * (bd.d2[a] * bq.v[c]);
+      sqq += k * (bd.v[a] * bq.d2[c]);
+      sdq += k * (bd.d1[a] * bq.d1[c]);
+      slope0 += p[1 + (b0d.first + a) * ne + even(b0q.first + c)] * (b0d.d1[a] * b0q.v[c]);
+    }
+  }
+  // Coefficients scaled like the polynomial family's: W' in L0 I0^2 units.
+  const double kW = kPolyL0H * kPolyI0A * kPolyI0A;
+  *psi_d = p[0] + kW * (sd - slope0);
+  *psi_q = kW * sq;
+  *ldd = kW * sdd;
+  *lqq = kW * sqq;
+  *ldq = kW * sdq;
+}
+
+// The scalar value of a double or a ceres::Jet (its .a member): the spline's
+// basis depends on the operating point, which is data, never a parameter.
+inline double ScalarOf(double x) { return x; }
+template <typename J>
+double ScalarOf(const J& j) { return j.a; }
+
+// A family instance: "analytic", "poly<N>" or "spline<R>".
+struct Family {
+  enum Kind { kAnalytic, kPoly, kSpline } kind = kAnalytic;
+  int degree = 0;          // kPoly only
+  SplineDomain spline;     // kSpline only
+  int NumParams() const {
+    if (kind == kAnalytic) return sim::kSaturationParams;
+    if (kind == kPoly) return 1 + static_cast<int>(PolyTerms(degree).size());
+    return 1 + spline.NumCoefficients();
+  }
+  // Parameter combinations the surfaces do not depend on (the spline's
+  // constant and its slope in id at the origin, removed by construction).
+  int NullDirections() const { return kind == kSpline ? 2 : 0; }
   std::string Name() const {
-    return kind == kAnalytic ? "analytic" : "poly" + std::to_string(degree);
+    if (kind == kAnalytic) return "analytic";
+    if (kind == kPoly) return "poly" + std::to_string(degree);
+    return "spline" + std::to_string(spline.spans);
   }
 };
 
@@ -89,8 +216,11 @@ template <typename T, typename P>
 void FamilyFlux(const Family& f, const T& id, const T& iq, const P* p, T* psi_d, T* psi_q) {
   if (f.kind == Family::kAnalytic) {
     sim::SaturationFlux(id, iq, p, psi_d, psi_q);
-  } else {
+  } else if (f.kind == Family::kPoly) {
     PolyFlux(f.degree, id, iq, p, psi_d, psi_q);
+  } else {
+    T a, b, c;
+    SplineFluxAndInductance(f.spline, ScalarOf(id), ScalarOf(iq), p, psi_d, psi_q, &a, &b, &c);
   }
 }
 
@@ -98,8 +228,11 @@ template <typename T, typename P>
 void FamilyInductance(const Family& f, const T& id, const T& iq, const P* p, T* ldd, T* lqq, T* ldq) {
   if (f.kind == Family::kAnalytic) {
     sim::SaturationInductance(id, iq, p, ldd, lqq, ldq);
-  } else {
+  } else if (f.kind == Family::kPoly) {
     PolyInductance(f.degree, id, iq, p, ldd, lqq, ldq);
+  } else {
+    T a, b;
+    SplineFluxAndInductance(f.spline, ScalarOf(id), ScalarOf(iq), p, &a, &b, ldd, lqq, ldq);
   }
 }
 

@@ -1,0 +1,162 @@
+// The B-spline co-energy family: the basis (partition of unity, derivatives,
+// smooth continuation beyond the knots), the family's physics by
+// construction (psi = grad W', L = Hessian, psi_q(id, 0) = 0,
+// psi_d(0, 0) = psi_pm) for random coefficients, and fits with known truth.
+#include <cmath>
+#include <random>
+
+#include "fitting/fit.h"
+#include "fitting/flux_family.h"
+#include "gtest/gtest.h"
+#include "identification/identify.h"
+#include "nlohmann/json.hpp"
+#include "simulation/flux_map.h"
+#include "simulation/twin.h"
+
+namespace fluxcal::fit {
+namespace {
+
+// Value of basis function `index` at x, from the nonzero set EvalBasis gives.
+double BasisValue(double x, double lo, double hi, int spans, int index, int derivative) {
+  const Basis1d b = EvalBasis(x, lo, hi, spans);
+  const int r = index - b.first;
+  if (r < 0 || r > kSplineDegree) return 0.0;
+  return derivative == 0 ? b.v[r] : (derivative == 1 ? b.d1[r] : b.d2[r]);
+}
+
+TEST(SplineBasis, PartitionOfUnityAndDerivatives) {
+  const double lo = -105, hi = 5;
+  for (int spans : {1, 2, 5}) {
+    const int n = spans + kSplineDegree;
+    for (double x = lo; x <= hi; x += 0.37) {
+      const Basis1d b = EvalBasis(x, lo, hi, spans);
+      double sum = 0, sum1 = 0, sum2 = 0;
+      for (int r = 0; r <= kSplineDegree; ++r) {
+        EXPECT_GE(b.v[r], -1e-15);
+        EXPECT_LT(b.first + r, n);
+        sum += b.v[r];
+        sum1 += b.d1[r];
+        sum2 += b.d2[r];
+      }
+      EXPECT_NEAR(sum, 1.0, 1e-12) << "x " << x;   // sum B_i = 1, so its derivatives vanish
+      EXPECT_NEAR(sum1, 0.0, 1e-12);
+      EXPECT_NEAR(sum2, 0.0, 1e-12);
+      // Derivatives against central differences, for every function.
+      const double h = 1e-4;
+      for (int i = 0; i < n; ++i) {
+        const double fd1 = (BasisValue(x + h, lo, hi, spans, i, 0) - BasisValue(x - h, lo, hi, spans, i, 0)) / (2 * h);
+        const double fd2 = (BasisValue(x + h, lo, hi, spans, i, 1) - BasisValue(x - h, lo, hi, spans, i, 1)) / (2 * h);
+        EXPECT_NEAR(BasisValue(x, lo, hi, spans, i, 1), fd1, 1e-7) << "B'_" << i << " at " << x;
+        EXPECT_NEAR(BasisValue(x, lo, hi, spans, i, 2), fd2, 1e-7) << "B''_" << i << " at " << x;
+      }
+    }
+  }
+}
+
+TEST(SplineBasis, ContinuesSmoothlyBeyondTheKnots) {
+  const double lo = -105, hi = 5;
+  const int spans = 3, n = spans + kSplineDegree;
+  for (double edge : {lo, hi}) {
+    for (int i = 0; i < n; ++i) {
+      for (int d = 0; d <= 2; ++d) {
+        const double in = BasisValue(edge - 1e-9 * (edge == hi ? 1 : -1), lo, hi, spans, i, d);
+        const double out = BasisValue(edge + 1e-9 * (edge == hi ? 1 : -1), lo, hi, spans, i, d);
+        EXPECT_NEAR(in, out, 1e-8) << "basis " << i << " derivative " << d << " at " << edge;
+      }
+      // Beyond the edge: a quadratic (constant second derivative).
+      const double out = edge == hi ? hi + 30 : lo - 30;
+      EXPECT_NEAR(BasisValue(out, lo, hi, spans, i, 2), BasisValue(edge, lo, hi, spans, i, 2), 1e-12);
+    }
+  }
+}
+
+// Random coefficients: whatever the fit finds, the surfaces are physical
+// where the family guarantees it.
+TEST(SplineFamily, ConservativeAndSymmetricByConstruction) {
+  Family f;
+  f.kind = Family::kSpline;
+  f.spline = {3, -110, 8, 110};
+  std::mt19937_64 rng(5);
+  std::normal_distribution<double> nd(0, 1);
+  std::vector<double> p(f.NumParams());
+  p[0] = 0.0114;
+  for (size_t k = 1; k < p.size(); ++k) p[k] = nd(rng);
+  auto psi = [&](double id, double iq, double* d, double* q) { FamilyFlux(f, id, iq, p.data(), d, q); };
+  double d0, q0;
+  psi(0, 0, &d0, &q0);
+  EXPECT_NEAR(d0, p[0], 1e-15) << "psi_d(0, 0) = psi_pm";
+  for (double id : {-150.0, -100.0, -37.0, 0.0, 6.0, 20.0}) {
+    double d, q;
+    psi(id, 0, &d, &q);
+    EXPECT_NEAR(q, 0.0, 1e-15) << "psi_q(id, 0) = 0 at id " << id;
+    for (double iq : {-140.0, -60.0, 13.0, 55.0, 109.0, 130.0}) {
+      double d1, q1;
+      psi(id, iq, &d1, &q1);
+      double dm, qm;
+      psi(id, -iq, &dm, &qm);
+      EXPECT_NEAR(dm, d1, 1e-14);
+      EXPECT_NEAR(qm, -q1, 1e-14);
+      // L = d psi / d i (central differences), inside and beyond the knots.
+      double ldd, lqq, ldq;
+      FamilyInductance(f, id, iq, p.data(), &ldd, &lqq, &ldq);
+      const double h = 1e-3;
+      double a, b, c, e;
+      psi(id + h, iq, &a, &b);
+      psi(id - h, iq, &c, &e);
+      EXPECT_NEAR(ldd, (a - c) / (2 * h), 1e-8) << id << ", " << iq;
+      EXPECT_NEAR(ldq, (b - e) / (2 * h), 1e-8) << id << ", " << iq;
+      psi(id, iq + h, &a, &b);
+      psi(id, iq - h, &c, &e);
+      EXPECT_NEAR(ldq, (a - c) / (2 * h), 1e-8) << "reciprocity at " << id << ", " << iq;
+      EXPECT_NEAR(lqq, (b - e) / (2 * h), 1e-8) << id << ", " << iq;
+    }
+  }
+}
+
+// Fits with known truth: both twin magnetics families, spline only.
+TEST(SplineFit, RecoversTruthOnBothMagneticsFamilies) {
+  sim::MotorParams mp;
+  mp.sat.g_cross_h = 3e-5;
+  sim::AnalyticMotor source(mp);
+  for (bool gridded : {false, true}) {
+    sim::TwinConfig cfg;
+    cfg.seed = 22;
+    cfg.sensors.noise_a = 0.08;
+    cfg.effects.cross_saturation = gridded ? 0.0 : 3e-5;
+    if (gridded) {
+      cfg.magnetics = std::make_shared<sim::GriddedFluxMap>(sim::GriddedFluxMap::FromModel(source, -160, 40, 41, 160, 33));
+    }
+    auto r = sim::Simulate(cfg, sim::DefaultPlan());
+    ASSERT_TRUE(r.ok());
+    auto ids = ident::IdentifySet(r->set, {});
+    ASSERT_TRUE(ids.ok());
+    FitOptions o;
+    o.model = "spline";
+    auto cal = Fit(FitDataFromRecording(r->set, *ids), o);
+    ASSERT_TRUE(cal.ok()) << cal.status();
+    EXPECT_EQ(cal->family().kind, Family::kSpline);
+    double e = 0, e_psi = 0;
+    for (const auto& t : r->truth_points) {
+      const auto p = cal->Predict(t.id_true_a, t.iq_true_a);
+      e += std::pow(p.ldd_h / t.ldd_h - 1, 2) + std::pow(p.lqq_h / t.lqq_h - 1, 2);
+      e_psi = std::max(e_psi, std::hypot(p.psi_d_wb - t.psi_d_wb, p.psi_q_wb - t.psi_q_wb) /
+                                  std::max(std::hypot(t.psi_d_wb, t.psi_q_wb), t.psi_pm_wb));
+      EXPECT_GT(p.ldd_h_std, 0.0);
+    }
+    const double rms = std::sqrt(e / (2 * r->truth_points.size()));
+    EXPECT_LT(rms, 0.005) << cal->family().Name() << (gridded ? " on the gridded map" : " on the analytic motor");
+    EXPECT_LT(e_psi, 0.005) << cal->family().Name();
+    // Exact JSON round trip, knots included.
+    auto back = Calibration::FromJson(nlohmann::json::parse(cal->ToJson().dump()));
+    ASSERT_TRUE(back.ok()) << back.status();
+    EXPECT_EQ(back->ToJson().dump(), cal->ToJson().dump());
+    const auto a = cal->Flux(-130, 120), b = back->Flux(-130, 120);
+    EXPECT_EQ(a.psi_d_wb, b.psi_d_wb);
+    EXPECT_EQ(a.psi_q_wb, b.psi_q_wb);
+    std::printf("spline fit (%s): %s, L RMS %.3f %%, worst psi %.3f %%\n", gridded ? "gridded map" : "analytic",
+                cal->family().Name().c_str(), 100 * rms, 100 * e_psi);
+  }
+}
+
+}  // namespace
+}  // namespace fluxcal::fit
