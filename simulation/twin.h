@@ -176,6 +176,25 @@ struct ReplayOptions {
 absl::StatusOr<std::vector<ReplayPoint>> ReplayOpenLoop(const io::RecordingSet& set, const MagneticModel& model,
                                                         const ReplayOptions& options);
 
+// Closed-loop replay: every recorded test run again on the twin's bench —
+// the manifest's references, speed and injection, the bench controller of
+// `control` (a recording does not say which gains its bench used; these are
+// the assumption), the controller reading the recorded angle, the plant
+// driven by `model` with `effects` — aligned with the recording (plant
+// angle and injection phase at its first sample) after `settle_s`. Returns
+// the simulated measured phase currents sample by sample and their RMS
+// difference from the recorded ones. Unlike the open-loop replay, a wrong
+// model here shows up as the controller's reaction to it, as on the bench.
+struct ClosedLoopReplayOptions {
+  double rs_ohm = 0.011;
+  Effects effects;
+  ControlParams control;
+  double settle_s = 0.03;
+  int substeps = 10;
+};
+absl::StatusOr<std::vector<ReplayPoint>> ReplayClosedLoop(const io::RecordingSet& set, const MagneticModel& model,
+                                                          const ClosedLoopReplayOptions& options);
+
 // A serial-specific production spread: a few percent on saturation
 // parameters, psi_pm and Rs, reproducible from the seed.
 MotorParams PerturbForProduction(const MotorParams& nominal, uint64_t seed);
