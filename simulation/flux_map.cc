@@ -47,13 +47,41 @@ absl::StatusOr<GriddedFluxMap> GriddedFluxMap::FromFluxGrid(std::vector<double> 
   const auto& X = m.x_;
   const auto& Y = m.y_;
   auto idx = [&](size_t i, size_t j) { return i * ny + j; };
+  // Nodal derivatives by finite differences: the five-point stencil
+  // (-f2 + 8 f1 - 8 f-1 + f-2) / 12h, fourth order, where the four
+  // neighbours exist and are evenly spaced; otherwise the three-point one.
+  // Fourth order keeps the nodal inductances consistent with the nodal flux
+  // values to O(h^4), so the interpolant's inductance does not bend within
+  // a cell (which HF injection, sampling +-5 A around a point, would see).
+  // Evenly spaced over the stencil c-2 .. c+2 (indices may run below 0 on
+  // the iq axis, mirrored: -Y[k] at index -k).
+  auto even_spacing = [](const std::vector<double>& a, long c) {
+    auto at = [&](long k) { return k >= 0 ? a[static_cast<size_t>(k)] : -a[static_cast<size_t>(-k)]; };
+    const double h = at(c + 1) - at(c);
+    for (long k = c - 2; k < c + 2; ++k) {
+      if (std::abs(at(k + 1) - at(k) - h) > 1e-9 * std::abs(h)) return false;
+    }
+    return true;
+  };
   auto dx = [&](const std::vector<double>& v, size_t i, size_t j) {
+    if (i >= 2 && i + 2 < nx && even_spacing(X, static_cast<long>(i))) {
+      const double h = X[i + 1] - X[i];
+      return (-v[idx(i + 2, j)] + 8 * v[idx(i + 1, j)] - 8 * v[idx(i - 1, j)] + v[idx(i - 2, j)]) / (12 * h);
+    }
     const size_t a = i == 0 ? 0 : i - 1, b = i + 1 == nx ? i : i + 1;
     return (v[idx(b, j)] - v[idx(a, j)]) / (X[b] - X[a]);
   };
   // d/diq with the mirror image below iq = 0: even functions have zero
-  // slope there, odd ones are antisymmetric.
+  // slope there, odd ones are antisymmetric (v(-y) = -v(y)).
   auto dy = [&](const std::vector<double>& v, size_t i, size_t j, bool odd) {
+    auto at = [&](long k) {
+      return k >= 0 ? v[idx(i, static_cast<size_t>(k))] : (odd ? -1.0 : 1.0) * v[idx(i, static_cast<size_t>(-k))];
+    };
+    const long jl = static_cast<long>(j);
+    if (j + 2 < ny && even_spacing(Y, jl)) {
+      const double h = Y[j + 1] - Y[j];
+      return (-at(jl + 2) + 8 * at(jl + 1) - 8 * at(jl - 1) + at(jl - 2)) / (12 * h);
+    }
     if (j == 0) return odd ? (v[idx(i, 1)] - (-v[idx(i, 1)])) / (2 * Y[1]) : 0.0;
     const size_t b = j + 1 == ny ? j : j + 1;
     return (v[idx(i, b)] - v[idx(i, j - 1)]) / (Y[b] - Y[j - 1]);
@@ -62,17 +90,27 @@ absl::StatusOr<GriddedFluxMap> GriddedFluxMap::FromFluxGrid(std::vector<double> 
   auto& D = m.d_;
   D[1][0] = pd;   // W'_id = psi_d (even in iq)
   D[0][1] = pq;   // W'_iq = psi_q (odd in iq)
-  for (size_t i = 1; i < nx; ++i) {
-    D[0][0][idx(i, 0)] = D[0][0][idx(i - 1, 0)] + 0.5 * (pd[idx(i, 0)] + pd[idx(i - 1, 0)]) * (X[i] - X[i - 1]);
-  }
-  for (size_t i = 0; i < nx; ++i)
-    for (size_t j = 1; j < ny; ++j)
-      D[0][0][idx(i, j)] = D[0][0][idx(i, j - 1)] + 0.5 * (pq[idx(i, j)] + pq[idx(i, j - 1)]) * (Y[j] - Y[j - 1]);
   for (size_t i = 0; i < nx; ++i) {
     for (size_t j = 0; j < ny; ++j) {
       D[2][0][idx(i, j)] = dx(pd, i, j);                                       // Ldd (even)
       D[0][2][idx(i, j)] = dy(pq, i, j, true);                                 // Lqq (even)
       D[1][1][idx(i, j)] = j == 0 ? 0.0 : 0.5 * (dy(pd, i, j, false) + dx(pq, i, j));   // Ldq (odd)
+    }
+  }
+  // Co-energy at the nodes: W' = int psi . di along id at iq = 0, then along
+  // iq. Trapezoid with the Euler-Maclaurin end correction
+  // -h^2/12 (f'(b) - f'(a)) (f' = the nodal inductances): fourth order, so
+  // the nodal W' agrees with the nodal flux and inductance to the same order.
+  for (size_t i = 1; i < nx; ++i) {
+    const double h = X[i] - X[i - 1];
+    D[0][0][idx(i, 0)] = D[0][0][idx(i - 1, 0)] + 0.5 * h * (pd[idx(i, 0)] + pd[idx(i - 1, 0)]) -
+                         h * h / 12.0 * (D[2][0][idx(i, 0)] - D[2][0][idx(i - 1, 0)]);
+  }
+  for (size_t i = 0; i < nx; ++i) {
+    for (size_t j = 1; j < ny; ++j) {
+      const double h = Y[j] - Y[j - 1];
+      D[0][0][idx(i, j)] = D[0][0][idx(i, j - 1)] + 0.5 * h * (pq[idx(i, j)] + pq[idx(i, j - 1)]) -
+                           h * h / 12.0 * (D[0][2][idx(i, j)] - D[0][2][idx(i, j - 1)]);
     }
   }
   for (size_t i = 0; i < nx; ++i) {
