@@ -1,5 +1,5 @@
 // fluxcal fit <recording-set | hf_results.csv> [--model auto|analytic|spline|splineR|poly|polyN]
-//             --out calibration.json [--json] [--serial S --pole-pairs P] 
+//             --out calibration.json [--svg PLOT.svg] [--json] [--serial S --pole-pairs P]
 // Identifies every waveform point (least squares), then fits the
 // flux-linkage surfaces jointly with hf_results and steady-state rows.
 #include <cstdio>
@@ -10,6 +10,8 @@
 #include "cli/args.h"
 #include "cli/command.h"
 #include "fitting/fit.h"
+#include "fitting/plot.h"
+#include "io/csv.h"
 #include "identification/identify.h"
 #include "nlohmann/json.hpp"
 
@@ -22,11 +24,11 @@ int Fail(const std::string& m, int code = 1) {
 }
 
 int RunFit(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, {"model", "out", "serial", "pole-pairs"}, {"json"});
+  auto args = ParseArgs(argv, {"model", "out", "serial", "pole-pairs", "svg"}, {"json"});
   if (!args.ok()) return Fail(std::string(args.status().message()), 2);
   if (args->positional.size() != 1 || !args->Get("out")) {
     return Fail("usage: fluxcal fit <recording-set | hf_results.csv> [--model auto|analytic|spline|splineR|poly|polyN] "
-                "--out calibration.json [--json]", 2);
+                "--out calibration.json [--svg PLOT.svg] [--json]", 2);
   }
   const std::string input = args->positional[0];
   fit::FitData data;
@@ -60,6 +62,12 @@ int RunFit(const std::vector<std::string>& argv) {
   if (!cal.ok()) return Fail(std::string(cal.status().message()));
   if (auto st = fit::SaveCalibrationFile(*args->Get("out"), *cal); !st.ok()) return Fail(std::string(st.message()));
   for (const auto& c : cal->summary.candidates) std::fprintf(stderr, "fit:   %s\n", c.c_str());
+  if (auto svg = args->Get("svg")) {
+    if (auto st = io::WriteFileAtomically(*svg, fit::PlotFitSvg(*cal, data)); !st.ok()) {
+      return Fail(std::string(st.message()));
+    }
+    std::fprintf(stderr, "fit: plot %s\n", svg->c_str());
+  }
   if (args->Has("json")) {
     nlohmann::json j = cal->ToJson();
     j["out"] = *args->Get("out");

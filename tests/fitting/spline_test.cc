@@ -7,6 +7,7 @@
 
 #include "fitting/fit.h"
 #include "fitting/flux_family.h"
+#include "fitting/plot.h"
 #include "gtest/gtest.h"
 #include "identification/identify.h"
 #include "nlohmann/json.hpp"
@@ -153,6 +154,19 @@ TEST(SplineFit, RecoversTruthOnBothMagneticsFamilies) {
     const auto a = cal->Flux(-130, 120), b = back->Flux(-130, 120);
     EXPECT_EQ(a.psi_d_wb, b.psi_d_wb);
     EXPECT_EQ(a.psi_q_wb, b.psi_q_wb);
+    // The fit plot: one dot per identified point in each panel, one curve
+    // per distinct iq (Ldd panel) and id (Lqq panel) level of the plan.
+    const FitData data = FitDataFromRecording(r->set, *ids);
+    const std::string svg = PlotFitSvg(*cal, data);
+    auto count = [&](const std::string& what) {
+      size_t n = 0;
+      for (size_t at = svg.find(what); at != std::string::npos; at = svg.find(what, at + 1)) ++n;
+      return n;
+    };
+    EXPECT_EQ(count("<circle"), 2 * data.inductances.size());
+    EXPECT_GE(count("<polyline"), 6u);
+    EXPECT_EQ(svg.rfind("<svg", 0), 0u);
+    EXPECT_NE(svg.find("</svg>"), std::string::npos);
     std::printf("spline fit (%s): %s, L RMS %.3f %%, worst psi %.3f %%\n", gridded ? "gridded map" : "analytic",
                 cal->family().Name().c_str(), 100 * rms, 100 * e_psi);
   }
