@@ -532,8 +532,13 @@ std::string PlotCurvesSvg(const sim::MagneticModel& m, const MachineLimits& lim,
   auto X = [&](double id) { return x0 + (id - id_min) / (id_max - id_min) * pw; };
   auto Y = [&](double iq) { return y0 + ph - (iq - iq_min) / (iq_max - iq_min) * ph; };
   std::string s = absl::StrFormat("<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"%g\" height=\"%g\" font-family=\"sans-serif\" font-size=\"11\">\n", W, H);
+  // Curves are clipped to the frame (MTPV runs on beyond -i_max).
+  s += absl::StrFormat("<defs><clipPath id=\"frame\"><rect x=\"%g\" y=\"%g\" width=\"%g\" height=\"%g\"/></clipPath></defs>\n",
+                       x0, y0, pw, ph);
   s += absl::StrFormat("<rect x=\"%g\" y=\"%g\" width=\"%g\" height=\"%g\" fill=\"white\" stroke=\"black\"/>\n", x0, y0, pw, ph);
-  s += absl::StrFormat("<text x=\"%g\" y=\"%g\">id [A]</text><text x=\"5\" y=\"%g\">iq [A]</text>\n", x0 + pw / 2, H - 5, y0 + ph / 2);
+  s += absl::StrFormat("<text x=\"%g\" y=\"%g\">id [A]</text>"
+                       "<text x=\"12\" y=\"%g\" transform=\"rotate(-90 12 %g)\" text-anchor=\"middle\">iq [A]</text>\n",
+                       x0 + pw / 2, H - 5, y0 + ph / 2, y0 + ph / 2);
   for (int k = 0; k <= 4; ++k) {
     const double id = id_min + (id_max - id_min) * k / 4, iq = iq_min + (iq_max - iq_min) * k / 4;
     s += absl::StrFormat("<text x=\"%g\" y=\"%g\">%.0f</text><text x=\"20\" y=\"%g\">%.0f</text>\n", X(id) - 10, y0 + ph + 14, id, Y(iq) + 4, iq);
@@ -543,13 +548,21 @@ std::string PlotCurvesSvg(const sim::MagneticModel& m, const MachineLimits& lim,
   for (int c = 1; c <= 6; ++c) {
     const double t = tmax * c / 6;
     std::string pts;
+    double lx = -1, ly = -1;   // the contour's last point inside the frame: its label goes there
     for (int k = 0; k <= 60; ++k) {
       const double id = id_min + (0 - id_min) * k / 60;
       double iq;
-      if (SolveIqForTorque(m, lim, id, t, 1.0, &iq) && iq <= iq_max) pts += absl::StrFormat("%.1f,%.1f ", X(id), Y(iq));
+      if (SolveIqForTorque(m, lim, id, t, 1.0, &iq) && iq <= iq_max) {
+        pts += absl::StrFormat("%.1f,%.1f ", X(id), Y(iq));
+        lx = X(id);
+        ly = Y(iq);
+      }
     }
-    s += absl::StrFormat("<polyline points=\"%s\" fill=\"none\" stroke=\"#999\"/>\n", pts);
-    s += absl::StrFormat("<text x=\"%g\" y=\"%g\" fill=\"#666\">%.1f N m</text>\n", X(-0.15 * lim.i_max_a), y0 + 12 * c, t);
+    s += absl::StrFormat("<polyline points=\"%s\" fill=\"none\" stroke=\"#999\" clip-path=\"url(#frame)\"/>\n", pts);
+    if (lx >= 0) {
+      s += absl::StrFormat("<text x=\"%.1f\" y=\"%.1f\" fill=\"#666\" text-anchor=\"end\">%.1f N m</text>\n", lx - 3,
+                           ly - 4, t);
+    }
   }
   std::string circ;
   for (int k = 0; k <= 90; ++k) {
@@ -563,7 +576,8 @@ std::string PlotCurvesSvg(const sim::MagneticModel& m, const MachineLimits& lim,
     const auto& iq = t.outputs[1].values;
     for (size_t k = 0; k < id.size(); ++k)
       if (iq[k] >= 0) pts += absl::StrFormat("%.1f,%.1f ", X(id[k]), Y(iq[k]));
-    s += absl::StrFormat("<polyline points=\"%s\" fill=\"none\" stroke=\"%s\" stroke-width=\"2\"/>\n", pts, color);
+    s += absl::StrFormat("<polyline points=\"%s\" fill=\"none\" stroke=\"%s\" stroke-width=\"2\" clip-path=\"url(#frame)\"/>\n",
+                         pts, color);
     s += absl::StrFormat("<text x=\"%g\" y=\"%g\" fill=\"%s\">%s</text>\n", x0 + 10, y0 + ph - (label[1] == 'T' && label[3] == 'V' ? 30 : 15), color, label);
   };
   curve(mtpa, "#c00", "MTPA");
@@ -577,24 +591,45 @@ std::string PlotMapSvg(const Table& fw, const std::string& output_name) {
   for (const auto& out : fw.outputs) if (out.name == output_name) o = &out;
   if (o == nullptr || fw.axes.size() != 2) return "";
   const size_t n0 = fw.axes[0].values.size(), n1 = fw.axes[1].values.size();
-  const double x0 = 60, y0 = 20, pw = 560, ph = 420;
+  const double x0 = 70, y0 = 30, pw = 540, ph = 400;
   double lo = *std::min_element(o->values.begin(), o->values.end());
   double hi = *std::max_element(o->values.begin(), o->values.end());
   if (hi <= lo) hi = lo + 1;
-  std::string s = "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"700\" height=\"480\" font-family=\"sans-serif\" font-size=\"11\">\n";
+  auto colour = [&](double v) {
+    const double u = std::clamp((v - lo) / (hi - lo), 0.0, 1.0);
+    return absl::StrFormat("rgb(%d,60,%d)", static_cast<int>(255 * u), static_cast<int>(255 * (1 - u)));
+  };
+  std::string s = absl::StrFormat(
+      "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"760\" height=\"500\" font-family=\"sans-serif\" "
+      "font-size=\"11\">\n<text x=\"%g\" y=\"18\" font-size=\"13\">%s [%s] over torque request and speed%s</text>\n",
+      x0, output_name, UnitOf(output_name), fw.serial.empty() ? "" : " (" + fw.serial + ")");
   const double cw = pw / n1, ch = ph / n0;
   for (size_t i = 0; i < n0; ++i) {
     for (size_t j = 0; j < n1; ++j) {
-      const double v = (o->values[i * n1 + j] - lo) / (hi - lo);
-      const int r = static_cast<int>(255 * v), b = static_cast<int>(255 * (1 - v));
-      s += absl::StrFormat("<rect x=\"%.2f\" y=\"%.2f\" width=\"%.2f\" height=\"%.2f\" fill=\"rgb(%d,60,%d)\"/>\n",
-                           x0 + j * cw, y0 + ph - (i + 1) * ch, cw + 0.3, ch + 0.3, r, b);
+      s += absl::StrFormat("<rect class=\"cell\" x=\"%.2f\" y=\"%.2f\" width=\"%.2f\" height=\"%.2f\" fill=\"%s\"/>\n",
+                           x0 + j * cw, y0 + ph - (i + 1) * ch, cw + 0.3, ch + 0.3, colour(o->values[i * n1 + j]));
     }
   }
-  s += absl::StrFormat("<text x=\"%g\" y=\"470\">speed [rpm] 0 .. %.0f</text>\n", x0 + pw / 2 - 60, fw.axes[1].values.back());
-  s += absl::StrFormat("<text x=\"2\" y=\"%g\">torque [N m]</text>\n", y0 + ph / 2);
-  s += absl::StrFormat("<text x=\"630\" y=\"30\">%s</text><text x=\"630\" y=\"45\">max %.1f</text><text x=\"630\" y=\"60\">min %.1f</text>\n",
-                       output_name, hi, lo);
+  // Axes: five ticks each, at cell centres.
+  for (int k = 0; k <= 4; ++k) {
+    const size_t j = (n1 - 1) * k / 4, i = (n0 - 1) * k / 4;
+    s += absl::StrFormat("<text x=\"%.1f\" y=\"%.1f\" text-anchor=\"middle\">%.0f</text>\n", x0 + (j + 0.5) * cw,
+                         y0 + ph + 14, fw.axes[1].values[j]);
+    s += absl::StrFormat("<text x=\"%.1f\" y=\"%.1f\" text-anchor=\"end\">%.1f</text>\n", x0 - 4,
+                         y0 + ph - (i + 0.5) * ch + 4, fw.axes[0].values[i]);
+  }
+  s += absl::StrFormat("<text x=\"%g\" y=\"%g\" text-anchor=\"middle\">speed [rpm]</text>\n", x0 + pw / 2, y0 + ph + 32);
+  s += absl::StrFormat("<text x=\"14\" y=\"%g\" transform=\"rotate(-90 14 %g)\" text-anchor=\"middle\">torque [N m]</text>\n",
+                       y0 + ph / 2, y0 + ph / 2);
+  // Colour bar.
+  const double bx = x0 + pw + 30, bw = 18;
+  for (int k = 0; k < 50; ++k) {
+    const double v = lo + (hi - lo) * (k + 0.5) / 50;
+    s += absl::StrFormat("<rect class=\"scale\" x=\"%.1f\" y=\"%.2f\" width=\"%.1f\" height=\"%.2f\" fill=\"%s\"/>\n", bx,
+                         y0 + ph - (k + 1) * ph / 50, bw, ph / 50 + 0.3, colour(v));
+  }
+  s += absl::StrFormat("<text x=\"%.1f\" y=\"%.1f\">%.1f</text><text x=\"%.1f\" y=\"%.1f\">%.1f</text>\n", bx + bw + 4,
+                       y0 + 10, hi, bx + bw + 4, y0 + ph, lo);
   s += "</svg>\n";
   return s;
 }
