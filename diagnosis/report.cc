@@ -108,48 +108,99 @@ std::string ToText(const DiagnosisReport& r) {
 }
 
 std::string ResidualMapSvg(const DiagnosisReport& r, bool after) {
-  // Normalised HF residual per standstill point over the (id, iq) plane.
-  const double x0 = 60, y0 = 30, w = 480, h = 400;
-  std::string s = "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"640\" height=\"480\" font-family=\"sans-serif\" font-size=\"11\">\n";
-  s += absl::StrFormat("<text x=\"60\" y=\"18\">%s: normalised residual %s (circle area ~ |z|; red = signal hf_current, blue = dc_voltage)</text>\n",
-                       r.serial, after ? "after" : "before");
-  s += absl::StrFormat("<rect x=\"%g\" y=\"%g\" width=\"%g\" height=\"%g\" fill=\"none\" stroke=\"black\"/>\n", x0, y0, w, h);
-  s += "<text x=\"270\" y=\"460\">id [A] (-110 .. 10)</text><text x=\"5\" y=\"230\">iq [A]</text>\n";
+  // One panel per standstill signal (HF phasors, held DC voltages): a cell
+  // per operating point on the (id, iq) grid, coloured by the normalised
+  // residual |z| (its RMS per real component, in sigma) and labelled with
+  // it. Green below 2 sigma, amber to 5, red above.
+  const char* signals[2] = {"hf_current", "dc_voltage"};
+  std::vector<double> ids, iqs;
   for (const auto& z : r.residuals) {
-    if (z.speed_rpm != 0 || (z.signal != "hf_current" && z.signal != "dc_voltage")) continue;
-    const double v = after ? z.after : z.before;
-    const double cx = x0 + (z.id_a + 110) / 120 * w + (z.signal == "dc_voltage" ? 8 : 0);
-    const double cy = y0 + h - (z.iq_a + 10) / 120 * h;
-    s += absl::StrFormat("<circle cx=\"%.1f\" cy=\"%.1f\" r=\"%.1f\" fill=\"%s\" fill-opacity=\"0.6\"><title>%s %s z=%.2f</title></circle>\n",
-                         cx, cy, std::min(30.0, 3 + 3 * std::sqrt(v)), z.signal == "dc_voltage" ? "#36c" : "#c33",
-                         z.point, z.signal, v);
+    if (z.speed_rpm != 0 || (z.signal != signals[0] && z.signal != signals[1])) continue;
+    ids.push_back(z.id_a);
+    iqs.push_back(z.iq_a);
+  }
+  auto levels = [](std::vector<double> v) {
+    std::sort(v.begin(), v.end());
+    std::vector<double> out;
+    for (double x : v) if (out.empty() || x - out.back() > 3.0) out.push_back(x);   // held to +-3 A
+    return out;
+  };
+  const auto lx = levels(ids), ly = levels(iqs);
+  auto nearest = [](const std::vector<double>& l, double v) {
+    size_t best = 0;
+    for (size_t k = 1; k < l.size(); ++k) if (std::abs(l[k] - v) < std::abs(l[best] - v)) best = k;
+    return best;
+  };
+  const double pw = 360, ph = 320, y0 = 50;
+  const double cw = lx.empty() ? pw : pw / lx.size(), ch = ly.empty() ? ph : ph / ly.size();
+  std::string s = absl::StrFormat(
+      "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"880\" height=\"440\" font-family=\"sans-serif\" "
+      "font-size=\"11\">\n<text x=\"60\" y=\"18\" font-size=\"13\">%s: normalised residual per standstill point, "
+      "%s the findings (|z| in sigma; green &lt; 2, amber &lt; 5, red &gt;= 5)</text>\n",
+      r.serial, after ? "after" : "before");
+  for (int p = 0; p < 2; ++p) {
+    const double x0 = 60 + p * 430;
+    s += absl::StrFormat("<text x=\"%.1f\" y=\"%.1f\" font-size=\"12\">%s</text>\n", x0, y0 - 8, signals[p]);
+    s += absl::StrFormat("<rect x=\"%.1f\" y=\"%.1f\" width=\"%.1f\" height=\"%.1f\" fill=\"#eee\" stroke=\"black\"/>\n",
+                         x0, y0, pw, ph);
+    for (size_t i = 0; i < lx.size(); ++i) {
+      s += absl::StrFormat("<text x=\"%.1f\" y=\"%.1f\" text-anchor=\"middle\">%.0f</text>\n", x0 + (i + 0.5) * cw,
+                           y0 + ph + 14, std::round(lx[i]) + 0.0);
+    }
+    for (size_t j = 0; j < ly.size(); ++j) {
+      s += absl::StrFormat("<text x=\"%.1f\" y=\"%.1f\" text-anchor=\"end\">%.0f</text>\n", x0 - 4,
+                           y0 + ph - (j + 0.5) * ch + 4, std::round(ly[j]) + 0.0);
+    }
+    s += absl::StrFormat("<text x=\"%.1f\" y=\"%.1f\" text-anchor=\"middle\">id [A]</text>\n", x0 + pw / 2, y0 + ph + 30);
+    s += absl::StrFormat("<text x=\"%.1f\" y=\"%.1f\" transform=\"rotate(-90 %.1f %.1f)\" text-anchor=\"middle\">iq [A]</text>\n",
+                         x0 - 36, y0 + ph / 2, x0 - 36, y0 + ph / 2);
+    for (const auto& z : r.residuals) {
+      if (z.speed_rpm != 0 || z.signal != signals[p]) continue;
+      const double v = after ? z.after : z.before;
+      const size_t i = nearest(lx, z.id_a), j = nearest(ly, z.iq_a);
+      const char* fill = v < 2 ? "#8c8" : (v < 5 ? "#fc6" : "#e55");
+      const double cx = x0 + i * cw, cy = y0 + ph - (j + 1) * ch;
+      s += absl::StrFormat(
+          "<rect class=\"point\" x=\"%.1f\" y=\"%.1f\" width=\"%.1f\" height=\"%.1f\" fill=\"%s\" stroke=\"white\">"
+          "<title>%s %s |z| = %.2f</title></rect>\n<text x=\"%.1f\" y=\"%.1f\" text-anchor=\"middle\">%.1f</text>\n",
+          cx, cy, cw, ch, fill, z.point, z.signal, v, cx + cw / 2, cy + ch / 2 + 4, v);
+    }
   }
   s += "</svg>\n";
   return s;
 }
 
 std::string SpectrumSvg(const DiagnosisReport& r) {
-  const double x0 = 60, y0 = 30, w = 560, h = 380;
+  const double x0 = 80, y0 = 30, w = 560, h = 380;
   double top = 1e-9;
   for (double v : r.spectrum_before_a) top = std::max(top, v);
   for (double v : r.spectrum_after_a) top = std::max(top, v);
-  std::string s = "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"660\" height=\"460\" font-family=\"sans-serif\" font-size=\"11\">\n";
-  s += absl::StrFormat("<text x=\"60\" y=\"18\">%s: spectrum of the replay residual (complex alpha-beta), red = nominal, "
-                       "blue = final; log scale, top %.3g A</text>\n", r.serial, top);
+  // Log axis over five decades below the next power of ten above the top.
+  constexpr int kDecades = 5;
+  const double hi = std::pow(10.0, std::ceil(std::log10(top))), lo = hi * std::pow(10.0, -kDecades);
+  std::string s = "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"760\" height=\"460\" font-family=\"sans-serif\" font-size=\"11\">\n";
+  s += absl::StrFormat("<text x=\"%g\" y=\"18\">%s: spectrum of the replay residual (complex alpha-beta); red = nominal "
+                       "model, blue = final model</text>\n", x0, r.serial);
   s += absl::StrFormat("<rect x=\"%g\" y=\"%g\" width=\"%g\" height=\"%g\" fill=\"none\" stroke=\"black\"/>\n", x0, y0, w, h);
+  auto y = [&](double v) { return y0 + h - h * std::log10(std::max(v, lo) / lo) / kDecades; };
+  for (int d = 0; d <= kDecades; ++d) {
+    const double v = lo * std::pow(10.0, d);
+    s += absl::StrFormat("<line x1=\"%g\" y1=\"%.1f\" x2=\"%g\" y2=\"%.1f\" stroke=\"#ddd\"/>"
+                         "<text x=\"%g\" y=\"%.1f\" text-anchor=\"end\">%.0e A</text>\n",
+                         x0, y(v), x0 + w, y(v), x0 - 4, y(v) + 4, v);
+  }
   const size_t n = r.spectrum_hz.size();
-  auto y = [&](double v) { return y0 + h - h * std::max(0.0, std::log10(std::max(v, top * 1e-4) / (top * 1e-4))) / 4.0; };
   for (size_t k = 0; k < n; ++k) {
     const double x = x0 + w * (k + 0.5) / n;
-    s += absl::StrFormat("<line x1=\"%.1f\" y1=\"%.1f\" x2=\"%.1f\" y2=\"%.1f\" stroke=\"#c33\" stroke-width=\"3\"/>\n",
-                         x - 1.5, y0 + h, x - 1.5, y(r.spectrum_before_a[k]));
-    s += absl::StrFormat("<line x1=\"%.1f\" y1=\"%.1f\" x2=\"%.1f\" y2=\"%.1f\" stroke=\"#36c\" stroke-width=\"3\"/>\n",
-                         x + 1.5, y0 + h, x + 1.5, y(r.spectrum_after_a[k]));
+    s += absl::StrFormat("<line x1=\"%.1f\" y1=\"%.1f\" x2=\"%.1f\" y2=\"%.1f\" stroke=\"#c33\" stroke-width=\"2.5\"/>\n",
+                         x - 1.3, y0 + h, x - 1.3, y(r.spectrum_before_a[k]));
+    s += absl::StrFormat("<line x1=\"%.1f\" y1=\"%.1f\" x2=\"%.1f\" y2=\"%.1f\" stroke=\"#36c\" stroke-width=\"2.5\"/>\n",
+                         x + 1.3, y0 + h, x + 1.3, y(r.spectrum_after_a[k]));
     if (static_cast<int>(r.spectrum_hz[k]) % 500 == 0) {
-      s += absl::StrFormat("<text x=\"%.1f\" y=\"%g\">%.0f</text>\n", x - 10, y0 + h + 14, r.spectrum_hz[k]);
+      s += absl::StrFormat("<text x=\"%.1f\" y=\"%g\" text-anchor=\"middle\">%.0f</text>\n", x, y0 + h + 14, r.spectrum_hz[k]);
     }
   }
-  s += "<text x=\"300\" y=\"450\">frequency [Hz]</text>\n</svg>\n";
+  s += absl::StrFormat("<text x=\"%g\" y=\"450\" text-anchor=\"middle\">frequency [Hz]</text>\n</svg>\n", x0 + w / 2);
   return s;
 }
 

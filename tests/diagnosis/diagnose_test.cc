@@ -251,6 +251,36 @@ TEST(Nominal, DeclaredUncompensatedDeadTimeIsNotAFinding) {
   EXPECT_TRUE(r->findings.empty());
 }
 
+// The plots: one labelled cell per standstill point and signal in the
+// residual maps, red (>= 5 sigma) before and none after for a concealed dead
+// time; one pair of bars per frequency bin in the spectrum.
+TEST(Plots, ResidualMapsAndSpectrum) {
+  sim::TwinConfig cfg;
+  cfg.seed = 42;
+  cfg.effects.dead_time_s = 2e-6;
+  auto sim = sim::Simulate(cfg, sim::DefaultPlan());
+  ASSERT_TRUE(sim.ok());
+  auto r = Diagnose(sim->set);
+  ASSERT_TRUE(r.ok());
+  auto count = [](const std::string& svg, const std::string& what) {
+    size_t n = 0;
+    for (size_t at = svg.find(what); at != std::string::npos; at = svg.find(what, at + 1)) ++n;
+    return n;
+  };
+  size_t standstill = 0;
+  for (const auto& z : r->residuals) {
+    if (z.speed_rpm == 0 && (z.signal == "hf_current" || z.signal == "dc_voltage")) ++standstill;
+  }
+  const std::string before = ResidualMapSvg(*r, false), after = ResidualMapSvg(*r, true);
+  EXPECT_EQ(count(before, "class=\"point\""), standstill);
+  EXPECT_EQ(count(after, "class=\"point\""), standstill);
+  EXPECT_GT(count(before, "#e55"), standstill / 4) << "the dead time's DC-voltage signature, red";
+  EXPECT_EQ(count(after, "#e55"), 0u) << "explained: nothing red after";
+  const std::string spectrum = SpectrumSvg(*r);
+  EXPECT_EQ(count(spectrum, "stroke=\"#c33\""), r->spectrum_hz.size());
+  EXPECT_EQ(count(spectrum, "stroke=\"#36c\""), r->spectrum_hz.size());
+}
+
 TEST(Table1, DifferentialInductanceFromPublishedData) {
   auto rows = ReadTable1(std::string(FLUXCAL_SOURCE_DIR) + "/data/paper_table1.csv");
   ASSERT_TRUE(rows.ok()) << rows.status();
