@@ -47,6 +47,9 @@ TEST(Cli, EndToEnd) {
   ASSERT_TRUE(fs::exists(set + "/manifest.json"));
   ASSERT_TRUE(fs::exists(set + ".truth.json"));
 
+  auto valid = Json(Fluxcal("validate " + set + " --json"));
+  EXPECT_TRUE(valid["valid"].get<bool>());
+  EXPECT_EQ(valid["points"], 40);
   auto id = Json(Fluxcal("identify " + set + " --json"));
   ASSERT_EQ(id["points"].size(), 40u);
   EXPECT_GT(id["points"][0]["ld_h"].get<double>(), 1e-4);
@@ -114,6 +117,12 @@ TEST(Cli, BadInputNamesTheFile) {
   EXPECT_EQ(WEXITSTATUS(st), 1);
   EXPECT_NE(out.find("manifest.json"), std::string::npos) << out;
   EXPECT_NE(out.find("field 'serial'"), std::string::npos) << out;
+  // validate: the same message as one JSON document, exit 1.
+  const auto v = Fluxcal("validate " + dir.string() + " --json");
+  EXPECT_EQ(v.code, 1);
+  const auto vj = nlohmann::json::parse(v.out);
+  EXPECT_FALSE(vj["valid"].get<bool>());
+  EXPECT_NE(vj["error"].get<std::string>().find("field 'serial'"), std::string::npos) << v.out;
   EXPECT_EQ(Fluxcal("nosuchcommand").code, 2);
   EXPECT_EQ(Fluxcal("identify " + dir.string() + " --bogus").code, 2);
   fs::remove_all(dir);
