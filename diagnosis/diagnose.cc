@@ -896,6 +896,8 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
   while (true) {
     int best = -1;
     FitOut best_fit;
+    // The current model's residuals, once per round (candidates compare to them).
+    const auto z_current = Residuals(m, current.p);
     for (size_t c = 0; c < cands.size(); ++c) {
       if (used[c]) continue;
       if (std::find(free.begin(), free.end(), cands[c].block) != free.end()) continue;
@@ -908,7 +910,7 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
       if (!f.ok) continue;
       const double dbic = f.bic - current.bic;
       if (dbic > -opt.bic_threshold || Significance(cands[c], f, m) < opt.parameter_sigma) continue;
-      if (!PracticallySignificant(Residuals(m, current.p), Residuals(m, f.p), current.rms, f.rms, opt)) continue;
+      if (!PracticallySignificant(z_current, Residuals(m, f.p), current.rms, f.rms, opt)) continue;
       if (best < 0 || f.bic < best_fit.bic) { best = static_cast<int>(c); best_fit = f; }
     }
     if (best < 0) break;

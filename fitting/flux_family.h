@@ -154,36 +154,37 @@ inline Basis1d EvalBasis(double x, double lo, double hi, int spans) {
   return b;
 }
 
-// psi and L of the spline family. p[0] = psi_pm, p[1 + i * NumEven() + e] =
-// coefficient of B_i(id) E_e(iq), E_e = B_e + B_{NumQ()-1-e}.
+// psi (when psi_d is given) and L (when ldd is given) of the spline family.
+// p[0] = psi_pm, p[1 + i * NumEven() + e] = coefficient of B_i(id) E_e(iq),
+// E_e = B_e + B_{NumQ()-1-e}. Only flux needs S's slope at the origin.
 template <typename T, typename P>
 void SplineFluxAndInductance(const SplineDomain& dom, double id, double iq, const P* p, T* psi_d,
                              T* psi_q, T* ldd, T* lqq, T* ldq) {
-  const Basis1d bd = EvalBasis(id, dom.id_lo_a, dom.id_hi_a, dom.spans);
-  const Basis1d bq = EvalBasis(iq, -dom.iq_hi_a, dom.iq_hi_a, 2 * dom.spans);
-  const Basis1d b0d = EvalBasis(0.0, dom.id_lo_a, dom.id_hi_a, dom.spans);
-  const Basis1d b0q = EvalBasis(0.0, -dom.iq_hi_a, dom.iq_hi_a, 2 * dom.spans);
   const int nq = dom.NumQ(), ne = dom.NumEven();
   auto even = [&](int j) { return j < ne ? j : nq - 1 - j; };
-  T sd(0.0), sq(0.0), sdd(0.0), sqq(0.0), sdq(0.0), slope0(0.0);
-  for (int a = 0; a <= kSplineDegree; ++a) {
-    for (int c = 0; c <= kSplineDegree; ++c) {
-      const P& k = p[1 + (bd.first + a) * ne + even(bq.first + c)];
-      sd += k * (bd.d1[a] * bq.v[c]);
-      sq += k * (bd.v[a] * bq.d1[c]);
-      sdd += k * (bd.d2[a] * bq.v[c]);
-      sqq += k * (bd.v[a] * bq.d2[c]);
-      sdq += k * (bd.d1[a] * bq.d1[c]);
-      slope0 += p[1 + (b0d.first + a) * ne + even(b0q.first + c)] * (b0d.d1[a] * b0q.v[c]);
-    }
-  }
+  // sum over the nonzero basis products of coefficient * f(bd, bq, a, c).
+  auto sum = [&](const Basis1d& bd, const Basis1d& bq, auto f) {
+    T s(0.0);
+    for (int a = 0; a <= kSplineDegree; ++a)
+      for (int c = 0; c <= kSplineDegree; ++c) s += p[1 + (bd.first + a) * ne + even(bq.first + c)] * f(a, c);
+    return s;
+  };
+  const Basis1d bd = EvalBasis(id, dom.id_lo_a, dom.id_hi_a, dom.spans);
+  const Basis1d bq = EvalBasis(iq, -dom.iq_hi_a, dom.iq_hi_a, 2 * dom.spans);
   // Coefficients scaled like the polynomial family's: W' in L0 I0^2 units.
   const double kW = kPolyL0H * kPolyI0A * kPolyI0A;
-  *psi_d = p[0] + kW * (sd - slope0);
-  *psi_q = kW * sq;
-  *ldd = kW * sdd;
-  *lqq = kW * sqq;
-  *ldq = kW * sdq;
+  if (psi_d != nullptr) {
+    const Basis1d b0d = EvalBasis(0.0, dom.id_lo_a, dom.id_hi_a, dom.spans);
+    const Basis1d b0q = EvalBasis(0.0, -dom.iq_hi_a, dom.iq_hi_a, 2 * dom.spans);
+    const T slope0 = sum(b0d, b0q, [&](int a, int c) { return b0d.d1[a] * b0q.v[c]; });
+    *psi_d = p[0] + kW * (sum(bd, bq, [&](int a, int c) { return bd.d1[a] * bq.v[c]; }) - slope0);
+    *psi_q = kW * sum(bd, bq, [&](int a, int c) { return bd.v[a] * bq.d1[c]; });
+  }
+  if (ldd != nullptr) {
+    *ldd = kW * sum(bd, bq, [&](int a, int c) { return bd.d2[a] * bq.v[c]; });
+    *lqq = kW * sum(bd, bq, [&](int a, int c) { return bd.v[a] * bq.d2[c]; });
+    *ldq = kW * sum(bd, bq, [&](int a, int c) { return bd.d1[a] * bq.d1[c]; });
+  }
 }
 
 // The scalar value of a double or a ceres::Jet (its .a member): the spline's
@@ -219,8 +220,7 @@ void FamilyFlux(const Family& f, const T& id, const T& iq, const P* p, T* psi_d,
   } else if (f.kind == Family::kPoly) {
     PolyFlux(f.degree, id, iq, p, psi_d, psi_q);
   } else {
-    T a, b, c;
-    SplineFluxAndInductance(f.spline, ScalarOf(id), ScalarOf(iq), p, psi_d, psi_q, &a, &b, &c);
+    SplineFluxAndInductance<T>(f.spline, ScalarOf(id), ScalarOf(iq), p, psi_d, psi_q, nullptr, nullptr, nullptr);
   }
 }
 
@@ -231,8 +231,7 @@ void FamilyInductance(const Family& f, const T& id, const T& iq, const P* p, T* 
   } else if (f.kind == Family::kPoly) {
     PolyInductance(f.degree, id, iq, p, ldd, lqq, ldq);
   } else {
-    T a, b;
-    SplineFluxAndInductance(f.spline, ScalarOf(id), ScalarOf(iq), p, &a, &b, ldd, lqq, ldq);
+    SplineFluxAndInductance<T>(f.spline, ScalarOf(id), ScalarOf(iq), p, nullptr, nullptr, ldd, lqq, ldq);
   }
 }
 

@@ -2,8 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
-#include <cstdlib>
 #include <complex>
 #include <deque>
 #include <fstream>
@@ -11,6 +9,8 @@
 #include <random>
 #include <set>
 #include <sstream>
+
+#include <Eigen/Dense>
 
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
@@ -751,6 +751,26 @@ absl::StatusOr<Plan> LoadPlanJson(const std::string& path) {
   return plan;
 }
 
+// The plant both replays drive: `model` as the magnetics, the effects the
+// caller wants included, the recording's drive.
+PlantModel ReplayPlant(const MagneticModel& model, double temperature_c, double rs_ohm, const Effects& e,
+                       double udc_v, double ts_s, double u_max_v) {
+  PlantModel m;
+  ToArray(SaturationParams{}, m.p);
+  m.map = &model;
+  m.map_temperature_c = temperature_c;
+  m.rs_ohm = rs_ohm;
+  m.r_hf_ohm = e.r_hf_ohm;
+  m.order = e.order;
+  m.amplitude_h = e.amplitude_h;
+  m.dead_time_s = e.dead_time_s;
+  m.dead_time_i_th_a = e.dead_time_i_th_a;
+  m.udc_v = udc_v;
+  m.ts_s = ts_s;
+  m.u_max_v = u_max_v;
+  return m;
+}
+
 absl::StatusOr<std::vector<ReplayPoint>> ReplayOpenLoop(const io::RecordingSet& set, const MagneticModel& model,
                                                         const ReplayOptions& opt) {
   const auto& mf = set.manifest;
@@ -766,19 +786,9 @@ absl::StatusOr<std::vector<ReplayPoint>> ReplayOpenLoop(const io::RecordingSet& 
   for (size_t p = 0; p < set.waveforms.size(); ++p) {
     const auto& w = set.waveforms[p];
     const size_t n = w.size();
-    PlantModel m;
-    ToArray(SaturationParams{}, m.p);
-    m.map = &model;
-    m.map_temperature_c = mf.points[p].temperature_c.value_or(25.0);
-    m.rs_ohm = opt.rs_ohm;
-    m.r_hf_ohm = opt.effects.r_hf_ohm;
-    m.order = opt.effects.order;
-    m.amplitude_h = opt.effects.amplitude_h;
-    m.dead_time_s = opt.effects.dead_time_s;
-    m.dead_time_i_th_a = opt.effects.dead_time_i_th_a;
-    m.udc_v = mf.drive.udc_v.value_or(50.0);
-    m.ts_s = ts;
-    m.u_max_v = 1e9;   // the recorded commands are already limited
+    // The recorded commands are already limited: no modulator limit.
+    const PlantModel m = ReplayPlant(model, mf.points[p].temperature_c.value_or(25.0), opt.rs_ohm, opt.effects,
+                                     mf.drive.udc_v.value_or(50.0), ts, 1e9);
     auto true_theta = [&](size_t k) { return w.theta_e_rad[k] - opt.effects.offset_rad; };
     // Unwrapped angle and its per-sample rate (the plant needs w_e).
     std::vector<double> th(n);
@@ -839,43 +849,23 @@ absl::StatusOr<std::vector<ReplayPoint>> ReplayOpenLoop(const io::RecordingSet& 
 // The injection phasor V of the recorded command u = V e^{j w_i t} + (c0 +
 // c1 tau) e^{j theta}: complex least squares over the record with the
 // fundamental (rotating with the recorded angle, drifting linearly) as two
-// more regressors. A plain projection on e^{j w_i t} would leak the
-// fundamental into V at speed (6 mrad of phase at 500 rpm, 0.05 A of HF
-// current). Normal equations solved by Gaussian elimination with pivoting.
+// more regressors, so the fundamental does not leak into V at speed. (What
+// the controller itself adds at w_i is not separable here; ReplayClosedLoop
+// refines the phase against its own simulated command.)
 std::complex<double> CommandedInjection(const io::Waveform& w, double wi, double ts) {
   using C = std::complex<double>;
   const size_t n = w.size();
   const double t_mid = 0.5 * static_cast<double>(n - 1) * ts;
-  C G[3][3] = {}, h[3] = {};
+  Eigen::Matrix3cd G = Eigen::Matrix3cd::Zero();
+  Eigen::Vector3cd h = Eigen::Vector3cd::Zero();
   for (size_t k = 0; k < n; ++k) {
     const double t = static_cast<double>(k) * ts;
     const C e = std::polar(1.0, w.theta_e_rad[k]);
-    const C b[3] = {std::polar(1.0, wi * t), e, (t - t_mid) / std::max(t_mid, ts) * e};
-    const C u(w.ualpha_ref_v[k], w.ubeta_ref_v[k]);
-    for (int i = 0; i < 3; ++i) {
-      for (int j = 0; j < 3; ++j) G[i][j] += std::conj(b[i]) * b[j];
-      h[i] += std::conj(b[i]) * u;
-    }
+    const Eigen::Vector3cd b(std::polar(1.0, wi * t), e, (t - t_mid) / std::max(t_mid, ts) * e);
+    G.noalias() += b.conjugate() * b.transpose();
+    h.noalias() += b.conjugate() * C(w.ualpha_ref_v[k], w.ubeta_ref_v[k]);
   }
-  for (int c = 0; c < 3; ++c) {
-    int piv = c;
-    for (int r = c + 1; r < 3; ++r) if (std::abs(G[r][c]) > std::abs(G[piv][c])) piv = r;
-    std::swap(G[c], G[piv]);
-    std::swap(h[c], h[piv]);
-    if (std::abs(G[c][c]) < 1e-300) continue;
-    for (int r = c + 1; r < 3; ++r) {
-      const C f = G[r][c] / G[c][c];
-      for (int j = c; j < 3; ++j) G[r][j] -= f * G[c][j];
-      h[r] -= f * h[c];
-    }
-  }
-  C x[3];
-  for (int c = 2; c >= 0; --c) {
-    C acc = h[c];
-    for (int j = c + 1; j < 3; ++j) acc -= G[c][j] * x[j];
-    x[c] = std::abs(G[c][c]) < 1e-300 ? C(0.0) : acc / G[c][c];
-  }
-  return x[0];
+  return G.ldlt().solve(h)(0);
 }
 
 absl::StatusOr<std::vector<ReplayPoint>> ReplayClosedLoop(const io::RecordingSet& set, const MagneticModel& model,
@@ -912,19 +902,8 @@ absl::StatusOr<std::vector<ReplayPoint>> ReplayClosedLoop(const io::RecordingSet
     const auto& pt = mf.points[p];
     const size_t n = w.size();
     if (n < 3) return absl::InvalidArgumentError("replay: too few samples");
-    PlantModel m;
-    ToArray(SaturationParams{}, m.p);
-    m.map = &model;
-    m.map_temperature_c = pt.temperature_c.value_or(25.0);
-    m.rs_ohm = opt.rs_ohm;
-    m.r_hf_ohm = opt.effects.r_hf_ohm;
-    m.order = opt.effects.order;
-    m.amplitude_h = opt.effects.amplitude_h;
-    m.dead_time_s = opt.effects.dead_time_s;
-    m.dead_time_i_th_a = opt.effects.dead_time_i_th_a;
-    m.udc_v = cfg.drive.udc_v;
-    m.ts_s = ts;
-    m.u_max_v = cfg.drive.udc_v / kSqrt3;
+    const PlantModel m = ReplayPlant(model, pt.temperature_c.value_or(25.0), opt.rs_ohm, opt.effects,
+                                     cfg.drive.udc_v, ts, cfg.drive.udc_v / kSqrt3);
     // Align the run's record window with the recording: the plant's angle
     // follows the recorded one less the offset effect, and the
     // injection has the recorded phase at its first sample.
