@@ -32,7 +32,7 @@ int RunDiagnose(const std::vector<std::string>& argv) {
       std::cout << nlohmann::json{{"finding", r.finding}, {"rms_before", r.rms_before}, {"rms_after", r.rms_after},
                                   {"trend_slope_per_a", r.trend_slope_per_a}, {"trend_sigma", r.trend_sigma},
                                   {"lq_app_from_hf_h", r.lq_app_from_hf_h}}
-                       .dump(2)
+                       .dump(2, ' ', false, nlohmann::json::error_handler_t::replace)
                 << "\n";
     } else {
       std::printf("Paper Table 1: HF Lq vs steady-state Lq: relative mismatch grows with iq (%.3g %%/A, %.1f sigma).\n"
@@ -67,7 +67,7 @@ int RunDiagnose(const std::vector<std::string>& argv) {
     (void)io::WriteFileAtomically(*dir + "/replay_spectrum.svg", diag::SpectrumSvg(*rep));
     std::fprintf(stderr, "diagnose: plots in %s\n", dir->c_str());
   }
-  if (args->Has("json")) std::cout << diag::ToJson(*rep).dump(2) << "\n";
+  if (args->Has("json")) std::cout << diag::ToJson(*rep).dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
   else std::cout << diag::ToText(*rep);
   return 0;
 }

@@ -115,7 +115,7 @@ int RunEol(const std::vector<std::string>& argv) {
     }
   }
   if (args->Has("json")) {
-    std::cout << out.dump(2) << "\n";
+    std::cout << out.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
   } else {
     std::printf("%s: calibration v%d (%s), verdict %s, psi_pm %.5g Wb, fit rms %.3f %%\n", serial.c_str(),
                 fit.calibration().version(), fit.calibration().model().c_str(), fit.calibration().verdict().c_str(),
@@ -152,7 +152,7 @@ int RunList(const std::vector<std::string>& argv) {
     token = resp.next_page_token();
   } while (!token.empty());
   if (args->Has("json")) {
-    std::cout << nlohmann::json{{"motors", all}}.dump(2) << "\n";
+    std::cout << nlohmann::json{{"motors", all}}.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
   } else {
     std::printf("%-24s %7s %5s  %-20s %s\n", "serial", "version", "runs", "updated", "verdict");
     for (const auto& m : all) {
@@ -183,7 +183,7 @@ int RunHistory(const std::vector<std::string>& argv) {
                   {"version", e.version()}, {"detail", e.detail()}});
   }
   if (args->Has("json")) {
-    std::cout << nlohmann::json{{"serial", resp.serial()}, {"events", ev}}.dump(2) << "\n";
+    std::cout << nlohmann::json{{"serial", resp.serial()}, {"events", ev}}.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
   } else {
     for (const auto& e : ev) {
       std::printf("%s  %-12s run %-5lld v%-3d %s\n", e["created_utc"].get<std::string>().c_str(),
@@ -217,7 +217,7 @@ int RunFleet(const std::vector<std::string>& argv) {
                    {"outliers", std::vector<std::string>(p.outliers().begin(), p.outliers().end())}});
   }
   if (args->Has("json")) {
-    std::cout << nlohmann::json{{"points", pts}}.dump(2) << "\n";
+    std::cout << nlohmann::json{{"points", pts}}.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
   } else {
     for (const auto& p : pts) {
       std::printf("(%6.1f, %6.1f) A: %d serials, Ldd %.4f +- %.4f mH, Lqq %.4f +- %.4f mH, torque %.3f +- %.3f N m, outliers %s\n",

@@ -93,7 +93,7 @@ int RunExport(const std::vector<std::string>& argv) {
                                 {"serial", spec.serial}, {"calibration_version", spec.calibration_version},
                                 {"rows", table->clamped.size()}, {"clamped_rows", clamped},
                                 {"crc32", crc}, {"sha256", out->sha256}, {"bytes", out->bytes.size()}}
-                     .dump(2)
+                     .dump(2, ' ', false, nlohmann::json::error_handler_t::replace)
               << "\n";
   } else {
     std::printf("%s: %s table, %zu cells (%zu clamped at limits), crc32 %s sha256 %s\n",

@@ -71,7 +71,7 @@ int RunFit(const std::vector<std::string>& argv) {
   if (args->Has("json")) {
     nlohmann::json j = cal->ToJson();
     j["out"] = *args->Get("out");
-    std::cout << j.dump(2) << "\n";
+    std::cout << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
   } else {
     std::printf("serial %s: model %s, %d observations, rms %.3f %%, psi_pm %.6g Wb -> %s\n",
                 cal->serial().c_str(), cal->family().Name().c_str(), cal->summary.observations,

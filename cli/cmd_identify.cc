@@ -69,7 +69,7 @@ int RunIdentify(const std::vector<std::string>& argv) {
       }
       j["points"].push_back(p);
     }
-    std::cout << j.dump(2) << "\n";
+    std::cout << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
     return 0;
   }
   // CSV is the default human/machine form (--csv accepted for clarity).

@@ -76,7 +76,7 @@ int RunQueryLocal(const std::vector<std::string>& argv) {
         if (args->Has("json")) arr.push_back(ToJson(id, iq, p)); else csv += CsvRow(id, iq, p);
       }
     }
-    if (args->Has("json")) std::cout << nlohmann::json{{"serial", cal->serial()}, {"points", arr}}.dump(2) << "\n";
+    if (args->Has("json")) std::cout << nlohmann::json{{"serial", cal->serial()}, {"points", arr}}.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
     else std::cout << csv;
     return 0;
   }
@@ -87,7 +87,7 @@ int RunQueryLocal(const std::vector<std::string>& argv) {
   }
   const auto p = cal->Predict(**id, **iq);
   if (args->Has("json")) {
-    std::cout << ToJson(**id, **iq, p).dump(2) << "\n";
+    std::cout << ToJson(**id, **iq, p).dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
   } else if (args->Has("csv")) {
     std::cout << kCsvHeader << CsvRow(**id, **iq, p);
   } else {

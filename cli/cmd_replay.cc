@@ -89,7 +89,7 @@ int RunReplay(const std::vector<std::string>& argv) {
       j["controller"] = {{"bandwidth_hz", co.control.bandwidth_hz}, {"ld_nominal_h", co.control.ld_nominal_h},
                          {"lq_nominal_h", co.control.lq_nominal_h}, {"settle_s", co.settle_s}};
     }
-    std::printf("%s\n", j.dump(2).c_str());
+    std::printf("%s\n", j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace).c_str());
     return 0;
   }
   std::printf("%-8s %9s %9s %9s %14s\n", "point", "id_ref_a", "iq_ref_a", "speed_rpm", "residual_rms_a");

@@ -73,7 +73,7 @@ int RunSimulate(const std::vector<std::string>& argv) {
                         {"points", plan.points.size()}, {"steady_state_rows", plan.steady_state.size()},
                         {"effects", sim::ActiveEffectNames(cfg.effects)}, {"seconds", secs},
                         {"clipped", res->clipped}};
-    std::cout << j.dump(2) << "\n";
+    std::cout << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
   } else {
     std::cout << dir << "\n" << truth << "\n";
   }

@@ -26,7 +26,7 @@ int RunValidate(const std::vector<std::string>& argv) {
   if (!set.ok()) {
     std::fprintf(stderr, "fluxcal validate: %s\n", std::string(set.status().message()).c_str());
     if (json) {
-      std::printf("%s\n", nlohmann::json{{"valid", false}, {"error", std::string(set.status().message())}}.dump(2).c_str());
+      std::printf("%s\n", nlohmann::json{{"valid", false}, {"error", std::string(set.status().message())}}.dump(2, ' ', false, nlohmann::json::error_handler_t::replace).c_str());
     }
     return 1;
   }
@@ -52,7 +52,7 @@ int RunValidate(const std::vector<std::string>& argv) {
                       {"steady_state_rows", set->steady_state.size()},
                       {"hf_results_rows", set->hf_results.size()}};
   if (json) {
-    std::printf("%s\n", j.dump(2).c_str());
+    std::printf("%s\n", j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace).c_str());
   } else {
     std::printf("%s: valid %s set, serial %s: %zu points (%zu rotating), %zu samples at %g Hz, "
                 "injection %g Hz, %zu steady-state rows, %zu hf_results rows\n",

@@ -72,7 +72,7 @@ int RunRemoteQuery(const std::vector<std::string>& argv) {
                                 {"psi_d_wb_std", v.psi_d_wb_std()}, {"ldd_h_std", v.ldd_h_std()},
                                 {"lqq_h_std", v.lqq_h_std()}, {"torque_nm_std", v.torque_nm_std()},
                                 {"extrapolated", v.extrapolated()}}
-                     .dump(2)
+                     .dump(2, ' ', false, nlohmann::json::error_handler_t::replace)
               << "\n";
   } else {
     std::printf("serial %s v%d at id = %g A, iq = %g A: psi_d %.6g Wb, psi_q %.6g Wb, Ldd %.5g mH, Lqq %.5g mH, "
@@ -124,7 +124,7 @@ int RunRemoteExport(const std::vector<std::string>& argv) {
                                 {"table", req.table()}, {"format", req.format()}, {"crc32", resp.crc32()},
                                 {"sha256", resp.sha256()}, {"clamped_cells", resp.clamped_cells()},
                                 {"bytes", resp.data().size()}}
-                     .dump(2)
+                     .dump(2, ' ', false, nlohmann::json::error_handler_t::replace)
               << "\n";
   } else {
     std::printf("%s: %s v%d %s table (%s), crc32 %s sha256 %s\n", args->Get("out")->c_str(), resp.serial().c_str(),

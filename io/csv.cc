@@ -10,6 +10,7 @@
 #include <system_error>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 
 namespace fluxcal::io {
 namespace {
@@ -20,9 +21,10 @@ std::string_view Trim(std::string_view s) {
   return s;
 }
 
+// A cell or header echoed in a message: at most 40 bytes, escaped.
 std::string Shorten(std::string_view s) {
-  if (s.size() <= 40) return std::string(s);
-  return absl::StrCat(absl::string_view(s.data(), 37), "...");
+  if (s.size() <= 40) return Printable(s);
+  return absl::StrCat(Printable(s.substr(0, 37)), "...");
 }
 
 }  // namespace
@@ -168,6 +170,43 @@ absl::StatusOr<CsvTable> ParseNumericCsv(std::string_view text,
         absl::StrCat(display_path, ":1: field '", spec[0].name, "': empty file, no header"));
   }
   return table;
+}
+
+std::string Printable(std::string_view text) {
+  // Keeps printable ASCII and well-formed UTF-8 multi-byte sequences (RFC
+  // 3629 ranges, no overlongs or surrogates); every other byte becomes \xNN,
+  // so that messages are valid UTF-8 for JSON and cannot carry control
+  // characters into logs or metadata.
+  std::string out;
+  out.reserve(text.size());
+  const auto* s = reinterpret_cast<const unsigned char*>(text.data());
+  const size_t n = text.size();
+  for (size_t i = 0; i < n;) {
+    const unsigned char c = s[i];
+    if (c >= 0x20 && c < 0x7f) {
+      out.push_back(static_cast<char>(c));
+      ++i;
+      continue;
+    }
+    size_t len = 0;
+    unsigned char lo = 0x80, hi = 0xbf;
+    if (c >= 0xc2 && c <= 0xdf) len = 2;
+    else if (c >= 0xe0 && c <= 0xef) { len = 3; if (c == 0xe0) lo = 0xa0; if (c == 0xed) hi = 0x9f; }
+    else if (c >= 0xf0 && c <= 0xf4) { len = 4; if (c == 0xf0) lo = 0x90; if (c == 0xf4) hi = 0x8f; }
+    bool ok = len > 0 && i + len <= n;
+    for (size_t k = 1; ok && k < len; ++k) {
+      const unsigned char b = s[i + k];
+      ok = k == 1 ? (b >= lo && b <= hi) : (b >= 0x80 && b <= 0xbf);
+    }
+    if (ok) {
+      out.append(text.substr(i, len));
+      i += len;
+    } else {
+      absl::StrAppend(&out, absl::StrFormat("\\x%02x", c));
+      ++i;
+    }
+  }
+  return out;
 }
 
 }  // namespace fluxcal::io

@@ -29,6 +29,10 @@ absl::StatusOr<CsvTable> ParseNumericCsv(std::string_view text,
                                          const std::string& display_path,
                                          const std::vector<CsvColumnSpec>& spec);
 
+// `text` made safe to echo in a message, a log line or JSON: printable ASCII
+// and well-formed UTF-8 are kept, every other byte becomes \xNN.
+std::string Printable(std::string_view text);
+
 // Reads a whole file. NotFound names the path.
 absl::StatusOr<std::string> ReadFileToString(const std::string& path);
 

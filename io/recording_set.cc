@@ -107,7 +107,12 @@ absl::StatusOr<Manifest> ParseManifest(const ManifestCtx& ctx) {
     const size_t line = 1 + static_cast<size_t>(
         std::count(ctx.text.begin(), ctx.text.begin() + off, '\n'));
     return absl::InvalidArgumentError(absl::StrCat(
-        ctx.path, ":", line, ": field '(json)': syntax error: ", e.what()));
+        ctx.path, ":", line, ": field '(json)': syntax error: ", Printable(e.what())));
+  } catch (const json::exception& e) {
+    // out_of_range 406: a number that overflows a double (1e999, a
+    // 400-digit integer). The parser does not say where; the message does.
+    return absl::InvalidArgumentError(absl::StrCat(
+        ctx.path, ":1: field '(json)': ", Printable(e.what())));
   }
   if (!j.is_object()) return ctx.Error("(root)", "expected a JSON object", 1);
 
@@ -116,14 +121,14 @@ absl::StatusOr<Manifest> ParseManifest(const ManifestCtx& ctx) {
   auto fmt = GetString(ctx, j, "format", "format", true, &present, 1);
   if (!fmt.ok()) return fmt.status();
   if (*fmt != kRecordingFormatV1) {
-    return ctx.Error("format", absl::StrCat("unknown format version '", *fmt,
+    return ctx.Error("format", absl::StrCat("unknown format version '", Printable(*fmt),
                                             "' (supported: ", kRecordingFormatV1, ")"));
   }
   m.format = *fmt;
   auto serial = GetString(ctx, j, "serial", "serial", true, &present, 1);
   if (!serial.ok()) return serial.status();
   if (!IsValidSerial(*serial)) {
-    return ctx.Error("serial", absl::StrCat("illegal serial '", *serial,
+    return ctx.Error("serial", absl::StrCat("illegal serial '", Printable(*serial),
                                             "' (1 to 64 characters of A-Z a-z 0-9 - _ .)"));
   }
   m.serial = *serial;
@@ -213,7 +218,7 @@ absl::StatusOr<Manifest> ParseManifest(const ManifestCtx& ctx) {
     if (!type.ok()) return type.status();
     if (*type != "rotating") {
       return ctx.Error("injection.type",
-                       absl::StrCat("unsupported injection type '", *type, "' (supported: rotating)"));
+                       absl::StrCat("unsupported injection type '", Printable(*type), "' (supported: rotating)"));
     }
     inj.type = *type;
     auto amp = GetNumber(ctx, *iit, "amplitude_v", "injection.amplitude_v", true, 0, &present, hint);
@@ -250,17 +255,17 @@ absl::StatusOr<Manifest> ParseManifest(const ManifestCtx& ctx) {
       auto id = GetString(ctx, p, "id", base + ".id", true, &present, line);
       if (!id.ok()) return id.status();
       if (id->empty() || !IsValidSerial(*id)) {
-        return ctx.Error(base + ".id", absl::StrCat("illegal point id '", *id, "'"), line);
+        return ctx.Error(base + ".id", absl::StrCat("illegal point id '", Printable(*id), "'"), line);
       }
       if (!ids.insert(*id).second) {
-        return ctx.Error(base + ".id", absl::StrCat("duplicate point id '", *id, "'"), line);
+        return ctx.Error(base + ".id", absl::StrCat("duplicate point id '", Printable(*id), "'"), line);
       }
       ps.id = *id;
       auto file = GetString(ctx, p, "file", base + ".file", true, &present, line);
       if (!file.ok()) return file.status();
       if (!IsSafeRelativePath(*file)) {
         return ctx.Error(base + ".file",
-                         absl::StrCat("path '", *file, "' must be relative and inside the set"), line);
+                         absl::StrCat("path '", Printable(*file), "' must be relative and inside the set"), line);
       }
       ps.file = *file;
       auto idr = GetNumber(ctx, p, "id_ref_a", base + ".id_ref_a", true, 0, &present, line);
@@ -284,7 +289,7 @@ absl::StatusOr<Manifest> ParseManifest(const ManifestCtx& ctx) {
     if (!v.ok()) return v.status();
     if (present) {
       if (!IsSafeRelativePath(*v)) {
-        return ctx.Error(key, absl::StrCat("path '", *v, "' must be relative and inside the set"));
+        return ctx.Error(key, absl::StrCat("path '", Printable(*v), "' must be relative and inside the set"));
       }
       (std::string(key) == "steady_state" ? m.steady_state : m.hf_results) = *v;
     }
@@ -315,11 +320,9 @@ std::optional<double> Opt(double v) {
   return std::isnan(v) ? std::nullopt : std::optional<double>(v);
 }
 
-absl::StatusOr<Waveform> ReadWaveform(const std::string& path, const std::string& display,
+absl::StatusOr<Waveform> ReadWaveform(std::string_view text, const std::string& display,
                                       const Manifest& m) {
-  auto text = ReadFileToString(path);
-  if (!text.ok()) return absl::NotFoundError(absl::StrCat(display, ": referenced file not found"));
-  auto table = ParseNumericCsv(*text, display, WaveformSpec());
+  auto table = ParseNumericCsv(text, display, WaveformSpec());
   if (!table.ok()) return table.status();
   Waveform w;
   w.t_s = std::move(table->columns[0]);
@@ -402,10 +405,61 @@ absl::StatusOr<Manifest> ReadManifest(const std::string& manifest_path) {
   return ParseManifest(ctx);
 }
 
-absl::StatusOr<std::vector<SteadyStateRow>> ReadSteadyStateCsv(const std::string& path) {
-  auto text = ReadFileToString(path);
-  if (!text.ok()) return absl::NotFoundError(absl::StrCat(path, ": referenced file not found"));
-  auto t = ParseNumericCsv(*text, path, SteadyStateSpec());
+namespace {
+
+// Where a set's files come from: a directory on disk, or names and contents
+// held in memory (a set received over the network is never written to disk).
+class SetSource {
+ public:
+  virtual ~SetSource() = default;
+  // Contents of the file `rel` (relative to the set root), nullptr when it is
+  // absent. The pointer stays valid until the next call.
+  virtual const std::string* Read(const std::string& rel) = 0;
+  // The name used in messages for `rel`.
+  virtual std::string Display(const std::string& rel) const = 0;
+};
+
+class DirSource final : public SetSource {
+ public:
+  explicit DirSource(fs::path root) : root_(std::move(root)) {}
+  const std::string* Read(const std::string& rel) override {
+    std::error_code ec;
+    const fs::path p = root_ / rel;
+    if (!fs::is_regular_file(p, ec)) return nullptr;
+    auto text = ReadFileToString(p.string());
+    if (!text.ok()) return nullptr;
+    buf_ = std::move(*text);
+    return &buf_;
+  }
+  std::string Display(const std::string& rel) const override { return (root_ / rel).string(); }
+
+ private:
+  fs::path root_;
+  std::string buf_;
+};
+
+class MemorySource final : public SetSource {
+ public:
+  MemorySource(const RecordingFiles& files, std::string display_root)
+      : files_(files), root_(std::move(display_root)) {}
+  const std::string* Read(const std::string& rel) override {
+    // Manifest references are compared after lexical normalisation
+    // ("./points/p0.csv" names "points/p0.csv"); the stored names are
+    // already canonical (ValidateRecordingFileName).
+    auto it = files_.find(fs::path(rel).lexically_normal().generic_string());
+    return it == files_.end() ? nullptr : &it->second;
+  }
+  std::string Display(const std::string& rel) const override {
+    return root_.empty() ? rel : absl::StrCat(root_, "/", rel);
+  }
+
+ private:
+  const RecordingFiles& files_;
+  std::string root_;
+};
+
+absl::StatusOr<std::vector<SteadyStateRow>> ParseSteadyState(std::string_view text, const std::string& path) {
+  auto t = ParseNumericCsv(text, path, SteadyStateSpec());
   if (!t.ok()) return t.status();
   std::vector<SteadyStateRow> rows(t->rows);
   for (size_t r = 0; r < t->rows; ++r) {
@@ -421,10 +475,8 @@ absl::StatusOr<std::vector<SteadyStateRow>> ReadSteadyStateCsv(const std::string
   return rows;
 }
 
-absl::StatusOr<std::vector<HfResultRow>> ReadHfResultsCsv(const std::string& path) {
-  auto text = ReadFileToString(path);
-  if (!text.ok()) return absl::NotFoundError(absl::StrCat(path, ": referenced file not found"));
-  auto t = ParseNumericCsv(*text, path, HfResultsSpec());
+absl::StatusOr<std::vector<HfResultRow>> ParseHfResults(std::string_view text, const std::string& path) {
+  auto t = ParseNumericCsv(text, path, HfResultsSpec());
   if (!t.ok()) return t.status();
   std::vector<HfResultRow> rows(t->rows);
   for (size_t r = 0; r < t->rows; ++r) {
@@ -446,52 +498,44 @@ absl::StatusOr<std::vector<HfResultRow>> ReadHfResultsCsv(const std::string& pat
   return rows;
 }
 
-absl::StatusOr<RecordingSet> ReadRecordingSet(const std::string& dir) {
+absl::StatusOr<RecordingSet> ReadSet(SetSource& src, const std::string& root_dir) {
   RecordingSet set;
-  set.root_dir = dir;
-  const fs::path root(dir);
-  std::error_code ec;
-  if (!fs::is_directory(root, ec)) {
-    return absl::NotFoundError(absl::StrCat(dir, ": not a directory"));
+  set.root_dir = root_dir;
+  const std::string manifest_path = src.Display("manifest.json");
+  const std::string* mtext = src.Read("manifest.json");
+  if (mtext == nullptr) {
+    return absl::NotFoundError(absl::StrCat(manifest_path, ":1: field '(file)': manifest not found"));
   }
-  const std::string manifest_path = (root / "manifest.json").string();
-  auto m = ReadManifest(manifest_path);
+  ManifestCtx ctx{manifest_path, *mtext};
+  auto m = ParseManifest(ctx);
   if (!m.ok()) return m.status();
   set.manifest = std::move(*m);
   const Manifest& mf = set.manifest;
+  auto missing = [&](const std::string& field, const std::string& key, const std::string& file) {
+    return absl::NotFoundError(absl::StrCat(manifest_path, ":", LineOfKey(ctx.text, key), ": field '", field,
+                                            "': referenced file '", Printable(file), "' not found"));
+  };
   set.waveforms.reserve(mf.points.size());
   for (size_t k = 0; k < mf.points.size(); ++k) {
-    const std::string display = (root / mf.points[k].file).string();
-    if (!fs::exists(display, ec)) {
-      return absl::NotFoundError(absl::StrCat(
-          manifest_path, ":", LineOfKey(*ReadFileToString(manifest_path), mf.points[k].file),
-          ": field 'points[", k, "].file': referenced file '", mf.points[k].file, "' not found"));
+    const std::string* text = src.Read(mf.points[k].file);
+    if (text == nullptr) {
+      return missing(absl::StrCat("points[", k, "].file"), mf.points[k].file, mf.points[k].file);
     }
-    auto w = ReadWaveform(display, display, mf);
+    auto w = ReadWaveform(*text, src.Display(mf.points[k].file), mf);
     if (!w.ok()) return w.status();
     set.waveforms.push_back(std::move(*w));
   }
   if (mf.steady_state) {
-    const std::string p = (root / *mf.steady_state).string();
-    if (!fs::exists(p, ec)) {
-      return absl::NotFoundError(absl::StrCat(manifest_path, ":",
-                                              LineOfKey(*ReadFileToString(manifest_path), "steady_state"),
-                                              ": field 'steady_state': referenced file '",
-                                              *mf.steady_state, "' not found"));
-    }
-    auto rows = ReadSteadyStateCsv(p);
+    const std::string* text = src.Read(*mf.steady_state);
+    if (text == nullptr) return missing("steady_state", "steady_state", *mf.steady_state);
+    auto rows = ParseSteadyState(*text, src.Display(*mf.steady_state));
     if (!rows.ok()) return rows.status();
     set.steady_state = std::move(*rows);
   }
   if (mf.hf_results) {
-    const std::string p = (root / *mf.hf_results).string();
-    if (!fs::exists(p, ec)) {
-      return absl::NotFoundError(absl::StrCat(manifest_path, ":",
-                                              LineOfKey(*ReadFileToString(manifest_path), "hf_results"),
-                                              ": field 'hf_results': referenced file '",
-                                              *mf.hf_results, "' not found"));
-    }
-    auto rows = ReadHfResultsCsv(p);
+    const std::string* text = src.Read(*mf.hf_results);
+    if (text == nullptr) return missing("hf_results", "hf_results", *mf.hf_results);
+    auto rows = ParseHfResults(*text, src.Display(*mf.hf_results));
     if (!rows.ok()) return rows.status();
     set.hf_results = std::move(*rows);
   }
@@ -501,6 +545,71 @@ absl::StatusOr<RecordingSet> ReadRecordingSet(const std::string& dir) {
   }
   return set;
 }
+
+}  // namespace
+
+absl::StatusOr<std::vector<SteadyStateRow>> ReadSteadyStateCsv(const std::string& path) {
+  auto text = ReadFileToString(path);
+  if (!text.ok()) return absl::NotFoundError(absl::StrCat(path, ": referenced file not found"));
+  return ParseSteadyState(*text, path);
+}
+
+absl::StatusOr<std::vector<HfResultRow>> ReadHfResultsCsv(const std::string& path) {
+  auto text = ReadFileToString(path);
+  if (!text.ok()) return absl::NotFoundError(absl::StrCat(path, ": referenced file not found"));
+  return ParseHfResults(*text, path);
+}
+
+absl::StatusOr<RecordingSet> ReadRecordingSet(const std::string& dir) {
+  std::error_code ec;
+  if (!fs::is_directory(fs::path(dir), ec)) {
+    return absl::NotFoundError(absl::StrCat(dir, ": not a directory"));
+  }
+  DirSource src{fs::path(dir)};
+  return ReadSet(src, dir);
+}
+
+absl::StatusOr<RecordingSet> ReadRecordingSetFromFiles(const RecordingFiles& files,
+                                                       const std::string& display_root) {
+  for (const auto& [name, data] : files) {
+    if (auto s = ValidateRecordingFileName(name); !s.ok()) return s;
+  }
+  MemorySource src(files, display_root);
+  return ReadSet(src, std::string());
+}
+
+absl::Status ValidateRecordingFileName(std::string_view name) {
+  auto bad = [&](const std::string& why) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("file '", Printable(name.substr(0, 120)), name.size() > 120 ? "...'" : "'",
+                     ": illegal file name in a recording set (", why, ")"));
+  };
+  if (name.empty()) return bad("empty");
+  if (name.size() > kMaxRecordingFileNameBytes) {
+    return bad(absl::StrCat("longer than ", kMaxRecordingFileNameBytes, " bytes"));
+  }
+  if (name.front() == '/') return bad("absolute path");
+  int depth = 0;
+  size_t start = 0;
+  while (start <= name.size()) {
+    size_t end = name.find('/', start);
+    if (end == std::string_view::npos) end = name.size();
+    const std::string_view part = name.substr(start, end - start);
+    if (part.empty()) return bad("empty path component");
+    if (part == "." || part == "..") return bad("'.' or '..' component");
+    for (char c : part) {
+      const bool ok = (c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') ||
+                      c == '-' || c == '_' || c == '.';
+      if (!ok) return bad("only A-Z a-z 0-9 - _ . and '/' between components");
+    }
+    if (++depth > kMaxRecordingFileDepth) {
+      return bad(absl::StrCat("more than ", kMaxRecordingFileDepth, " levels"));
+    }
+    start = end + 1;
+  }
+  return absl::OkStatus();
+}
+
 
 double EffectiveUdc(const RecordingSet& set, size_t point, size_t sample) {
   const double v = set.waveforms[point].udc_v[sample];

@@ -13,8 +13,10 @@
 #ifndef FLUXCAL_IO_RECORDING_SET_H_
 #define FLUXCAL_IO_RECORDING_SET_H_
 
+#include <map>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "absl/status/status.h"
@@ -103,6 +105,27 @@ struct RecordingSet {
 // Returns InvalidArgument for malformed content, NotFound for a missing
 // manifest or referenced file.
 absl::StatusOr<RecordingSet> ReadRecordingSet(const std::string& dir);
+
+// A recording set held in memory: file name relative to the set root ->
+// contents. A set that arrives over the network is read from here and never
+// written to disk.
+using RecordingFiles = std::map<std::string, std::string>;
+
+inline constexpr size_t kMaxRecordingFileNameBytes = 255;
+inline constexpr int kMaxRecordingFileDepth = 4;
+
+// A file name as a client may send it: 1..255 bytes of '/'-separated
+// components, each of A-Z a-z 0-9 - _ . and none empty, "." or ".."; no
+// leading '/'; at most 4 levels. So a name can never reach outside a
+// directory, carry a control character or a newline. InvalidArgument names
+// the (escaped) file.
+absl::Status ValidateRecordingFileName(std::string_view name);
+
+// ReadRecordingSet over files in memory. Every name is checked with
+// ValidateRecordingFileName first; messages name files as
+// "<display_root>/<name>" (just "<name>" when display_root is empty).
+absl::StatusOr<RecordingSet> ReadRecordingSetFromFiles(const RecordingFiles& files,
+                                                       const std::string& display_root);
 
 // Parses only manifest.json (validated as above).
 absl::StatusOr<Manifest> ReadManifest(const std::string& manifest_path);

@@ -1,11 +1,8 @@
 #include "server/service.h"
 
-#include <zlib.h>
-
 #include <cmath>
 #include <filesystem>
-#include <fstream>
-#include <random>
+#include <set>
 
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/health_check_service_interface.h>
@@ -16,7 +13,9 @@
 #include "diagnosis/diagnose.h"
 #include "identification/identify.h"
 #include "nlohmann/json.hpp"
+#include "io/csv.h"
 #include "io/recording_set.h"
+#include "server/recording_archive.h"
 #include "server/validation.h"
 #include "storage/operations.h"
 #include "tables/sha256.h"
@@ -82,11 +81,13 @@ grpc::Status CalibrationServiceImpl::IngestHfResults(grpc::ServerContext* ctx,
     if (ctx->IsCancelled()) return grpc::Status(grpc::StatusCode::CANCELLED, "client cancelled the stream");
     if (serial.empty()) {
       if (auto s = ValidateSerial(msg.serial()); !s.ok()) return ToGrpcStatus(s);
+      if (auto s = ValidateIdentifier(msg.station_id(), "station_id"); !s.ok()) return ToGrpcStatus(s);
       serial = msg.serial();
       station = msg.station_id();
     } else if (!msg.serial().empty() && msg.serial() != serial) {
       return ToGrpcStatus(absl::InvalidArgumentError(
-          absl::StrCat("serial: a stream carries one serial; got '", msg.serial(), "' after '", serial, "'")));
+          absl::StrCat("serial: a stream carries one serial; got '", io::Printable(msg.serial().substr(0, 80)), "' after '",
+                       serial, "'")));
     }
     if (msg.has_motor()) {
       if (auto s = ValidateMotor(msg.motor()); !s.ok()) return ToGrpcStatus(s);
@@ -101,7 +102,7 @@ grpc::Status CalibrationServiceImpl::IngestHfResults(grpc::ServerContext* ctx,
       if (auto s = ValidatePoint(p, index); !s.ok()) {
         auto* r = response->add_rejects();
         r->set_index(index);
-        r->set_point_id(p.point_id());
+        r->set_point_id(io::Printable(p.point_id().substr(0, kMaxIdentifierBytes)));
         const std::string m(s.message());
         r->set_field(m.substr(0, m.find(':')));
         r->set_message(m);
@@ -137,56 +138,65 @@ grpc::Status CalibrationServiceImpl::IngestHfResults(grpc::ServerContext* ctx,
 grpc::Status CalibrationServiceImpl::IngestRecording(grpc::ServerContext* ctx,
                                                      grpc::ServerReader<v1::RecordingChunk>* reader,
                                                      v1::IngestRecordingResponse* response) {
+  // The set is assembled, validated and identified in memory: a file name
+  // from the client never becomes a path on this machine.
   v1::RecordingChunk chunk;
   std::string serial, station;
-  std::map<std::string, std::string> files;
+  io::RecordingFiles files;
   long long total = 0;
+  int index = 0;
   while (reader->Read(&chunk)) {
+    const std::string field = absl::StrCat("chunks[", index++, "]");
     if (serial.empty()) {
-      if (auto s = ValidateSerial(chunk.serial()); !s.ok()) return ToGrpcStatus(s);
+      if (auto s = ValidateSerial(chunk.serial(), field + ".serial"); !s.ok()) return ToGrpcStatus(s);
+      if (auto s = ValidateIdentifier(chunk.station_id(), field + ".station_id"); !s.ok()) return ToGrpcStatus(s);
       serial = chunk.serial();
       station = chunk.station_id();
+    } else if (!chunk.serial().empty() && chunk.serial() != serial) {
+      return ToGrpcStatus(absl::InvalidArgumentError(
+          absl::StrCat(field, ".serial: a stream carries one serial; got '", io::Printable(chunk.serial().substr(0, 80)),
+                       "' after '", serial, "'")));
     }
-    const std::string& p = chunk.path();
-    if (p.empty() || p[0] == '/' || p.find("..") != std::string::npos) {
-      return ToGrpcStatus(absl::InvalidArgumentError(absl::StrCat("path: illegal file path '", p, "'")));
+    if (auto s = io::ValidateRecordingFileName(chunk.path()); !s.ok()) {
+      return ToGrpcStatus(absl::InvalidArgumentError(absl::StrCat(field, ".path: ", s.message())));
     }
     total += static_cast<long long>(chunk.data().size());
     if (total > kMaxRecordingBytes) {
-      return ToGrpcStatus(absl::InvalidArgumentError(absl::StrCat("data: recording exceeds ", kMaxRecordingBytes, " bytes")));
+      return ToGrpcStatus(absl::ResourceExhaustedError(
+          absl::StrCat(field, ".data: recording exceeds the limit of ", kMaxRecordingBytes, " bytes")));
     }
-    files[p] += chunk.data();
+    auto it = files.find(chunk.path());
+    if (it == files.end()) {
+      if (static_cast<int>(files.size()) >= kMaxRecordingFiles) {
+        return ToGrpcStatus(absl::ResourceExhaustedError(
+            absl::StrCat(field, ".path: recording exceeds the limit of ", kMaxRecordingFiles, " files")));
+      }
+      it = files.emplace(chunk.path(), std::string()).first;
+    }
+    it->second += chunk.data();
   }
   if (serial.empty()) return ToGrpcStatus(absl::InvalidArgumentError("serial: the stream carried no chunk"));
   if (ctx->IsCancelled()) return grpc::Status(grpc::StatusCode::CANCELLED, "client cancelled the stream");
-  // Materialise, validate and identify like a local set.
-  namespace fs = std::filesystem;
-  std::mt19937_64 rng(std::random_device{}());
-  const fs::path dir = fs::temp_directory_path() / absl::StrFormat("fluxcal-ingest-%016x", rng());
-  std::error_code ec;
-  std::string archive;
-  for (const auto& [path, data] : files) {
-    const fs::path f = dir / path;
-    fs::create_directories(f.parent_path(), ec);
-    std::ofstream(f, std::ios::binary) << data;
-    absl::StrAppend(&archive, path, "\n", data.size(), "\n", data);
-  }
-  auto cleanup = [&] { fs::remove_all(dir, ec); };
-  auto set = io::ReadRecordingSet(dir.string());
-  if (!set.ok()) {
-    cleanup();
-    std::string msg(set.status().message());
-    const std::string prefix = dir.string() + "/";
-    for (size_t pos; (pos = msg.find(prefix)) != std::string::npos;) msg.erase(pos, prefix.size());
-    return ToGrpcStatus(absl::InvalidArgumentError(msg));
+  auto set = io::ReadRecordingSetFromFiles(files, "");
+  if (!set.ok()) return ToGrpcStatus(absl::InvalidArgumentError(std::string(set.status().message())));
+  // Files the manifest does not name are junk: refuse rather than store them.
+  {
+    std::set<std::string> named = {"manifest.json"};
+    for (const auto& p : set->manifest.points) named.insert(std::filesystem::path(p.file).lexically_normal().generic_string());
+    if (set->manifest.steady_state) named.insert(std::filesystem::path(*set->manifest.steady_state).lexically_normal().generic_string());
+    if (set->manifest.hf_results) named.insert(std::filesystem::path(*set->manifest.hf_results).lexically_normal().generic_string());
+    for (const auto& [name, data] : files) {
+      if (!named.count(name)) {
+        return ToGrpcStatus(absl::InvalidArgumentError(
+            absl::StrCat("path: file '", name, "' is not referenced by manifest.json")));
+      }
+    }
   }
   if (set->manifest.serial != serial) {
-    cleanup();
     return ToGrpcStatus(absl::InvalidArgumentError(
         absl::StrCat("serial: stream serial '", serial, "' differs from the manifest's '", set->manifest.serial, "'")));
   }
   auto ids = ident::IdentifySet(*set, {});
-  cleanup();
   if (!ids.ok()) return ToGrpcStatus(absl::InvalidArgumentError(std::string(ids.status().message())));
   std::vector<storage::HfPointRow> rows;
   for (const auto& r : *ids) {
@@ -199,23 +209,20 @@ grpc::Status CalibrationServiceImpl::IngestRecording(grpc::ServerContext* ctx,
     h.temperature_c = r.temperature_c; h.reliable = r.reliable;
     rows.push_back(h);
   }
-  uLongf zlen = compressBound(archive.size());
-  std::vector<uint8_t> z(zlen);
-  if (compress2(z.data(), &zlen, reinterpret_cast<const Bytef*>(archive.data()), archive.size(), 6) != Z_OK) {
-    return ToGrpcStatus(absl::InternalError("zlib: compression failed"));
-  }
-  z.resize(zlen);
+  const std::string archive = EncodeRecordingArchive(files);
+  auto z = Deflate(archive);
+  if (!z.ok()) return ToGrpcStatus(z.status());
   const std::string sha = tables::Sha256Hex(archive);
   const auto& mm = set->manifest.motor;
   storage::MotorRow motor{serial, mm.pole_pairs, mm.rs_ohm.value_or(0.0), mm.psi_pm_wb.value_or(0.0)};
-  auto run = store_->IngestHfRun(motor, station, "recording", rows, sha, z, static_cast<int64_t>(archive.size()));
+  auto run = store_->IngestHfRun(motor, station, "recording", rows, sha, *z, static_cast<int64_t>(archive.size()));
   if (!run.ok()) return ToGrpcStatus(run.status());
   response->set_serial(serial);
   response->set_run_id(*run);
   response->set_points(static_cast<int>(rows.size()));
   response->set_recording_sha256(sha);
   response->set_recording_bytes(static_cast<int64_t>(archive.size()));
-  response->set_stored_bytes(static_cast<int64_t>(z.size()));
+  response->set_stored_bytes(static_cast<int64_t>(z->size()));
   return grpc::Status::OK;
 }
 
@@ -363,40 +370,6 @@ grpc::Status CalibrationServiceImpl::FleetStatistics(grpc::ServerContext*, const
   return grpc::Status::OK;
 }
 
-namespace {
-
-// Inverse of the archive IngestRecording stores: "path\nsize\nbytes" records.
-absl::StatusOr<std::string> Unpack(const std::vector<uint8_t>& z, const std::string& dir) {
-  std::string out;
-  uLongf cap = static_cast<uLongf>(std::max<size_t>(z.size() * 8, 1 << 20));
-  for (int attempt = 0; attempt < 8; ++attempt, cap *= 4) {
-    out.resize(cap);
-    uLongf len = cap;
-    const int rc = uncompress(reinterpret_cast<Bytef*>(out.data()), &len, z.data(), z.size());
-    if (rc == Z_OK) { out.resize(len); break; }
-    if (rc != Z_BUF_ERROR) return absl::DataLossError("stored recording: zlib error");
-    if (attempt == 7) return absl::DataLossError("stored recording: too large");
-  }
-  namespace fs = std::filesystem;
-  size_t pos = 0;
-  while (pos < out.size()) {
-    const size_t a = out.find('\n', pos);
-    const size_t b = a == std::string::npos ? a : out.find('\n', a + 1);
-    if (b == std::string::npos) return absl::DataLossError("stored recording: corrupt archive");
-    const std::string path = out.substr(pos, a - pos);
-    const size_t size = std::stoull(out.substr(a + 1, b - a - 1));
-    if (b + 1 + size > out.size()) return absl::DataLossError("stored recording: truncated archive");
-    const fs::path f = fs::path(dir) / path;
-    std::error_code ec;
-    fs::create_directories(f.parent_path(), ec);
-    std::ofstream(f, std::ios::binary).write(out.data() + b + 1, static_cast<std::streamsize>(size));
-    pos = b + 1 + size;
-  }
-  return dir;
-}
-
-}  // namespace
-
 grpc::Status CalibrationServiceImpl::Diagnose(grpc::ServerContext*, const v1::DiagnoseRequest* req,
                                               v1::DiagnoseResponse* resp) {
   if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
@@ -404,21 +377,17 @@ grpc::Status CalibrationServiceImpl::Diagnose(grpc::ServerContext*, const v1::Di
   if (!sha.ok()) return ToGrpcStatus(sha.status());
   auto blob = store_->GetRecording(*sha);
   if (!blob.ok()) return ToGrpcStatus(blob.status());
-  std::mt19937_64 rng(std::random_device{}());
-  const std::string dir = (std::filesystem::temp_directory_path() / absl::StrFormat("fluxcal-diag-%016x", rng())).string();
-  auto unpacked = Unpack(*blob, dir);
-  std::error_code ec;
-  if (!unpacked.ok()) {
-    std::filesystem::remove_all(dir, ec);
-    return ToGrpcStatus(unpacked.status());
-  }
-  auto set = io::ReadRecordingSet(dir);
+  // Unpacked in memory only (names re-checked), never onto the filesystem.
+  auto archive = Inflate(*blob, static_cast<size_t>(kMaxRecordingBytes) + (64u << 20));
+  if (!archive.ok()) return ToGrpcStatus(archive.status());
+  auto files = DecodeRecordingArchive(*archive);
+  if (!files.ok()) return ToGrpcStatus(files.status());
+  auto set = io::ReadRecordingSetFromFiles(*files, "");
   absl::StatusOr<diag::DiagnosisReport> rep = set.ok() ? diag::Diagnose(*set) : absl::StatusOr<diag::DiagnosisReport>(set.status());
-  std::filesystem::remove_all(dir, ec);
   if (!rep.ok()) return ToGrpcStatus(rep.status());
   resp->set_serial(req->serial());
   resp->set_verdict(rep->verdict);
-  resp->set_report_json(diag::ToJson(*rep).dump());
+  resp->set_report_json(diag::ToJson(*rep).dump(-1, ' ', false, nlohmann::json::error_handler_t::replace));
   for (const auto& f : rep->findings) resp->add_effects(f.effect);
   return grpc::Status::OK;
 }

@@ -4,6 +4,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "io/csv.h"
 #include "io/recording_set.h"
 
 namespace fluxcal::server {
@@ -27,7 +28,25 @@ absl::Status ValidateSerial(const std::string& serial, const std::string& field)
   if (serial.empty()) return absl::InvalidArgumentError(absl::StrCat(field, ": must not be empty"));
   if (!io::IsValidSerial(serial)) {
     return absl::InvalidArgumentError(
-        absl::StrCat(field, ": illegal serial '", serial.substr(0, 80), "' (1 to 64 characters of A-Z a-z 0-9 - _ .)"));
+        absl::StrCat(field, ": illegal serial '", io::Printable(serial.substr(0, 80)), "' (1 to 64 characters of A-Z a-z 0-9 - _ .)"));
+  }
+  return absl::OkStatus();
+}
+
+absl::Status ValidateIdentifier(const std::string& value, const std::string& field, bool required) {
+  if (value.empty()) {
+    if (required) return absl::InvalidArgumentError(absl::StrCat(field, ": must not be empty"));
+    return absl::OkStatus();
+  }
+  if (value.size() > kMaxIdentifierBytes) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(field, ": longer than ", kMaxIdentifierBytes, " bytes (", value.size(), ")"));
+  }
+  for (unsigned char c : value) {
+    if (c < 0x20 || c > 0x7e) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          field, ": only printable ASCII is allowed, got byte 0x", absl::Hex(c, absl::kZeroPad2)));
+    }
   }
   return absl::OkStatus();
 }
@@ -42,6 +61,7 @@ absl::Status ValidateMotor(const fluxcal::v1::MotorInfo& m) {
 
 absl::Status ValidatePoint(const fluxcal::v1::HfPoint& p, int i) {
   const std::string f = absl::StrCat("points[", i, "]");
+  if (auto s = ValidateIdentifier(p.point_id(), f + ".point_id"); !s.ok()) return s;
   if (auto s = Range(f + ".id_a", p.id_a(), -1e4, 1e4, "must be within +-10 kA"); !s.ok()) return s;
   if (auto s = Range(f + ".iq_a", p.iq_a(), -1e4, 1e4, "must be within +-10 kA"); !s.ok()) return s;
   if (auto s = Range(f + ".speed_rpm", p.speed_rpm(), -1e5, 1e5, "must be within +-100000 rpm"); !s.ok()) return s;

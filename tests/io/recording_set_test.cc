@@ -297,5 +297,97 @@ TEST(Serial, Rules) {
   EXPECT_FALSE(IsValidSerial("a/b"));
 }
 
+
+// Every file of the fixture set, by relative name, as a network client sends it.
+RecordingFiles FilesOf(const fs::path& dir) {
+  RecordingFiles files;
+  for (const auto& e : fs::recursive_directory_iterator(dir)) {
+    if (!e.is_regular_file()) continue;
+    std::ifstream f(e.path(), std::ios::binary);
+    std::stringstream ss;
+    ss << f.rdbuf();
+    files[fs::relative(e.path(), dir).generic_string()] = ss.str();
+  }
+  return files;
+}
+
+TEST_F(RecordingSetTest, InMemoryReadEqualsDiskRead) {
+  auto disk = ReadRecordingSet(dir_.string());
+  ASSERT_TRUE(disk.ok()) << disk.status();
+  auto mem = ReadRecordingSetFromFiles(FilesOf(dir_), "upload");
+  ASSERT_TRUE(mem.ok()) << mem.status();
+  ASSERT_EQ(mem->waveforms.size(), disk->waveforms.size());
+  for (size_t k = 0; k < disk->waveforms.size(); ++k) {
+    EXPECT_EQ(mem->waveforms[k].ia_a, disk->waveforms[k].ia_a);
+    EXPECT_EQ(mem->waveforms[k].theta_e_rad, disk->waveforms[k].theta_e_rad);
+  }
+  EXPECT_EQ(mem->steady_state.size(), disk->steady_state.size());
+  EXPECT_EQ(mem->hf_results.size(), disk->hf_results.size());
+  EXPECT_EQ(mem->manifest.serial, disk->manifest.serial);
+  // Messages name the in-memory file under the display root.
+  auto files = FilesOf(dir_);
+  files["points/p001.csv"] += "0.1,x,0,0,0,0,0,\n";
+  auto bad = ReadRecordingSetFromFiles(files, "upload");
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.status().message().find("upload/points/p001.csv:202: field 'ia_a'"), std::string::npos)
+      << bad.status();
+  files.erase("points/p001.csv");
+  auto missing = ReadRecordingSetFromFiles(files, "");
+  ASSERT_FALSE(missing.ok());
+  EXPECT_EQ(missing.status().code(), absl::StatusCode::kNotFound);
+  EXPECT_NE(missing.status().message().find("manifest.json:"), std::string::npos) << missing.status();
+  EXPECT_NE(missing.status().message().find("points[1].file"), std::string::npos) << missing.status();
+}
+
+TEST(RecordingFileName, Rules) {
+  for (const char* good : {"manifest.json", "points/p000.csv", "a/b/c/d.csv", "x-y_z.1"}) {
+    EXPECT_TRUE(ValidateRecordingFileName(good).ok()) << good;
+  }
+  for (const std::string& bad : std::vector<std::string>{
+           "", "/abs", "../x", "a/../b", "a/./b", "a//b", "a/", ".", "..", "a b", "a\nb", "a\\b",
+           std::string("a\0b", 3), "a/b/c/d/e", std::string(256, 'a'), "\xc3\xa9.csv", "a:b"}) {
+    auto s = ValidateRecordingFileName(bad);
+    EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument) << Printable(bad);
+    for (unsigned char c : std::string(s.message())) EXPECT_GE(c, 0x20) << "control byte in message";
+  }
+  // Hostile names never reach a lookup.
+  RecordingFiles files{{"../manifest.json", "{}"}};
+  EXPECT_EQ(ReadRecordingSetFromFiles(files, "").status().code(), absl::StatusCode::kInvalidArgument);
+}
+
+TEST(Printable, EscapesWhatJsonAndLogsCannotCarry) {
+  EXPECT_EQ(Printable("plain text 1.5"), "plain text 1.5");
+  EXPECT_EQ(Printable("\xc3\xa9t\xc3\xa9"), "\xc3\xa9t\xc3\xa9");          // well-formed UTF-8 kept
+  EXPECT_EQ(Printable("a\nb"), "a\\x0ab");
+  EXPECT_EQ(Printable("\xff\xfe"), "\\xff\\xfe");
+  EXPECT_EQ(Printable("\xc0\xaf"), "\\xc0\\xaf");                        // overlong '/'
+  EXPECT_EQ(Printable("\xed\xa0\x80"), "\\xed\\xa0\\x80");                // surrogate
+  EXPECT_EQ(Printable("\xe2\x82"), "\\xe2\\x82");                         // truncated
+}
+
+TEST_F(RecordingSetTest, OverflowingNumbersAndBadBytesAreErrorsNotCrashes) {
+  // 1e999 and a 400-digit integer overflow a double inside the JSON parser.
+  Replace("manifest.json", "\"udc_v\": 50.0", "\"udc_v\": 1e999");
+  ExpectError(absl::StatusCode::kInvalidArgument, {"manifest.json:1: field '(json)'"});
+  Replace("manifest.json", "1e999", std::string(400, '9'));
+  ExpectError(absl::StatusCode::kInvalidArgument, {"manifest.json:1: field '(json)'"});
+  Replace("manifest.json", std::string(400, '9'), "50.0");
+  // Invalid UTF-8 in a CSV header and a cell is echoed escaped.
+  ReplaceLine("points/p000.csv", 1, "t_s,ia_a\xff,ib_a,ic_a,theta_e_rad,ualpha_ref_v,ubeta_ref_v,udc_v");
+  auto r = ReadRecordingSet(dir_.string());
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.status().message().find("ia_a\\xff"), std::string::npos) << r.status();
+  ReplaceLine("points/p000.csv", 1, "t_s,ia_a,ib_a,ic_a,theta_e_rad,ualpha_ref_v,ubeta_ref_v,udc_v");
+  ReplaceLine("points/p000.csv", 3, "0.0001,\xfe\x01,0,0,0,0,0,");
+  r = ReadRecordingSet(dir_.string());
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.status().message().find("got '\\xfe\\x01'"), std::string::npos) << r.status();
+  // Strings in the manifest: an illegal serial with a newline is escaped.
+  Replace("manifest.json", "\"IPM-TEST-001\"", "\"IPM\\nX\\u0000\"");
+  r = ReadRecordingSet(dir_.string());
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.status().message().find("illegal serial 'IPM\\x0aX\\x00'"), std::string::npos) << r.status();
+}
+
 }  // namespace
 }  // namespace fluxcal::io

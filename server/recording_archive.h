@@ -1,0 +1,34 @@
+// The stored form of a raw recording set (IngestRecording -> store ->
+// Diagnose): named files in a RecordingArchive protobuf, zlib-compressed.
+// Decoding checks every name again and never touches the filesystem, so a
+// stored recording cannot make the service write a file.
+#ifndef FLUXCAL_SERVER_RECORDING_ARCHIVE_H_
+#define FLUXCAL_SERVER_RECORDING_ARCHIVE_H_
+
+#include <cstdint>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "io/recording_set.h"
+
+namespace fluxcal::server {
+
+// Serialised archive (uncompressed): the magic line, then the protobuf.
+std::string EncodeRecordingArchive(const io::RecordingFiles& files);
+
+// Inverse of EncodeRecordingArchive. Also reads the first stored format
+// ("name\nsize\nbytes" records) strictly: every name checked, sizes parsed
+// without overflow, bounds checked. DataLoss for anything malformed.
+absl::StatusOr<io::RecordingFiles> DecodeRecordingArchive(std::string_view bytes);
+
+// zlib (RFC 1950) at level 6.
+absl::StatusOr<std::vector<uint8_t>> Deflate(std::string_view bytes);
+// Streaming inflate that stops with DataLoss past `max_bytes` of output, so
+// a small hostile blob cannot expand without bound.
+absl::StatusOr<std::string> Inflate(const std::vector<uint8_t>& z, size_t max_bytes);
+
+}  // namespace fluxcal::server
+
+#endif  // FLUXCAL_SERVER_RECORDING_ARCHIVE_H_
