@@ -41,6 +41,7 @@ int RunEol(const std::vector<std::string>& argv) {
     return 1;
   }
   auto stub = MakeStub(*args->Get("server"));
+  if (!stub) return 1;
   // Stream the per-point results (one message per point, as a station does
   // while the motor is on the bench).
   v1::IngestHfResultsResponse ing;
@@ -132,6 +133,7 @@ int RunList(const std::vector<std::string>& argv) {
     return 2;
   }
   auto stub = MakeStub(*args->Get("server"));
+  if (!stub) return 1;
   nlohmann::json all = nlohmann::json::array();
   std::string token;
   do {
@@ -170,6 +172,7 @@ int RunHistory(const std::vector<std::string>& argv) {
     return 2;
   }
   auto stub = MakeStub(*args->Get("server"));
+  if (!stub) return 1;
   v1::HistoryRequest req;
   req.set_serial(args->positional[0]);
   v1::HistoryResponse resp;
@@ -201,6 +204,7 @@ int RunFleet(const std::vector<std::string>& argv) {
     return 2;
   }
   auto stub = MakeStub(*args->Get("server"));
+  if (!stub) return 1;
   v1::FleetStatisticsRequest req;
   v1::FleetStatisticsResponse resp;
   grpc::ClientContext ctx;

@@ -1,5 +1,12 @@
 // fluxcal serve --db PATH --listen 127.0.0.1:50051
+//   [--tls-cert PEM --tls-key PEM [--client-ca PEM [--require-client-cert]]]
+//   [--auth KEYS] [--insecure] [--quiet]
 // Runs the calibration service on a SQLite store until SIGINT/SIGTERM.
+//
+// Transport and identity (docs/service.md, "Security"): off loopback the
+// service needs TLS (or an explicit --insecure) and a keys file (--auth):
+// deny by default. On loopback without --auth it runs open, for a bench PC
+// or development, and says so.
 #include <csignal>
 #include <cstdio>
 #include <thread>
@@ -8,6 +15,8 @@
 
 #include "cli/args.h"
 #include "cli/command.h"
+#include "io/csv.h"
+#include "server/auth.h"
 #include "server/service.h"
 #include "storage/store.h"
 
@@ -17,29 +26,95 @@ namespace {
 volatile std::sig_atomic_t g_stop = 0;
 void OnSignal(int) { g_stop = 1; }
 
+constexpr char kUsage[] =
+    "usage: fluxcal serve --db PATH --listen HOST:PORT [--tls-cert PEM --tls-key PEM [--client-ca PEM]]\n"
+    "                     [--require-client-cert] [--auth KEYS.json] [--insecure] [--quiet]\n";
+
 int RunServe(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, {"db", "listen"}, {});
+  auto args = ParseArgs(argv, {"db", "listen", "tls-cert", "tls-key", "client-ca", "auth"}, {"insecure", "quiet", "require-client-cert"});
   if (!args.ok() || !args->positional.empty()) {
-    std::fprintf(stderr, "usage: fluxcal serve --db PATH --listen 127.0.0.1:50051\n");
+    std::fprintf(stderr, "%s", kUsage);
     return 2;
   }
   const std::string db = args->Get("db").value_or("fluxcal.db");
   const std::string listen = args->Get("listen").value_or("127.0.0.1:50051");
+  server::ServerOptions opt;
+  auto pem = [&](const char* flag, std::string* out) {
+    if (auto path = args->Get(flag)) {
+      auto text = io::ReadFileToString(*path);
+      if (!text.ok()) {
+        std::fprintf(stderr, "fluxcal serve: --%s %s: cannot read\n", flag, path->c_str());
+        return false;
+      }
+      *out = std::move(*text);
+    }
+    return true;
+  };
+  if (!pem("tls-cert", &opt.tls_cert_pem) || !pem("tls-key", &opt.tls_key_pem) ||
+      !pem("client-ca", &opt.client_ca_pem)) {
+    return 2;
+  }
+  if (opt.tls_cert_pem.empty() != opt.tls_key_pem.empty()) {
+    std::fprintf(stderr, "fluxcal serve: --tls-cert and --tls-key go together\n");
+    return 2;
+  }
+  if (!opt.client_ca_pem.empty() && opt.tls_cert_pem.empty()) {
+    std::fprintf(stderr, "fluxcal serve: --client-ca needs --tls-cert and --tls-key\n");
+    return 2;
+  }
+  opt.require_client_cert = args->Has("require-client-cert");
+  if (opt.require_client_cert && opt.client_ca_pem.empty()) {
+    std::fprintf(stderr, "fluxcal serve: --require-client-cert needs --client-ca\n");
+    return 2;
+  }
+  const bool loopback = server::IsLoopbackAddress(listen);
+  const bool tls = !opt.tls_cert_pem.empty();
+  if (!loopback && !tls && !args->Has("insecure")) {
+    std::fprintf(stderr,
+                 "fluxcal serve: %s is not a loopback address: give --tls-cert and --tls-key (or --insecure to "
+                 "serve plaintext on purpose)\n",
+                 listen.c_str());
+    return 2;
+  }
+  std::unique_ptr<server::Authorizer> auth;
+  if (auto keys_path = args->Get("auth")) {
+    auto keys = server::LoadKeys(*keys_path);
+    if (!keys.ok()) {
+      std::fprintf(stderr, "fluxcal serve: %s\n", std::string(keys.status().message()).c_str());
+      return 1;
+    }
+    auth = std::make_unique<server::Authorizer>(std::move(*keys));
+  } else if (!loopback) {
+    std::fprintf(stderr,
+                 "fluxcal serve: %s is not a loopback address: give --auth KEYS.json (fluxcal admin add-key); "
+                 "the service denies by default\n",
+                 listen.c_str());
+    return 2;
+  }
   auto store = storage::Store::Open(db);
   if (!store.ok()) {
     std::fprintf(stderr, "fluxcal serve: %s\n", std::string(store.status().message()).c_str());
     return 1;
   }
   server::CalibrationServiceImpl service(store->get());
+  service.set_authorizer(auth.get());
+  opt.authorizer = auth.get();
+  opt.log_requests = !args->Has("quiet");
+  // Reflection describes the API only; with identities on, it stays off so
+  // that nothing but health answers an anonymous caller.
+  opt.reflection = auth == nullptr;
   int port = 0;
-  auto srv = server::StartServer(&service, listen, &port);
+  auto srv = server::StartServer(&service, listen, &port, opt);
   if (!srv || port == 0) {
     std::fprintf(stderr, "fluxcal serve: cannot listen on %s\n", listen.c_str());
     return 1;
   }
   std::signal(SIGINT, OnSignal);
   std::signal(SIGTERM, OnSignal);
-  std::fprintf(stderr, "fluxcal serve: listening on %s (port %d), store %s\n", listen.c_str(), port, db.c_str());
+  std::fprintf(stderr, "fluxcal serve: listening on %s (port %d, %s%s), store %s\n", listen.c_str(), port,
+               tls ? "TLS" : "plaintext", tls && !opt.client_ca_pem.empty() ? " with client certificates" : "",
+               db.c_str());
+  if (!auth) std::fprintf(stderr, "fluxcal serve: no --auth: open on loopback, every caller is admin\n");
   std::fflush(stderr);
   std::thread waiter([&] { srv->Wait(); });
   while (!g_stop) std::this_thread::sleep_for(std::chrono::milliseconds(100));

@@ -2,9 +2,12 @@
 
 #include <chrono>
 #include <cstdio>
+#include <cstdlib>
 #include <iostream>
+#include <map>
 
 #include <grpcpp/grpcpp.h>
+#include <grpcpp/support/client_interceptor.h>
 
 #include "absl/strings/numbers.h"
 #include "cli/args.h"
@@ -13,11 +16,128 @@
 
 namespace fluxcal::cli {
 
+ClientOptions& GlobalClientOptions() {
+  static ClientOptions o = [] {
+    ClientOptions d;
+    auto env = [](const char* n) { const char* v = std::getenv(n); return v ? std::string(v) : std::string(); };
+    d.ca_file = env("FLUXCAL_CA");
+    d.cert_file = env("FLUXCAL_CERT");
+    d.key_file = env("FLUXCAL_KEY");
+    d.token_file = env("FLUXCAL_TOKEN_FILE");
+    return d;
+  }();
+  return o;
+}
+
+std::string TakeClientFlags(std::vector<std::string>* args) {
+  ClientOptions& o = GlobalClientOptions();
+  const std::map<std::string, std::string*> value_flags = {
+      {"--ca", &o.ca_file}, {"--cert", &o.cert_file}, {"--key", &o.key_file}, {"--token-file", &o.token_file}};
+  std::vector<std::string> rest;
+  for (size_t k = 0; k < args->size(); ++k) {
+    const std::string& a = (*args)[k];
+    if (a == "--insecure") {
+      o.insecure = true;
+      continue;
+    }
+    const auto eq = a.find('=');
+    const std::string name = a.substr(0, eq);
+    auto it = value_flags.find(name);
+    if (it == value_flags.end()) {
+      rest.push_back(a);
+      continue;
+    }
+    if (eq != std::string::npos) {
+      *it->second = a.substr(eq + 1);
+    } else if (k + 1 < args->size()) {
+      *it->second = (*args)[++k];
+    } else {
+      return name + " needs a value";
+    }
+  }
+  *args = std::move(rest);
+  return "";
+}
+
+namespace {
+
+// Adds the bearer token to every call on the channel.
+class TokenInterceptor final : public grpc::experimental::Interceptor {
+ public:
+  explicit TokenInterceptor(std::string header) : header_(std::move(header)) {}
+  void Intercept(grpc::experimental::InterceptorBatchMethods* m) override {
+    if (m->QueryInterceptionHookPoint(grpc::experimental::InterceptionHookPoints::PRE_SEND_INITIAL_METADATA)) {
+      m->GetSendInitialMetadata()->insert({"authorization", header_});
+    }
+    m->Proceed();
+  }
+
+ private:
+  std::string header_;
+};
+
+class TokenInterceptorFactory final : public grpc::experimental::ClientInterceptorFactoryInterface {
+ public:
+  explicit TokenInterceptorFactory(std::string header) : header_(std::move(header)) {}
+  grpc::experimental::Interceptor* CreateClientInterceptor(grpc::experimental::ClientRpcInfo*) override {
+    return new TokenInterceptor(header_);
+  }
+
+ private:
+  std::string header_;
+};
+
+bool IsLoopback(const std::string& address) {
+  std::string host = address;
+  for (const char* scheme : {"dns:///", "ipv4:", "ipv6:"}) {
+    if (host.rfind(scheme, 0) == 0) host = host.substr(std::string(scheme).size());
+  }
+  if (host.rfind("unix:", 0) == 0) return true;
+  if (const auto colon = host.rfind(':'); colon != std::string::npos) host = host.substr(0, colon);
+  return host == "localhost" || host == "[::1]" || host.rfind("127.", 0) == 0;
+}
+
+bool ReadPem(const std::string& path, const char* what, std::string* out) {
+  if (path.empty()) return true;
+  auto text = io::ReadFileToString(path);
+  if (!text.ok()) {
+    std::fprintf(stderr, "fluxcal: %s: cannot read %s\n", path.c_str(), what);
+    return false;
+  }
+  *out = std::move(*text);
+  return true;
+}
+
+}  // namespace
+
 std::unique_ptr<v1::CalibrationService::Stub> MakeStub(const std::string& address) {
+  const ClientOptions& o = GlobalClientOptions();
   grpc::ChannelArguments args;
   args.SetMaxReceiveMessageSize(64 << 20);
+  std::shared_ptr<grpc::ChannelCredentials> creds;
+  const bool tls = !o.ca_file.empty() || !o.cert_file.empty() || (!o.insecure && !IsLoopback(address));
+  if (tls) {
+    grpc::SslCredentialsOptions ssl;
+    if (!ReadPem(o.ca_file, "--ca", &ssl.pem_root_certs) || !ReadPem(o.cert_file, "--cert", &ssl.pem_cert_chain) ||
+        !ReadPem(o.key_file, "--key", &ssl.pem_private_key)) {
+      return nullptr;
+    }
+    creds = grpc::SslCredentials(ssl);
+  } else {
+    creds = grpc::InsecureChannelCredentials();
+  }
+  std::vector<std::unique_ptr<grpc::experimental::ClientInterceptorFactoryInterface>> interceptors;
+  if (!o.token_file.empty()) {
+    auto token = io::ReadFileToString(o.token_file);
+    if (!token.ok()) {
+      std::fprintf(stderr, "fluxcal: %s: cannot read --token-file\n", o.token_file.c_str());
+      return nullptr;
+    }
+    std::string t = token->substr(0, token->find_first_of("\r\n"));
+    interceptors.push_back(std::make_unique<TokenInterceptorFactory>("Bearer " + t));
+  }
   return v1::CalibrationService::NewStub(
-      grpc::CreateCustomChannel(address, grpc::InsecureChannelCredentials(), args));
+      grpc::experimental::CreateCustomChannelWithInterceptors(address, creds, args, std::move(interceptors)));
 }
 
 int ReportRpcError(const char* cmd, const grpc::Status& s) {
@@ -28,6 +148,13 @@ int ReportRpcError(const char* cmd, const grpc::Status& s) {
   const int c = static_cast<int>(s.error_code());
   std::fprintf(stderr, "fluxcal %s: %s: %s\n", cmd, c >= 0 && c <= 16 ? kNames[c] : "ERROR",
                s.error_message().c_str());
+  if (s.error_code() == grpc::StatusCode::UNAVAILABLE) {
+    std::fprintf(stderr,
+                 "hint: is `fluxcal serve` running at that address? A TLS server needs --ca (its CA), one that "
+                 "requires client certificates --cert and --key; a plaintext server off loopback needs --insecure\n");
+  } else if (s.error_code() == grpc::StatusCode::UNAUTHENTICATED) {
+    std::fprintf(stderr, "hint: give --token-file FILE (fluxcal admin add-key) or a client certificate (--cert, --key)\n");
+  }
   return 1;
 }
 
@@ -50,6 +177,7 @@ int RunRemoteQuery(const std::vector<std::string>& argv) {
     return 2;
   }
   auto stub = MakeStub(*args->Get("server"));
+  if (!stub) return 1;
   v1::QueryFluxRequest req;
   req.set_serial(args->positional[0]);
   int version = 0;
@@ -110,6 +238,7 @@ int RunRemoteExport(const std::vector<std::string>& argv) {
     if (d->has_value()) (req.*setter)(**d);
   }
   auto stub = MakeStub(*args->Get("server"));
+  if (!stub) return 1;
   v1::ExportTableResponse resp;
   grpc::ClientContext ctx;
   Deadline(&ctx, 120);

@@ -11,6 +11,26 @@
 
 namespace fluxcal::cli {
 
+// How clients reach the service. Set once per process from the global
+// client flags (cli/main.cc strips them from every command but `serve`):
+//   --ca PEM          trust these roots (TLS); else the system's roots
+//   --cert PEM --key PEM   client certificate (mutual TLS)
+//   --token-file F    send 'authorization: Bearer <first line of F>'
+//   --insecure        plaintext even to a non-loopback address
+// The environment gives defaults: FLUXCAL_CA, FLUXCAL_CERT, FLUXCAL_KEY,
+// FLUXCAL_TOKEN_FILE. Plaintext is used for loopback addresses unless --ca
+// is given; every other address uses TLS unless --insecure.
+struct ClientOptions {
+  std::string ca_file, cert_file, key_file, token_file;
+  bool insecure = false;
+};
+ClientOptions& GlobalClientOptions();
+// Removes the client flags above from `args` into GlobalClientOptions();
+// returns a usage message on a flag without its value.
+std::string TakeClientFlags(std::vector<std::string>* args);
+
+// A stub for `address` with GlobalClientOptions(). On a bad option (an
+// unreadable file) prints the reason and returns nullptr.
 std::unique_ptr<v1::CalibrationService::Stub> MakeStub(const std::string& address);
 // Prints "fluxcal <cmd>: <code>: <message>" to stderr and returns the exit code.
 int ReportRpcError(const char* cmd, const grpc::Status& s);

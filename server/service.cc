@@ -7,6 +7,10 @@
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/health_check_service_interface.h>
 #include <grpcpp/grpcpp.h>
+#include <grpcpp/support/server_interceptor.h>
+
+#include <chrono>
+#include <cstdio>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -35,6 +39,11 @@ grpc::Status ToGrpcStatus(const absl::Status& s) {
     case absl::StatusCode::kDeadlineExceeded: c = grpc::StatusCode::DEADLINE_EXCEEDED; break;
     case absl::StatusCode::kCancelled: c = grpc::StatusCode::CANCELLED; break;
     case absl::StatusCode::kDataLoss: c = grpc::StatusCode::DATA_LOSS; break;
+    case absl::StatusCode::kPermissionDenied: c = grpc::StatusCode::PERMISSION_DENIED; break;
+    case absl::StatusCode::kUnauthenticated: c = grpc::StatusCode::UNAUTHENTICATED; break;
+    case absl::StatusCode::kAborted: c = grpc::StatusCode::ABORTED; break;
+    case absl::StatusCode::kOutOfRange: c = grpc::StatusCode::OUT_OF_RANGE; break;
+    case absl::StatusCode::kUnimplemented: c = grpc::StatusCode::UNIMPLEMENTED; break;
     default: break;
   }
   return grpc::Status(c, std::string(s.message()));
@@ -66,11 +75,29 @@ void ToProto(const storage::CalibrationRow& c, v1::CalibrationRecord* r) {
   r->set_run_id(c.run_id);
 }
 
+// The station a run is recorded under: an authenticated station is itself,
+// whatever the message claims (a different claim is refused); others
+// (admin, open mode) may name one.
+absl::Status StationOf(const Identity& who, const std::string& claimed, std::string* station) {
+  if (who.via == "open" || who.role != Role::kStation) {
+    *station = claimed.empty() && who.via != "open" ? who.name : claimed;
+    return absl::OkStatus();
+  }
+  if (!claimed.empty() && claimed != who.name) {
+    return absl::PermissionDeniedError(
+        absl::StrCat("station_id: '", claimed, "' is not the caller's identity '", who.name, "'"));
+  }
+  *station = who.name;
+  return absl::OkStatus();
+}
+
 }  // namespace
 
 grpc::Status CalibrationServiceImpl::IngestHfResults(grpc::ServerContext* ctx,
                                                      grpc::ServerReader<v1::IngestHfResultsRequest>* reader,
                                                      v1::IngestHfResultsResponse* response) {
+  auto who = auth_->Authorize(*ctx, Rpc::kIngestHfResults);
+  if (!who.ok()) return ToGrpcStatus(who.status());
   v1::IngestHfResultsRequest msg;
   std::string serial, station;
   v1::MotorInfo motor;
@@ -82,8 +109,8 @@ grpc::Status CalibrationServiceImpl::IngestHfResults(grpc::ServerContext* ctx,
     if (serial.empty()) {
       if (auto s = ValidateSerial(msg.serial()); !s.ok()) return ToGrpcStatus(s);
       if (auto s = ValidateIdentifier(msg.station_id(), "station_id"); !s.ok()) return ToGrpcStatus(s);
+      if (auto s = StationOf(*who, msg.station_id(), &station); !s.ok()) return ToGrpcStatus(s);
       serial = msg.serial();
-      station = msg.station_id();
     } else if (!msg.serial().empty() && msg.serial() != serial) {
       return ToGrpcStatus(absl::InvalidArgumentError(
           absl::StrCat("serial: a stream carries one serial; got '", io::Printable(msg.serial().substr(0, 80)), "' after '",
@@ -138,6 +165,8 @@ grpc::Status CalibrationServiceImpl::IngestHfResults(grpc::ServerContext* ctx,
 grpc::Status CalibrationServiceImpl::IngestRecording(grpc::ServerContext* ctx,
                                                      grpc::ServerReader<v1::RecordingChunk>* reader,
                                                      v1::IngestRecordingResponse* response) {
+  auto who = auth_->Authorize(*ctx, Rpc::kIngestRecording);
+  if (!who.ok()) return ToGrpcStatus(who.status());
   // The set is assembled, validated and identified in memory: a file name
   // from the client never becomes a path on this machine.
   v1::RecordingChunk chunk;
@@ -150,8 +179,8 @@ grpc::Status CalibrationServiceImpl::IngestRecording(grpc::ServerContext* ctx,
     if (serial.empty()) {
       if (auto s = ValidateSerial(chunk.serial(), field + ".serial"); !s.ok()) return ToGrpcStatus(s);
       if (auto s = ValidateIdentifier(chunk.station_id(), field + ".station_id"); !s.ok()) return ToGrpcStatus(s);
+      if (auto s = StationOf(*who, chunk.station_id(), &station); !s.ok()) return ToGrpcStatus(s);
       serial = chunk.serial();
-      station = chunk.station_id();
     } else if (!chunk.serial().empty() && chunk.serial() != serial) {
       return ToGrpcStatus(absl::InvalidArgumentError(
           absl::StrCat(field, ".serial: a stream carries one serial; got '", io::Printable(chunk.serial().substr(0, 80)),
@@ -226,12 +255,21 @@ grpc::Status CalibrationServiceImpl::IngestRecording(grpc::ServerContext* ctx,
   return grpc::Status::OK;
 }
 
-grpc::Status CalibrationServiceImpl::Fit(grpc::ServerContext*, const v1::FitRequest* req, v1::FitResponse* resp) {
+grpc::Status CalibrationServiceImpl::Fit(grpc::ServerContext* ctx, const v1::FitRequest* req, v1::FitResponse* resp) {
+  auto who = auth_->Authorize(*ctx, Rpc::kFit);
+  if (!who.ok()) return ToGrpcStatus(who.status());
   if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
   storage::FitTolerances tol;
   if (req->max_rms_relative() < 0 || !std::isfinite(req->max_rms_relative()) ||
       req->psi_pm_tolerance_relative() < 0 || !std::isfinite(req->psi_pm_tolerance_relative())) {
     return ToGrpcStatus(absl::InvalidArgumentError("max_rms_relative, psi_pm_tolerance_relative: must be >= 0"));
+  }
+  // Verdict tolerances are server policy: a client may tighten them, never
+  // loosen them (a failing run must not become "pass" on request).
+  if (req->max_rms_relative() > tol.max_rms_relative || req->psi_pm_tolerance_relative() > tol.psi_pm_tolerance_relative) {
+    return ToGrpcStatus(absl::InvalidArgumentError(absl::StrFormat(
+        "max_rms_relative, psi_pm_tolerance_relative: may only tighten the server policy (%g, %g)",
+        tol.max_rms_relative, tol.psi_pm_tolerance_relative)));
   }
   if (req->max_rms_relative() > 0) tol.max_rms_relative = req->max_rms_relative();
   if (req->psi_pm_tolerance_relative() > 0) tol.psi_pm_tolerance_relative = req->psi_pm_tolerance_relative();
@@ -242,8 +280,10 @@ grpc::Status CalibrationServiceImpl::Fit(grpc::ServerContext*, const v1::FitRequ
   return grpc::Status::OK;
 }
 
-grpc::Status CalibrationServiceImpl::GetCalibration(grpc::ServerContext*, const v1::GetCalibrationRequest* req,
+grpc::Status CalibrationServiceImpl::GetCalibration(grpc::ServerContext* ctx, const v1::GetCalibrationRequest* req,
                                                     v1::CalibrationRecord* resp) {
+  auto who = auth_->Authorize(*ctx, Rpc::kGetCalibration);
+  if (!who.ok()) return ToGrpcStatus(who.status());
   if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
   if (req->version() < 0) return ToGrpcStatus(absl::InvalidArgumentError("version: must be >= 0 (0 = latest)"));
   auto row = store_->GetCalibration(req->serial(), req->version());
@@ -252,8 +292,10 @@ grpc::Status CalibrationServiceImpl::GetCalibration(grpc::ServerContext*, const 
   return grpc::Status::OK;
 }
 
-grpc::Status CalibrationServiceImpl::ListMotors(grpc::ServerContext*, const v1::ListMotorsRequest* req,
+grpc::Status CalibrationServiceImpl::ListMotors(grpc::ServerContext* ctx, const v1::ListMotorsRequest* req,
                                                 v1::ListMotorsResponse* resp) {
+  auto who = auth_->Authorize(*ctx, Rpc::kListMotors);
+  if (!who.ok()) return ToGrpcStatus(who.status());
   int size = req->page_size() == 0 ? 50 : req->page_size();
   if (size < 0 || size > 1000) return ToGrpcStatus(absl::InvalidArgumentError("page_size: must be 0..1000"));
   int offset = 0;
@@ -277,8 +319,10 @@ grpc::Status CalibrationServiceImpl::ListMotors(grpc::ServerContext*, const v1::
   return grpc::Status::OK;
 }
 
-grpc::Status CalibrationServiceImpl::History(grpc::ServerContext*, const v1::HistoryRequest* req,
+grpc::Status CalibrationServiceImpl::History(grpc::ServerContext* ctx, const v1::HistoryRequest* req,
                                              v1::HistoryResponse* resp) {
+  auto who = auth_->Authorize(*ctx, Rpc::kHistory);
+  if (!who.ok()) return ToGrpcStatus(who.status());
   if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
   auto rows = store_->History(req->serial());
   if (!rows.ok()) return ToGrpcStatus(rows.status());
@@ -291,8 +335,10 @@ grpc::Status CalibrationServiceImpl::History(grpc::ServerContext*, const v1::His
   return grpc::Status::OK;
 }
 
-grpc::Status CalibrationServiceImpl::QueryFlux(grpc::ServerContext*, const v1::QueryFluxRequest* req,
+grpc::Status CalibrationServiceImpl::QueryFlux(grpc::ServerContext* ctx, const v1::QueryFluxRequest* req,
                                                v1::QueryFluxResponse* resp) {
+  auto who = auth_->Authorize(*ctx, Rpc::kQueryFlux);
+  if (!who.ok()) return ToGrpcStatus(who.status());
   if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
   if (req->points_size() > 100000) return ToGrpcStatus(absl::InvalidArgumentError("points: at most 100000 per call"));
   for (int k = 0; k < req->points_size(); ++k) {
@@ -316,8 +362,10 @@ grpc::Status CalibrationServiceImpl::QueryFlux(grpc::ServerContext*, const v1::Q
   return grpc::Status::OK;
 }
 
-grpc::Status CalibrationServiceImpl::ExportTable(grpc::ServerContext*, const v1::ExportTableRequest* req,
+grpc::Status CalibrationServiceImpl::ExportTable(grpc::ServerContext* ctx, const v1::ExportTableRequest* req,
                                                  v1::ExportTableResponse* resp) {
+  auto who = auth_->Authorize(*ctx, Rpc::kExportTable);
+  if (!who.ok()) return ToGrpcStatus(who.status());
   if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
   tables::TableSpec spec;
   spec.kind = req->table().empty() ? "mtpa" : req->table();
@@ -347,8 +395,10 @@ grpc::Status CalibrationServiceImpl::ExportTable(grpc::ServerContext*, const v1:
   return grpc::Status::OK;
 }
 
-grpc::Status CalibrationServiceImpl::FleetStatistics(grpc::ServerContext*, const v1::FleetStatisticsRequest* req,
+grpc::Status CalibrationServiceImpl::FleetStatistics(grpc::ServerContext* ctx, const v1::FleetStatisticsRequest* req,
                                                      v1::FleetStatisticsResponse* resp) {
+  auto who = auth_->Authorize(*ctx, Rpc::kFleetStatistics);
+  if (!who.ok()) return ToGrpcStatus(who.status());
   std::vector<std::pair<double, double>> pts;
   for (int k = 0; k < req->points_size(); ++k) {
     if (auto s = ValidateOperatingPoint(req->points(k), k); !s.ok()) return ToGrpcStatus(s);
@@ -370,8 +420,10 @@ grpc::Status CalibrationServiceImpl::FleetStatistics(grpc::ServerContext*, const
   return grpc::Status::OK;
 }
 
-grpc::Status CalibrationServiceImpl::Diagnose(grpc::ServerContext*, const v1::DiagnoseRequest* req,
+grpc::Status CalibrationServiceImpl::Diagnose(grpc::ServerContext* ctx, const v1::DiagnoseRequest* req,
                                               v1::DiagnoseResponse* resp) {
+  auto who = auth_->Authorize(*ctx, Rpc::kDiagnose);
+  if (!who.ok()) return ToGrpcStatus(who.status());
   if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
   auto sha = store_->LatestRecordingSha(req->serial());
   if (!sha.ok()) return ToGrpcStatus(sha.status());
@@ -392,14 +444,82 @@ grpc::Status CalibrationServiceImpl::Diagnose(grpc::ServerContext*, const v1::Di
   return grpc::Status::OK;
 }
 
+namespace {
+
+// One stderr line per request: method, identity, peer, status, latency.
+class RequestLog final : public grpc::experimental::Interceptor {
+ public:
+  RequestLog(grpc::experimental::ServerRpcInfo* info, const Authorizer* auth)
+      : info_(info), auth_(auth), start_(std::chrono::steady_clock::now()) {}
+  void Intercept(grpc::experimental::InterceptorBatchMethods* m) override {
+    if (m->QueryInterceptionHookPoint(grpc::experimental::InterceptionHookPoints::PRE_SEND_STATUS)) {
+      const grpc::Status st = m->GetSendStatus();
+      const grpc::ServerContextBase* base = info_->server_context();
+      std::string who = "-", peer = "-";
+      if (const auto* ctx = dynamic_cast<const grpc::ServerContext*>(base)) {
+        if (auto id = auth_->Authenticate(*ctx); id.ok()) who = absl::StrCat(id->name, "/", std::string(RoleName(id->role)));
+        peer = ctx->peer();
+      }
+      const double ms =
+          std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start_).count();
+      std::fprintf(stderr, "fluxcal serve: rpc=%s identity=%s peer=%s status=%d latency_ms=%.1f\n", info_->method(),
+                   who.c_str(), peer.c_str(), static_cast<int>(st.error_code()), ms);
+    }
+    m->Proceed();
+  }
+
+ private:
+  grpc::experimental::ServerRpcInfo* info_;
+  const Authorizer* auth_;
+  std::chrono::steady_clock::time_point start_;
+};
+
+class RequestLogFactory final : public grpc::experimental::ServerInterceptorFactoryInterface {
+ public:
+  explicit RequestLogFactory(const Authorizer* auth) : auth_(auth) {}
+  grpc::experimental::Interceptor* CreateServerInterceptor(grpc::experimental::ServerRpcInfo* info) override {
+    return new RequestLog(info, auth_);
+  }
+
+ private:
+  const Authorizer* auth_;
+};
+
+}  // namespace
+
+bool IsLoopbackAddress(const std::string& address) {
+  if (address.rfind("unix:", 0) == 0) return true;
+  std::string host = address;
+  if (const auto colon = host.rfind(':'); colon != std::string::npos) host = host.substr(0, colon);
+  if (host.rfind("ipv4:", 0) == 0) host = host.substr(5);
+  if (host.rfind("ipv6:", 0) == 0) host = host.substr(5);
+  return host == "localhost" || host == "[::1]" || host.rfind("127.", 0) == 0;
+}
+
 std::unique_ptr<grpc::Server> StartServer(CalibrationServiceImpl* service, const std::string& address,
-                                          int* bound_port) {
+                                          int* bound_port, const ServerOptions& options) {
   grpc::EnableDefaultHealthCheckService(true);
-  grpc::reflection::InitProtoReflectionServerBuilderPlugin();
+  if (options.reflection) grpc::reflection::InitProtoReflectionServerBuilderPlugin();
   grpc::ServerBuilder b;
-  b.AddListeningPort(address, grpc::InsecureServerCredentials(), bound_port);
+  std::shared_ptr<grpc::ServerCredentials> creds = grpc::InsecureServerCredentials();
+  if (!options.tls_cert_pem.empty()) {
+    grpc::SslServerCredentialsOptions ssl(
+        options.client_ca_pem.empty() ? GRPC_SSL_DONT_REQUEST_CLIENT_CERTIFICATE
+        : options.require_client_cert ? GRPC_SSL_REQUEST_AND_REQUIRE_CLIENT_CERTIFICATE_AND_VERIFY
+                                      : GRPC_SSL_REQUEST_CLIENT_CERTIFICATE_AND_VERIFY);
+    ssl.pem_root_certs = options.client_ca_pem;
+    ssl.pem_key_cert_pairs.push_back({options.tls_key_pem, options.tls_cert_pem});
+    creds = grpc::SslServerCredentials(ssl);
+  }
+  b.AddListeningPort(address, creds, bound_port);
   b.RegisterService(service);
   b.SetMaxReceiveMessageSize(64 << 20);
+  if (options.log_requests) {
+    static const Authorizer kOpen;
+    std::vector<std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>> creators;
+    creators.push_back(std::make_unique<RequestLogFactory>(options.authorizer ? options.authorizer : &kOpen));
+    b.experimental().SetInterceptorCreators(std::move(creators));
+  }
   return b.BuildAndStart();
 }
 

@@ -12,6 +12,7 @@
 
 #include "absl/status/status.h"
 #include "fluxcal/v1/calibration.grpc.pb.h"
+#include "server/auth.h"
 #include "storage/store.h"
 
 namespace grpc {
@@ -25,6 +26,8 @@ grpc::Status ToGrpcStatus(const absl::Status& s);
 class CalibrationServiceImpl final : public fluxcal::v1::CalibrationService::Service {
  public:
   explicit CalibrationServiceImpl(storage::Store* store) : store_(store) {}
+  // Who may call what (server/auth.h). Without one the service is open.
+  void set_authorizer(const Authorizer* auth) { auth_ = auth != nullptr ? auth : &open_; }
 
   grpc::Status IngestHfResults(grpc::ServerContext* ctx, grpc::ServerReader<v1::IngestHfResultsRequest>* reader,
                                v1::IngestHfResultsResponse* response) override;
@@ -46,13 +49,34 @@ class CalibrationServiceImpl final : public fluxcal::v1::CalibrationService::Ser
 
  private:
   storage::Store* store_;
+  Authorizer open_;
+  const Authorizer* auth_ = &open_;
+};
+
+struct ServerOptions {
+  // TLS: PEM server certificate chain and private key; both empty means
+  // plaintext. client_ca_pem non-empty requires and verifies client
+  // certificates (mutual TLS) against it.
+  std::string tls_cert_pem, tls_key_pem, client_ca_pem;
+  // With client_ca_pem: refuse the handshake without a client certificate
+  // (else a certificate is verified when presented and a token may stand
+  // in for it).
+  bool require_client_cert = false;
+  bool reflection = true;
+  // One log line per request on stderr: method, identity, peer, status,
+  // latency.
+  bool log_requests = false;
+  const Authorizer* authorizer = nullptr;   // for the request log's identity
 };
 
 // Builds and starts a server (health checking and reflection on) listening
 // on `address` ("127.0.0.1:50051"; port 0 picks one, returned in
 // *bound_port).
 std::unique_ptr<grpc::Server> StartServer(CalibrationServiceImpl* service, const std::string& address,
-                                          int* bound_port);
+                                          int* bound_port, const ServerOptions& options = {});
+
+// True for 127.0.0.0/8, [::1], localhost and unix: addresses.
+bool IsLoopbackAddress(const std::string& address);
 
 }  // namespace fluxcal::server
 

@@ -1,0 +1,131 @@
+// fluxcal admin add-key|add-cert|revoke|list-keys --keys KEYS.json ...
+// Manages the identities `fluxcal serve --auth KEYS.json` accepts
+// (server/auth.h). A token is printed once, when it is made; the file keeps
+// only its SHA-256.
+#include <cstdio>
+#include <iostream>
+
+#include "cli/args.h"
+#include "cli/command.h"
+#include "io/csv.h"
+#include "io/recording_set.h"
+#include "nlohmann/json.hpp"
+#include "server/auth.h"
+
+namespace fluxcal::cli {
+namespace {
+
+// An existing keys file, or an empty set when it does not exist yet.
+absl::StatusOr<server::Keys> LoadOrEmpty(const std::string& path) {
+  if (!io::ReadFileToString(path).ok()) return server::Keys{};
+  return server::LoadKeys(path);
+}
+
+int Fail(const char* cmd, const absl::Status& s) {
+  std::fprintf(stderr, "fluxcal admin %s: %s\n", cmd, std::string(s.message()).c_str());
+  return 1;
+}
+
+int AddEntry(const std::vector<std::string>& argv, bool cert) {
+  const char* cmd = cert ? "add-cert" : "add-key";
+  auto args = ParseArgs(argv, {"keys", "name", "role", "cn"}, {"json"});
+  if (!args.ok() || !args->Get("keys") || !args->Get("name") || !args->Get("role") || (cert && !args->Get("cn"))) {
+    std::fprintf(stderr, "usage: fluxcal admin %s --keys KEYS.json --name NAME --role %s%s [--json]\n", cmd,
+                 "station|release|flasher|engineer|admin", cert ? " --cn CERT_COMMON_NAME" : "");
+    return 2;
+  }
+  auto role = server::ParseRole(*args->Get("role"));
+  if (!role) return Fail(cmd, absl::InvalidArgumentError("--role: one of station, release, flasher, engineer, admin"));
+  const std::string name = *args->Get("name");
+  if (!io::IsValidSerial(name)) {
+    return Fail(cmd, absl::InvalidArgumentError("--name: 1 to 64 characters of A-Z a-z 0-9 - _ ."));
+  }
+  auto keys = LoadOrEmpty(*args->Get("keys"));
+  if (!keys.ok()) return Fail(cmd, keys.status());
+  for (const auto& e : keys->entries) {
+    if (e.name == name) return Fail(cmd, absl::AlreadyExistsError("--name: '" + name + "' exists (revoke it first)"));
+  }
+  server::KeyEntry e;
+  e.name = name;
+  e.role = *role;
+  std::string token;
+  if (cert) {
+    e.cert_cn = *args->Get("cn");
+  } else {
+    auto t = server::NewToken();
+    if (!t.ok()) return Fail(cmd, t.status());
+    token = *t;
+    e.token_sha256 = server::Sha256Hex(token);
+  }
+  keys->entries.push_back(e);
+  if (auto s = server::SaveKeys(*args->Get("keys"), *keys); !s.ok()) return Fail(cmd, s);
+  if (args->Has("json")) {
+    nlohmann::json j = {{"name", name}, {"role", std::string(server::RoleName(*role))}};
+    if (cert) j["cert_cn"] = e.cert_cn; else j["token"] = token;
+    std::cout << j.dump(2) << "\n";
+  } else if (cert) {
+    std::printf("%s (%s): client certificate CN '%s'\n", name.c_str(), std::string(server::RoleName(*role)).c_str(),
+                e.cert_cn.c_str());
+  } else {
+    std::fprintf(stderr, "token for %s (%s), shown once; store it in a file for --token-file:\n", name.c_str(),
+                 std::string(server::RoleName(*role)).c_str());
+    std::printf("%s\n", token.c_str());
+  }
+  return 0;
+}
+
+int RunAddKey(const std::vector<std::string>& argv) { return AddEntry(argv, false); }
+int RunAddCert(const std::vector<std::string>& argv) { return AddEntry(argv, true); }
+
+int RunRevoke(const std::vector<std::string>& argv) {
+  auto args = ParseArgs(argv, {"keys", "name"}, {"json"});
+  if (!args.ok() || !args->Get("keys") || !args->Get("name")) {
+    std::fprintf(stderr, "usage: fluxcal admin revoke --keys KEYS.json --name NAME [--json]\n");
+    return 2;
+  }
+  auto keys = server::LoadKeys(*args->Get("keys"));
+  if (!keys.ok()) return Fail("revoke", keys.status());
+  const size_t before = keys->entries.size();
+  std::erase_if(keys->entries, [&](const server::KeyEntry& e) { return e.name == *args->Get("name"); });
+  if (keys->entries.size() == before) {
+    return Fail("revoke", absl::NotFoundError("--name: '" + *args->Get("name") + "' is not in the keys"));
+  }
+  if (auto s = server::SaveKeys(*args->Get("keys"), *keys); !s.ok()) return Fail("revoke", s);
+  if (args->Has("json")) {
+    std::cout << nlohmann::json{{"revoked", *args->Get("name")}}.dump(2) << "\n";
+  } else {
+    std::printf("revoked %s (a running server reads its keys at start: restart it)\n", args->Get("name")->c_str());
+  }
+  return 0;
+}
+
+int RunListKeys(const std::vector<std::string>& argv) {
+  auto args = ParseArgs(argv, {"keys"}, {"json"});
+  if (!args.ok() || !args->Get("keys")) {
+    std::fprintf(stderr, "usage: fluxcal admin list-keys --keys KEYS.json [--json]\n");
+    return 2;
+  }
+  auto keys = server::LoadKeys(*args->Get("keys"));
+  if (!keys.ok()) return Fail("list-keys", keys.status());
+  nlohmann::json arr = nlohmann::json::array();
+  for (const auto& e : keys->entries) {
+    arr.push_back({{"name", e.name}, {"role", std::string(server::RoleName(e.role))},
+                   {"credential", e.cert_cn.empty() ? "token" : "certificate"}, {"cert_cn", e.cert_cn}});
+    if (!args->Has("json")) {
+      std::printf("%-24s %-9s %s\n", e.name.c_str(), std::string(server::RoleName(e.role)).c_str(),
+                  e.cert_cn.empty() ? "token" : ("certificate CN " + e.cert_cn).c_str());
+    }
+  }
+  if (args->Has("json")) std::cout << nlohmann::json{{"keys", arr}}.dump(2) << "\n";
+  return 0;
+}
+
+}  // namespace
+
+FLUXCAL_REGISTER_COMMAND("admin add-key", "make a bearer token for an identity with a role (printed once)",
+                         RunAddKey);
+FLUXCAL_REGISTER_COMMAND("admin add-cert", "accept a client certificate common name with a role", RunAddCert);
+FLUXCAL_REGISTER_COMMAND("admin revoke", "remove an identity from a keys file", RunRevoke);
+FLUXCAL_REGISTER_COMMAND("admin list-keys", "list identities and roles of a keys file", RunListKeys);
+
+}  // namespace fluxcal::cli

@@ -1,0 +1,392 @@
+// Identity, roles and transport: the role matrix (each role x each RPC),
+// anonymous and unknown callers, a station's identity on its runs, server
+// policy on verdict tolerances, TLS and mutual TLS with a throwaway CA made
+// by Debian's openssl, and `fluxcal serve` refusing unsafe listen setups.
+#include <sqlite3.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <map>
+
+#include <grpcpp/generic/generic_stub.h>
+#include <grpcpp/grpcpp.h>
+#include <grpcpp/support/client_interceptor.h>
+
+#include "gtest/gtest.h"
+#include "io/csv.h"
+#include "server/auth.h"
+#include "server/service.h"
+#include "simulation/twin.h"
+#include "storage/store.h"
+
+namespace fluxcal::server {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string TempPath(const std::string& name) {
+  return (fs::temp_directory_path() / ("fluxcal_auth_" + std::to_string(::getpid()) + "_" + name)).string();
+}
+
+// Adds a bearer token to every call (what the CLI does with --token-file).
+class Bearer final : public grpc::experimental::Interceptor {
+ public:
+  explicit Bearer(std::string t) : t_(std::move(t)) {}
+  void Intercept(grpc::experimental::InterceptorBatchMethods* m) override {
+    if (m->QueryInterceptionHookPoint(grpc::experimental::InterceptionHookPoints::PRE_SEND_INITIAL_METADATA)) {
+      m->GetSendInitialMetadata()->insert({"authorization", "Bearer " + t_});
+    }
+    m->Proceed();
+  }
+  std::string t_;
+};
+class BearerFactory final : public grpc::experimental::ClientInterceptorFactoryInterface {
+ public:
+  explicit BearerFactory(std::string t) : t_(std::move(t)) {}
+  grpc::experimental::Interceptor* CreateClientInterceptor(grpc::experimental::ClientRpcInfo*) override {
+    return new Bearer(t_);
+  }
+  std::string t_;
+};
+
+std::shared_ptr<grpc::Channel> Channel(const std::string& addr, std::shared_ptr<grpc::ChannelCredentials> creds,
+                                       const std::string& token) {
+  std::vector<std::unique_ptr<grpc::experimental::ClientInterceptorFactoryInterface>> f;
+  if (!token.empty()) f.push_back(std::make_unique<BearerFactory>(token));
+  return grpc::experimental::CreateCustomChannelWithInterceptors(addr, creds, grpc::ChannelArguments(), std::move(f));
+}
+
+v1::HfPoint OnePoint() {
+  v1::HfPoint p;
+  p.set_point_id("p0");
+  p.set_id_a(-20); p.set_iq_a(40); p.set_ld_h(1e-4); p.set_lq_h(2e-4);
+  p.set_temperature_c(25); p.set_reliable(true);
+  return p;
+}
+
+// Calls `rpc` with a small request; the status is all that matters here.
+grpc::Status Call(v1::CalibrationService::Stub* stub, Rpc rpc) {
+  grpc::ClientContext ctx;
+  ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(20));
+  switch (rpc) {
+    case Rpc::kIngestHfResults: {
+      v1::IngestHfResultsResponse r;
+      auto w = stub->IngestHfResults(&ctx, &r);
+      v1::IngestHfResultsRequest m;
+      m.set_serial("IPM-AUTH-1");
+      m.mutable_motor()->set_pole_pairs(4);
+      *m.add_points() = OnePoint();
+      w->Write(m);
+      w->WritesDone();
+      return w->Finish();
+    }
+    case Rpc::kIngestRecording: {
+      v1::IngestRecordingResponse r;
+      auto w = stub->IngestRecording(&ctx, &r);
+      v1::RecordingChunk c;
+      c.set_serial("IPM-AUTH-1");
+      c.set_path("manifest.json");
+      c.set_data("{}");
+      w->Write(c);
+      w->WritesDone();
+      return w->Finish();
+    }
+    case Rpc::kFit: { v1::FitRequest q; q.set_serial("IPM-AUTH-1"); v1::FitResponse r; return stub->Fit(&ctx, q, &r); }
+    case Rpc::kGetCalibration: {
+      v1::GetCalibrationRequest q; q.set_serial("IPM-AUTH-1"); v1::CalibrationRecord r;
+      return stub->GetCalibration(&ctx, q, &r);
+    }
+    case Rpc::kListMotors: { v1::ListMotorsRequest q; v1::ListMotorsResponse r; return stub->ListMotors(&ctx, q, &r); }
+    case Rpc::kHistory: { v1::HistoryRequest q; q.set_serial("IPM-AUTH-1"); v1::HistoryResponse r; return stub->History(&ctx, q, &r); }
+    case Rpc::kQueryFlux: {
+      v1::QueryFluxRequest q; q.set_serial("IPM-AUTH-1"); v1::QueryFluxResponse r;
+      return stub->QueryFlux(&ctx, q, &r);
+    }
+    case Rpc::kExportTable: {
+      v1::ExportTableRequest q; q.set_serial("IPM-AUTH-1"); v1::ExportTableResponse r;
+      return stub->ExportTable(&ctx, q, &r);
+    }
+    case Rpc::kFleetStatistics: {
+      v1::FleetStatisticsRequest q; v1::FleetStatisticsResponse r; return stub->FleetStatistics(&ctx, q, &r);
+    }
+    case Rpc::kDiagnose: { v1::DiagnoseRequest q; q.set_serial("IPM-AUTH-1"); v1::DiagnoseResponse r; return stub->Diagnose(&ctx, q, &r); }
+  }
+  return grpc::Status::CANCELLED;
+}
+
+grpc::StatusCode HealthCheck(const std::shared_ptr<grpc::Channel>& ch) {
+  grpc::GenericStub gs(ch);
+  grpc::CompletionQueue cq;
+  grpc::ClientContext c;
+  c.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+  grpc::Slice empty("", 0);
+  grpc::ByteBuffer req(&empty, 1), resp;
+  auto call = gs.PrepareUnaryCall(&c, "/grpc.health.v1.Health/Check", req, &cq);
+  call->StartCall();
+  grpc::Status st;
+  call->Finish(&resp, &st, reinterpret_cast<void*>(1));
+  void* tag = nullptr;
+  bool ok = false;
+  cq.Next(&tag, &ok);
+  return st.error_code();
+}
+
+struct Fixture {
+  std::string db;
+  std::unique_ptr<storage::Store> store;
+  std::unique_ptr<CalibrationServiceImpl> service;
+  std::unique_ptr<Authorizer> auth;
+  std::unique_ptr<grpc::Server> server;
+  std::map<Role, std::string> tokens;
+  int port = 0;
+
+  explicit Fixture(const std::string& name, const ServerOptions& base = {}, Keys extra = {}) {
+    db = TempPath(name + ".db");
+    for (auto sfx : {"", "-wal", "-shm"}) fs::remove(db + sfx);
+    store = std::move(*storage::Store::Open(db));
+    service = std::make_unique<CalibrationServiceImpl>(store.get());
+    Keys keys = std::move(extra);
+    for (Role r : {Role::kStation, Role::kRelease, Role::kFlasher, Role::kEngineer, Role::kAdmin}) {
+      tokens[r] = *NewToken();
+      keys.entries.push_back({std::string(RoleName(r)) + "-1", r, Sha256Hex(tokens[r]), ""});
+    }
+    auth = std::make_unique<Authorizer>(keys);
+    service->set_authorizer(auth.get());
+    ServerOptions opt = base;
+    opt.authorizer = auth.get();
+    opt.reflection = false;
+    server = StartServer(service.get(), "127.0.0.1:0", &port, opt);
+  }
+  ~Fixture() {
+    server->Shutdown();
+    store.reset();
+    for (auto sfx : {"", "-wal", "-shm"}) fs::remove(db + sfx);
+  }
+  std::string addr() const { return "127.0.0.1:" + std::to_string(port); }
+};
+
+TEST(Roles, MatrixOfEveryRoleAndRpc) {
+  Fixture f("matrix");
+  int denied = 0, allowed = 0;
+  for (Role role : {Role::kStation, Role::kRelease, Role::kFlasher, Role::kEngineer, Role::kAdmin}) {
+    auto stub = v1::CalibrationService::NewStub(Channel(f.addr(), grpc::InsecureChannelCredentials(), f.tokens[role]));
+    for (Rpc rpc : kAllRpcs) {
+      const grpc::Status s = Call(stub.get(), rpc);
+      SCOPED_TRACE(std::string(RoleName(role)) + " -> " + std::string(RpcName(rpc)) + ": " + s.error_message());
+      EXPECT_NE(s.error_code(), grpc::StatusCode::UNAUTHENTICATED);
+      if (RoleMayCall(role, rpc)) {
+        EXPECT_NE(s.error_code(), grpc::StatusCode::PERMISSION_DENIED);
+        ++allowed;
+      } else {
+        EXPECT_EQ(s.error_code(), grpc::StatusCode::PERMISSION_DENIED);
+        EXPECT_NE(s.error_message().find("may not call " + std::string(RpcName(rpc))), std::string::npos);
+        ++denied;
+      }
+    }
+  }
+  // The table itself: a flasher only fetches tables, a station cannot read
+  // other motors' history or diagnose, nobody but admin has everything.
+  EXPECT_FALSE(RoleMayCall(Role::kFlasher, Rpc::kIngestHfResults));
+  EXPECT_FALSE(RoleMayCall(Role::kFlasher, Rpc::kFit));
+  EXPECT_TRUE(RoleMayCall(Role::kFlasher, Rpc::kExportTable));
+  EXPECT_FALSE(RoleMayCall(Role::kStation, Rpc::kDiagnose));
+  EXPECT_FALSE(RoleMayCall(Role::kRelease, Rpc::kIngestRecording));
+  EXPECT_GT(denied, 10);
+  EXPECT_GT(allowed, 10);
+}
+
+TEST(Roles, WithoutAValidCredentialOnlyHealthAnswers) {
+  Fixture f("anon");
+  for (const std::string token : {std::string(), std::string("not-a-token"), std::string(64, '0')}) {
+    auto ch = Channel(f.addr(), grpc::InsecureChannelCredentials(), token);
+    auto stub = v1::CalibrationService::NewStub(ch);
+    for (Rpc rpc : kAllRpcs) {
+      const grpc::Status s = Call(stub.get(), rpc);
+      EXPECT_EQ(s.error_code(), grpc::StatusCode::UNAUTHENTICATED) << RpcName(rpc) << " token '" << token << "'";
+    }
+    EXPECT_EQ(HealthCheck(ch), grpc::StatusCode::OK);
+  }
+  // Nothing anonymous reached the store.
+  auto motors = f.store->ListMotors("", false, 0, 10);
+  ASSERT_TRUE(motors.ok());
+  EXPECT_TRUE(motors->empty());
+}
+
+TEST(Roles, AStationIngestsAsItselfAndCannotLoosenTheVerdict) {
+  Fixture f("station");
+  auto stub = v1::CalibrationService::NewStub(
+      Channel(f.addr(), grpc::InsecureChannelCredentials(), f.tokens[Role::kStation]));
+  {
+    grpc::ClientContext ctx;
+    v1::IngestHfResultsResponse r;
+    auto w = stub->IngestHfResults(&ctx, &r);
+    v1::IngestHfResultsRequest m;
+    m.set_serial("IPM-AUTH-2");
+    m.set_station_id("someone-else");
+    m.mutable_motor()->set_pole_pairs(4);
+    *m.add_points() = OnePoint();
+    w->Write(m);
+    w->WritesDone();
+    const grpc::Status s = w->Finish();
+    EXPECT_EQ(s.error_code(), grpc::StatusCode::PERMISSION_DENIED) << s.error_message();
+    EXPECT_NE(s.error_message().find("not the caller's identity 'station-1'"), std::string::npos) << s.error_message();
+  }
+  EXPECT_TRUE(Call(stub.get(), Rpc::kIngestHfResults).ok());
+  {
+    sqlite3* h = nullptr;
+    ASSERT_EQ(sqlite3_open(f.db.c_str(), &h), SQLITE_OK);
+    sqlite3_stmt* st = nullptr;
+    sqlite3_prepare_v2(h, "SELECT station FROM runs WHERE serial = 'IPM-AUTH-1'", -1, &st, nullptr);
+    ASSERT_EQ(sqlite3_step(st), SQLITE_ROW);
+    EXPECT_STREQ(reinterpret_cast<const char*>(sqlite3_column_text(st, 0)), "station-1");
+    sqlite3_finalize(st);
+    sqlite3_close(h);
+  }
+  grpc::ClientContext ctx;
+  v1::FitRequest q;
+  q.set_serial("IPM-AUTH-1");
+  q.set_max_rms_relative(1e300);
+  v1::FitResponse r;
+  const grpc::Status s = stub->Fit(&ctx, q, &r);
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(s.error_message().find("may only tighten the server policy"), std::string::npos) << s.error_message();
+}
+
+// A throwaway CA, a server certificate for 127.0.0.1 and a client
+// certificate, made with Debian's openssl.
+struct Pki {
+  std::string dir = TempPath("pki");
+  Pki() {
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    const std::string d = dir;
+    const std::string script =
+        "set -e; cd " + d + "\n"
+        "openssl req -x509 -newkey ec -pkeyopt ec_paramgen_curve:prime256v1 -nodes -keyout ca.key -out ca.pem "
+        "-days 2 -subj /CN=fluxcal-test-ca 2>/dev/null\n"
+        "mk() { openssl req -newkey ec -pkeyopt ec_paramgen_curve:prime256v1 -nodes -keyout $1.key -out $1.csr "
+        "-subj /CN=$2 2>/dev/null; printf '%s' \"$3\" > $1.ext; openssl x509 -req -in $1.csr -CA ca.pem -CAkey ca.key "
+        "-CAcreateserial -out $1.pem -days 2 -extfile $1.ext 2>/dev/null; }\n"
+        "mk server localhost 'subjectAltName=IP:127.0.0.1,DNS:localhost'\n"
+        "mk client station-cert-7 'extendedKeyUsage=clientAuth'\n"
+        "mk stranger unknown-host 'extendedKeyUsage=clientAuth'\n";
+    std::ofstream(d + "/make.sh") << script;
+    ok = std::system(("bash " + d + "/make.sh").c_str()) == 0;
+  }
+  ~Pki() { fs::remove_all(dir); }
+  std::string Read(const std::string& f) const { return *io::ReadFileToString(dir + "/" + f); }
+  bool ok = false;
+};
+
+TEST(Tls, ServerCertificateAndMutualTls) {
+  Pki pki;
+  ASSERT_TRUE(pki.ok) << "openssl could not make the test CA";
+  ServerOptions opt;
+  opt.tls_cert_pem = pki.Read("server.pem");
+  opt.tls_key_pem = pki.Read("server.key");
+  {
+    Fixture f("tls", opt);
+    grpc::SslCredentialsOptions ssl;
+    ssl.pem_root_certs = pki.Read("ca.pem");
+    auto stub = v1::CalibrationService::NewStub(Channel(f.addr(), grpc::SslCredentials(ssl), f.tokens[Role::kAdmin]));
+    EXPECT_TRUE(Call(stub.get(), Rpc::kListMotors).ok());
+    // A plaintext client cannot talk to the TLS port.
+    auto plain = v1::CalibrationService::NewStub(
+        Channel(f.addr(), grpc::InsecureChannelCredentials(), f.tokens[Role::kAdmin]));
+    EXPECT_EQ(Call(plain.get(), Rpc::kListMotors).error_code(), grpc::StatusCode::UNAVAILABLE);
+    // Nor a client that does not trust the CA.
+    auto untrusting = v1::CalibrationService::NewStub(
+        Channel(f.addr(), grpc::SslCredentials(grpc::SslCredentialsOptions()), f.tokens[Role::kAdmin]));
+    EXPECT_EQ(Call(untrusting.get(), Rpc::kListMotors).error_code(), grpc::StatusCode::UNAVAILABLE);
+  }
+  opt.client_ca_pem = pki.Read("ca.pem");
+  Keys certs;
+  certs.entries.push_back({"station-7", Role::kStation, "", "station-cert-7"});
+  Fixture f("mtls", opt, certs);
+  auto with_cert = [&](const std::string& who) {
+    grpc::SslCredentialsOptions ssl;
+    ssl.pem_root_certs = pki.Read("ca.pem");
+    if (!who.empty()) {
+      ssl.pem_cert_chain = pki.Read(who + ".pem");
+      ssl.pem_private_key = pki.Read(who + ".key");
+    }
+    return v1::CalibrationService::NewStub(Channel(f.addr(), grpc::SslCredentials(ssl), ""));
+  };
+  auto station = with_cert("client");
+  EXPECT_TRUE(Call(station.get(), Rpc::kIngestHfResults).ok());
+  EXPECT_EQ(Call(station.get(), Rpc::kDiagnose).error_code(), grpc::StatusCode::PERMISSION_DENIED);
+  auto stranger = with_cert("stranger");
+  const grpc::Status s = Call(stranger.get(), Rpc::kListMotors);
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::UNAUTHENTICATED);
+  EXPECT_NE(s.error_message().find("'unknown-host' is not in the service's keys"), std::string::npos) << s.error_message();
+  // Without a client certificate (and no token) the caller is anonymous.
+  EXPECT_EQ(Call(with_cert("").get(), Rpc::kListMotors).error_code(), grpc::StatusCode::UNAUTHENTICATED);
+}
+
+TEST(Tls, RequiredClientCertificate) {
+  Pki pki;
+  ASSERT_TRUE(pki.ok);
+  ServerOptions opt;
+  opt.tls_cert_pem = pki.Read("server.pem");
+  opt.tls_key_pem = pki.Read("server.key");
+  opt.client_ca_pem = pki.Read("ca.pem");
+  opt.require_client_cert = true;
+  Fixture f("mtls-required", opt);
+  grpc::SslCredentialsOptions ssl;
+  ssl.pem_root_certs = pki.Read("ca.pem");
+  // A valid token is not enough: the handshake needs a certificate.
+  auto stub = v1::CalibrationService::NewStub(Channel(f.addr(), grpc::SslCredentials(ssl), f.tokens[Role::kAdmin]));
+  EXPECT_EQ(Call(stub.get(), Rpc::kListMotors).error_code(), grpc::StatusCode::UNAVAILABLE);
+}
+
+int RunFluxcal(const std::string& args, std::string* err) {
+  const std::string out = TempPath("serve.err");
+  const int rc = std::system((std::string(FLUXCAL_BINARY) + " " + args + " 2>" + out + " >/dev/null").c_str());
+  *err = io::ReadFileToString(out).value_or("");
+  fs::remove(out);
+  return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
+}
+
+TEST(Serve, RefusesUnsafeListenSetups) {
+  std::string err;
+  const std::string db = TempPath("refuse.db");
+  EXPECT_EQ(RunFluxcal("serve --db " + db + " --listen 0.0.0.0:0", &err), 2);
+  EXPECT_NE(err.find("not a loopback address: give --tls-cert and --tls-key"), std::string::npos) << err;
+  EXPECT_EQ(RunFluxcal("serve --db " + db + " --listen 0.0.0.0:0 --insecure", &err), 2);
+  EXPECT_NE(err.find("give --auth KEYS.json"), std::string::npos) << err;
+  EXPECT_EQ(RunFluxcal("serve --db " + db + " --tls-cert /nonexistent.pem --tls-key x", &err), 2);
+  EXPECT_NE(err.find("cannot read"), std::string::npos) << err;
+  EXPECT_FALSE(fs::exists(db));
+  EXPECT_TRUE(IsLoopbackAddress("127.0.0.1:50051"));
+  EXPECT_TRUE(IsLoopbackAddress("localhost:1"));
+  EXPECT_TRUE(IsLoopbackAddress("[::1]:1"));
+  EXPECT_FALSE(IsLoopbackAddress("0.0.0.0:50051"));
+  EXPECT_FALSE(IsLoopbackAddress("[::]:50051"));
+  EXPECT_FALSE(IsLoopbackAddress("10.0.0.5:50051"));
+}
+
+TEST(Keys, AdminCommandsRoundTrip) {
+  const std::string keys = TempPath("keys.json");
+  fs::remove(keys);
+  std::string err;
+  EXPECT_EQ(RunFluxcal("admin add-key --keys " + keys + " --name st-1 --role station", &err), 0) << err;
+  EXPECT_EQ(RunFluxcal("admin add-cert --keys " + keys + " --name st-2 --role flasher --cn host-2", &err), 0) << err;
+  EXPECT_EQ(RunFluxcal("admin add-key --keys " + keys + " --name st-1 --role admin", &err), 1);
+  EXPECT_NE(err.find("exists"), std::string::npos) << err;
+  EXPECT_EQ(RunFluxcal("admin add-key --keys " + keys + " --name x --role superuser", &err), 1);
+  auto k = LoadKeys(keys);
+  ASSERT_TRUE(k.ok()) << k.status();
+  ASSERT_EQ(k->entries.size(), 2u);
+  EXPECT_EQ(k->entries[0].token_sha256.size(), 64u);
+  EXPECT_EQ(k->entries[1].cert_cn, "host-2");
+  EXPECT_EQ(fs::status(keys).permissions() & (fs::perms::group_all | fs::perms::others_all), fs::perms::none);
+  EXPECT_EQ(RunFluxcal("admin revoke --keys " + keys + " --name st-1", &err), 0) << err;
+  EXPECT_EQ(LoadKeys(keys)->entries.size(), 1u);
+  fs::remove(keys);
+}
+
+}  // namespace
+}  // namespace fluxcal::server
