@@ -10,7 +10,11 @@
 #include "io/csv.h"
 #include "io/recording_set.h"
 #include "nlohmann/json.hpp"
+#include <sys/stat.h>
+
 #include "server/auth.h"
+#include "tables/signature.h"
+#include "tables/sha256.h"
 
 namespace fluxcal::cli {
 namespace {
@@ -55,7 +59,7 @@ int AddEntry(const std::vector<std::string>& argv, bool cert) {
     auto t = server::NewToken();
     if (!t.ok()) return Fail(cmd, t.status());
     token = *t;
-    e.token_sha256 = server::Sha256Hex(token);
+    e.token_sha256 = tables::Sha256Hex(token);
   }
   keys->entries.push_back(e);
   if (auto s = server::SaveKeys(*args->Get("keys"), *keys); !s.ok()) return Fail(cmd, s);
@@ -120,8 +124,34 @@ int RunListKeys(const std::vector<std::string>& argv) {
   return 0;
 }
 
+int RunKeygen(const std::vector<std::string>& argv) {
+  auto args = ParseArgs(argv, {"out"}, {"json"});
+  if (!args.ok() || !args->Get("out")) {
+    std::fprintf(stderr, "usage: fluxcal admin keygen --out PREFIX [--json]   (writes PREFIX.key, PREFIX.pub)\n");
+    return 2;
+  }
+  auto kp = tables::GenerateEd25519();
+  if (!kp.ok()) return Fail("keygen", kp.status());
+  const std::string key = *args->Get("out") + ".key", pub = *args->Get("out") + ".pub";
+  if (io::ReadFileToString(key).ok()) return Fail("keygen", absl::AlreadyExistsError(key + ": exists; not overwritten"));
+  const mode_t old = ::umask(077);
+  auto s = io::WriteFileAtomically(key, kp->private_pem);
+  ::umask(old);
+  if (!s.ok()) return Fail("keygen", s);
+  if (auto s2 = io::WriteFileAtomically(pub, kp->public_pem); !s2.ok()) return Fail("keygen", s2);
+  auto id = tables::KeyId(kp->public_pem);
+  if (args->Has("json")) {
+    std::cout << nlohmann::json{{"private_key", key}, {"public_key", pub}, {"key_id", id.value_or("")}}.dump(2) << "\n";
+  } else {
+    std::printf("%s (private, keep on the server), %s (public, give to flashers), key id %s\n", key.c_str(),
+                pub.c_str(), id.value_or("?").c_str());
+  }
+  return 0;
+}
+
 }  // namespace
 
+FLUXCAL_REGISTER_COMMAND("admin keygen", "make an Ed25519 key pair for signing exports", RunKeygen);
 FLUXCAL_REGISTER_COMMAND("admin add-key", "make a bearer token for an identity with a role (printed once)",
                          RunAddKey);
 FLUXCAL_REGISTER_COMMAND("admin add-cert", "accept a client certificate common name with a role", RunAddCert);

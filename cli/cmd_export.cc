@@ -1,6 +1,8 @@
 // fluxcal export calibration.json --table mtpa|mtpv|fw --format csv|json|h|cdfx|dcm
 //                [--points N] [--speed-points M] [--speed-max-rpm R] [--i-max-a A]
-//                [--udc-v V] [--svg FILE] --out FILE [--json]
+//                [--udc-v V] [--svg FILE] [--sign-key ED25519.key] --out FILE [--json]
+// With --sign-key, FILE.sig holds a detached Ed25519 signature
+// (tables/signature.h; `fluxcal verify FILE --pubkey KEY.pub`).
 // Builds an ECU lookup table from a fitted calibration and writes it with
 // CRC-32 and SHA-256 of its payload (docs/tables.md).
 #include <cstdio>
@@ -13,6 +15,7 @@
 #include "fitting/calibration.h"
 #include "io/csv.h"
 #include "nlohmann/json.hpp"
+#include "tables/signature.h"
 #include "tables/tables.h"
 
 namespace fluxcal::cli {
@@ -28,7 +31,7 @@ int RunExport(const std::vector<std::string>& argv) {
     if (a == "--server" || a.rfind("--server=", 0) == 0) return RunRemoteExport(argv);
   }
   auto args = ParseArgs(argv, {"table", "format", "points", "speed-points", "speed-max-rpm", "i-max-a",
-                               "udc-v", "out", "svg"},
+                               "udc-v", "out", "svg", "sign-key"},
                         {"json"});
   if (!args.ok()) return Fail(std::string(args.status().message()), 2);
   if (args->positional.size() != 1 || !args->Get("out")) {
@@ -70,6 +73,15 @@ int RunExport(const std::vector<std::string>& argv) {
   auto out = tables::Export(*table, *fmt);
   if (!out.ok()) return Fail(std::string(out.status().message()));
   if (auto st = io::WriteFileAtomically(*args->Get("out"), out->bytes); !st.ok()) return Fail(std::string(st.message()));
+  std::string sig_path;
+  if (auto key_path = args->Get("sign-key")) {
+    auto key = io::ReadFileToString(*key_path);
+    if (!key.ok()) return Fail("--sign-key " + *key_path + ": cannot read", 2);
+    auto sig = tables::SignDetached(out->bytes, *key);
+    if (!sig.ok()) return Fail("--sign-key: " + std::string(sig.status().message()));
+    sig_path = *args->Get("out") + ".sig";
+    if (auto st = io::WriteFileAtomically(sig_path, *sig); !st.ok()) return Fail(std::string(st.message()));
+  }
   if (auto svg = args->Get("svg")) {
     std::string text;
     if (spec.kind == "fw") {
@@ -92,7 +104,8 @@ int RunExport(const std::vector<std::string>& argv) {
     std::cout << nlohmann::json{{"out", *args->Get("out")}, {"table", spec.kind}, {"format", args->Get("format").value_or("csv")},
                                 {"serial", spec.serial}, {"calibration_version", spec.calibration_version},
                                 {"rows", table->clamped.size()}, {"clamped_rows", clamped},
-                                {"crc32", crc}, {"sha256", out->sha256}, {"bytes", out->bytes.size()}}
+                                {"crc32", crc}, {"sha256", out->sha256}, {"bytes", out->bytes.size()},
+                                {"signature", sig_path}}
                      .dump(2, ' ', false, nlohmann::json::error_handler_t::replace)
               << "\n";
   } else {

@@ -1,6 +1,6 @@
 // fluxcal serve --db PATH --listen 127.0.0.1:50051
 //   [--tls-cert PEM --tls-key PEM [--client-ca PEM [--require-client-cert]]]
-//   [--auth KEYS] [--insecure] [--quiet]
+//   [--auth KEYS] [--signing-key ED25519.key] [--insecure] [--quiet]
 // Runs the calibration service on a SQLite store until SIGINT/SIGTERM.
 //
 // Transport and identity (docs/service.md, "Security"): off loopback the
@@ -19,6 +19,7 @@
 #include "server/auth.h"
 #include "server/service.h"
 #include "storage/store.h"
+#include "tables/signature.h"
 
 namespace fluxcal::cli {
 namespace {
@@ -28,10 +29,11 @@ void OnSignal(int) { g_stop = 1; }
 
 constexpr char kUsage[] =
     "usage: fluxcal serve --db PATH --listen HOST:PORT [--tls-cert PEM --tls-key PEM [--client-ca PEM]]\n"
-    "                     [--require-client-cert] [--auth KEYS.json] [--insecure] [--quiet]\n";
+    "                     [--require-client-cert] [--auth KEYS.json] [--signing-key ED25519.key] [--insecure]\n"
+    "                     [--quiet]\n";
 
 int RunServe(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, {"db", "listen", "tls-cert", "tls-key", "client-ca", "auth"}, {"insecure", "quiet", "require-client-cert"});
+  auto args = ParseArgs(argv, {"db", "listen", "tls-cert", "tls-key", "client-ca", "auth", "signing-key"}, {"insecure", "quiet", "require-client-cert"});
   if (!args.ok() || !args->positional.empty()) {
     std::fprintf(stderr, "%s", kUsage);
     return 2;
@@ -98,6 +100,15 @@ int RunServe(const std::vector<std::string>& argv) {
   }
   server::CalibrationServiceImpl service(store->get());
   service.set_authorizer(auth.get());
+  std::string signing_key;
+  if (!pem("signing-key", &signing_key)) return 2;
+  if (!signing_key.empty()) {
+    if (auto pub = tables::PublicPemOf(signing_key); !pub.ok()) {
+      std::fprintf(stderr, "fluxcal serve: --signing-key: %s\n", std::string(pub.status().message()).c_str());
+      return 2;
+    }
+    service.set_signing_key(signing_key);
+  }
   opt.authorizer = auth.get();
   opt.log_requests = !args->Has("quiet");
   // Reflection describes the API only; with identities on, it stays off so

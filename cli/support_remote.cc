@@ -248,6 +248,12 @@ int RunRemoteExport(const std::vector<std::string>& argv) {
     std::fprintf(stderr, "fluxcal export: %s\n", std::string(st.message()).c_str());
     return 1;
   }
+  if (!resp.signature().empty()) {
+    if (auto st = io::WriteFileAtomically(*args->Get("out") + ".sig", resp.signature()); !st.ok()) {
+      std::fprintf(stderr, "fluxcal export: %s\n", std::string(st.message()).c_str());
+      return 1;
+    }
+  }
   if (args->Has("json")) {
     std::cout << nlohmann::json{{"out", *args->Get("out")}, {"serial", resp.serial()}, {"version", resp.version()},
                                 {"table", req.table()}, {"format", req.format()}, {"crc32", resp.crc32()},

@@ -1,7 +1,6 @@
 #include "server/auth.h"
 
 #include <openssl/crypto.h>
-#include <openssl/evp.h>
 #include <openssl/rand.h>
 #include <sys/stat.h>
 
@@ -14,6 +13,7 @@
 #include "absl/strings/str_cat.h"
 #include "io/csv.h"
 #include "nlohmann/json.hpp"
+#include "tables/sha256.h"
 
 namespace fluxcal::server {
 namespace {
@@ -81,13 +81,6 @@ bool RoleMayCall(Role role, Rpc rpc) {
       return role == Role::kEngineer;
   }
   return false;
-}
-
-std::string Sha256Hex(std::string_view bytes) {
-  unsigned char md[EVP_MAX_MD_SIZE];
-  unsigned int n = 0;
-  EVP_Digest(bytes.data(), bytes.size(), md, &n, EVP_sha256(), nullptr);
-  return Hex(md, n);
 }
 
 absl::StatusOr<std::string> NewToken() {
@@ -160,7 +153,7 @@ absl::StatusOr<Identity> Authorizer::Authenticate(const grpc::ServerContext& ctx
     if (v.substr(0, kBearer.size()) != kBearer) {
       return absl::UnauthenticatedError("authorization: expected 'Bearer <token>'");
     }
-    const std::string h = Sha256Hex(v.substr(kBearer.size()));
+    const std::string h = tables::Sha256Hex(v.substr(kBearer.size()));
     for (const auto& e : keys_.entries) {
       if (e.token_sha256.size() == h.size() && CRYPTO_memcmp(e.token_sha256.data(), h.data(), h.size()) == 0) {
         return Identity{e.name, e.role, "token"};

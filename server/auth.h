@@ -62,7 +62,6 @@ absl::StatusOr<Keys> LoadKeys(const std::string& path);
 absl::Status SaveKeys(const std::string& path, const Keys& keys);   // atomic, mode 0600
 // 32 random bytes (OpenSSL RAND_bytes) as 64 hex characters.
 absl::StatusOr<std::string> NewToken();
-std::string Sha256Hex(std::string_view bytes);   // OpenSSL EVP
 
 struct Identity {
   std::string name;

@@ -23,6 +23,7 @@
 #include "server/validation.h"
 #include "storage/operations.h"
 #include "tables/sha256.h"
+#include "tables/signature.h"
 
 namespace fluxcal::server {
 
@@ -392,6 +393,11 @@ grpc::Status CalibrationServiceImpl::ExportTable(grpc::ServerContext* ctx, const
   resp->set_crc32(absl::StrFormat("%08x", r->exported.crc32));
   resp->set_sha256(r->exported.sha256);
   resp->set_clamped_cells(r->clamped_cells);
+  if (!signing_key_pem_.empty()) {
+    auto sig = tables::SignDetached(r->exported.bytes, signing_key_pem_);
+    if (!sig.ok()) return ToGrpcStatus(sig.status());
+    resp->set_signature(*sig);
+  }
   return grpc::Status::OK;
 }
 

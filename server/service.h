@@ -28,6 +28,8 @@ class CalibrationServiceImpl final : public fluxcal::v1::CalibrationService::Ser
   explicit CalibrationServiceImpl(storage::Store* store) : store_(store) {}
   // Who may call what (server/auth.h). Without one the service is open.
   void set_authorizer(const Authorizer* auth) { auth_ = auth != nullptr ? auth : &open_; }
+  // Ed25519 private key (PEM) that signs every ExportTable reply.
+  void set_signing_key(std::string private_pem) { signing_key_pem_ = std::move(private_pem); }
 
   grpc::Status IngestHfResults(grpc::ServerContext* ctx, grpc::ServerReader<v1::IngestHfResultsRequest>* reader,
                                v1::IngestHfResultsResponse* response) override;
@@ -51,6 +53,7 @@ class CalibrationServiceImpl final : public fluxcal::v1::CalibrationService::Ser
   storage::Store* store_;
   Authorizer open_;
   const Authorizer* auth_ = &open_;
+  std::string signing_key_pem_;
 };
 
 struct ServerOptions {

@@ -1,5 +1,5 @@
-// SHA-256 (FIPS 180-4). Written here because the project links no crypto
-// library; verified against the NIST test vectors in tests/tables.
+// SHA-256 (FIPS 180-4) through OpenSSL's libcrypto (EVP), checked against
+// the NIST test vectors in tests/tables.
 #ifndef FLUXCAL_TABLES_SHA256_H_
 #define FLUXCAL_TABLES_SHA256_H_
 

@@ -73,6 +73,31 @@ TEST(Cli, EndToEnd) {
     EXPECT_TRUE(fs::file_size(out) > 100) << fmt;
   }
 
+  // Signed export: keygen, export --sign-key, verify; a changed byte or
+  // another key fails verification.
+  const std::string prefix = (dir / "signing").string();
+  auto kg = Json(Fluxcal("admin keygen --out " + prefix + " --json"));
+  EXPECT_EQ(kg["key_id"].get<std::string>().size(), 16u);
+  EXPECT_EQ(Fluxcal("admin keygen --out " + prefix).code, 1);   // never overwrites a key
+  const std::string table = (dir / "signed.dcm").string();
+  auto se = Json(Fluxcal("export " + cal + " --table mtpa --format dcm --points 8 --out " + table + " --sign-key " +
+                         prefix + ".key --json"));
+  EXPECT_EQ(se["signature"], table + ".sig");
+  auto ok = Json(Fluxcal("verify " + table + " --pubkey " + prefix + ".pub --json"));
+  EXPECT_TRUE(ok["valid"].get<bool>());
+  EXPECT_EQ(ok["key_id"], kg["key_id"]);
+  {
+    std::ofstream(table, std::ios::app) << " ";
+    const auto bad = Fluxcal("verify " + table + " --pubkey " + prefix + ".pub --json");
+    EXPECT_EQ(bad.code, 1);
+    EXPECT_NE(bad.out.find("changed after signing"), std::string::npos) << bad.out;
+  }
+  Json(Fluxcal("admin keygen --out " + prefix + "2 --json"));
+  Json(Fluxcal("export " + cal + " --table mtpa --format dcm --points 8 --out " + table + " --sign-key " + prefix + ".key --json"));
+  const auto other = Fluxcal("verify " + table + " --pubkey " + prefix + "2.pub --json");
+  EXPECT_EQ(other.code, 1);
+  EXPECT_NE(other.out.find("not by this key"), std::string::npos) << other.out;
+
   auto diag = Json(Fluxcal("diagnose " + set + " --json"));
   EXPECT_EQ(diag["format"], "fluxcal.diagnosis.v1");
   ASSERT_GE(diag["findings"].size(), 1u);

@@ -18,6 +18,7 @@
 #include "io/recording_set.h"
 #include "simulation/twin.h"
 #include "storage/store.h"
+#include "tables/signature.h"
 
 namespace fluxcal::server {
 namespace {
@@ -251,6 +252,15 @@ TEST_F(ServiceTest, EightConcurrentStationsThenFitExportQuery) {
   EXPECT_EQ(er.version(), 2);
   EXPECT_EQ(er.sha256().size(), 64u);
   EXPECT_NE(er.data().find("KENNLINIE FLUXCAL_MTPA_ID_A 16"), std::string::npos);
+  EXPECT_TRUE(er.signature().empty());
+  // With a signing key every reply carries a detached signature of its data.
+  auto kp = tables::GenerateEd25519();
+  ASSERT_TRUE(kp.ok());
+  service_->set_signing_key(kp->private_pem);
+  grpc::ClientContext sc;
+  v1::ExportTableResponse sr;
+  ASSERT_TRUE(stub_->ExportTable(&sc, e, &sr).ok());
+  EXPECT_TRUE(tables::VerifyDetached(sr.data(), sr.signature(), kp->public_pem).ok()) << sr.signature();
 }
 
 // A raw recording streamed in chunks is validated, identified, stored by

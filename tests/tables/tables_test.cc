@@ -15,6 +15,7 @@
 #include "nlohmann/json.hpp"
 #include "simulation/twin.h"
 #include "tables/sha256.h"
+#include "tables/signature.h"
 #include "tables/tables.h"
 #include "tinyxml2.h"
 
@@ -443,4 +444,27 @@ TEST(Export, DcmRoundTrip) {
 }
 
 }  // namespace
+TEST(Signature, SignVerifyTamperWrongKeyMalformed) {
+  auto a = GenerateEd25519();
+  auto b = GenerateEd25519();
+  ASSERT_TRUE(a.ok() && b.ok());
+  const std::string data = "KENNLINIE FLUXCAL_MTPA_ID_A 16\n";
+  auto sig = SignDetached(data, a->private_pem);
+  ASSERT_TRUE(sig.ok()) << sig.status();
+  EXPECT_EQ(sig->rfind("fluxcal-signature-v1 ed25519\nkey_id ", 0), 0u);
+  EXPECT_TRUE(VerifyDetached(data, *sig, a->public_pem).ok());
+  EXPECT_EQ(VerifyDetached(data + " ", *sig, a->public_pem).code(), absl::StatusCode::kPermissionDenied);
+  EXPECT_EQ(VerifyDetached(data, *sig, b->public_pem).code(), absl::StatusCode::kPermissionDenied);
+  // A forged signature line with the right key id and digest.
+  std::string forged = *sig;
+  const auto pos = forged.find("signature ") + 10;
+  forged[pos] = forged[pos] == 'A' ? 'B' : 'A';
+  EXPECT_EQ(VerifyDetached(data, forged, a->public_pem).code(), absl::StatusCode::kPermissionDenied);
+  EXPECT_EQ(VerifyDetached(data, "garbage", a->public_pem).code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(VerifyDetached(data, *sig, "not a key").code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(*PublicPemOf(a->private_pem), a->public_pem);
+  EXPECT_EQ(KeyId(a->public_pem)->size(), 16u);
+  EXPECT_NE(*KeyId(a->public_pem), *KeyId(b->public_pem));
+}
+
 }  // namespace fluxcal::tables
