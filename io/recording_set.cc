@@ -388,6 +388,8 @@ std::string FmtOpt(const std::optional<double>& v) { return v ? Fmt(*v) : std::s
 
 bool IsValidSerial(const std::string& serial) {
   if (serial.empty() || serial.size() > 64) return false;
+  // "." and ".." (any all-dot name) read as paths, not serials.
+  if (serial.find_first_not_of('.') == std::string::npos) return false;
   for (char c : serial) {
     const bool ok = (c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') ||
                     c == '-' || c == '_' || c == '.';

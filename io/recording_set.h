@@ -135,7 +135,8 @@ absl::StatusOr<Manifest> ReadManifest(const std::string& manifest_path);
 // round-trip the physics (not necessarily bit-exact).
 absl::Status WriteRecordingSet(const std::string& dir, const RecordingSet& set);
 
-// Serial rule: 1 to 64 characters of A-Z a-z 0-9 - _ .
+// Serial rule: 1 to 64 characters of A-Z a-z 0-9 - _ . (the contract's
+// rule), and not only dots ("." and ".." name directories, not motors).
 bool IsValidSerial(const std::string& serial);
 
 // Standalone readers/writers of the optional tables (same validation).

@@ -47,7 +47,9 @@ grpc::Status ToGrpcStatus(const absl::Status& s) {
     case absl::StatusCode::kUnimplemented: c = grpc::StatusCode::UNIMPLEMENTED; break;
     default: break;
   }
-  return grpc::Status(c, std::string(s.message()));
+  std::string msg(s.message());
+  if (msg.size() > kMaxStatusMessageBytes) msg = msg.substr(0, kMaxStatusMessageBytes - 3) + "...";
+  return grpc::Status(c, msg);
 }
 
 namespace {
@@ -104,6 +106,7 @@ grpc::Status CalibrationServiceImpl::IngestHfResults(grpc::ServerContext* ctx,
   v1::MotorInfo motor;
   bool have_motor = false;
   std::vector<storage::HfPointRow> rows;
+  std::set<std::string> point_ids;
   int index = 0;
   while (reader->Read(&msg)) {
     if (ctx->IsCancelled()) return grpc::Status(grpc::StatusCode::CANCELLED, "client cancelled the stream");
@@ -124,10 +127,14 @@ grpc::Status CalibrationServiceImpl::IngestHfResults(grpc::ServerContext* ctx,
     }
     for (const auto& p : msg.points()) {
       if (index >= kMaxPointsPerStream) {
-        return ToGrpcStatus(absl::InvalidArgumentError(
-            absl::StrCat("points: stream exceeds ", kMaxPointsPerStream, " points")));
+        return ToGrpcStatus(absl::ResourceExhaustedError(
+            absl::StrCat("points: stream exceeds the limit of ", kMaxPointsPerStream, " points")));
       }
-      if (auto s = ValidatePoint(p, index); !s.ok()) {
+      absl::Status s = ValidatePoint(p, index);
+      if (s.ok() && !p.point_id().empty() && !point_ids.insert(p.point_id()).second) {
+        s = absl::InvalidArgumentError(absl::StrCat("points[", index, "].point_id: duplicate '", p.point_id(), "'"));
+      }
+      if (!s.ok()) {
         auto* r = response->add_rejects();
         r->set_index(index);
         r->set_point_id(io::Printable(p.point_id().substr(0, kMaxIdentifierBytes)));
@@ -154,6 +161,15 @@ grpc::Status CalibrationServiceImpl::IngestHfResults(grpc::ServerContext* ctx,
   if (rows.empty()) {
     return ToGrpcStatus(absl::InvalidArgumentError(
         absl::StrCat("points: no valid point in the stream (", response->rejects_size(), " rejected)")));
+  }
+  {
+    std::set<std::pair<double, double>> distinct;
+    for (const auto& r : rows) distinct.insert({r.id_a, r.iq_a});
+    if (static_cast<int>(distinct.size()) < kMinDistinctOperatingPoints) {
+      return ToGrpcStatus(absl::InvalidArgumentError(absl::StrCat(
+          "points: ", distinct.size(), " distinct operating points (id_a, iq_a); a calibration needs at least ",
+          kMinDistinctOperatingPoints)));
+    }
   }
   auto run = store_->IngestHfRun(m, station, "hf_run", rows);
   if (!run.ok()) return ToGrpcStatus(run.status());
@@ -286,7 +302,7 @@ grpc::Status CalibrationServiceImpl::GetCalibration(grpc::ServerContext* ctx, co
   auto who = auth_->Authorize(*ctx, Rpc::kGetCalibration);
   if (!who.ok()) return ToGrpcStatus(who.status());
   if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
-  if (req->version() < 0) return ToGrpcStatus(absl::InvalidArgumentError("version: must be >= 0 (0 = latest)"));
+  if (auto s = ValidateVersion(req->version()); !s.ok()) return ToGrpcStatus(s);
   auto row = store_->GetCalibration(req->serial(), req->version());
   if (!row.ok()) return ToGrpcStatus(row.status());
   ToProto(*row, resp);
@@ -299,15 +315,10 @@ grpc::Status CalibrationServiceImpl::ListMotors(grpc::ServerContext* ctx, const 
   if (!who.ok()) return ToGrpcStatus(who.status());
   int size = req->page_size() == 0 ? 50 : req->page_size();
   if (size < 0 || size > 1000) return ToGrpcStatus(absl::InvalidArgumentError("page_size: must be 0..1000"));
-  int offset = 0;
-  if (!req->page_token().empty()) {
-    try {
-      offset = std::stoi(req->page_token());
-    } catch (...) {
-      offset = -1;
-    }
-    if (offset < 0) return ToGrpcStatus(absl::InvalidArgumentError("page_token: not a token from this service"));
-  }
+  auto token = ParsePageToken(req->page_token());
+  if (!token.ok()) return ToGrpcStatus(token.status());
+  const int offset = *token;
+  if (req->serial_prefix().size() > 64) return ToGrpcStatus(absl::InvalidArgumentError("serial_prefix: at most 64 characters"));
   auto rows = store_->ListMotors(req->serial_prefix(), req->only_failed(), offset, size + 1);
   if (!rows.ok()) return ToGrpcStatus(rows.status());
   for (size_t k = 0; k < rows->size() && static_cast<int>(k) < size; ++k) {
@@ -341,7 +352,10 @@ grpc::Status CalibrationServiceImpl::QueryFlux(grpc::ServerContext* ctx, const v
   auto who = auth_->Authorize(*ctx, Rpc::kQueryFlux);
   if (!who.ok()) return ToGrpcStatus(who.status());
   if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
-  if (req->points_size() > 100000) return ToGrpcStatus(absl::InvalidArgumentError("points: at most 100000 per call"));
+  if (auto s = ValidateVersion(req->version()); !s.ok()) return ToGrpcStatus(s);
+  if (req->points_size() > kMaxQueryPoints) {
+    return ToGrpcStatus(absl::ResourceExhaustedError(absl::StrCat("points: at most ", kMaxQueryPoints, " per call")));
+  }
   for (int k = 0; k < req->points_size(); ++k) {
     if (auto s = ValidateOperatingPoint(req->points(k), k); !s.ok()) return ToGrpcStatus(s);
   }
@@ -373,14 +387,22 @@ grpc::Status CalibrationServiceImpl::ExportTable(grpc::ServerContext* ctx, const
   if (req->points() != 0) spec.points = req->points();
   if (req->speed_points() != 0) spec.speed_points = req->speed_points();
   if (req->speed_max_rpm() != 0) spec.speed_max_rpm = req->speed_max_rpm();
-  if (spec.points < 2 || spec.points > 4096) return ToGrpcStatus(absl::InvalidArgumentError("points: must be 2..4096"));
-  if (spec.speed_points < 2 || spec.speed_points > 1024) return ToGrpcStatus(absl::InvalidArgumentError("speed_points: must be 2..1024"));
+  if (auto s = ValidateVersion(req->version()); !s.ok()) return ToGrpcStatus(s);
+  if (spec.points < 2 || spec.points > kMaxTablePoints) {
+    return ToGrpcStatus(absl::InvalidArgumentError(absl::StrCat("points: must be 2..", kMaxTablePoints)));
+  }
+  if (spec.speed_points < 2 || spec.speed_points > kMaxTableSpeedPoints) {
+    return ToGrpcStatus(absl::InvalidArgumentError(absl::StrCat("speed_points: must be 2..", kMaxTableSpeedPoints)));
+  }
+  if (spec.kind == "fw" && static_cast<long long>(spec.points) * spec.speed_points > kMaxTableCells) {
+    return ToGrpcStatus(absl::ResourceExhaustedError(
+        absl::StrCat("points x speed_points: a field-weakening map has at most ", kMaxTableCells, " cells")));
+  }
   if (!(spec.speed_max_rpm > 0 && spec.speed_max_rpm <= 1e5)) return ToGrpcStatus(absl::InvalidArgumentError("speed_max_rpm: must be in (0, 100000]"));
   tables::MachineLimits lim;
-  lim.i_max_a = req->i_max_a();   // 0: the calibration's measured current limit
-  if (lim.i_max_a == 0) lim.i_max_a = -1;
+  lim.i_max_a = req->i_max_a() == 0 ? -1 : req->i_max_a();   // 0: the calibration's measured current limit
   if (req->udc_v() != 0) lim.udc_v = req->udc_v();
-  if (!(lim.i_max_a == -1 || (lim.i_max_a > 0 && lim.i_max_a <= 1e4))) {
+  if (!(req->i_max_a() == 0 || (req->i_max_a() > 0 && req->i_max_a() <= 1e4))) {
     return ToGrpcStatus(absl::InvalidArgumentError("i_max_a: must be in (0, 10000] (0: measured limit)"));
   }
   if (!(lim.udc_v > 0 && lim.udc_v <= 5000)) return ToGrpcStatus(absl::InvalidArgumentError("udc_v: must be in (0, 5000]"));
@@ -406,6 +428,13 @@ grpc::Status CalibrationServiceImpl::FleetStatistics(grpc::ServerContext* ctx, c
   auto who = auth_->Authorize(*ctx, Rpc::kFleetStatistics);
   if (!who.ok()) return ToGrpcStatus(who.status());
   std::vector<std::pair<double, double>> pts;
+  if (req->points_size() > kMaxFleetPoints) {
+    return ToGrpcStatus(absl::ResourceExhaustedError(absl::StrCat("points: at most ", kMaxFleetPoints, " per call")));
+  }
+  if (!std::isfinite(req->outlier_sigma()) || req->outlier_sigma() < 0 || req->outlier_sigma() > 100) {
+    return ToGrpcStatus(absl::InvalidArgumentError(absl::StrFormat(
+        "outlier_sigma: must be in (0, 100] (0: default 3), got %g", req->outlier_sigma())));
+  }
   for (int k = 0; k < req->points_size(); ++k) {
     if (auto s = ValidateOperatingPoint(req->points(k), k); !s.ok()) return ToGrpcStatus(s);
     pts.push_back({req->points(k).id_a(), req->points(k).iq_a()});

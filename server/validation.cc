@@ -2,6 +2,7 @@
 
 #include <cmath>
 
+#include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "io/csv.h"
@@ -65,11 +66,10 @@ absl::Status ValidatePoint(const fluxcal::v1::HfPoint& p, int i) {
   if (auto s = Range(f + ".id_a", p.id_a(), -1e4, 1e4, "must be within +-10 kA"); !s.ok()) return s;
   if (auto s = Range(f + ".iq_a", p.iq_a(), -1e4, 1e4, "must be within +-10 kA"); !s.ok()) return s;
   if (auto s = Range(f + ".speed_rpm", p.speed_rpm(), -1e5, 1e5, "must be within +-100000 rpm"); !s.ok()) return s;
-  if (!std::isfinite(p.ld_h()) || p.ld_h() <= 0 || p.ld_h() >= 1) {
-    return Bad(f + ".ld_h", "must be positive and below 1 H", p.ld_h());
-  }
-  if (!std::isfinite(p.lq_h()) || p.lq_h() <= 0 || p.lq_h() >= 1) {
-    return Bad(f + ".lq_h", "must be positive and below 1 H", p.lq_h());
+  for (auto [name, v] : {std::pair<const char*, double>{".ld_h", p.ld_h()}, {".lq_h", p.lq_h()}}) {
+    if (!std::isfinite(v) || v < kMinInductanceH || v >= kMaxInductanceH) {
+      return Bad(f + name, "must be in [1e-7, 1) H", v);
+    }
   }
   if (p.has_ldq_h()) {
     if (auto s = Range(f + ".ldq_h", p.ldq_h(), -1, 1, "must be within +-1 H"); !s.ok()) return s;
@@ -78,6 +78,10 @@ absl::Status ValidatePoint(const fluxcal::v1::HfPoint& p, int i) {
                          {".lq_h_std", p.lq_h_std()}, {".ldq_h_std", p.ldq_h_std()}}) {
     if (auto s = Range(f + name, v, 0, 1, "must be 0..1 H"); !s.ok()) return s;
   }
+  // A standard error as large as the value says the point carries no
+  // information; such a point is refused, not fitted.
+  if (p.ld_h_std() >= p.ld_h()) return Bad(f + ".ld_h_std", "must be below ld_h", p.ld_h_std());
+  if (p.lq_h_std() >= p.lq_h()) return Bad(f + ".lq_h_std", "must be below lq_h", p.lq_h_std());
   return Range(f + ".temperature_c", p.temperature_c(), -60, 250, "must be -60..250 degC");
 }
 
@@ -85,6 +89,21 @@ absl::Status ValidateOperatingPoint(const fluxcal::v1::OperatingPoint& p, int i)
   const std::string f = absl::StrCat("points[", i, "]");
   if (auto s = Range(f + ".id_a", p.id_a(), -1e4, 1e4, "must be within +-10 kA"); !s.ok()) return s;
   return Range(f + ".iq_a", p.iq_a(), -1e4, 1e4, "must be within +-10 kA");
+}
+
+absl::Status ValidateVersion(int version) {
+  if (version < 0) return absl::InvalidArgumentError(absl::StrCat("version: must be >= 0 (0 = latest), got ", version));
+  return absl::OkStatus();
+}
+
+absl::StatusOr<int> ParsePageToken(const std::string& token) {
+  int offset = 0;
+  if (token.empty()) return 0;
+  if (token.size() > 10 || !absl::SimpleAtoi(token, &offset) || offset < 0 ||
+      token.find_first_not_of("0123456789") != std::string::npos) {
+    return absl::InvalidArgumentError("page_token: not a token from this service");
+  }
+  return offset;
 }
 
 }  // namespace fluxcal::server

@@ -7,11 +7,31 @@
 #include <string>
 
 #include "absl/status/status.h"
+#include "absl/status/statusor.h"
 #include "fluxcal/v1/calibration.pb.h"
 
 namespace fluxcal::server {
 
-inline constexpr int kMaxPointsPerStream = 100000;
+// One run: a dense EOL grid is ~1000 points; 10 000 bounds the fit's cost
+// (a few seconds, docs/performance.md) instead of letting one request take
+// minutes and gigabytes.
+inline constexpr int kMaxPointsPerStream = 10000;
+// A calibration needs a grid: fewer distinct (id_a, iq_a) than this cannot
+// determine a flux surface (36 copies of one point must not "pass").
+inline constexpr int kMinDistinctOperatingPoints = 6;
+// Batch queries and fleet statistics.
+inline constexpr int kMaxQueryPoints = 100000;
+inline constexpr int kMaxFleetPoints = 1000;
+// Table grids: rows per curve, and cells of a field-weakening map.
+inline constexpr int kMaxTablePoints = 1024;
+inline constexpr int kMaxTableSpeedPoints = 256;
+inline constexpr long long kMaxTableCells = 65536;
+// Longest message a client gets back (values inside are already escaped
+// and cut); gRPC metadata limits are a few kB.
+inline constexpr size_t kMaxStatusMessageBytes = 1024;
+// Plausible differential inductance of a traction or industrial PMSM.
+inline constexpr double kMinInductanceH = 1e-7;
+inline constexpr double kMaxInductanceH = 1.0;
 // A recording set as uploaded: at most this many bytes over all files and
 // this many files (a 1000-point set at 10 kHz for 0.2 s a point is ~25 MB in
 // ~1000 files).
@@ -28,6 +48,10 @@ absl::Status ValidateMotor(const fluxcal::v1::MotorInfo& m);
 // `index` is the point's position in the stream.
 absl::Status ValidatePoint(const fluxcal::v1::HfPoint& p, int index);
 absl::Status ValidateOperatingPoint(const fluxcal::v1::OperatingPoint& p, int index);
+// version: 0 = latest, n > 0 = that version; negative is refused.
+absl::Status ValidateVersion(int version);
+// A page token this service issued: a non-negative decimal offset.
+absl::StatusOr<int> ParsePageToken(const std::string& token);
 
 }  // namespace fluxcal::server
 

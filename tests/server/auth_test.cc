@@ -60,12 +60,17 @@ std::shared_ptr<grpc::Channel> Channel(const std::string& addr, std::shared_ptr<
   return grpc::experimental::CreateCustomChannelWithInterceptors(addr, creds, grpc::ChannelArguments(), std::move(f));
 }
 
-v1::HfPoint OnePoint() {
-  v1::HfPoint p;
-  p.set_point_id("p0");
-  p.set_id_a(-20); p.set_iq_a(40); p.set_ld_h(1e-4); p.set_lq_h(2e-4);
-  p.set_temperature_c(25); p.set_reliable(true);
-  return p;
+// The smallest run the service takes: six distinct operating points.
+std::vector<v1::HfPoint> SmallGrid() {
+  std::vector<v1::HfPoint> out;
+  for (int k = 0; k < 6; ++k) {
+    v1::HfPoint p;
+    p.set_point_id("p" + std::to_string(k));
+    p.set_id_a(-20.0 * (k % 3)); p.set_iq_a(40.0 * (k / 3)); p.set_ld_h(1e-4); p.set_lq_h(2e-4);
+    p.set_temperature_c(25); p.set_reliable(true);
+    out.push_back(p);
+  }
+  return out;
 }
 
 // Calls `rpc` with a small request; the status is all that matters here.
@@ -79,7 +84,7 @@ grpc::Status Call(v1::CalibrationService::Stub* stub, Rpc rpc) {
       v1::IngestHfResultsRequest m;
       m.set_serial("IPM-AUTH-1");
       m.mutable_motor()->set_pole_pairs(4);
-      *m.add_points() = OnePoint();
+      for (const auto& p : SmallGrid()) *m.add_points() = p;
       w->Write(m);
       w->WritesDone();
       return w->Finish();
@@ -228,7 +233,7 @@ TEST(Roles, AStationIngestsAsItselfAndCannotLoosenTheVerdict) {
     m.set_serial("IPM-AUTH-2");
     m.set_station_id("someone-else");
     m.mutable_motor()->set_pole_pairs(4);
-    *m.add_points() = OnePoint();
+    for (const auto& p : SmallGrid()) *m.add_points() = p;
     w->Write(m);
     w->WritesDone();
     const grpc::Status s = w->Finish();

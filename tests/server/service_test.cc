@@ -138,8 +138,12 @@ TEST_F(ServiceTest, PointValidationRules) {
   const std::vector<Case> cases = {
       {[](v1::HfPoint* p) { p->set_ld_h(std::nan("")); }, "points[3].ld_h"},
       {[](v1::HfPoint* p) { p->set_lq_h(INFINITY); }, "points[3].lq_h"},
-      {[](v1::HfPoint* p) { p->set_ld_h(-1e-4); }, "points[3].ld_h: must be positive"},
-      {[](v1::HfPoint* p) { p->set_lq_h(2.0); }, "points[3].lq_h: must be positive and below 1 H"},
+      {[](v1::HfPoint* p) { p->set_ld_h(-1e-4); }, "points[3].ld_h: must be in [1e-7, 1) H"},
+      {[](v1::HfPoint* p) { p->set_lq_h(2.0); }, "points[3].lq_h: must be in [1e-7, 1) H"},
+      {[](v1::HfPoint* p) { p->set_ld_h(1e-300); }, "points[3].ld_h: must be in [1e-7, 1) H"},
+      {[](v1::HfPoint* p) { p->set_lq_h_std(1000 * p->lq_h()); }, "points[3].lq_h_std: must be below lq_h"},
+      {[](v1::HfPoint* p) { p->set_point_id("p4"); }, "points[4].point_id: duplicate 'p4'"},
+      {[](v1::HfPoint* p) { p->set_point_id(std::string(100, 'x')); }, "points[3].point_id: longer than 64"},
       {[](v1::HfPoint* p) { p->set_id_a(2e4); }, "points[3].id_a"},
       {[](v1::HfPoint* p) { p->set_speed_rpm(-2e5); }, "points[3].speed_rpm"},
       {[](v1::HfPoint* p) { p->set_ld_h_std(-1); }, "points[3].ld_h_std"},
@@ -152,8 +156,7 @@ TEST_F(ServiceTest, PointValidationRules) {
     ASSERT_TRUE(Ingest("IPM-V", pts, &r).ok());
     EXPECT_EQ(r.accepted(), 35);
     ASSERT_EQ(r.rejects_size(), 1);
-    EXPECT_EQ(r.rejects(0).index(), 3);
-    EXPECT_EQ(r.rejects(0).point_id(), "p3");
+    EXPECT_EQ(r.rejects(0).index(), c.field.rfind("points[4]", 0) == 0 ? 4 : 3);
     EXPECT_NE(r.rejects(0).message().find(c.field), std::string::npos) << r.rejects(0).message();
   }
   // A stream with only invalid points is refused whole.
