@@ -24,6 +24,10 @@ void PrintUsage() {
 }  // namespace
 
 int main(int argc, char** argv) {
+  if (argc >= 2 && (std::string(argv[1]) == "--version" || std::string(argv[1]) == "version")) {
+    std::printf("fluxcal %s\n", FLUXCAL_VERSION);
+    return 0;
+  }
   if (argc < 2 || std::string(argv[1]) == "help" || std::string(argv[1]) == "--help" ||
       std::string(argv[1]) == "-h") {
     PrintUsage();
