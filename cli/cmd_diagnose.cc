@@ -1,4 +1,4 @@
-// fluxcal diagnose <recording-set> [--json] [--plots DIR]
+// fluxcal diagnose <recording-set> [--json] [--plots DIR] [--exclude-effects a,b]
 // fluxcal diagnose --table1 data/paper_table1.csv [--json]
 // Locates where the nominal model and the recordings differ, names the
 // missing physics, refits, reports (docs/diagnosis-report.md).
@@ -9,14 +9,16 @@
 #include "cli/args.h"
 #include "cli/command.h"
 #include "diagnosis/diagnose.h"
+#include "absl/strings/str_split.h"
 #include "io/csv.h"
+#include "simulation/effects.h"
 #include "nlohmann/json.hpp"
 
 namespace fluxcal::cli {
 namespace {
 
 int RunDiagnose(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, {"plots", "table1"}, {"json"});
+  auto args = ParseArgs(argv, {"plots", "table1", "exclude-effects"}, {"json"});
   if (!args.ok()) {
     std::fprintf(stderr, "fluxcal diagnose: %s\n", std::string(args.status().message()).c_str());
     return 2;
@@ -44,7 +46,7 @@ int RunDiagnose(const std::vector<std::string>& argv) {
     return 0;
   }
   if (args->positional.size() != 1) {
-    std::fprintf(stderr, "usage: fluxcal diagnose <recording-set> [--json] [--plots DIR]\n"
+    std::fprintf(stderr, "usage: fluxcal diagnose <recording-set> [--json] [--plots DIR] [--exclude-effects a,b]\n"
                          "       fluxcal diagnose --table1 data/paper_table1.csv [--json]\n");
     return 2;
   }
@@ -55,7 +57,17 @@ int RunDiagnose(const std::vector<std::string>& argv) {
   }
   std::fprintf(stderr, "diagnose %s: %zu points, %zu steady-state rows\n", set->manifest.serial.c_str(),
                set->waveforms.size(), set->steady_state.size());
-  auto rep = diag::Diagnose(*set);
+  diag::DiagnoseOptions options;
+  if (auto ex = args->Get("exclude-effects")) {
+    for (const std::string& name : std::vector<std::string>(absl::StrSplit(*ex, ',', absl::SkipEmpty()))) {
+      if (sim::FindEffect(name) == nullptr) {
+        std::fprintf(stderr, "fluxcal diagnose: flag --exclude-effects: unknown effect '%s'\n", name.c_str());
+        return 2;
+      }
+      options.excluded_effects.insert(name);
+    }
+  }
+  auto rep = diag::Diagnose(*set, options);
   if (!rep.ok()) {
     std::fprintf(stderr, "fluxcal diagnose: %s\n", std::string(rep.status().message()).c_str());
     return 1;

@@ -14,6 +14,8 @@
 #include "identification/demod.h"
 #include "identification/identify.h"
 #include "identification/inductance.h"
+#include "simulation/effects.h"
+#include "simulation/frames.h"
 #include "simulation/magnetic_model.h"
 #include "simulation/twin.h"
 
@@ -21,8 +23,8 @@ namespace fluxcal::diag {
 namespace {
 
 using Complex = std::complex<double>;
-constexpr double kPi = std::numbers::pi;
-constexpr double kSqrt3 = 1.7320508075688772935;
+using sim::kPi;
+using sim::kSqrt3;
 constexpr double kL0 = 1e-4;    // inductance scale of the surface polynomials [H]
 constexpr double kI0 = 100.0;   // current scale [A]
 constexpr double kIth = 1.0;    // soft-sign current of the dead-time model [A]
@@ -34,8 +36,20 @@ inline double IPow(double x, int n) {
 }
 
 // ---- Parameter blocks (scaled to order one) -----------------------------
-enum Block { kBase, kCross, kDead, kRs, kRhf, kOffset, kGain, kPsi, kDelay, kHarm, kNumBlocks };
-constexpr int kBlockSize[kNumBlocks] = {10, 8, 1, 1, 1, 1, 3, 1, 1, 1};
+enum Block { kBase, kCross, kDead, kRs, kRhf, kOffset, kGain, kPsi, kDelay, kHarm, kSensorOffset, kUdcGain, kNumBlocks };
+constexpr int kBlockSize[kNumBlocks] = {10, 8, 1, 1, 1, 1, 3, 1, 1, 1, 2, 1};
+// Fit scales of the effect blocks, from the catalogue (simulation/effects.h):
+// value = neutral + scale x block value (psi_pm relative to its nominal).
+const double kScaleDead = sim::EffectParam("dead_time", "dead_time_s").fit_scale;
+const double kScaleRs = sim::EffectParam("stator_resistance", "rs_ohm").fit_scale;
+const double kScaleRhf = sim::EffectParam("hf_resistance", "r_hf_ohm").fit_scale;
+const double kScaleOffset = sim::EffectParam("position_offset", "offset_rad").fit_scale;
+const double kScaleGain = sim::EffectParam("current_sensor_gain", "gain_a").fit_scale;
+const double kScalePsi = sim::EffectParam("magnet_temperature", "psi_pm_wb").fit_scale;
+const double kScaleDelay = sim::EffectParam("sampling_delay", "delay_s").fit_scale;
+const double kScaleHarm = sim::EffectParam("spatial_harmonics", "amplitude_h").fit_scale;
+const double kScaleSensorOffset = sim::EffectParam("current_sensor_offset", "offset_a_a").fit_scale;
+const double kScaleUdcGain = sim::EffectParam("dc_link_sense_gain", "udc_sense_gain").fit_scale;
 // Cross terms x^a y^b of the co-energy (a >= 1, b >= 2 even): they vanish
 // with iq = 0 or id = 0 as the machine's symmetry requires.
 constexpr int kCrossTerms[8][2] = {{1, 2}, {2, 2}, {3, 2}, {1, 4}, {2, 4}, {4, 2}, {5, 2}, {3, 4}};
@@ -117,7 +131,7 @@ struct Model {
     const double x = id / kI0, y = iq / kI0;
     const double* b = p[kBase];
     const double* c = p[kCross];
-    const double psi_pm = psi_nom * (1 + 1e-2 * p[kPsi][0]);
+    const double psi_pm = psi_nom * (1 + kScalePsi * p[kPsi][0]);
     double d = x * (b[0] + x * (b[1] / 2 + x * (b[2] / 3 + x * (b[3] / 4 + x * b[4] / 5))));
     double q = y * (b[5] + y * (b[6] / 2 + y * (b[7] / 3 + y * (b[8] / 4 + y * b[9] / 5))));
     for (int k = 0; k < kBlockSize[kCross]; ++k) {
@@ -128,12 +142,23 @@ struct Model {
     *pd = psi_pm + kL0 * kI0 * d;
     *pq = kL0 * kI0 * q;
   }
-  double Rs(const double* const* p) const { return rs_nom + 1e-3 * p[kRs][0]; }
-  double DeadTime(const double* const* p) const { return dead_nom_s + 1e-6 * p[kDead][0]; }
-  double Offset(const double* const* p) const { return 1e-2 * p[kOffset][0]; }
-  Complex M2(const double* const* p) const { return 1e-2 * Complex(p[kGain][0], p[kGain][1]); }
+  double Rs(const double* const* p) const { return rs_nom + kScaleRs * p[kRs][0]; }
+  double DeadTime(const double* const* p) const { return dead_nom_s + kScaleDead * p[kDead][0]; }
+  double Offset(const double* const* p) const { return kScaleOffset * p[kOffset][0]; }
+  double Delay(const double* const* p) const { return kScaleDelay * p[kDelay][0]; }
+  double RHf(const double* const* p) const { return kScaleRhf * p[kRhf][0]; }
+  double Harm(const double* const* p) const { return kScaleHarm * p[kHarm][0]; }
+  Complex M2(const double* const* p) const { return kScaleGain * Complex(p[kGain][0], p[kGain][1]); }
   // Mean sensor gain m1 (measured = m1 i + m2 conj(i) in alpha-beta).
-  double M1(const double* const* p) const { return 1.0 + 1e-2 * p[kGain][2]; }
+  double M1(const double* const* p) const { return 1.0 + kScaleGain * p[kGain][2]; }
+  // current_sensor_offset in alpha-beta (the zero sequence of three phase
+  // offsets cancels in the Clarke transform of a star winding: unobservable).
+  Complex SensorOffset(const double* const* p) const {
+    return kScaleSensorOffset * Complex(p[kSensorOffset][0], p[kSensorOffset][1]);
+  }
+  // dc_link_sense_gain: measured / true Udc; the modulator applies
+  // command / gain, so every command is gain x the voltage the machine needs.
+  double UdcGain(const double* const* p) const { return 1.0 + kScaleUdcGain * p[kUdcGain][0]; }
 
   // Eqs. (E1)-(E2) of identification/inductance.h with a voltage on both
   // sequences: V = R I0 + j w (S I0 + D conj(I1)), Vn = R I1 + j w2 (S I1 + D conj(I0)).
@@ -172,14 +197,15 @@ struct Model {
     double ldd, lqq, ldq;
     Inductance(p, it.real(), it.imag(), &ldd, &lqq, &ldq);
     if (o.locked && p[kHarm][0] != 0.0) {
-      const double h = 1e-6 * p[kHarm][0] * std::cos(harm_order * (o.theta - Offset(p)));
+      const double h = Harm(p) * std::cos(harm_order * (o.theta - Offset(p)));
       ldd += h;
       lqq += h;
     }
-    const double r = Rs(p) + 1e-3 * p[kRhf][0];
+    const double r = Rs(p) + RHf(p);
     // Applied HF voltage: extra delay rotates it; an uncompensated dead time
     // subtracts its HF component (computed from the recorded currents).
-    Complex v = o.v_eff * StaircaseDelay(w_i, 1e-6 * p[kDelay][0]) - DeadTime(p) * o.dead_hf;
+    // A DC-link sense gain scales the applied injection by 1 / gain.
+    Complex v = o.v_eff * StaircaseDelay(w_i, Delay(p)) / UdcGain(p) - DeadTime(p) * o.dead_hf;
     Complex vn = -DeadTime(p) * o.dead_neg;
     const int hk = HarmIndex(harm_order);
     if (!o.locked && p[kHarm][0] != 0.0 && hk >= 0) {
@@ -190,7 +216,7 @@ struct Model {
       // (2 w_e - w_i) -- e.g. order 4 at 1500 rpm with 4 pole pairs and
       // 500 Hz: 5 w_e = w_i -- it drives HF current like the injection does.
       // Its share on each basis is the window mean P or Q (docs/diagnosis.md).
-      const double h = 1e-6 * p[kHarm][0];
+      const double h = Harm(p);
       const int n = harm_order;
       const Complex j(0.0, 1.0);
       const Complex half = 0.5 * h * it;
@@ -215,13 +241,16 @@ struct Model {
   // The controller holds the *measured* current; with unequal sensor gains
   // i_s,meas = i_s + m2 conj(i_s), so in dq the true current is
   // i = i_meas - m2 e^{-j 2 theta} conj(i_meas) to first order.
+  // A sensor offset o (alpha-beta) adds o e^{-j theta} to the measured dq
+  // current at standstill.
   Complex TrueCurrent(const double* const* p, Complex i_meas, double theta) const {
-    return (i_meas - M2(p) * std::polar(1.0, -2 * theta) * std::conj(i_meas)) / M1(p);
+    const Complex i = i_meas - SensorOffset(p) * std::polar(1.0, -theta);
+    return (i - M2(p) * std::polar(1.0, -2 * theta) * std::conj(i)) / M1(p);
   }
   Complex PredictDc(const double* const* p, const DcObs& o) const {
     // Holding a DC current at standstill needs u = Rs i (the rotation by an
     // angle offset cancels), plus what counteracts the dead time.
-    return Rs(p) * TrueCurrent(p, Complex(o.id_a, o.iq_a), o.theta) + DeadTime(p) * o.dead;
+    return UdcGain(p) * (Rs(p) * TrueCurrent(p, Complex(o.id_a, o.iq_a), o.theta) + DeadTime(p) * o.dead);
   }
   Complex PredictSs(const double* const* p, const SsObs& o) const {
     const Complex rot = std::polar(1.0, Offset(p));
@@ -229,7 +258,7 @@ struct Model {
     double pd, pq;
     Flux(p, it.real(), it.imag(), &pd, &pq);
     const Complex u_true(Rs(p) * it.real() - o.w_e * pq, Rs(p) * it.imag() + o.w_e * pd);
-    return std::conj(rot) * u_true * std::polar(1.0, o.w_e * 1e-6 * p[kDelay][0]) + DeadTime(p) * o.dead;
+    return UdcGain(p) * (std::conj(rot) * u_true * std::polar(1.0, o.w_e * Delay(p)) + DeadTime(p) * o.dead);
   }
   double PredictTorque(const double* const* p, const SsObs& o) const {
     const Complex it = std::polar(1.0, Offset(p)) * Complex(o.id_a, o.iq_a) / M1(p);
@@ -324,13 +353,42 @@ double RelativeRms(const Model& m, const Params& p) {
   return n ? std::sqrt(s / n) : 0.0;
 }
 
-FitOut Solve(const Model& m, const Params& start, const std::vector<Block>& free_blocks) {
+// Observation kinds, as ObservationResidual numbers them.
+enum Kind { kHfKind = 0, kDcKind = 1, kSsKind = 2, kTorqueKind = 3 };
+const char* KindSignal(int kind) {
+  static const char* names[4] = {"hf_current", "dc_voltage", "steady_state_voltage", "torque"};
+  return names[kind];
+}
+
+// Least squares over every observation except those of kind `held_out`
+// (-1: none), with the blocks in `free_blocks` free.
+// Relative residual RMS of one observation kind (normalised as RelativeRms).
+double RelativeRmsOf(const Model& m, const Params& p, int kind) {
+  const auto ptr = p.Ptrs();
+  double s = 0;
+  int n = 0;
+  if (kind == kDcKind) {
+    for (const auto& o : m.dc) { s += std::norm(o.u - m.PredictDc(ptr.data(), o)) / (m.dc_scale_v * m.dc_scale_v); ++n; }
+  }
+  for (const auto& o : m.ss) {
+    if (kind == kSsKind) { s += std::norm(o.u - m.PredictSs(ptr.data(), o)) / (o.scale * o.scale); ++n; }
+    if (kind == kTorqueKind && o.has_torque) {
+      const double d = (o.torque - m.PredictTorque(ptr.data(), o)) / m.torque_scale_nm;
+      s += d * d;
+      ++n;
+    }
+  }
+  return n ? std::sqrt(s / n) : 0.0;
+}
+
+FitOut Solve(const Model& m, const Params& start, const std::vector<Block>& free_blocks, int held_out = -1) {
   FitOut out;
   out.p = start;
   ceres::Problem problem;
   std::vector<double*> blocks;
   for (auto& x : out.p.b) blocks.push_back(x.data());
   auto add = [&](int kind, int index) {
+    if (kind == held_out) return;
     auto* c = new ceres::DynamicNumericDiffCostFunction<ObservationResidual>(new ObservationResidual(&m, kind, index));
     for (int k = 0; k < kNumBlocks; ++k) c->AddParameterBlock(kBlockSize[k]);
     c->SetNumResiduals(ObservationResidual::NumResiduals(kind));
@@ -671,66 +729,80 @@ void InitBase(const Model& m, const std::vector<ident::HfPointResult>& all_ids, 
   (void)m;
 }
 
+// The three phase gains of m1, m2 (g_x = m1 + 2 Re(m2 e^{-j 2 phi_x}), sum of
+// the deviations zero) and the zero-sum phase offsets of an alpha-beta
+// offset o (o_x = Re(o e^{-j phi_x})).
+const double kPhasePhi[3] = {0, 2 * kPi / 3, 4 * kPi / 3};
+double PhaseGain(double m1, Complex m2, int x) { return m1 + 2 * std::real(m2 * std::polar(1.0, -2 * kPhasePhi[x])); }
+double PhaseOffset(Complex o, int x) { return std::real(o * std::polar(1.0, -kPhasePhi[x])); }
+
+// The finding for an accepted candidate: the catalogue's explanation and
+// the block's parameters in the catalogue's names and units.
 Finding Describe(const Candidate& c, const Model& m, const FitOut& f) {
   Finding out;
   out.effect = c.effect;
+  const sim::EffectRow* row = sim::FindEffect(c.effect);
+  if (row != nullptr) out.explanation = std::string(row->explanation);
   auto sd = [&](Block b, int i) { return f.stdev.count(b) ? f.stdev.at(b)[i] : 0.0; };
-  const auto& p = f.p.b;
-  if (c.effect == "dead_time") {
-    // Effective dead time acting (declared uncompensated part included).
-    out.parameters["dead_time_s"] = m.dead_nom_s + 1e-6 * p[kDead][0];
-    out.parameter_std["dead_time_s"] = 1e-6 * sd(kDead, 0);
-    out.explanation = "voltage error that follows the sign of each phase current: the held DC commands depart from "
-                      "Rs i by a current-sign pattern and the HF response is distorted where a phase current "
-                      "lingers near zero (uncompensated inverter dead time or device drop)";
-  } else if (c.effect == "stator_resistance") {
-    out.parameters["rs_ohm"] = m.rs_nom + 1e-3 * p[kRs][0];
-    out.parameter_std["rs_ohm"] = 1e-3 * sd(kRs, 0);
-    out.explanation = "the DC voltage that holds each standstill current scales with a resistance other than the "
-                      "nominal one";
-  } else if (c.effect == "hf_resistance") {
-    out.parameters["r_hf_ohm"] = 1e-3 * p[kRhf][0];
-    out.parameter_std["r_hf_ohm"] = 1e-3 * sd(kRhf, 0);
-    out.explanation = "the positive-sequence HF current leads the injected voltage by more than the winding "
-                      "resistance explains: extra series resistance at the injection frequency (eddy currents)";
-  } else if (c.effect == "position_offset") {
-    out.parameters["offset_rad"] = 1e-2 * p[kOffset][0];
-    out.parameter_std["offset_rad"] = 1e-2 * sd(kOffset, 0);
-    out.explanation = "the saliency (negative-sequence phase) and the steady-state voltages are rotated by a "
-                      "constant angle: the angle sensor reads true + offset";
-  } else if (c.effect == "current_sensor_gain") {
-    const Complex m2 = 1e-2 * Complex(p[kGain][0], p[kGain][1]);
-    const double m1 = 1 + 1e-2 * p[kGain][2];
-    const double phi[3] = {0, 2 * kPi / 3, 4 * kPi / 3};
-    const char* names[3] = {"gain_a", "gain_b", "gain_c"};
-    const double sdr = 1e-2 * std::max(sd(kGain, 0), sd(kGain, 1));
-    for (int x = 0; x < 3; ++x) {
-      // g_x = m1 + delta_x, delta_x = 2 Re(m2 e^{-j 2 phi_x}) (sum delta = 0).
-      out.parameters[names[x]] = m1 + 2 * std::real(m2 * std::polar(1.0, -2 * phi[x]));
-      out.parameter_std[names[x]] = std::hypot(2 * sdr, 1e-2 * sd(kGain, 2));
+  const auto ptr = f.p.Ptrs();
+  const double* const* p = ptr.data();
+  switch (c.block) {
+    case kDead:
+      // Effective dead time acting (declared uncompensated part included).
+      out.parameters["dead_time_s"] = m.DeadTime(p);
+      out.parameter_std["dead_time_s"] = kScaleDead * sd(kDead, 0);
+      break;
+    case kRs:
+      out.parameters["rs_ohm"] = m.Rs(p);
+      out.parameter_std["rs_ohm"] = kScaleRs * sd(kRs, 0);
+      break;
+    case kRhf:
+      out.parameters["r_hf_ohm"] = m.RHf(p);
+      out.parameter_std["r_hf_ohm"] = kScaleRhf * sd(kRhf, 0);
+      break;
+    case kOffset:
+      out.parameters["offset_rad"] = m.Offset(p);
+      out.parameter_std["offset_rad"] = kScaleOffset * sd(kOffset, 0);
+      break;
+    case kGain: {
+      const char* names[3] = {"gain_a", "gain_b", "gain_c"};
+      const double sdr = kScaleGain * std::max(sd(kGain, 0), sd(kGain, 1));
+      for (int x = 0; x < 3; ++x) {
+        out.parameters[names[x]] = PhaseGain(m.M1(p), m.M2(p), x);
+        out.parameter_std[names[x]] = std::hypot(2 * sdr, kScaleGain * sd(kGain, 2));
+      }
+      break;
     }
-    out.explanation = "a spurious HF component fixed in the stationary frame (not following 2 theta_e) and held "
-                      "currents off by a sensor gain: the phase current sensors have unequal gains (their mean "
-                      "is separated from Rs by the nominal Rs)";
-  } else if (c.effect == "magnet_temperature") {
-    out.parameters["psi_pm_wb"] = m.psi_nom * (1 + 1e-2 * p[kPsi][0]);
-    out.parameter_std["psi_pm_wb"] = m.psi_nom * 1e-2 * sd(kPsi, 0);
-    out.explanation = "back-EMF in the steady-state voltages and torque differ from the nominal magnet flux "
-                      "(magnet temperature or magnetisation)";
-  } else if (c.effect == "sampling_delay") {
-    out.parameters["delay_s"] = 1e-6 * p[kDelay][0];
-    out.parameter_std["delay_s"] = 1e-6 * sd(kDelay, 0);
-    out.explanation = "HF current lags the command by a phase proportional to frequency and the steady-state "
-                      "voltages are rotated by w_e times the same time: extra delay between command and inverter";
-  } else if (c.effect == "spatial_harmonics") {
-    out.parameters["order"] = c.order;
-    out.parameters["amplitude_h"] = 1e-6 * p[kHarm][0];
-    out.parameter_std["amplitude_h"] = 1e-6 * sd(kHarm, 0);
-    out.explanation = absl::StrFormat("the identified inductance at standstill varies with rotor angle as "
-                                      "cos(%d theta_e), beyond the saliency's 2 theta_e", c.order);
-  } else if (c.effect == "cross_saturation") {
-    out.explanation = "the HF response needs Ldq != 0 and Ldd depending on iq: psi_d depends on iq and psi_q on "
-                      "id (cross saturation), modelled by cross terms of the co-energy";
+    case kPsi:
+      out.parameters["psi_pm_wb"] = m.psi_nom * (1 + kScalePsi * p[kPsi][0]);
+      out.parameter_std["psi_pm_wb"] = m.psi_nom * kScalePsi * sd(kPsi, 0);
+      break;
+    case kDelay:
+      out.parameters["delay_s"] = m.Delay(p);
+      out.parameter_std["delay_s"] = kScaleDelay * sd(kDelay, 0);
+      break;
+    case kHarm:
+      out.parameters["order"] = c.order;
+      out.parameters["amplitude_h"] = m.Harm(p);
+      out.parameter_std["amplitude_h"] = kScaleHarm * sd(kHarm, 0);
+      out.explanation = absl::StrFormat("the identified inductance at standstill varies with rotor angle as "
+                                        "cos(%d theta_e), beyond the saliency's 2 theta_e", c.order);
+      break;
+    case kSensorOffset: {
+      const char* names[3] = {"offset_a_a", "offset_b_a", "offset_c_a"};
+      const double sdo = kScaleSensorOffset * std::max(sd(kSensorOffset, 0), sd(kSensorOffset, 1));
+      for (int x = 0; x < 3; ++x) {
+        out.parameters[names[x]] = PhaseOffset(m.SensorOffset(p), x);
+        out.parameter_std[names[x]] = sdo;
+      }
+      break;
+    }
+    case kUdcGain:
+      out.parameters["udc_sense_gain"] = m.UdcGain(p);
+      out.parameter_std["udc_sense_gain"] = kScaleUdcGain * sd(kUdcGain, 0);
+      break;
+    default:
+      break;
   }
   return out;
 }
@@ -752,31 +824,30 @@ double Significance(const Candidate& c, const FitOut& f, const Model& m) {
     }
     return 3.0 * max_ldq / (0.01 * mean_l);
   }
-  // Materiality: below these sizes no calibration decision changes, however
-  // precisely the data pin them down (a fraction of the tolerances:
-  // dead time 20 %, resistance 15 %, offset 0.5 deg, gains 0.5 %).
-  const auto& q = f.p.b;
-  double size = 0, floor = 0;
-  switch (c.block) {
-    case kDead: size = std::abs(1e-6 * q[kDead][0]); floor = 0.1e-6; break;
-    case kRs: size = std::abs(1e-3 * q[kRs][0]); floor = 0.03 * std::max(m.rs_nom, 1e-3); break;
-    case kRhf: size = std::abs(1e-3 * q[kRhf][0]); floor = 0.002; break;
-    case kOffset: size = std::abs(1e-2 * q[kOffset][0]); floor = 0.25 * kPi / 180; break;
-    case kGain: {
-      const Complex m2 = 1e-2 * Complex(q[kGain][0], q[kGain][1]);
-      const double m1 = 1e-2 * q[kGain][2];
-      for (double phi : {0.0, 2 * kPi / 3, 4 * kPi / 3}) {
-        size = std::max(size, std::abs(m1 + 2 * std::real(m2 * std::polar(1.0, -2 * phi))));
-      }
-      floor = 0.0025;
-      break;
+  // Materiality (the catalogue's floors): below them no calibration
+  // decision changes, however precisely the data pin the value down. The
+  // size of a finding is its largest parameter's distance from neutral.
+  const Finding d = Describe(c, m, f);
+  const sim::EffectRow* row = sim::FindEffect(c.effect);
+  if (row == nullptr) return 0.0;
+  bool material = false;
+  for (const auto& par : row->parameters) {
+    const auto it = d.parameters.find(std::string(par.name));
+    if (it == d.parameters.end() || par.name == "order") continue;
+    double size = 0, floor = par.floor;
+    if (par.floor_kind == sim::FloorKind::kRelativeNominal) {
+      const double nominal = par.name == "rs_ohm" ? m.rs_nom : m.psi_nom;
+      size = std::abs(it->second - nominal);
+      floor = par.floor * std::max(std::abs(nominal), par.name == "rs_ohm" ? 1e-3 : 0.0);
+    } else {
+      // The reported dead time includes what the manifest declares
+      // uncompensated (part of the nominal model); the finding is the rest.
+      const double reference = par.name == "dead_time_s" ? m.dead_nom_s : par.neutral;
+      size = std::abs(it->second - reference);
     }
-    case kPsi: size = std::abs(1e-2 * q[kPsi][0]); floor = 0.005; break;
-    case kDelay: size = std::abs(1e-6 * q[kDelay][0]); floor = 2e-6; break;
-    case kHarm: size = std::abs(1e-6 * q[kHarm][0]); floor = 1e-6; break;
-    default: break;
+    if (size >= floor) material = true;
   }
-  if (size < floor) return 0.0;
+  if (!material) return 0.0;
   if (!f.stdev.count(c.block)) return 0.0;
   double best = 0;
   for (int i = 0; i < kBlockSize[c.block]; ++i) {
@@ -820,14 +891,17 @@ double ReplayResidual(const io::RecordingSet& set, const Model& m, const Params&
   opt.effects.dead_time_s = m.DeadTime(ptr.data());
   opt.effects.dead_time_i_th_a = kIth;
   opt.effects.offset_rad = m.Offset(ptr.data());
-  opt.effects.delay_s = 1e-6 * ptr[kDelay][0];
-  opt.effects.r_hf_ohm = 1e-3 * ptr[kRhf][0];
+  opt.effects.delay_s = m.Delay(ptr.data());
+  opt.effects.r_hf_ohm = m.RHf(ptr.data());
   opt.effects.order = ptr[kHarm][0] != 0.0 ? harm_order : 0;
-  opt.effects.amplitude_h = 1e-6 * ptr[kHarm][0];
-  const Complex m2 = m.M2(ptr.data());
-  const double phi[3] = {0, 2 * kPi / 3, 4 * kPi / 3};
+  opt.effects.amplitude_h = m.Harm(ptr.data());
+  opt.effects.udc_sense_gain = m.UdcGain(ptr.data());
+  const Complex so = m.SensorOffset(ptr.data());
+  opt.effects.offset_a_a = PhaseOffset(so, 0);
+  opt.effects.offset_b_a = PhaseOffset(so, 1);
+  opt.effects.offset_c_a = PhaseOffset(so, 2);
   double* g[3] = {&opt.effects.gain_a, &opt.effects.gain_b, &opt.effects.gain_c};
-  for (int x = 0; x < 3; ++x) *g[x] = m.M1(ptr.data()) + 2 * std::real(m2 * std::polar(1.0, -2 * phi[x]));
+  for (int x = 0; x < 3; ++x) *g[x] = PhaseGain(m.M1(ptr.data()), m.M2(ptr.data()), x);
   auto rep = sim::ReplayOpenLoop(set, model, opt);
   spectrum->assign(freqs.size(), 0.0);
   if (!rep.ok()) return std::nan("");
@@ -885,11 +959,14 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
       {"hf_resistance", kRhf}, {"position_offset", kOffset}, {"current_sensor_gain", kGain},
       {"magnet_temperature", kPsi}, {"sampling_delay", kDelay},
       {"spatial_harmonics", kHarm, 4}, {"spatial_harmonics", kHarm, 6}, {"spatial_harmonics", kHarm, 8},
-      {"spatial_harmonics", kHarm, 12}};
-  if (m.ss.empty()) {
-    cands.erase(std::remove_if(cands.begin(), cands.end(), [](const Candidate& c) { return c.effect == "magnet_temperature"; }),
-                cands.end());
-  }
+      {"spatial_harmonics", kHarm, 12}, {"current_sensor_offset", kSensorOffset},
+      {"dc_link_sense_gain", kUdcGain}};
+  cands.erase(std::remove_if(cands.begin(), cands.end(),
+                             [&](const Candidate& c) {
+                               return opt.excluded_effects.count(c.effect) > 0 ||
+                                      (m.ss.empty() && c.effect == "magnet_temperature");
+                             }),
+              cands.end());
   FitOut current = base;
   std::vector<std::string> model_name = {"nominal"};
   std::vector<bool> used(cands.size(), false);
@@ -898,6 +975,7 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
     FitOut best_fit;
     // The current model's residuals, once per round (candidates compare to them).
     const auto z_current = Residuals(m, current.p);
+    std::vector<RejectedCandidate> round_rejected;
     for (size_t c = 0; c < cands.size(); ++c) {
       if (used[c]) continue;
       if (std::find(free.begin(), free.end(), cands[c].block) != free.end()) continue;
@@ -909,11 +987,33 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
       FitOut f = Solve(m, st, trial);
       if (!f.ok) continue;
       const double dbic = f.bic - current.bic;
-      if (dbic > -opt.bic_threshold || Significance(cands[c], f, m) < opt.parameter_sigma) continue;
-      if (!PracticallySignificant(z_current, Residuals(m, f.p), current.rms, f.rms, opt)) continue;
+      const double sig = Significance(cands[c], f, m);
+      std::string why;
+      if (dbic > -opt.bic_threshold) {
+        why = absl::StrFormat("BIC improves by %.1f, not more than %.0f", -dbic, opt.bic_threshold);
+      } else if (sig < opt.parameter_sigma) {
+        why = sig == 0.0 ? "its fitted size is below the catalogue's materiality floor"
+                         : absl::StrFormat("its parameter is %.1f standard deviations from neutral, below %.0f", sig,
+                                           opt.parameter_sigma);
+      } else if (!PracticallySignificant(z_current, Residuals(m, f.p), current.rms, f.rms, opt)) {
+        why = "it lowers neither the residual RMS by 10 % nor half of a located region's excess";
+      }
+      if (!why.empty()) {
+        std::string name = cands[c].effect;
+        if (cands[c].block == kHarm) name += absl::StrFormat(" (order %d)", cands[c].order);
+        round_rejected.push_back({name, why, dbic, sig});
+        continue;
+      }
       if (best < 0 || f.bic < best_fit.bic) { best = static_cast<int>(c); best_fit = f; }
     }
-    if (best < 0) break;
+    if (best < 0) {
+      // The best rejected candidates of the last round, by BIC.
+      std::sort(round_rejected.begin(), round_rejected.end(),
+                [](const RejectedCandidate& a, const RejectedCandidate& b) { return a.delta_bic < b.delta_bic; });
+      if (round_rejected.size() > 3) round_rejected.resize(3);
+      rep.rejected = round_rejected;
+      break;
+    }
     used[best] = true;
     if (cands[best].block == kHarm) m.harm_order = cands[best].order;
     free.push_back(cands[best].block);
@@ -959,6 +1059,30 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
       if (after.signal == before.signal && after.where == before.where) before_sigma = before.significance_sigma;
     }
     if (after.significance_sigma > 0.1 * before_sigma) all_explained = false;
+  }
+  // Honesty (docs/diagnosis.md): the final model, refitted without one
+  // observable class at a time, must predict that class. A located region
+  // of the class whose prediction error stays significant means the
+  // findings fit the data without being the physics that made them.
+  if (!rep.findings.empty()) {
+    for (int kind : {kDcKind, kSsKind, kTorqueKind}) {
+      const bool has = kind == kDcKind ? !m.dc.empty()
+                       : kind == kSsKind ? !m.ss.empty()
+                                         : std::any_of(m.ss.begin(), m.ss.end(), [](const SsObs& o) { return o.has_torque; });
+      if (!has) continue;
+      const FitOut f = Solve(m, current.p, free, kind);
+      if (!f.ok) continue;
+      HeldOutCheck h;
+      h.signal = KindSignal(kind);
+      const auto z = Residuals(m, f.p);
+      for (const auto& r : RegionStats(z)) {
+        if (r.signal == h.signal && r.k > 0) h.significance_sigma = std::max(h.significance_sigma, r.Sigma());
+      }
+      h.residual_rms = RelativeRmsOf(m, f.p, kind);
+      h.passed = h.significance_sigma < opt.heldout_sigma;
+      if (!h.passed) all_explained = false;
+      rep.held_out.push_back(h);
+    }
   }
   if (rep.findings.empty()) {
     rep.verdict = rep.mismatches.empty() ? "no_mismatch" : "unexplained";

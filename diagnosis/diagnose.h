@@ -6,6 +6,7 @@
 #define FLUXCAL_DIAGNOSIS_DIAGNOSE_H_
 
 #include <map>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -42,6 +43,22 @@ struct CorrectedPoint {
   double ldd_h_identified = 0, lqq_h_identified = 0;   // as identified
 };
 
+// Honesty check of the final model (docs/diagnosis.md): refitted without one
+// observable class, how well it predicts that class.
+struct HeldOutCheck {
+  std::string signal;               // the class left out of the fit
+  double significance_sigma = 0;    // largest region significance of its prediction error
+  double residual_rms = 0;          // relative RMS of its prediction error
+  bool passed = false;
+};
+
+// A candidate the last selection round did not accept, and why.
+struct RejectedCandidate {
+  std::string effect;
+  std::string reason;
+  double delta_bic = 0, significance = 0;
+};
+
 struct DiagnosisReport {
   std::string serial;
   std::string verdict;   // no_mismatch | explained | partly_explained | unexplained
@@ -49,6 +66,8 @@ struct DiagnosisReport {
   std::vector<Mismatch> mismatches;          // located against the baseline
   std::vector<Mismatch> remaining;           // still significant after the refit
   std::vector<Finding> findings;             // in acceptance order
+  std::vector<HeldOutCheck> held_out;        // predictions of classes left out of the fit
+  std::vector<RejectedCandidate> rejected;   // best candidates of the last round, not accepted
   std::vector<CorrectedPoint> corrected;     // inductances of the final model
   // Per-observable normalised residuals before/after, for plots.
   struct Residual {
@@ -73,7 +92,13 @@ struct DiagnoseOptions {
   double parameter_sigma = 3.0;     // parameter distance from neutral
   double mismatch_sigma = 5.0;      // a located region's significance
   double min_relative_improvement = 0.10;   // residual RMS drop to accept an effect
+  // A class left out of the final fit is predicted when no region of it is
+  // more significant than this (docs/diagnosis.md, "Honesty").
+  double heldout_sigma = 5.0;
   bool waveform_replay = true;              // replay evidence and spectra
+  // Catalogue rows left out of the candidates (probes of physics outside
+  // the vocabulary: conceal an effect, exclude its row).
+  std::set<std::string> excluded_effects;
 };
 
 absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const DiagnoseOptions& options = {});

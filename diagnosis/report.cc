@@ -42,6 +42,16 @@ nlohmann::json ToJson(const DiagnosisReport& r) {
     j["remaining_mismatches"].push_back({{"signal", m.signal}, {"where", m.where}, {"points", m.points},
                                          {"significance_sigma", m.significance_sigma}});
   }
+  j["held_out"] = json::array();
+  for (const auto& h : r.held_out) {
+    j["held_out"].push_back({{"signal", h.signal}, {"significance_sigma", h.significance_sigma},
+                             {"residual_rms", h.residual_rms}, {"passed", h.passed}});
+  }
+  j["rejected_candidates"] = json::array();
+  for (const auto& c : r.rejected) {
+    j["rejected_candidates"].push_back(
+        {{"effect", c.effect}, {"reason", c.reason}, {"delta_bic", c.delta_bic}, {"significance", c.significance}});
+  }
   j["corrected_inductances"] = json::array();
   for (const auto& c : r.corrected) {
     j["corrected_inductances"].push_back({{"point", c.point}, {"id_a", c.id_a}, {"iq_a", c.iq_a}, {"ldd_h", c.ldd_h},
@@ -90,6 +100,15 @@ std::string ToText(const DiagnosisReport& r) {
   }
   for (const auto& m : r.remaining) {
     s += absl::StrFormat("  Still unexplained: %s at %s (%.1f sigma).\n", m.signal, m.where, m.significance_sigma);
+  }
+  for (const auto& h : r.held_out) {
+    s += absl::StrFormat("  Fitted without %s, the final model predicts it to %.1f sigma (relative RMS %.3g %%)%s.\n",
+                         h.signal, h.significance_sigma, 100 * h.residual_rms,
+                         h.passed ? "" : ": not predicted, the findings do not account for it");
+  }
+  for (const auto& c : r.rejected) {
+    if (r.verdict == "explained" || r.verdict == "no_mismatch") break;
+    s += absl::StrFormat("  Rejected %s: %s.\n", c.effect, c.reason);
   }
   if (!r.spectrum_hz.empty()) {
     s += absl::StrFormat("Replaying every test through the twin with the recorded commands: phase-current residual "
