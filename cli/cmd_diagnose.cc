@@ -1,4 +1,5 @@
 // fluxcal diagnose <recording-set> [--json] [--plots DIR] [--exclude-effects a,b]
+//                  [--calibration-out cal.json]
 // fluxcal diagnose --table1 data/paper_table1.csv [--json]
 // Locates where the nominal model and the recordings differ, names the
 // missing physics, refits, reports (docs/diagnosis-report.md).
@@ -18,7 +19,7 @@ namespace fluxcal::cli {
 namespace {
 
 int RunDiagnose(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, {"plots", "table1", "exclude-effects"}, {"json"});
+  auto args = ParseArgs(argv, {"plots", "table1", "exclude-effects", "calibration-out"}, {"json"});
   if (!args.ok()) {
     std::fprintf(stderr, "fluxcal diagnose: %s\n", std::string(args.status().message()).c_str());
     return 2;
@@ -47,6 +48,7 @@ int RunDiagnose(const std::vector<std::string>& argv) {
   }
   if (args->positional.size() != 1) {
     std::fprintf(stderr, "usage: fluxcal diagnose <recording-set> [--json] [--plots DIR] [--exclude-effects a,b]\n"
+                         "       [--calibration-out cal.json]\n"
                          "       fluxcal diagnose --table1 data/paper_table1.csv [--json]\n");
     return 2;
   }
@@ -78,6 +80,24 @@ int RunDiagnose(const std::vector<std::string>& argv) {
     (void)io::WriteFileAtomically(*dir + "/residual_after.svg", diag::ResidualMapSvg(*rep, true));
     (void)io::WriteFileAtomically(*dir + "/replay_spectrum.svg", diag::SpectrumSvg(*rep));
     std::fprintf(stderr, "diagnose: plots in %s\n", dir->c_str());
+  }
+  if (auto out = args->Get("calibration-out")) {
+    // The diagnosed model as a calibration (fitting's families, refitted on
+    // the data freed of the findings), marked with what was found.
+    auto cal = diag::DiagnosedCalibration(*rep);
+    if (!cal.ok()) {
+      std::fprintf(stderr, "fluxcal diagnose: %s\n", std::string(cal.status().message()).c_str());
+      return 1;
+    }
+    nlohmann::json j = cal->ToJson();
+    nlohmann::json marks = nlohmann::json::array();
+    for (const auto& f : rep->findings) marks.push_back({{"effect", f.effect}, {"parameters", f.parameters}});
+    j["diagnosis"] = {{"format", "fluxcal.diagnosis.v1"}, {"verdict", rep->verdict}, {"findings", marks}};
+    if (auto st = io::WriteFileAtomically(*out, j.dump(2) + "\n"); !st.ok()) {
+      std::fprintf(stderr, "fluxcal diagnose: %s\n", std::string(st.message()).c_str());
+      return 1;
+    }
+    std::fprintf(stderr, "diagnose: calibration (%s) in %s\n", j.value("model", std::string("?")).c_str(), out->c_str());
   }
   if (args->Has("json")) std::cout << diag::ToJson(*rep).dump(2) << "\n";
   else std::cout << diag::ToText(*rep);

@@ -13,6 +13,8 @@
 #include <nlohmann/json_fwd.hpp>
 
 #include "absl/status/statusor.h"
+#include "fitting/calibration.h"
+#include "fitting/fit.h"
 #include "io/recording_set.h"
 
 namespace fluxcal::diag {
@@ -69,6 +71,8 @@ struct DiagnosisReport {
   std::vector<HeldOutCheck> held_out;        // predictions of classes left out of the fit
   std::vector<RejectedCandidate> rejected;   // best candidates of the last round, not accepted
   std::vector<CorrectedPoint> corrected;     // inductances of the final model
+  // The recording's fit data freed of the found effects (DiagnosedCalibration).
+  fit::FitData corrected_data;
   // Per-observable normalised residuals before/after, for plots.
   struct Residual {
     std::string point, signal;
@@ -102,6 +106,11 @@ struct DiagnoseOptions {
 };
 
 absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const DiagnoseOptions& options = {});
+
+// The diagnosed model as a calibration: the corrected data refitted through
+// the fit's own families (fitting::Fit), ready for `fluxcal export`.
+absl::StatusOr<fit::Calibration> DiagnosedCalibration(const DiagnosisReport& r,
+                                                      const fit::FitOptions& options = {});
 
 nlohmann::json ToJson(const DiagnosisReport& r);
 std::string ToText(const DiagnosisReport& r);
