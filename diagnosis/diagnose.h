@@ -99,6 +99,7 @@ struct DiagnoseOptions {
   // A class left out of the final fit is predicted when no region of it is
   // more significant than this (docs/diagnosis.md, "Honesty").
   double heldout_sigma = 5.0;
+  double heldout_fraction = 0.02;   // ... or this share of the class's located significance
   bool waveform_replay = true;              // replay evidence and spectra
   // Catalogue rows left out of the candidates (probes of physics outside
   // the vocabulary: conceal an effect, exclude its row).

@@ -31,11 +31,11 @@ const std::vector<EffectRow>& EffectCatalogue() {
        {}},
       {"stator_resistance", "winding resistance differs from nominal",
        "the DC voltage that holds each standstill current scales with a resistance other than the nominal one",
-       {{"rs_ohm", "ohm", 0.0, 1e-3, 0.03, FloorKind::kRelativeNominal}}},
+       {{"rs_ohm", "ohm", 0.0, 1e-3, 0.03, FloorKind::kRelativeNominal, 0.0}}},
       {"hf_resistance", "extra series resistance at the injection frequency (eddy currents, iron loss)",
        "the positive-sequence HF current leads the injected voltage by more than the winding resistance "
        "explains: extra series resistance at the injection frequency (eddy currents)",
-       {{"r_hf_ohm", "ohm", 0.0, 1e-3, 0.002}}},
+       {{"r_hf_ohm", "ohm", 0.0, 1e-3, 0.002, FloorKind::kAbsolute, 0.0}}},
       {"differential_inductance",
        "differential (HF) inductance used where apparent inductance / flux linkage is needed, or the reverse",
        "the mismatch between HF-identified and steady-state inductance grows with current: the differential "
@@ -57,7 +57,7 @@ const std::vector<EffectRow>& EffectCatalogue() {
       {"sampling_delay", "extra delay between voltage command and its application",
        "HF current lags the command by a phase proportional to frequency and the steady-state voltages are "
        "rotated by w_e times the same time: extra delay between command and inverter",
-       {{"delay_s", "s", 0.0, 1e-6, 2e-6}}},
+       {{"delay_s", "s", 0.0, 1e-6, 2e-6, FloorKind::kAbsolute, 0.0}}},
       {"spatial_harmonics", "inductance varies with rotor angle beyond the 2 theta_e term",
        "the identified inductance at standstill varies with rotor angle as cos(order theta_e), beyond the "
        "saliency's 2 theta_e",
@@ -73,13 +73,14 @@ const std::vector<EffectRow>& EffectCatalogue() {
        false},
       // A DC-link voltage measurement off by a gain: the modulator divides
       // the command by the measured voltage, so every applied voltage is
-      // scaled by 1/gain while currents and torque are untouched. 0.5 %: the
-      // tolerance of a production voltage divider.
+      // scaled by 1/gain while currents and torque are untouched. 1 %: the
+      // tolerance of a production voltage divider; below it the voltage
+      // tables move less than psi_pm's own 1 % tolerance.
       {"dc_link_sense_gain", "DC-link voltage measurement off by a gain (measured = gain x true)",
        "every applied voltage (held DC, HF injection, back-EMF) is the command scaled by one common factor while "
        "the torque agrees with the currents: the DC-link voltage is measured with a gain error, so the "
        "modulator applies command / gain",
-       {{"udc_sense_gain", "1", 1.0, 1e-2, 0.005}},
+       {{"udc_sense_gain", "1", 1.0, 1e-2, 0.01}},
        false},
   };
   return rows;

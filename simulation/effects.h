@@ -32,6 +32,11 @@ struct EffectParameter {
   double fit_scale = 1.0;      // diagnosis fits (value - neutral) / fit_scale (order one)
   double floor = 0.0;          // materiality floor (see FloorKind)
   FloorKind floor_kind = FloorKind::kAbsolute;
+  // Smallest physically plausible value: a finding whose value lies below
+  // it by more than 3 standard deviations is rejected as implausible (a
+  // negative extra delay or HF resistance is a stand-in for something
+  // else, not a fault).
+  double plausible_min = -1e300;
 };
 
 struct EffectRow {
