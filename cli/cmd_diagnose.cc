@@ -34,7 +34,17 @@ int RunDiagnose(const std::vector<std::string>& argv) {
     if (args->Has("json")) {
       std::cout << nlohmann::json{{"finding", r.finding}, {"rms_before", r.rms_before}, {"rms_after", r.rms_after},
                                   {"trend_slope_per_a", r.trend_slope_per_a}, {"trend_sigma", r.trend_sigma},
-                                  {"lq_app_from_hf_h", r.lq_app_from_hf_h}}
+                                  {"lq_app_from_hf_h", r.lq_app_from_hf_h},
+                                  {"max_before", r.max_before}, {"max_after", r.max_after},
+                                  {"alternatives", [&] {
+                                     nlohmann::json alts = nlohmann::json::array();
+                                     for (const auto& x : r.alternatives) {
+                                       alts.push_back({{"name", x.name}, {"meaning", x.meaning},
+                                                       {"parameter", x.parameter}, {"unit", x.unit},
+                                                       {"rms", x.rms}, {"max", x.max}, {"delta_bic", x.delta_bic}});
+                                     }
+                                     return alts;
+                                   }()}}
                        .dump(2)
                 << "\n";
     } else {
@@ -43,6 +53,12 @@ int RunDiagnose(const std::vector<std::string>& argv) {
                   "obtained by integrating the differential one.\n",
                   100 * r.trend_slope_per_a, r.trend_sigma, r.finding.empty() ? "none" : r.finding.c_str(),
                   100 * r.rms_before, 100 * r.rms_after);
+      std::printf("Largest error %.2f %% -> %.2f %%. What else could explain the rest (rows with iq > 0):\n",
+                  100 * r.max_before, 100 * r.max_after);
+      for (const auto& x : r.alternatives) {
+        std::printf("  %-16s %s: parameter %.4g %s, RMS %.2f %%, max %.2f %%, delta BIC %+.1f\n", x.name.c_str(),
+                    x.meaning.c_str(), x.parameter, x.unit.c_str(), 100 * x.rms, 100 * x.max, x.delta_bic);
+      }
     }
     return 0;
   }

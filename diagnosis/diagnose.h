@@ -132,6 +132,18 @@ struct Table1Result {
   std::vector<double> lq_app_from_hf_h;      // apparent from integrating Lqq
   double trend_slope_per_a = 0, trend_sigma = 0;   // mismatch growth with current
   std::string finding;                       // "differential_inductance" or ""
+  double max_before = 0, max_after = 0;      // largest relative errors
+  // What else could explain the error left after integrating: one-parameter
+  // hypotheses on the rows with iq > 0 (the formula u_d/(w_e i_q) needs
+  // current), each with its fitted parameter, the relative errors it leaves
+  // and BIC against "estimation noise only" (docs/diagnosis.md, Table 1).
+  struct Alternative {
+    std::string name, meaning;
+    double parameter = 0;          // in the unit `unit` says
+    std::string unit;
+    double rms = 0, max = 0, delta_bic = 0;
+  };
+  std::vector<Alternative> alternatives;
 };
 absl::StatusOr<std::vector<Table1Row>> ReadTable1(const std::string& path);
 Table1Result DiagnoseTable1(const std::vector<Table1Row>& rows);
