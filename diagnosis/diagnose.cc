@@ -37,8 +37,11 @@ inline double IPow(double x, int n) {
 }
 
 // ---- Parameter blocks (scaled to order one) -----------------------------
-enum Block { kBase, kCross, kDead, kRs, kRhf, kOffset, kGain, kPsi, kDelay, kHarm, kSensorOffset, kUdcGain, kNumBlocks };
-constexpr int kBlockSize[kNumBlocks] = {10, 8, 1, 1, 1, 1, 3, 1, 1, 1, 2, 1};
+enum Block {
+  kBase, kCross, kDead, kRs, kRhf, kOffset, kGain, kPsi, kDelay, kHarm, kSensorOffset, kUdcGain, kRImb, kDrift,
+  kNumBlocks
+};
+constexpr int kBlockSize[kNumBlocks] = {10, 8, 1, 1, 1, 1, 3, 1, 1, 1, 2, 1, 2, 1};
 // Fit scales of the effect blocks, from the catalogue (simulation/effects.h):
 // value = neutral + scale x block value (psi_pm relative to its nominal).
 const double kScaleDead = sim::EffectParam("dead_time", "dead_time_s").fit_scale;
@@ -51,6 +54,8 @@ const double kScaleDelay = sim::EffectParam("sampling_delay", "delay_s").fit_sca
 const double kScaleHarm = sim::EffectParam("spatial_harmonics", "amplitude_h").fit_scale;
 const double kScaleSensorOffset = sim::EffectParam("current_sensor_offset", "offset_a_a").fit_scale;
 const double kScaleUdcGain = sim::EffectParam("dc_link_sense_gain", "udc_sense_gain").fit_scale;
+const double kScaleRImb = sim::EffectParam("phase_resistance_imbalance", "dr_a_ohm").fit_scale;
+const double kScaleDrift = sim::EffectParam("stator_temperature_drift", "winding_temp_rise_k").fit_scale;
 // Cross terms x^a y^b of the co-energy (a >= 1, b >= 2 even): they vanish
 // with iq = 0 or id = 0 as the machine's symmetry requires.
 constexpr int kCrossTerms[8][2] = {{1, 2}, {2, 2}, {3, 2}, {1, 4}, {2, 4}, {4, 2}, {5, 2}, {3, 4}};
@@ -71,6 +76,7 @@ struct HfObs {
                                             // positive- and negative-sequence bases
   double sigma0, sigma1, scale;
   bool locked;
+  double progress = 0;   // position in the test's order, 0..1 (stator_temperature_drift)
   // Rotating points, per candidate harmonic order n (index in kHarmOrders):
   // window means P = <e^{j((n+1) theta - w_i t)}>, Q = <e^{-j((n-1) theta + w_i t)}>
   // that project the harmonic's fundamental-current voltage on the
@@ -85,6 +91,7 @@ int HarmIndex(int order) {
 struct DcObs {
   std::string point;
   double id_a, iq_a, theta;
+  double progress = 0;
   Complex u, dead;                  // dead: command change per second of dead time
   double sigma;
 };
@@ -160,6 +167,15 @@ struct Model {
   // dc_link_sense_gain: measured / true Udc; the modulator applies
   // command / gain, so every command is gain x the voltage the machine needs.
   double UdcGain(const double* const* p) const { return 1.0 + kScaleUdcGain * p[kUdcGain][0]; }
+  // phase_resistance_imbalance: per-phase drops dr_x i_x are, in
+  // alpha-beta, mean(dr) i + r2 conj(i) with r2 = (1/3) sum dr_x e^{j 2 phi_x};
+  // mean(dr) is stator_resistance, r2 is this block.
+  Complex RImb(const double* const* p) const { return kScaleRImb * Complex(p[kRImb][0], p[kRImb][1]); }
+  // stator_temperature_drift: Rs at a point recorded a fraction `progress`
+  // of the way through the locked/rotating points (1 for steady state).
+  double RsAt(const double* const* p, double progress) const {
+    return Rs(p) * (1.0 + sim::kCopperAlphaPerK * kScaleDrift * p[kDrift][0] * progress);
+  }
 
   // Eqs. (E1)-(E2) of identification/inductance.h with a voltage on both
   // sequences: V = R I0 + j w (S I0 + D conj(I1)), Vn = R I1 + j w2 (S I1 + D conj(I0)).
@@ -202,7 +218,7 @@ struct Model {
       ldd += h;
       lqq += h;
     }
-    const double r = Rs(p) + RHf(p);
+    const double r = RsAt(p, o.progress) + RHf(p);
     // Applied HF voltage: extra delay rotates it; an uncompensated dead time
     // subtracts its HF component (computed from the recorded currents).
     // A DC-link sense gain scales the applied injection by 1 / gain.
@@ -251,14 +267,18 @@ struct Model {
   Complex PredictDc(const double* const* p, const DcObs& o) const {
     // Holding a DC current at standstill needs u = Rs i (the rotation by an
     // angle offset cancels), plus what counteracts the dead time.
-    return UdcGain(p) * (Rs(p) * TrueCurrent(p, Complex(o.id_a, o.iq_a), o.theta) + DeadTime(p) * o.dead);
+    const Complex it = TrueCurrent(p, Complex(o.id_a, o.iq_a), o.theta);
+    // Unequal phase resistances add r2 e^{-j 2 theta} conj(i) in dq.
+    const Complex imb = RImb(p) * std::polar(1.0, -2 * o.theta) * std::conj(it);
+    return UdcGain(p) * (RsAt(p, o.progress) * it + imb + DeadTime(p) * o.dead);
   }
   Complex PredictSs(const double* const* p, const SsObs& o) const {
     const Complex rot = std::polar(1.0, Offset(p));
     const Complex it = rot * Complex(o.id_a, o.iq_a) / M1(p);
     double pd, pq;
     Flux(p, it.real(), it.imag(), &pd, &pq);
-    const Complex u_true(Rs(p) * it.real() - o.w_e * pq, Rs(p) * it.imag() + o.w_e * pd);
+    const double rs = RsAt(p, 1.0);   // recorded after the points: the winding is warm
+    const Complex u_true(rs * it.real() - o.w_e * pq, rs * it.imag() + o.w_e * pd);
     return UdcGain(p) * (std::conj(rot) * u_true * std::polar(1.0, o.w_e * Delay(p)) + DeadTime(p) * o.dead);
   }
   double PredictTorque(const double* const* p, const SsObs& o) const {
@@ -605,6 +625,8 @@ absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident:
     o.w_e = o.speed_rpm == 0 ? 0.0 : id.speed_rpm * m.pole_pairs * 2 * kPi / 60;
     o.locked = o.speed_rpm == 0;
     o.theta = w.theta_e_rad[0];
+    // The manifest lists points in recording order.
+    o.progress = ids->size() > 1 ? static_cast<double>(k) / static_cast<double>(ids->size() - 1) : 0.0;
     o.i0 = id.i0_a; o.i1 = id.i1_a; o.v_eff = id.v_eff_v;
     o.mean_e2 = 0.0;
     // Noise from the data (LSQ standard error) plus a model floor of 0.25 %
@@ -662,6 +684,7 @@ absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident:
       d.point = id.point;
       d.id_a = id.id_a; d.iq_a = id.iq_a;
       d.theta = w.theta_e_rad[0];
+      d.progress = o.progress;
       Complex mean = 0;
       for (const auto& u : per_period) mean += u;
       mean /= static_cast<double>(per_period.size());
@@ -800,6 +823,20 @@ Finding Describe(const Candidate& c, const Model& m, const FitOut& f) {
       out.parameters["udc_sense_gain"] = m.UdcGain(p);
       out.parameter_std["udc_sense_gain"] = kScaleUdcGain * sd(kUdcGain, 0);
       break;
+    case kRImb: {
+      // dr_x = 2 Re(r2 e^{-j 2 phi_x}), the zero-sum set (the common part is Rs).
+      const char* names[3] = {"dr_a_ohm", "dr_b_ohm", "dr_c_ohm"};
+      const double sdr = kScaleRImb * std::max(sd(kRImb, 0), sd(kRImb, 1));
+      for (int x = 0; x < 3; ++x) {
+        out.parameters[names[x]] = 2 * std::real(m.RImb(p) * std::polar(1.0, -2 * kPhasePhi[x]));
+        out.parameter_std[names[x]] = 2 * sdr;
+      }
+      break;
+    }
+    case kDrift:
+      out.parameters["winding_temp_rise_k"] = kScaleDrift * p[kDrift][0];
+      out.parameter_std["winding_temp_rise_k"] = kScaleDrift * sd(kDrift, 0);
+      break;
     default:
       break;
   }
@@ -912,6 +949,10 @@ double ReplayResidual(const io::RecordingSet& set, const Model& m, const Params&
   opt.effects.order = ptr[kHarm][0] != 0.0 ? harm_order : 0;
   opt.effects.amplitude_h = m.Harm(ptr.data());
   opt.effects.udc_sense_gain = m.UdcGain(ptr.data());
+  for (int x = 0; x < 3; ++x) {
+    double* dr[3] = {&opt.effects.dr_a_ohm, &opt.effects.dr_b_ohm, &opt.effects.dr_c_ohm};
+    *dr[x] = 2 * std::real(m.RImb(ptr.data()) * std::polar(1.0, -2 * kPhasePhi[x]));
+  }
   const Complex so = m.SensorOffset(ptr.data());
   opt.effects.offset_a_a = PhaseOffset(so, 0);
   opt.effects.offset_b_a = PhaseOffset(so, 1);
@@ -965,7 +1006,7 @@ fit::FitData CorrectedFitData(const io::RecordingSet& set, const Model& m, const
   Model mc = m;
   mc.dead_nom_s = 0.0;   // no dead time acts in the clean model
   Params clean = final_p;
-  for (Block b : {kDead, kRhf, kOffset, kGain, kDelay, kHarm, kSensorOffset, kUdcGain}) {
+  for (Block b : {kDead, kRhf, kOffset, kGain, kDelay, kHarm, kSensorOffset, kUdcGain, kRImb, kDrift}) {
     std::fill(clean.b[b].begin(), clean.b[b].end(), 0.0);
   }
   const auto pf = final_p.Ptrs(), pc = clean.Ptrs();
@@ -1050,7 +1091,8 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
       {"magnet_temperature", kPsi}, {"sampling_delay", kDelay},
       {"spatial_harmonics", kHarm, 4}, {"spatial_harmonics", kHarm, 6}, {"spatial_harmonics", kHarm, 8},
       {"spatial_harmonics", kHarm, 12}, {"current_sensor_offset", kSensorOffset},
-      {"dc_link_sense_gain", kUdcGain}};
+      {"dc_link_sense_gain", kUdcGain}, {"phase_resistance_imbalance", kRImb},
+      {"stator_temperature_drift", kDrift}};
   cands.erase(std::remove_if(cands.begin(), cands.end(),
                              [&](const Candidate& c) {
                                return opt.excluded_effects.count(c.effect) > 0 ||

@@ -223,6 +223,9 @@ PlantModel MakePlant(const TwinConfig& cfg, double temperature_c) {
   m.ts_s = 1.0 / cfg.drive.f_pwm_hz;
   m.u_max_v = cfg.drive.udc_v / kSqrt3;
   m.voltage_gain = 1.0 / cfg.effects.udc_sense_gain;
+  m.dr_a_ohm = cfg.effects.dr_a_ohm;
+  m.dr_b_ohm = cfg.effects.dr_b_ohm;
+  m.dr_c_ohm = cfg.effects.dr_c_ohm;
   return m;
 }
 
@@ -318,8 +321,13 @@ absl::StatusOr<SimulationResult> Simulate(const TwinConfig& cfg, const Plan& pla
   mf.drive.dead_time_compensated = true;
   mf.injection = io::InjectionInfo{"rotating", cfg.injection.amplitude_v, cfg.injection.frequency_hz};
   std::mt19937_64 rng(cfg.seed);
-  for (const auto& pt : plan.points) {
-    const PlantModel m = MakePlant(cfg, pt.temperature_c);
+  for (size_t k = 0; k < plan.points.size(); ++k) {
+    const auto& pt = plan.points[k];
+    PlantModel m = MakePlant(cfg, pt.temperature_c);
+    // stator_temperature_drift: the winding warms linearly over the locked
+    // and rotating points in plan order, then stays warm (steady state).
+    m.rs_ohm *= 1.0 + kCopperAlphaPerK * cfg.effects.winding_temp_rise_k *
+                          (plan.points.size() > 1 ? static_cast<double>(k) / (plan.points.size() - 1) : 0.0);
     PointRun run = RunPoint(cfg, m, pt.id_ref_a, pt.iq_ref_a, pt.speed_rpm, pt.theta_e_rad,
                             pt.temperature_c, true, plan.settle_s, plan.record_s, &rng);
     res.clipped |= run.clipped;
@@ -339,7 +347,8 @@ absl::StatusOr<SimulationResult> Simulate(const TwinConfig& cfg, const Plan& pla
     mf.steady_state = "steady_state.csv";
     std::normal_distribution<double> tnoise(0.0, 0.01);
     for (const auto& ss : plan.steady_state) {
-      const PlantModel m = MakePlant(cfg, ss.temperature_c);
+      PlantModel m = MakePlant(cfg, ss.temperature_c);
+      m.rs_ohm *= 1.0 + kCopperAlphaPerK * cfg.effects.winding_temp_rise_k;
       PointRun run = RunPoint(cfg, m, ss.id_ref_a, ss.iq_ref_a, ss.speed_rpm, 0.2,
                               ss.temperature_c, false, plan.settle_s, 0.05, &rng);
       io::SteadyStateRow row;

@@ -82,6 +82,25 @@ const std::vector<EffectRow>& EffectCatalogue() {
        "modulator applies command / gain",
        {{"udc_sense_gain", "1", 1.0, 1e-2, 0.01}},
        false},
+      // A bad joint (crimp, weld, terminal) adds resistance to one phase.
+      // Its common part is stator_resistance; the rest is reported as a
+      // zero-sum set. 1 mOhm: 8 % of these windings' Rs, about the
+      // resistance spread a production line accepts between phases.
+      {"phase_resistance_imbalance", "unequal phase resistances, e.g. a bad joint (extra ohm per phase)",
+       "the DC voltage that holds a standstill current depends on the current's direction in the stationary "
+       "frame (twice the angle), with no matching HF component in the stationary frame and no change at speed: "
+       "the phase resistances differ (a bad joint)",
+       {{"dr_a_ohm", "ohm", 0.0, 1e-3, 1e-3}, {"dr_b_ohm", "ohm", 0.0, 1e-3, 1e-3}, {"dr_c_ohm", "ohm", 0.0, 1e-3, 1e-3}},
+       false},
+      // The winding warms during the test (copper +0.393 %/K): Rs grows
+      // along the test's order. 5 K: 2 % of Rs, below stator_resistance's
+      // own 3 % floor.
+      {"stator_temperature_drift",
+       "the winding warms during the test: Rs rises linearly over the locked points (copper +0.393 %/K)",
+       "the resistance the held DC voltages need rises with the order the points were recorded in: the winding "
+       "warmed during the test",
+       {{"winding_temp_rise_k", "K", 0.0, 1.0, 5.0}},
+       false},
   };
   return rows;
 }
@@ -116,7 +135,9 @@ std::map<std::string, double*> DoubleFields(Effects* e) {
           {"gain_c", &e->gain_c},             {"delay_s", &e->delay_s},
           {"amplitude_h", &e->amplitude_h},   {"cross_saturation", &e->cross_saturation},
           {"offset_a_a", &e->offset_a_a},     {"offset_b_a", &e->offset_b_a},
-          {"offset_c_a", &e->offset_c_a},     {"udc_sense_gain", &e->udc_sense_gain}};
+          {"offset_c_a", &e->offset_c_a},     {"udc_sense_gain", &e->udc_sense_gain},
+          {"dr_a_ohm", &e->dr_a_ohm},         {"dr_b_ohm", &e->dr_b_ohm},
+          {"dr_c_ohm", &e->dr_c_ohm},         {"winding_temp_rise_k", &e->winding_temp_rise_k}};
 }
 
 }  // namespace
@@ -166,6 +187,10 @@ std::map<std::string, double> EffectParameters(const Effects& e, std::string_vie
     return {{"offset_a_a", e.offset_a_a}, {"offset_b_a", e.offset_b_a}, {"offset_c_a", e.offset_c_a}};
   }
   if (effect == "dc_link_sense_gain") return {{"udc_sense_gain", e.udc_sense_gain}};
+  if (effect == "phase_resistance_imbalance") {
+    return {{"dr_a_ohm", e.dr_a_ohm}, {"dr_b_ohm", e.dr_b_ohm}, {"dr_c_ohm", e.dr_c_ohm}};
+  }
+  if (effect == "stator_temperature_drift") return {{"winding_temp_rise_k", e.winding_temp_rise_k}};
   return {};
 }
 

@@ -72,6 +72,8 @@ struct Effects {
   // Extensions of the vocabulary (docs/diagnosis-report.md).
   double offset_a_a = 0.0, offset_b_a = 0.0, offset_c_a = 0.0;   // current_sensor_offset
   double udc_sense_gain = 1.0;   // dc_link_sense_gain: measured Udc / true Udc
+  double dr_a_ohm = 0.0, dr_b_ohm = 0.0, dr_c_ohm = 0.0;   // phase_resistance_imbalance
+  double winding_temp_rise_k = 0.0;   // stator_temperature_drift: rise over the locked points
 };
 
 // Parses "dead_time_s=2e-6,offset_rad=0.05,..." (keys: Effects' fields plus

@@ -17,6 +17,8 @@ namespace fluxcal::sim {
 
 inline constexpr double kPi = std::numbers::pi;
 inline constexpr double kSqrt3 = 1.7320508075688772935;
+// Temperature coefficient of copper resistance at 20-25 degC [1/K].
+inline constexpr double kCopperAlphaPerK = 0.00393;
 
 struct AlphaBeta {
   double alpha = 0, beta = 0;

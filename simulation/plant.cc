@@ -23,7 +23,9 @@ void Derivative(const PlantModel& m, const State& x, double th, double we, doubl
   const Phases ph = InverseClarke(ial, ibe);
   double eal, ebe;
   DeadTimeError(m, ph.a, ph.b, ph.c, &eal, &ebe);
-  const double ua = m.voltage_gain * ual + eal, ub = m.voltage_gain * ube + ebe;
+  // Per-phase extra resistance: its drop dr_x i_x, back in alpha-beta.
+  const AlphaBeta dr = Clarke(m.dr_a_ohm * ph.a, m.dr_b_ohm * ph.b, m.dr_c_ohm * ph.c);
+  const double ua = m.voltage_gain * ual + eal - dr.alpha, ub = m.voltage_gain * ube + ebe - dr.beta;
   const double ud = c * ua + s * ub, uq = -s * ua + c * ub;
   *dpsd = ud - m.rs_ohm * i.d - m.r_hf_ohm * (i.d - x.lpd) + we * x.psq;
   *dpsq = uq - m.rs_ohm * i.q - m.r_hf_ohm * (i.q - x.lpq) - we * x.psd;

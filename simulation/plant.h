@@ -33,6 +33,8 @@ struct PlantModel {
   // dc_link_sense_gain: the modulator divides the command by the measured
   // Udc, so the applied voltage is command x voltage_gain (= 1 / gain).
   double voltage_gain = 1.0;
+  // phase_resistance_imbalance: extra resistance per phase (a bad joint).
+  double dr_a_ohm = 0, dr_b_ohm = 0, dr_c_ohm = 0;
 
   // psi(i, theta) including the spatial-harmonic term amp cos(n theta) i.
   void Flux(double id, double iq, double th, double* pd, double* pq) const {

@@ -32,6 +32,9 @@ PlantModel ReplayPlant(const MagneticModel& model, double temperature_c, double 
   m.ts_s = ts_s;
   m.u_max_v = u_max_v;
   m.voltage_gain = 1.0 / e.udc_sense_gain;
+  m.dr_a_ohm = e.dr_a_ohm;
+  m.dr_b_ohm = e.dr_b_ohm;
+  m.dr_c_ohm = e.dr_c_ohm;
   return m;
 }
 
