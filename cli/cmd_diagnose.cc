@@ -1,4 +1,5 @@
-// fluxcal diagnose <recording-set> [--json] [--plots DIR]
+// fluxcal diagnose <recording-set> [--json] [--plots DIR] [--exclude-effects a,b]
+//                  [--calibration-out cal.json]
 // fluxcal diagnose --table1 data/paper_table1.csv [--json]
 // Locates where the nominal model and the recordings differ, names the
 // missing physics, refits, reports (docs/diagnosis-report.md).
@@ -9,14 +10,16 @@
 #include "cli/args.h"
 #include "cli/command.h"
 #include "diagnosis/diagnose.h"
+#include "absl/strings/str_split.h"
 #include "io/csv.h"
+#include "simulation/effects.h"
 #include "nlohmann/json.hpp"
 
 namespace fluxcal::cli {
 namespace {
 
 int RunDiagnose(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, {"plots", "table1"}, {"json"});
+  auto args = ParseArgs(argv, {"plots", "table1", "exclude-effects", "calibration-out"}, {"json"});
   if (!args.ok()) {
     std::fprintf(stderr, "fluxcal diagnose: %s\n", std::string(args.status().message()).c_str());
     return 2;
@@ -31,7 +34,17 @@ int RunDiagnose(const std::vector<std::string>& argv) {
     if (args->Has("json")) {
       std::cout << nlohmann::json{{"finding", r.finding}, {"rms_before", r.rms_before}, {"rms_after", r.rms_after},
                                   {"trend_slope_per_a", r.trend_slope_per_a}, {"trend_sigma", r.trend_sigma},
-                                  {"lq_app_from_hf_h", r.lq_app_from_hf_h}}
+                                  {"lq_app_from_hf_h", r.lq_app_from_hf_h},
+                                  {"max_before", r.max_before}, {"max_after", r.max_after},
+                                  {"alternatives", [&] {
+                                     nlohmann::json alts = nlohmann::json::array();
+                                     for (const auto& x : r.alternatives) {
+                                       alts.push_back({{"name", x.name}, {"meaning", x.meaning},
+                                                       {"parameter", x.parameter}, {"unit", x.unit},
+                                                       {"rms", x.rms}, {"max", x.max}, {"delta_bic", x.delta_bic}});
+                                     }
+                                     return alts;
+                                   }()}}
                        .dump(2, ' ', false, nlohmann::json::error_handler_t::replace)
                 << "\n";
     } else {
@@ -40,11 +53,18 @@ int RunDiagnose(const std::vector<std::string>& argv) {
                   "obtained by integrating the differential one.\n",
                   100 * r.trend_slope_per_a, r.trend_sigma, r.finding.empty() ? "none" : r.finding.c_str(),
                   100 * r.rms_before, 100 * r.rms_after);
+      std::printf("Largest error %.2f %% -> %.2f %%. What else could explain the rest (rows with iq > 0):\n",
+                  100 * r.max_before, 100 * r.max_after);
+      for (const auto& x : r.alternatives) {
+        std::printf("  %-16s %s: parameter %.4g %s, RMS %.2f %%, max %.2f %%, delta BIC %+.1f\n", x.name.c_str(),
+                    x.meaning.c_str(), x.parameter, x.unit.c_str(), 100 * x.rms, 100 * x.max, x.delta_bic);
+      }
     }
     return 0;
   }
   if (args->positional.size() != 1) {
-    std::fprintf(stderr, "usage: fluxcal diagnose <recording-set> [--json] [--plots DIR]\n"
+    std::fprintf(stderr, "usage: fluxcal diagnose <recording-set> [--json] [--plots DIR] [--exclude-effects a,b]\n"
+                         "       [--calibration-out cal.json]\n"
                          "       fluxcal diagnose --table1 data/paper_table1.csv [--json]\n");
     return 2;
   }
@@ -55,7 +75,17 @@ int RunDiagnose(const std::vector<std::string>& argv) {
   }
   std::fprintf(stderr, "diagnose %s: %zu points, %zu steady-state rows\n", set->manifest.serial.c_str(),
                set->waveforms.size(), set->steady_state.size());
-  auto rep = diag::Diagnose(*set);
+  diag::DiagnoseOptions options;
+  if (auto ex = args->Get("exclude-effects")) {
+    for (const std::string& name : std::vector<std::string>(absl::StrSplit(*ex, ',', absl::SkipEmpty()))) {
+      if (sim::FindEffect(name) == nullptr) {
+        std::fprintf(stderr, "fluxcal diagnose: flag --exclude-effects: unknown effect '%s'\n", name.c_str());
+        return 2;
+      }
+      options.excluded_effects.insert(name);
+    }
+  }
+  auto rep = diag::Diagnose(*set, options);
   if (!rep.ok()) {
     std::fprintf(stderr, "fluxcal diagnose: %s\n", std::string(rep.status().message()).c_str());
     return 1;
@@ -66,6 +96,24 @@ int RunDiagnose(const std::vector<std::string>& argv) {
     (void)io::WriteFileAtomically(*dir + "/residual_after.svg", diag::ResidualMapSvg(*rep, true));
     (void)io::WriteFileAtomically(*dir + "/replay_spectrum.svg", diag::SpectrumSvg(*rep));
     std::fprintf(stderr, "diagnose: plots in %s\n", dir->c_str());
+  }
+  if (auto out = args->Get("calibration-out")) {
+    // The diagnosed model as a calibration (fitting's families, refitted on
+    // the data freed of the findings), marked with what was found.
+    auto cal = diag::DiagnosedCalibration(*rep);
+    if (!cal.ok()) {
+      std::fprintf(stderr, "fluxcal diagnose: %s\n", std::string(cal.status().message()).c_str());
+      return 1;
+    }
+    nlohmann::json j = cal->ToJson();
+    nlohmann::json marks = nlohmann::json::array();
+    for (const auto& f : rep->findings) marks.push_back({{"effect", f.effect}, {"parameters", f.parameters}});
+    j["diagnosis"] = {{"format", "fluxcal.diagnosis.v1"}, {"verdict", rep->verdict}, {"findings", marks}};
+    if (auto st = io::WriteFileAtomically(*out, j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n"); !st.ok()) {
+      std::fprintf(stderr, "fluxcal diagnose: %s\n", std::string(st.message()).c_str());
+      return 1;
+    }
+    std::fprintf(stderr, "diagnose: calibration (%s) in %s\n", j.value("model", std::string("?")).c_str(), out->c_str());
   }
   if (args->Has("json")) std::cout << diag::ToJson(*rep).dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
   else std::cout << diag::ToText(*rep);

@@ -6,12 +6,15 @@
 #define FLUXCAL_DIAGNOSIS_DIAGNOSE_H_
 
 #include <map>
+#include <set>
 #include <string>
 #include <vector>
 
 #include <nlohmann/json_fwd.hpp>
 
 #include "absl/status/statusor.h"
+#include "fitting/calibration.h"
+#include "fitting/fit.h"
 #include "io/recording_set.h"
 
 namespace fluxcal::diag {
@@ -42,6 +45,22 @@ struct CorrectedPoint {
   double ldd_h_identified = 0, lqq_h_identified = 0;   // as identified
 };
 
+// Honesty check of the final model (docs/diagnosis.md): refitted without one
+// observable class, how well it predicts that class.
+struct HeldOutCheck {
+  std::string signal;               // the class left out of the fit
+  double significance_sigma = 0;    // largest region significance of its prediction error
+  double residual_rms = 0;          // relative RMS of its prediction error
+  bool passed = false;
+};
+
+// A candidate the last selection round did not accept, and why.
+struct RejectedCandidate {
+  std::string effect;
+  std::string reason;
+  double delta_bic = 0, significance = 0;
+};
+
 struct DiagnosisReport {
   std::string serial;
   std::string verdict;   // no_mismatch | explained | partly_explained | unexplained
@@ -49,7 +68,11 @@ struct DiagnosisReport {
   std::vector<Mismatch> mismatches;          // located against the baseline
   std::vector<Mismatch> remaining;           // still significant after the refit
   std::vector<Finding> findings;             // in acceptance order
+  std::vector<HeldOutCheck> held_out;        // predictions of classes left out of the fit
+  std::vector<RejectedCandidate> rejected;   // best candidates of the last round, not accepted
   std::vector<CorrectedPoint> corrected;     // inductances of the final model
+  // The recording's fit data freed of the found effects (DiagnosedCalibration).
+  fit::FitData corrected_data;
   // Per-observable normalised residuals before/after, for plots.
   struct Residual {
     std::string point, signal;
@@ -73,10 +96,22 @@ struct DiagnoseOptions {
   double parameter_sigma = 3.0;     // parameter distance from neutral
   double mismatch_sigma = 5.0;      // a located region's significance
   double min_relative_improvement = 0.10;   // residual RMS drop to accept an effect
+  // A class left out of the final fit is predicted when no region of it is
+  // more significant than this (docs/diagnosis.md, "Honesty").
+  double heldout_sigma = 5.0;
+  double heldout_fraction = 0.02;   // ... or this share of the class's located significance
   bool waveform_replay = true;              // replay evidence and spectra
+  // Catalogue rows left out of the candidates (probes of physics outside
+  // the vocabulary: conceal an effect, exclude its row).
+  std::set<std::string> excluded_effects;
 };
 
 absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const DiagnoseOptions& options = {});
+
+// The diagnosed model as a calibration: the corrected data refitted through
+// the fit's own families (fitting::Fit), ready for `fluxcal export`.
+absl::StatusOr<fit::Calibration> DiagnosedCalibration(const DiagnosisReport& r,
+                                                      const fit::FitOptions& options = {});
 
 nlohmann::json ToJson(const DiagnosisReport& r);
 std::string ToText(const DiagnosisReport& r);
@@ -97,6 +132,18 @@ struct Table1Result {
   std::vector<double> lq_app_from_hf_h;      // apparent from integrating Lqq
   double trend_slope_per_a = 0, trend_sigma = 0;   // mismatch growth with current
   std::string finding;                       // "differential_inductance" or ""
+  double max_before = 0, max_after = 0;      // largest relative errors
+  // What else could explain the error left after integrating: one-parameter
+  // hypotheses on the rows with iq > 0 (the formula u_d/(w_e i_q) needs
+  // current), each with its fitted parameter, the relative errors it leaves
+  // and BIC against "estimation noise only" (docs/diagnosis.md, Table 1).
+  struct Alternative {
+    std::string name, meaning;
+    double parameter = 0;          // in the unit `unit` says
+    std::string unit;
+    double rms = 0, max = 0, delta_bic = 0;
+  };
+  std::vector<Alternative> alternatives;
 };
 absl::StatusOr<std::vector<Table1Row>> ReadTable1(const std::string& path);
 Table1Result DiagnoseTable1(const std::vector<Table1Row>& rows);

@@ -1,6 +1,7 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
+#include <functional>
 #include <sstream>
 
 #include "absl/strings/str_cat.h"
@@ -41,6 +42,16 @@ nlohmann::json ToJson(const DiagnosisReport& r) {
   for (const auto& m : r.remaining) {
     j["remaining_mismatches"].push_back({{"signal", m.signal}, {"where", m.where}, {"points", m.points},
                                          {"significance_sigma", m.significance_sigma}});
+  }
+  j["held_out"] = json::array();
+  for (const auto& h : r.held_out) {
+    j["held_out"].push_back({{"signal", h.signal}, {"significance_sigma", h.significance_sigma},
+                             {"residual_rms", h.residual_rms}, {"passed", h.passed}});
+  }
+  j["rejected_candidates"] = json::array();
+  for (const auto& c : r.rejected) {
+    j["rejected_candidates"].push_back(
+        {{"effect", c.effect}, {"reason", c.reason}, {"delta_bic", c.delta_bic}, {"significance", c.significance}});
   }
   j["corrected_inductances"] = json::array();
   for (const auto& c : r.corrected) {
@@ -90,6 +101,15 @@ std::string ToText(const DiagnosisReport& r) {
   }
   for (const auto& m : r.remaining) {
     s += absl::StrFormat("  Still unexplained: %s at %s (%.1f sigma).\n", m.signal, m.where, m.significance_sigma);
+  }
+  for (const auto& h : r.held_out) {
+    s += absl::StrFormat("  Fitted without %s, the final model predicts it to %.1f sigma (relative RMS %.3g %%)%s.\n",
+                         h.signal, h.significance_sigma, 100 * h.residual_rms,
+                         h.passed ? "" : ": not predicted, the findings do not account for it");
+  }
+  for (const auto& c : r.rejected) {
+    if (r.verdict == "explained" || r.verdict == "no_mismatch") break;
+    s += absl::StrFormat("  Rejected %s: %s.\n", c.effect, c.reason);
   }
   if (!r.spectrum_hz.empty()) {
     s += absl::StrFormat("Replaying every test through the twin with the recorded commands: phase-current residual "
@@ -269,6 +289,82 @@ Table1Result DiagnoseTable1(const std::vector<Table1Row>& rows) {
   const double se = n > 2 && den > 0 ? std::sqrt(ss / (n - 2) * n / den) : 0.0;
   out.trend_sigma = se > 0 ? std::abs(out.trend_slope_per_a) / se : 0.0;
   if (out.rms_after < out.rms_before && out.trend_slope_per_a < 0) out.finding = "differential_inductance";
+  for (size_t k = 0; k < rows.size(); ++k) {
+    out.max_before = std::max(out.max_before, std::abs(rows[k].lq_hf_h / rows[k].lq_ss_h - 1));
+    out.max_after = std::max(out.max_after, std::abs(out.lq_app_from_hf_h[k] / rows[k].lq_ss_h - 1));
+  }
+  // Alternatives for what is left: on the rows with iq > 0, the steady-state
+  // value predicted from the integrated apparent Lq `a` as
+  //  - noise only: a (no parameter);
+  //  - a common scale k: k a -- an HF inductance biased by one factor (e.g.
+  //    injection voltage lost to dead time or a sample-and-hold magnitude
+  //    error), or a speed / voltage scale error in the steady-state test;
+  //  - an HF bias b: a + b -- an additive error of every HF value (b
+  //    integrates to itself);
+  //  - a voltage offset c: a + c / iq -- a constant error in u_d at the
+  //    test's speed (angle offset or delay: u_d picks up u_q x angle), which
+  //    divided by w_e i_q grows at low current.
+  // Each by least squares on the relative error; BIC = n ln(rss/n) + k ln n.
+  std::vector<double> iq, a, lss;
+  for (size_t k = 0; k < rows.size(); ++k) {
+    if (rows[k].iq_a <= 0) continue;
+    iq.push_back(rows[k].iq_a);
+    a.push_back(out.lq_app_from_hf_h[k]);
+    lss.push_back(rows[k].lq_ss_h);
+  }
+  const size_t m = iq.size();
+  if (m >= 3) {
+    // Relative residual r = pred/ss - 1 with pred = a + p g (g the
+    // hypothesis' regressor) or k a: linear least squares in one parameter.
+    auto fit1 = [&](const std::function<double(size_t)>& base, const std::function<double(size_t)>& g,
+                    double* p) {
+      double num = 0, den = 0;
+      for (size_t k = 0; k < m; ++k) {
+        const double y = 1 - base(k) / lss[k], x = g(k) / lss[k];
+        num += x * y;
+        den += x * x;
+      }
+      *p = den > 0 ? num / den : 0.0;
+    };
+    auto stats = [&](const std::function<double(size_t)>& pred, int params, Table1Result::Alternative* alt) {
+      double rss = 0, mx = 0;
+      for (size_t k = 0; k < m; ++k) {
+        const double r = pred(k) / lss[k] - 1;
+        rss += r * r;
+        mx = std::max(mx, std::abs(r));
+      }
+      alt->rms = std::sqrt(rss / m);
+      alt->max = mx;
+      return m * std::log(std::max(rss, 1e-300) / m) + params * std::log(static_cast<double>(m));
+    };
+    Table1Result::Alternative noise{"estimation_noise", "the values' own estimation errors only", 0, "", 0, 0, 0};
+    const double bic0 = stats([&](size_t k) { return a[k]; }, 0, &noise);
+    out.alternatives.push_back(noise);
+    Table1Result::Alternative gain{"common_scale", "one factor between HF and steady-state values (k x apparent)",
+                                   0, "1", 0, 0, 0};
+    // k minimises sum (k a/ss - 1)^2.
+    double num = 0, den = 0;
+    for (size_t k = 0; k < m; ++k) { num += a[k] / lss[k]; den += (a[k] / lss[k]) * (a[k] / lss[k]); }
+    const double kk = den > 0 ? num / den : 1.0;
+    gain.parameter = kk;
+    gain.delta_bic = stats([&](size_t k) { return kk * a[k]; }, 1, &gain) - bic0;
+    out.alternatives.push_back(gain);
+    Table1Result::Alternative bias{"hf_bias", "an additive error of every HF value (apparent + b)", 0, "H", 0, 0, 0};
+    double b;
+    fit1([&](size_t k) { return a[k]; }, [](size_t) { return 1.0; }, &b);
+    bias.parameter = b;
+    bias.delta_bic = stats([&](size_t k) { return a[k] + b; }, 1, &bias) - bic0;
+    out.alternatives.push_back(bias);
+    Table1Result::Alternative off{"voltage_offset",
+                                  "a constant u_d error at the test speed, e.g. an angle offset or delay "
+                                  "(apparent + c / iq)",
+                                  0, "H A", 0, 0, 0};
+    double c;
+    fit1([&](size_t k) { return a[k]; }, [&](size_t k) { return 1.0 / iq[k]; }, &c);
+    off.parameter = c;
+    off.delta_bic = stats([&](size_t k) { return a[k] + c / iq[k]; }, 1, &off) - bic0;
+    out.alternatives.push_back(off);
+  }
   return out;
 }
 

@@ -73,6 +73,86 @@ TWIN = [
     ('pair_rs_mt_s58', 58, 'rs_ohm=0.016,psi_pm_wb=0.0110', True, 'b'),
 ]
 
+# Extensions of the vocabulary (docs/diagnosis-report.md): each alone with
+# three seeds on the second motor ('b') and the twin's default motor, and in
+# pairs with original effects (three seeds each).
+EXT = []
+for variant in ('b', 'default'):
+    for k, seed in enumerate((81, 82, 83)):
+        EXT.append((f'udc_{variant}_s{seed}', seed, f'udc_sense_gain={(0.954, 1.03, 0.97)[k]}', True, variant))
+        EXT.append((f'cso_{variant}_s{seed}', seed,
+                    ('offset_b_a=1.0', 'offset_a_a=0.8,offset_c_a=-0.6', 'offset_c_a=1.5')[k], True, variant))
+        EXT.append((f'pri_{variant}_s{seed}', seed,
+                    ('dr_a_ohm=0.003', 'dr_b_ohm=0.004', 'dr_c_ohm=0.0025,dr_a_ohm=-0.0005')[k], True, variant))
+        EXT.append((f'std_{variant}_s{seed}', seed, f'winding_temp_rise_k={(20, 12, 30)[k]}', True, variant))
+for k, seed in enumerate((91, 92, 93)):
+    EXT.append((f'pair_udc_dt_s{seed}', seed, f'udc_sense_gain={(0.96, 1.04, 0.95)[k]},dead_time_s=1.0e-6', True, 'b'))
+    EXT.append((f'pair_cso_sd_s{seed}', seed, f'offset_a_a={(1.2, -1.0, 1.5)[k]},delay_s=30e-6', True, 'b'))
+    EXT.append((f'pair_udc_cso_s{seed}', seed, f'udc_sense_gain={(1.03, 0.96, 1.05)[k]},offset_b_a=1.2', True, 'default'))
+    EXT.append((f'pair_pri_sg_s{seed}', seed, f'dr_b_ohm={(0.003, 0.004, 0.0035)[k]},gain_a=1.02', True, 'b'))
+    EXT.append((f'pair_std_dt_s{seed}', seed, f'winding_temp_rise_k={(20, 25, 15)[k]},dead_time_s=1.0e-6', True, 'b'))
+TWIN += EXT
+
+# Physics outside the vocabulary: an effect concealed with its catalogue
+# row excluded (--exclude-effects). The verdict must never be `explained`.
+OUTSIDE = [
+    ('outside_udc_s84', 84, 'udc_sense_gain=0.954', True, 'b', 'dc_link_sense_gain'),
+    ('outside_udc_default_s85', 85, 'udc_sense_gain=1.04', True, 'default', 'dc_link_sense_gain'),
+    ('outside_cso_s86', 86, 'offset_b_a=1.5', True, 'b', 'current_sensor_offset'),
+    ('outside_rhf_s87', 87, 'r_hf_ohm=0.015', True, 'b', 'hf_resistance'),
+    ('outside_sd_s88', 88, 'delay_s=40e-6', True, 'b', 'sampling_delay'),
+    ('outside_dt_s89', 89, 'dead_time_s=1.5e-6', True, 'b', 'dead_time'),
+    ('outside_pri_s90', 90, 'dr_a_ohm=0.004', True, 'b', 'phase_resistance_imbalance'),
+    ('outside_std_s94', 94, 'winding_temp_rise_k=25', True, 'b', 'stator_temperature_drift'),
+]
+TWIN += [c[:5] for c in OUTSIDE]
+EXCLUDED = {c[0]: c[5] for c in OUTSIDE}
+
+
+def within(truth, rep, tol=0.15):
+    """Parameters of the extensions within tol of the truth (zero-sum offsets)."""
+    bad = []
+    found = {f['effect']: f['parameters'] for f in rep['findings']}
+    for e in truth.get('concealed_effects', []):
+        p = found.get(e['effect'])
+        if p is None:
+            continue
+        t = e['parameters']
+        if e['effect'] == 'dc_link_sense_gain':
+            if abs((p['udc_sense_gain'] - 1) / (t['udc_sense_gain'] - 1) - 1) > tol:
+                bad.append(f"udc_sense_gain {p['udc_sense_gain']:.4f} vs {t['udc_sense_gain']}")
+        if e['effect'] == 'current_sensor_offset':
+            names = ['offset_a_a', 'offset_b_a', 'offset_c_a']
+            mean = sum(t[n] for n in names) / 3
+            size = max(abs(t[n] - mean) for n in names)
+            for n in names:
+                if abs(p[n] - (t[n] - mean)) > tol * size:
+                    bad.append(f'{n} {p[n]:.3f} vs {t[n] - mean:.3f}')
+        if e['effect'] == 'phase_resistance_imbalance':
+            names = ['dr_a_ohm', 'dr_b_ohm', 'dr_c_ohm']
+            mean = sum(t[n] for n in names) / 3
+            size = max(abs(t[n] - mean) for n in names)
+            for n in names:
+                if abs(p[n] - (t[n] - mean)) > tol * size:
+                    bad.append(f'{n} {p[n]:.5f} vs {t[n] - mean:.5f}')
+        if e['effect'] == 'stator_temperature_drift':
+            if abs(p['winding_temp_rise_k'] / t['winding_temp_rise_k'] - 1) > tol:
+                bad.append(f"winding_temp_rise_k {p['winding_temp_rise_k']:.2f} vs {t['winding_temp_rise_k']}")
+    return bad
+
+
+def expected(want, truth):
+    """A bad joint adds resistance: its common part is a real Rs change,
+    named `stator_resistance` beside the imbalance when material (3 % of Rs)."""
+    want = set(want)
+    for e in truth.get('concealed_effects', []) if truth else []:
+        if e['effect'] == 'phase_resistance_imbalance':
+            t = e['parameters']
+            mean = (t['dr_a_ohm'] + t['dr_b_ohm'] + t['dr_c_ohm']) / 3
+            if mean > 0.03 * truth['motor']['rs_ohm']:
+                want.add('stator_resistance')
+    return sorted(want)
+
 
 def edit_csv(path, fn):
     rows = list(csv.DictReader(open(path)))
@@ -183,7 +263,7 @@ def main():
             cmd.append('--spread')
         subprocess.run(cmd, check=True, capture_output=True)
         truth = json.load(open(d + '.truth.json'))
-        return name, d, sorted({e['effect'] for e in truth['concealed_effects']})
+        return name, d, sorted({e['effect'] for e in truth['concealed_effects']}), truth
 
     with ThreadPoolExecutor(a.jobs) as ex:
         cases = list(ex.map(simulate, TWIN))
@@ -191,30 +271,46 @@ def main():
         t = os.path.join(EXAMPLES, name + '.truth.json')
         if os.path.exists(t):
             cases.append(('example_' + name, os.path.join(EXAMPLES, name),
-                          sorted({e['effect'] for e in json.load(open(t))['concealed_effects']})))
-    cases += edits(a.out)
+                          sorted({e['effect'] for e in json.load(open(t))['concealed_effects']}), {}))
+    cases += [c + ({},) for c in edits(a.out)]
 
     def diagnose(case):
-        name, d, want = case
-        r = subprocess.run([a.fluxcal, 'diagnose', d, '--json'], capture_output=True, text=True)
+        name, d, want, truth = case
+        cmd = [a.fluxcal, 'diagnose', d, '--json']
+        if name in EXCLUDED:
+            cmd += ['--exclude-effects', EXCLUDED[name]]
+        r = subprocess.run(cmd, capture_output=True, text=True)
         try:
             rep = json.loads(r.stdout)
         except json.JSONDecodeError:
-            return name, want, 'error', [], r.stderr.strip()[-200:]
+            return name, want, 'error', [], r.stderr.strip()[-200:], ['error'], 0
         got = [f['effect'] for f in rep['findings']]
         params = '; '.join(f"{f['effect']}: " + ', '.join(f'{k}={v:.4g}' for k, v in f['parameters'].items())
                            for f in rep['findings'])
-        return name, want, rep['verdict'], got, params
+        held = [h['signal'] for h in rep.get('held_out', []) if not h['passed']]
+        if held:
+            params += ' | not predicted when held out: ' + ','.join(held)
+        return name, expected(want, truth), rep['verdict'], got, params, within(truth, rep), rep['seconds']
 
     with ThreadPoolExecutor(a.jobs) as ex:
         results = list(ex.map(diagnose, cases))
     good = 0
-    for name, want, verdict, got, params in results:
-        ok = sorted(got) == want and verdict == ('explained' if want else 'no_mismatch')
+    slowest = 0.0
+    for name, want, verdict, got, params, bad_params, secs in results:
+        slowest = max(slowest, secs)
+        if name in EXCLUDED:
+            ok = verdict in ('partly_explained', 'unexplained')
+        elif name.startswith('edit_ia_dc_offset'):
+            # An edited offset is consistent with the model at standstill:
+            # named when the data resolve it, nothing otherwise.
+            ok = (got == [] and verdict == 'no_mismatch') or (got == ['current_sensor_offset'] and verdict == 'explained')
+        else:
+            ok = sorted(got) == want and verdict == ('explained' if want else 'no_mismatch') and not bad_params
         good += ok
+        extra = f" [excluded {EXCLUDED[name]}]" if name in EXCLUDED else ''
         print(f"{'ok ' if ok else 'BAD'} {name:36s} concealed={','.join(want) or '-':38s} "
-              f"{verdict}: {params or '-'}")
-    print(f'{good}/{len(results)} as expected')
+              f"{verdict}{extra}: {params or '-'}{' PARAMS ' + '; '.join(bad_params) if bad_params else ''}")
+    print(f'{good}/{len(results)} as expected; slowest diagnosis {slowest:.2f} s')
 
 
 if __name__ == '__main__':

@@ -1,8 +1,9 @@
 // The digital twin: a saturated IPMSM (flux linkages as states), a
 // per-PWM-period average inverter with dead time, a bench with PI current
 // control and rotating HF injection, and sensors. Every physical effect is a
-// named, parameterised, switchable term (names as in
-// docs/diagnosis-report.md). See docs/simulation.md for equations and timing.
+// named, parameterised, switchable term (the catalogue of
+// simulation/effects.h). Code: plant.{h,cc}, bench.{h,cc}, replay.cc,
+// twin_json.cc. See docs/simulation.md for equations and timing.
 #ifndef FLUXCAL_SIMULATION_TWIN_H_
 #define FLUXCAL_SIMULATION_TWIN_H_
 
@@ -15,6 +16,7 @@
 
 #include "absl/status/statusor.h"
 #include "io/recording_set.h"
+#include "simulation/effects.h"
 #include "simulation/magnetic_model.h"
 #include "simulation/saturation_model.h"
 
@@ -42,27 +44,6 @@ class AnalyticMotor : public MagneticModel {
  private:
   MotorParams p_;
 };
-
-// Concealable effects, all off by default. Parameter names follow
-// docs/diagnosis-report.md.
-struct Effects {
-  double dead_time_s = 0.0;      // residual uncompensated dead time
-  double dead_time_i_th_a = 1.0; // current scale of the soft sign (tanh)
-  std::optional<double> rs_ohm;  // stator_resistance: true Rs (manifest keeps nominal)
-  double r_hf_ohm = 0.0;         // hf_resistance: extra resistance seen by HF current
-  double offset_rad = 0.0;       // position_offset: measured = true + offset
-  double gain_a = 1.0, gain_b = 1.0, gain_c = 1.0;   // current_sensor_gain
-  std::optional<double> psi_pm_wb;   // magnet_temperature: true psi_pm (manifest nominal)
-  double delay_s = 0.0;          // sampling_delay: extra command delay
-  int order = 0;                 // spatial_harmonics: order in theta_e
-  double amplitude_h = 0.0;      //   and inductance amplitude
-  double cross_saturation = 0.0; // cross_saturation strength g_cross_h [H]
-};
-
-// Parses "dead_time_s=2e-6,offset_rad=0.05,..." (keys: the parameter names
-// above plus cross_saturation, noise_a). Unknown keys are errors.
-absl::Status ParseEffects(const std::string& spec, Effects* effects, double* noise_a);
-std::vector<std::string> ActiveEffectNames(const Effects& e);
 
 struct DriveParams {
   double udc_v = 50.0;

@@ -3,6 +3,7 @@
 // independent example sets, and the paper's Table 1.
 #include "diagnosis/diagnose.h"
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <functional>
@@ -11,7 +12,9 @@
 
 #include "gtest/gtest.h"
 #include "nlohmann/json.hpp"
+#include "identification/identify.h"
 #include "simulation/twin.h"
+#include "tables/tables.h"
 
 namespace fluxcal::diag {
 namespace {
@@ -130,6 +133,40 @@ TEST(Matrix, PairsOfEffects) {
   }
 }
 
+// Pairs that share a signature, separated by what distinguishes them: an
+// HF resistance and a delay both turn the HF phasor (the delay also rotates
+// the steady-state voltages in proportion to speed); psi_pm and an angle
+// offset both move the steady-state voltages (the offset also rotates the
+// negative sequence). Before the stepwise selection's backward round, a
+// constant offset stood in for the delay at mid speed (delay 5 us of 30,
+// an offset of 1.1 degrees that is not there).
+TEST(Matrix, PairsSharingASignature) {
+  {
+    sim::TwinConfig cfg;
+    cfg.seed = 9;
+    cfg.motor = sim::PerturbForProduction(cfg.motor, cfg.seed);
+    cfg.effects.r_hf_ohm = 0.05;
+    cfg.effects.delay_s = 30e-6;
+    const auto r = SimulateAndDiagnose(cfg);
+    EXPECT_EQ(Named(r), (std::set<std::string>{"hf_resistance", "sampling_delay"})) << r.verdict;
+    if (const Finding* f = Find(r, "hf_resistance")) EXPECT_NEAR(f->parameters.at("r_hf_ohm") / 0.05, 1.0, 0.15);
+    if (const Finding* f = Find(r, "sampling_delay")) EXPECT_NEAR(f->parameters.at("delay_s") / 30e-6, 1.0, 0.15);
+    EXPECT_EQ(r.verdict, "explained");
+  }
+  {
+    sim::TwinConfig cfg;
+    cfg.seed = 9;
+    cfg.motor = sim::PerturbForProduction(cfg.motor, cfg.seed);
+    cfg.effects.psi_pm_wb = 0.0108;
+    cfg.effects.offset_rad = 0.04;
+    const auto r = SimulateAndDiagnose(cfg);
+    EXPECT_EQ(Named(r), (std::set<std::string>{"magnet_temperature", "position_offset"})) << r.verdict;
+    if (const Finding* f = Find(r, "magnet_temperature")) EXPECT_NEAR(f->parameters.at("psi_pm_wb") / 0.0108, 1.0, 0.02);
+    if (const Finding* f = Find(r, "position_offset")) EXPECT_NEAR(f->parameters.at("offset_rad"), 0.04, 0.5 * M_PI / 180);
+    EXPECT_EQ(r.verdict, "explained");
+  }
+}
+
 // A second motor (data/motors/second_motor.json: other inductances, Rs and
 // psi_pm, a slower controller, more noise) with production spread, on a
 // plan shaped like an EOL run (data/plans/eol_like_plan.json: 36 locked
@@ -194,6 +231,176 @@ TEST(Matrix, SecondMotorEolLikePlan) {
   }
 }
 
+// The catalogue's extensions (docs/diagnosis-report.md) concealed alone, on
+// the twin's motor (default plan) and the second motor (EOL-like plan):
+// named, alone, `explained`, parameters within 15 %. (Three seeds each and
+// pairs: scripts/diagnosis-probe.py.)
+TEST(Matrix, ExtensionsAloneOnBothMotors) {
+  const fs::path data = fs::path(FLUXCAL_SOURCE_DIR) / "data";
+  auto eol = sim::LoadPlanJson((data / "plans" / "eol_like_plan.json").string());
+  ASSERT_TRUE(eol.ok());
+  struct Case {
+    std::string effect;
+    bool second_motor;
+    uint64_t seed;
+    std::function<void(sim::Effects*)> set;
+  };
+  const std::vector<Case> cases = {
+      {"dc_link_sense_gain", false, 61, [](sim::Effects* e) { e->udc_sense_gain = 0.954; }},
+      {"dc_link_sense_gain", true, 62, [](sim::Effects* e) { e->udc_sense_gain = 1.03; }},
+      {"current_sensor_offset", false, 63, [](sim::Effects* e) { e->offset_b_a = 1.0; }},
+      {"current_sensor_offset", true, 64, [](sim::Effects* e) { e->offset_a_a = 0.8; e->offset_c_a = -0.6; }},
+      {"phase_resistance_imbalance", false, 65, [](sim::Effects* e) { e->dr_a_ohm = 0.003; }},
+      {"phase_resistance_imbalance", true, 66, [](sim::Effects* e) { e->dr_b_ohm = 0.003; }},
+      {"stator_temperature_drift", false, 67, [](sim::Effects* e) { e->winding_temp_rise_k = 20; }},
+      {"stator_temperature_drift", true, 68, [](sim::Effects* e) { e->winding_temp_rise_k = 15; }},
+  };
+  for (const auto& c : cases) {
+    sim::TwinConfig cfg;
+    sim::Plan plan = sim::DefaultPlan();
+    if (c.second_motor) {
+      ASSERT_TRUE(sim::LoadMotorJson((data / "motors" / "second_motor.json").string(), &cfg).ok());
+      plan = *eol;
+    }
+    cfg.seed = c.seed;
+    cfg.motor = sim::PerturbForProduction(cfg.motor, c.seed);
+    c.set(&cfg.effects);
+    auto simulated = sim::Simulate(cfg, plan);
+    ASSERT_TRUE(simulated.ok());
+    auto r = Diagnose(simulated->set);
+    ASSERT_TRUE(r.ok());
+    const std::string label = c.effect + (c.second_motor ? " (second motor)" : "");
+    EXPECT_EQ(r->verdict, "explained") << label;
+    const auto& e = cfg.effects;
+    // A bad joint adds resistance: its common part (mean of the three) is a
+    // real stator_resistance change, named beside it when material.
+    const double dr_mean = (e.dr_a_ohm + e.dr_b_ohm + e.dr_c_ohm) / 3;
+    std::set<std::string> want = {c.effect};
+    if (dr_mean > 0.03 * cfg.motor.rs_ohm) want.insert("stator_resistance");
+    ASSERT_EQ(Named(*r), want) << label << ": first " << (r->findings.empty() ? "-" : r->findings[0].effect);
+    const Finding& f = *Find(*r, c.effect);
+    if (const Finding* rs = Find(*r, "stator_resistance")) {
+      EXPECT_NEAR(rs->parameters.at("rs_ohm") / (cfg.motor.rs_ohm + dr_mean), 1.0, 0.15) << label;
+    }
+    if (c.effect == "stator_temperature_drift") {
+      EXPECT_NEAR(f.parameters.at("winding_temp_rise_k") / e.winding_temp_rise_k, 1.0, 0.15) << label;
+    } else if (c.effect == "phase_resistance_imbalance") {
+      const double want_dr[3] = {e.dr_a_ohm - dr_mean, e.dr_b_ohm - dr_mean, e.dr_c_ohm - dr_mean};
+      const char* names[3] = {"dr_a_ohm", "dr_b_ohm", "dr_c_ohm"};
+      const double size = std::max({std::abs(want_dr[0]), std::abs(want_dr[1]), std::abs(want_dr[2])});
+      for (int x = 0; x < 3; ++x) EXPECT_NEAR(f.parameters.at(names[x]), want_dr[x], 0.15 * size) << label << names[x];
+    } else if (c.effect == "dc_link_sense_gain") {
+      EXPECT_NEAR((f.parameters.at("udc_sense_gain") - 1) / (e.udc_sense_gain - 1), 1.0, 0.15) << label;
+    } else {
+      // The zero-sum set of the truth (the common part is unobservable).
+      const double mean = (e.offset_a_a + e.offset_b_a + e.offset_c_a) / 3;
+      const double want[3] = {e.offset_a_a - mean, e.offset_b_a - mean, e.offset_c_a - mean};
+      const char* names[3] = {"offset_a_a", "offset_b_a", "offset_c_a"};
+      const double size = std::max({std::abs(want[0]), std::abs(want[1]), std::abs(want[2])});
+      for (int x = 0; x < 3; ++x) EXPECT_NEAR(f.parameters.at(names[x]), want[x], 0.15 * size) << label << names[x];
+    }
+    for (const auto& h : r->held_out) EXPECT_TRUE(h.passed) << label << ": " << h.signal;
+  }
+}
+
+// Physics outside the vocabulary (a catalogue row removed, its effect
+// concealed) is never `explained`. A DC-link voltage read 4.6 % low without
+// its row is fitted by stator_resistance + magnet_temperature +
+// current_sensor_gain all at one ratio; refitted without the torque rows,
+// that model mispredicts them, so the verdict is partial and says why.
+TEST(Honesty, OutsideTheCatalogueIsNeverExplained) {
+  struct Case {
+    std::string effect;
+    std::function<void(sim::Effects*)> set;
+  };
+  const std::vector<Case> cases = {
+      {"dc_link_sense_gain", [](sim::Effects* e) { e->udc_sense_gain = 0.954; }},
+      {"current_sensor_offset", [](sim::Effects* e) { e->offset_b_a = 1.5; }},
+  };
+  for (const auto& c : cases) {
+    sim::TwinConfig cfg;
+    cfg.seed = 71;
+    cfg.motor = sim::PerturbForProduction(cfg.motor, cfg.seed);
+    c.set(&cfg.effects);
+    auto simulated = sim::Simulate(cfg, sim::DefaultPlan());
+    ASSERT_TRUE(simulated.ok());
+    DiagnoseOptions opt;
+    opt.excluded_effects = {c.effect};
+    auto r = Diagnose(simulated->set, opt);
+    ASSERT_TRUE(r.ok());
+    EXPECT_NE(r->verdict, "explained") << c.effect;
+    EXPECT_NE(r->verdict, "no_mismatch") << c.effect;
+    EXPECT_FALSE(r->mismatches.empty()) << c.effect << ": located";
+    if (r->verdict == "unexplained") EXPECT_FALSE(r->rejected.empty()) << c.effect << ": says what it tried";
+  }
+}
+
+// The diagnosed model is a calibration: a concealed dead time diagnosed,
+// the corrected data refitted through the fit's families, and its MTPA
+// table within 0.1 % (of the largest current) of the table from the same
+// motor recorded without the dead time; a plain fit of the distorted set
+// is worse than that.
+double MtpaTableDifference(const fit::Calibration& a, const fit::Calibration& b) {
+  tables::MachineLimits lim;
+  lim.pole_pairs = a.pole_pairs();
+  lim.rs_ohm = a.rs_ohm();
+  lim.i_max_a = std::min(a.MeasuredCurrentLimitA(), b.MeasuredCurrentLimitA());
+  tables::TableSpec spec;
+  spec.include_generating = false;
+  auto ta = tables::BuildTable(a, lim, spec), tb = tables::BuildTable(b, lim, spec);
+  EXPECT_TRUE(ta.ok() && tb.ok());
+  if (!ta.ok() || !tb.ok()) return 1.0;
+  double worst = 0;
+  const auto& xa = ta->axes[0].values;
+  const auto& xb = tb->axes[0].values;
+  for (size_t o = 0; o < ta->outputs.size(); ++o) {
+    const auto& ya = ta->outputs[o].values;
+    const auto& yb = tb->outputs[o].values;
+    double scale = 0;
+    for (double v : ya) scale = std::max(scale, std::abs(v));
+    for (size_t k = 0; k < xa.size(); ++k) {
+      // b's value at a's torque (linear interpolation; the axes differ by
+      // the calibrations' maximum torques).
+      for (size_t j = 0; j + 1 < xb.size(); ++j) {
+        if (xb[j] <= xa[k] && xa[k] <= xb[j + 1]) {
+          const double t = (xa[k] - xb[j]) / (xb[j + 1] - xb[j]);
+          worst = std::max(worst, std::abs(ya[k] - (yb[j] + t * (yb[j + 1] - yb[j]))) / scale);
+          break;
+        }
+      }
+    }
+  }
+  return worst;
+}
+
+TEST(Calibration, DiagnosedDeadTimeGivesTheCleanMotorsTables) {
+  sim::TwinConfig cfg;
+  cfg.seed = 5;
+  cfg.motor = sim::PerturbForProduction(cfg.motor, cfg.seed);
+  auto clean = sim::Simulate(cfg, sim::DefaultPlan());
+  cfg.effects.dead_time_s = 2.5e-6;
+  auto distorted = sim::Simulate(cfg, sim::DefaultPlan());
+  ASSERT_TRUE(clean.ok() && distorted.ok());
+  auto fit_plain = [](const io::RecordingSet& set) {
+    auto ids = ident::IdentifySet(set, {});
+    EXPECT_TRUE(ids.ok());
+    return fit::Fit(fit::FitDataFromRecording(set, *ids));
+  };
+  auto reference = fit_plain(clean->set);
+  auto plain = fit_plain(distorted->set);
+  ASSERT_TRUE(reference.ok() && plain.ok());
+  auto r = Diagnose(distorted->set);
+  ASSERT_TRUE(r.ok());
+  ASSERT_EQ(Named(*r), std::set<std::string>{"dead_time"});
+  auto diagnosed = DiagnosedCalibration(*r);
+  ASSERT_TRUE(diagnosed.ok()) << diagnosed.status();
+  const double d_diag = MtpaTableDifference(*reference, *diagnosed);
+  const double d_plain = MtpaTableDifference(*reference, *plain);
+  EXPECT_LT(d_diag, 0.001) << "diagnosed calibration's MTPA table vs the clean motor's";
+  EXPECT_GT(d_plain, 2 * d_diag) << "the plain fit carries the dead time's distortion";
+  std::printf("MTPA table vs clean motor: diagnosed %.4f %%, plain fit %.4f %%\n", 100 * d_diag, 100 * d_plain);
+}
+
 // The independent generator's sets: expected verdict and effects from the
 // truth files (never their motor section).
 TEST(Examples, IndependentSets) {
@@ -248,7 +455,7 @@ TEST(Nominal, DeclaredUncompensatedDeadTimeIsNotAFinding) {
   auto r = Diagnose(set);
   ASSERT_TRUE(r.ok());
   EXPECT_EQ(r->verdict, "no_mismatch");
-  EXPECT_TRUE(r->findings.empty());
+  EXPECT_TRUE(r->findings.empty()) << r->findings[0].effect << " " << nlohmann::json(r->findings[0].parameters).dump();
 }
 
 // The plots: one labelled cell per standstill point and signal in the
@@ -289,6 +496,19 @@ TEST(Table1, DifferentialInductanceFromPublishedData) {
   EXPECT_EQ(r.finding, "differential_inductance");
   EXPECT_LT(r.trend_slope_per_a, 0.0) << "mismatch grows (negatively) with current";
   EXPECT_LT(r.rms_after, r.rms_before);
+  // What is left (max 5.0 %) is mostly one common factor: the integrated HF
+  // values are 2.6 % above the steady-state ones at every current (a
+  // common scale or an additive HF bias, indistinguishable on five rows),
+  // not a voltage offset growing as 1/iq.
+  ASSERT_EQ(r.alternatives.size(), 4u);
+  EXPECT_NEAR(r.max_after, 0.050, 0.001);
+  const auto& scale = r.alternatives[1];
+  EXPECT_EQ(scale.name, "common_scale");
+  EXPECT_NEAR(scale.parameter, 0.974, 0.002);
+  EXPECT_LT(scale.max, 0.025);
+  EXPECT_LT(scale.delta_bic, -2.0);
+  EXPECT_NEAR(r.alternatives[2].delta_bic, scale.delta_bic, 2.0) << "bias and scale alike on this data";
+  EXPECT_GT(r.alternatives[3].delta_bic, scale.delta_bic + 2.0) << "a voltage offset explains less";
   std::printf("Table 1: RMS error %.2f %% (differential as apparent) -> %.2f %% (integrated)\n",
               100 * r.rms_before, 100 * r.rms_after);
 }

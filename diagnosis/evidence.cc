@@ -1,0 +1,92 @@
+#include "diagnosis/internal.h"
+
+#include <algorithm>
+#include <cmath>
+#include <functional>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "simulation/twin.h"
+
+namespace fluxcal::diag::detail {
+
+// The fitted surfaces as a twin magnetic model (for waveform replay).
+class SurfaceModel : public sim::MagneticModel {
+ public:
+  SurfaceModel(const Model& m, const Params& p) : m_(m), p_(p), ptr_(p_.Ptrs()) {}
+  sim::FluxLinkage Flux(double id, double iq, double) const override {
+    sim::FluxLinkage f;
+    m_.Flux(ptr_.data(), id, iq, &f.psi_d_wb, &f.psi_q_wb);
+    return f;
+  }
+  sim::DifferentialInductance Inductance(double id, double iq, double) const override {
+    sim::DifferentialInductance l;
+    m_.Inductance(ptr_.data(), id, iq, &l.ldd_h, &l.lqq_h, &l.ldq_h);
+    return l;
+  }
+ private:
+  const Model& m_;
+  Params p_;
+  std::vector<const double*> ptr_;
+};
+
+// Replays every waveform point with the model and effects of `p`; returns
+// the overall RMS of simulated minus recorded phase currents and fills the
+// residual spectrum at `freqs` (mean over points of |DFT| of the complex
+// alpha-beta residual, in A).
+double ReplayResidual(const io::RecordingSet& set, const Model& m, const Params& p, int harm_order,
+                      const std::vector<double>& freqs, std::vector<double>* spectrum) {
+  SurfaceModel model(m, p);
+  const auto ptr = p.Ptrs();
+  sim::ReplayOptions opt;
+  opt.substeps = 5;   // RK4 at 20 us: w_i h = 0.06, far inside its accuracy
+  opt.rs_ohm = m.Rs(ptr.data());
+  opt.effects.dead_time_s = m.DeadTime(ptr.data());
+  opt.effects.dead_time_i_th_a = kIth;
+  opt.effects.offset_rad = m.Offset(ptr.data());
+  opt.effects.delay_s = m.Delay(ptr.data());
+  opt.effects.r_hf_ohm = m.RHf(ptr.data());
+  opt.effects.order = ptr[kHarm][0] != 0.0 ? harm_order : 0;
+  opt.effects.amplitude_h = m.Harm(ptr.data());
+  opt.effects.udc_sense_gain = m.UdcGain(ptr.data());
+  for (int x = 0; x < 3; ++x) {
+    double* dr[3] = {&opt.effects.dr_a_ohm, &opt.effects.dr_b_ohm, &opt.effects.dr_c_ohm};
+    *dr[x] = 2 * std::real(m.RImb(ptr.data()) * std::polar(1.0, -2 * kPhasePhi[x]));
+  }
+  const Complex so = m.SensorOffset(ptr.data());
+  opt.effects.offset_a_a = PhaseOffset(so, 0);
+  opt.effects.offset_b_a = PhaseOffset(so, 1);
+  opt.effects.offset_c_a = PhaseOffset(so, 2);
+  double* g[3] = {&opt.effects.gain_a, &opt.effects.gain_b, &opt.effects.gain_c};
+  for (int x = 0; x < 3; ++x) *g[x] = PhaseGain(m.M1(ptr.data()), m.M2(ptr.data()), x);
+  auto rep = sim::ReplayOpenLoop(set, model, opt);
+  spectrum->assign(freqs.size(), 0.0);
+  if (!rep.ok()) return std::nan("");
+  double se = 0;
+  size_t n_all = 0;
+  const double fs = set.manifest.drive.f_sample_hz;
+  for (size_t k = 0; k < rep->size(); ++k) {
+    const auto& r = (*rep)[k];
+    const auto& w = set.waveforms[k];
+    se += r.residual_rms_a * r.residual_rms_a * 3.0 * (w.size() - 1);
+    n_all += 3 * (w.size() - 1);
+    std::vector<Complex> e(w.size());
+    for (size_t s = 1; s < w.size(); ++s) {
+      const double ea = r.ia_a[s] - w.ia_a[s], eb = r.ib_a[s] - w.ib_a[s], ec = r.ic_a[s] - w.ic_a[s];
+      e[s] = Complex((2 * ea - eb - ec) / 3.0, (eb - ec) / kSqrt3);
+    }
+    for (size_t f = 0; f < freqs.size(); ++f) {
+      // DFT bin by a rotating phasor (recurrence, renormalised).
+      const Complex step = std::polar(1.0, -2 * kPi * freqs[f] / fs);
+      Complex rot = step, acc = 0;
+      for (size_t s = 1; s < w.size(); ++s) {
+        acc += e[s] * rot;
+        rot *= step;
+      }
+      (*spectrum)[f] += std::abs(acc) / static_cast<double>(w.size() - 1) / static_cast<double>(rep->size());
+    }
+  }
+  return n_all ? std::sqrt(se / n_all) : 0.0;
+}
+
+}  // namespace fluxcal::diag::detail

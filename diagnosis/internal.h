@@ -1,0 +1,373 @@
+// Diagnosis internals (not a public API): the effect model (parameter
+// blocks scaled by the catalogue, observations, predictions), the refit,
+// locating, the observations built from a recording, the verdict's pieces,
+// the waveform evidence and the corrected fit data. One job per source
+// file: effect model (this header), refit.cc, locate.cc, observations.cc,
+// verdict.cc, evidence.cc, corrected.cc; Diagnose() in diagnose.cc.
+// Unit-tested piece by piece in tests/diagnosis/pieces_test.cc.
+#ifndef FLUXCAL_DIAGNOSIS_INTERNAL_H_
+#define FLUXCAL_DIAGNOSIS_INTERNAL_H_
+
+#include <cmath>
+#include <complex>
+#include <map>
+#include <string>
+#include <vector>
+
+#include <Eigen/Dense>
+
+#include "absl/status/statusor.h"
+#include "diagnosis/diagnose.h"
+#include "fitting/fit.h"
+#include "identification/identify.h"
+#include "io/recording_set.h"
+#include "simulation/effects.h"
+#include "simulation/frames.h"
+
+namespace fluxcal::diag::detail {
+
+using Complex = std::complex<double>;
+using sim::kPi;
+using sim::kSqrt3;
+constexpr double kL0 = 1e-4;    // inductance scale of the surface polynomials [H]
+constexpr double kI0 = 100.0;   // current scale [A]
+constexpr double kIth = 1.0;    // soft-sign current of the dead-time model [A]
+
+inline double IPow(double x, int n) {
+  double r = 1.0;
+  for (int k = 0; k < n; ++k) r *= x;
+  return r;
+}
+
+// ---- Parameter blocks (scaled to order one) -----------------------------
+enum Block {
+  kBase, kCross, kDead, kRs, kRhf, kOffset, kGain, kPsi, kDelay, kHarm, kSensorOffset, kUdcGain, kRImb, kDrift,
+  kNumBlocks
+};
+constexpr int kBlockSize[kNumBlocks] = {10, 8, 1, 1, 1, 1, 3, 1, 1, 1, 2, 1, 2, 1};
+// Fit scales of the effect blocks, from the catalogue (simulation/effects.h):
+// value = neutral + scale x block value (psi_pm relative to its nominal).
+const double kScaleDead = sim::EffectParam("dead_time", "dead_time_s").fit_scale;
+const double kScaleRs = sim::EffectParam("stator_resistance", "rs_ohm").fit_scale;
+const double kScaleRhf = sim::EffectParam("hf_resistance", "r_hf_ohm").fit_scale;
+const double kScaleOffset = sim::EffectParam("position_offset", "offset_rad").fit_scale;
+const double kScaleGain = sim::EffectParam("current_sensor_gain", "gain_a").fit_scale;
+const double kScalePsi = sim::EffectParam("magnet_temperature", "psi_pm_wb").fit_scale;
+const double kScaleDelay = sim::EffectParam("sampling_delay", "delay_s").fit_scale;
+const double kScaleHarm = sim::EffectParam("spatial_harmonics", "amplitude_h").fit_scale;
+const double kScaleSensorOffset = sim::EffectParam("current_sensor_offset", "offset_a_a").fit_scale;
+const double kScaleUdcGain = sim::EffectParam("dc_link_sense_gain", "udc_sense_gain").fit_scale;
+const double kScaleRImb = sim::EffectParam("phase_resistance_imbalance", "dr_a_ohm").fit_scale;
+const double kScaleDrift = sim::EffectParam("stator_temperature_drift", "winding_temp_rise_k").fit_scale;
+// Cross terms x^a y^b of the co-energy (a >= 1, b >= 2 even): they vanish
+// with iq = 0 or id = 0 as the machine's symmetry requires.
+constexpr int kCrossTerms[8][2] = {{1, 2}, {2, 2}, {3, 2}, {1, 4}, {2, 4}, {4, 2}, {5, 2}, {3, 4}};
+
+struct Candidate {
+  std::string effect;
+  Block block;
+  int order = 0;   // spatial harmonics only
+};
+
+// Per-observation data, precomputed from the recording.
+struct HfObs {
+  std::string point;
+  double id_a, iq_a, w_e, theta, speed_rpm;
+  Complex i0, i1, v_eff, dead_hf, dead_neg;
+  Complex mean_e2;   // window mean of e^{-j 2 theta}: what a stationary-frame
+                     // component at -w_i contributes to the I1 projection   // dead-time HF voltage error per second of Td, on the
+                                            // positive- and negative-sequence bases
+  double sigma0, sigma1, scale;
+  bool locked;
+  double progress = 0;   // position in the test's order, 0..1 (stator_temperature_drift)
+  // Rotating points, per candidate harmonic order n (index in kHarmOrders):
+  // window means P = <e^{j((n+1) theta - w_i t)}>, Q = <e^{-j((n-1) theta + w_i t)}>
+  // that project the harmonic's fundamental-current voltage on the
+  // demodulators' bases (Model::PredictHf).
+  Complex harm_p[4], harm_q[4];
+};
+constexpr int kHarmOrders[4] = {4, 6, 8, 12};
+inline int HarmIndex(int order) {
+  for (int k = 0; k < 4; ++k) if (kHarmOrders[k] == order) return k;
+  return -1;
+}
+struct DcObs {
+  std::string point;
+  double id_a, iq_a, theta;
+  double progress = 0;
+  Complex u, dead;                  // dead: command change per second of dead time
+  double sigma;
+};
+struct SsObs {
+  double id_a, iq_a, speed_rpm, w_e;
+  Complex u, dead;
+  double sigma, scale;
+  bool has_torque;
+  double torque, torque_sigma;
+};
+
+struct Model {
+  int pole_pairs = 4;
+  double rs_nom = 0.01, psi_nom = 0.01, w_i = 2 * kPi * 500, ts = 1e-4;
+  // Dead time the manifest declares uncompensated (0 when compensated): part
+  // of the nominal drive; the dead_time effect is what acts beyond it.
+  double dead_nom_s = 0.0;
+  std::vector<HfObs> hf;
+  std::vector<DcObs> dc;
+  std::vector<SsObs> ss;
+  int harm_order = 6;
+  double dc_scale_v = 0.1, torque_scale_nm = 0.1;   // RelativeRms
+
+  // Differential inductance of the surfaces: base self-axis polynomials
+  // Ldd(id), Lqq(iq) plus the cross terms of W'_x = L0 I0^2 sum c x^a y^b.
+  void Inductance(const double* const* p, double id, double iq, double* ldd, double* lqq, double* ldq) const {
+    const double x = id / kI0, y = iq / kI0;
+    const double* b = p[kBase];
+    const double* c = p[kCross];
+    double dd = b[0] + x * (b[1] + x * (b[2] + x * (b[3] + x * b[4])));
+    double qq = b[5] + y * (b[6] + y * (b[7] + y * (b[8] + y * b[9])));
+    double dq = 0;
+    for (int k = 0; k < kBlockSize[kCross]; ++k) {
+      const int a = kCrossTerms[k][0], e = kCrossTerms[k][1];
+      if (a >= 2) dd += c[k] * a * (a - 1) * IPow(x, a - 2) * IPow(y, e);
+      qq += c[k] * e * (e - 1) * IPow(x, a) * IPow(y, e - 2);
+      dq += c[k] * a * e * IPow(x, a - 1) * IPow(y, e - 1);
+    }
+    *ldd = kL0 * dd;
+    *lqq = kL0 * qq;
+    *ldq = kL0 * dq;
+  }
+  // Flux linkage: gradient of the same co-energy (psi = grad W').
+  void Flux(const double* const* p, double id, double iq, double* pd, double* pq) const {
+    const double x = id / kI0, y = iq / kI0;
+    const double* b = p[kBase];
+    const double* c = p[kCross];
+    const double psi_pm = psi_nom * (1 + kScalePsi * p[kPsi][0]);
+    double d = x * (b[0] + x * (b[1] / 2 + x * (b[2] / 3 + x * (b[3] / 4 + x * b[4] / 5))));
+    double q = y * (b[5] + y * (b[6] / 2 + y * (b[7] / 3 + y * (b[8] / 4 + y * b[9] / 5))));
+    for (int k = 0; k < kBlockSize[kCross]; ++k) {
+      const int a = kCrossTerms[k][0], e = kCrossTerms[k][1];
+      d += c[k] * a * IPow(x, a - 1) * IPow(y, e);
+      q += c[k] * e * IPow(x, a) * IPow(y, e - 1);
+    }
+    *pd = psi_pm + kL0 * kI0 * d;
+    *pq = kL0 * kI0 * q;
+  }
+  double Rs(const double* const* p) const { return rs_nom + kScaleRs * p[kRs][0]; }
+  double DeadTime(const double* const* p) const { return dead_nom_s + kScaleDead * p[kDead][0]; }
+  double Offset(const double* const* p) const { return kScaleOffset * p[kOffset][0]; }
+  double Delay(const double* const* p) const { return kScaleDelay * p[kDelay][0]; }
+  double RHf(const double* const* p) const { return kScaleRhf * p[kRhf][0]; }
+  double Harm(const double* const* p) const { return kScaleHarm * p[kHarm][0]; }
+  Complex M2(const double* const* p) const { return kScaleGain * Complex(p[kGain][0], p[kGain][1]); }
+  // Mean sensor gain m1 (measured = m1 i + m2 conj(i) in alpha-beta).
+  double M1(const double* const* p) const { return 1.0 + kScaleGain * p[kGain][2]; }
+  // current_sensor_offset in alpha-beta (the zero sequence of three phase
+  // offsets cancels in the Clarke transform of a star winding: unobservable).
+  Complex SensorOffset(const double* const* p) const {
+    return kScaleSensorOffset * Complex(p[kSensorOffset][0], p[kSensorOffset][1]);
+  }
+  // dc_link_sense_gain: measured / true Udc; the modulator applies
+  // command / gain, so every command is gain x the voltage the machine needs.
+  double UdcGain(const double* const* p) const { return 1.0 + kScaleUdcGain * p[kUdcGain][0]; }
+  // phase_resistance_imbalance: per-phase drops dr_x i_x are, in
+  // alpha-beta, mean(dr) i + r2 conj(i) with r2 = (1/3) sum dr_x e^{j 2 phi_x};
+  // mean(dr) is stator_resistance, r2 is this block.
+  Complex RImb(const double* const* p) const { return kScaleRImb * Complex(p[kRImb][0], p[kRImb][1]); }
+  // stator_temperature_drift: Rs at a point recorded a fraction `progress`
+  // of the way through the locked/rotating points (1 for steady state).
+  double RsAt(const double* const* p, double progress) const {
+    return Rs(p) * (1.0 + sim::kCopperAlphaPerK * kScaleDrift * p[kDrift][0] * progress);
+  }
+
+  // Eqs. (E1)-(E2) of identification/inductance.h with a voltage on both
+  // sequences: V = R I0 + j w (S I0 + D conj(I1)), Vn = R I1 + j w2 (S I1 + D conj(I0)).
+  void SolvePhasors(double ldd, double lqq, double ldq, double r, Complex v, Complex vn, double w_e,
+                    Complex* i0, Complex* i1) const {
+    const Complex j(0.0, 1.0);
+    const double S = 0.5 * (ldd + lqq), w2 = 2.0 * w_e - w_i;
+    const Complex D(0.5 * (ldd - lqq), ldq);
+    const Complex a1 = r + j * w_i * S, b1 = j * w_i * D, a2 = r + j * w2 * S, b2 = j * w2 * D;
+    Eigen::Matrix4d A;
+    A << a1.real(), -a1.imag(), b1.real(), b1.imag(),
+         a1.imag(), a1.real(), b1.imag(), -b1.real(),
+         b2.real(), b2.imag(), a2.real(), -a2.imag(),
+         b2.imag(), -b2.real(), a2.imag(), a2.real();
+    const Eigen::Vector4d x = A.partialPivLu().solve(Eigen::Vector4d(v.real(), v.imag(), vn.real(), vn.imag()));
+    *i0 = Complex(x(0), x(1));
+    *i1 = Complex(x(2), x(3));
+  }
+  // What an extra delay tau of the held (staircase) command does to the
+  // phasor of the *sampled* HF current. The current of an inductive load
+  // driven by a staircase is piecewise linear with corners at the steps; with
+  // tau = (n + a) T, 0 <= a < 1, each sample falls a fraction 1 - a into a
+  // segment, so the samples interpolate the undelayed corner values:
+  //   i(t_k) = (1 - a) i0(t_{k-n}) + a i0(t_{k-n-1})
+  //   => factor e^{-j w n T} ((1 - a) + a e^{-j w T}).
+  // Not the pure e^{-j w tau}: at half a sample the magnitude is
+  // cos(w T / 2) (-1.2 % at 500 Hz, 10 kHz), which would otherwise be fitted
+  // as a 1 % larger inductance. (R T / L << 1, as for any motor winding.)
+  Complex StaircaseDelay(double w, double tau_s) const {
+    const double q = tau_s / ts, n = std::floor(q), a = q - n;
+    return std::polar(1.0, -w * n * ts) * ((1.0 - a) + a * std::polar(1.0, -w * ts));
+  }
+  void PredictHf(const double* const* p, const HfObs& o, Complex* i0, Complex* i1) const {
+    const Complex rot = std::polar(1.0, Offset(p));
+    const Complex it = rot * Complex(o.id_a, o.iq_a);   // true-frame current
+    double ldd, lqq, ldq;
+    Inductance(p, it.real(), it.imag(), &ldd, &lqq, &ldq);
+    if (o.locked && p[kHarm][0] != 0.0) {
+      const double h = Harm(p) * std::cos(harm_order * (o.theta - Offset(p)));
+      ldd += h;
+      lqq += h;
+    }
+    const double r = RsAt(p, o.progress) + RHf(p);
+    // Applied HF voltage: extra delay rotates it; an uncompensated dead time
+    // subtracts its HF component (computed from the recorded currents).
+    // A DC-link sense gain scales the applied injection by 1 / gain.
+    Complex v = o.v_eff * StaircaseDelay(w_i, Delay(p)) / UdcGain(p) - DeadTime(p) * o.dead_hf;
+    Complex vn = -DeadTime(p) * o.dead_neg;
+    const int hk = HarmIndex(harm_order);
+    if (!o.locked && p[kHarm][0] != 0.0 && hk >= 0) {
+      // At speed the angle-dependent flux h cos(n theta) i of the fundamental
+      // current, (h I/2)(e^{j(n+1)theta} + e^{-j(n-1)theta}) with I the dq
+      // current, induces d/dt of it: voltages at (n+1) w_e and -(n-1) w_e.
+      // Where one falls on the injection (w_i) or the negative sequence
+      // (2 w_e - w_i) -- e.g. order 4 at 1500 rpm with 4 pole pairs and
+      // 500 Hz: 5 w_e = w_i -- it drives HF current like the injection does.
+      // Its share on each basis is the window mean P or Q (docs/diagnosis.md).
+      const double h = Harm(p);
+      const int n = harm_order;
+      const Complex j(0.0, 1.0);
+      const Complex half = 0.5 * h * it;
+      const Complex up = j * double(n + 1) * o.w_e * half, down = -j * double(n - 1) * o.w_e * half;
+      v -= up * o.harm_p[hk] + down * o.harm_q[hk];
+      vn -= up * std::conj(o.harm_q[hk]) + down * std::conj(o.harm_p[hk]);
+    }
+    SolvePhasors(ldd, lqq, ldq, r, v, vn, o.w_e, i0, i1);
+    // The measured angle is true + offset: the negative sequence appears
+    // rotated by -2 offset in the measured frame.
+    *i1 *= std::conj(rot * rot);
+    // Unequal sensor gains: i_meas = i + m2 conj(i) (m1 = 1 absorbed in L).
+    const Complex m2 = M2(p);
+    const double m1 = M1(p);
+    if (m2 != 0.0 || m1 != 1.0) {
+      const Complex e2 = o.mean_e2;
+      const Complex a0 = *i0, a1 = *i1;
+      *i0 = m1 * a0 + m2 * std::conj(a1) * e2;
+      *i1 = m1 * a1 + m2 * std::conj(a0) * e2;
+    }
+  }
+  // The controller holds the *measured* current; with unequal sensor gains
+  // i_s,meas = i_s + m2 conj(i_s), so in dq the true current is
+  // i = i_meas - m2 e^{-j 2 theta} conj(i_meas) to first order.
+  // A sensor offset o (alpha-beta) adds o e^{-j theta} to the measured dq
+  // current at standstill.
+  Complex TrueCurrent(const double* const* p, Complex i_meas, double theta) const {
+    const Complex i = i_meas - SensorOffset(p) * std::polar(1.0, -theta);
+    return (i - M2(p) * std::polar(1.0, -2 * theta) * std::conj(i)) / M1(p);
+  }
+  Complex PredictDc(const double* const* p, const DcObs& o) const {
+    // Holding a DC current at standstill needs u = Rs i (the rotation by an
+    // angle offset cancels), plus what counteracts the dead time.
+    const Complex it = TrueCurrent(p, Complex(o.id_a, o.iq_a), o.theta);
+    // Unequal phase resistances add r2 e^{-j 2 theta} conj(i) in dq.
+    const Complex imb = RImb(p) * std::polar(1.0, -2 * o.theta) * std::conj(it);
+    return UdcGain(p) * (RsAt(p, o.progress) * it + imb + DeadTime(p) * o.dead);
+  }
+  Complex PredictSs(const double* const* p, const SsObs& o) const {
+    const Complex rot = std::polar(1.0, Offset(p));
+    const Complex it = rot * Complex(o.id_a, o.iq_a) / M1(p);
+    double pd, pq;
+    Flux(p, it.real(), it.imag(), &pd, &pq);
+    const double rs = RsAt(p, 1.0);   // recorded after the points: the winding is warm
+    const Complex u_true(rs * it.real() - o.w_e * pq, rs * it.imag() + o.w_e * pd);
+    return UdcGain(p) * (std::conj(rot) * u_true * std::polar(1.0, o.w_e * Delay(p)) + DeadTime(p) * o.dead);
+  }
+  double PredictTorque(const double* const* p, const SsObs& o) const {
+    const Complex it = std::polar(1.0, Offset(p)) * Complex(o.id_a, o.iq_a) / M1(p);
+    double pd, pq;
+    Flux(p, it.real(), it.imag(), &pd, &pq);
+    return 1.5 * pole_pairs * (pd * it.imag() - pq * it.real());
+  }
+};
+
+
+struct Params {
+  std::vector<std::vector<double>> b;
+  Params() {
+    for (int k = 0; k < kNumBlocks; ++k) b.emplace_back(kBlockSize[k], 0.0);
+  }
+  std::vector<const double*> Ptrs() const {
+    std::vector<const double*> v;
+    for (const auto& x : b) v.push_back(x.data());
+    return v;
+  }
+};
+
+struct FitOut {
+  Params p;
+  double chi2 = 0, bic = 0, rms = 0;
+  int k = 0, n = 0;
+  std::map<Block, std::vector<double>> stdev;
+  bool ok = false;
+};
+
+
+// ---- refit.cc ---------------------------------------------------------------
+// Observation kinds, as the cost functors number them.
+enum Kind { kHfKind = 0, kDcKind = 1, kSsKind = 2, kTorqueKind = 3 };
+const char* KindSignal(int kind);
+// Relative residual RMS over every observable / of one kind (dimensionless).
+double RelativeRms(const Model& m, const Params& p);
+double RelativeRmsOf(const Model& m, const Params& p, int kind);
+// Least squares over every observation except those of kind `held_out`
+// (-1: none), with the blocks in `free_blocks` free; covariance of the
+// effect blocks.
+FitOut Solve(const Model& m, const Params& start, const std::vector<Block>& free_blocks, int held_out = -1);
+
+// ---- locate.cc --------------------------------------------------------------
+struct Z {
+  std::string point, signal;
+  double id_a, iq_a, speed_rpm, z2;
+  int dof;
+};
+std::vector<Z> Residuals(const Model& m, const Params& p);
+struct RegionStat {
+  std::string signal, where;
+  double chi2 = 0;
+  int k = 0;
+  std::vector<std::pair<double, std::string>> points;   // (z^2 per dof, point)
+  // Gaussian significance of the excess, (chi2 - k) / sqrt(2k).
+  double Sigma() const { return k ? (chi2 - k) / std::sqrt(2.0 * k) : 0.0; }
+};
+std::vector<RegionStat> RegionStats(const std::vector<Z>& zs);
+std::vector<Mismatch> Locate(const std::vector<Z>& zs, double threshold);
+bool PracticallySignificant(const std::vector<Z>& before, const std::vector<Z>& after, double rms_before,
+                            double rms_after, const DiagnoseOptions& opt);
+
+// ---- observations.cc --------------------------------------------------------
+Complex DeadTimeUnit(double ia, double ib, double ic, double udc, double ts);
+double MeanSoftSign(double i0, double i1);
+absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident::HfPointResult>* ids);
+void InitBase(const Model& m, const std::vector<ident::HfPointResult>& all_ids, Params* p);
+
+// ---- verdict.cc -------------------------------------------------------------
+extern const double kPhasePhi[3];
+double PhaseGain(double m1, Complex m2, int x);
+double PhaseOffset(Complex o, int x);
+Finding Describe(const Candidate& c, const Model& m, const FitOut& f);
+bool Plausible(const Candidate& c, const FitOut& f, const Model& m);
+double Significance(const Candidate& c, const FitOut& f, const Model& m);
+
+// ---- evidence.cc ------------------------------------------------------------
+double ReplayResidual(const io::RecordingSet& set, const Model& m, const Params& p, int harm_order,
+                      const std::vector<double>& freqs, std::vector<double>* spectrum);
+
+// ---- corrected.cc -----------------------------------------------------------
+fit::FitData CorrectedFitData(const io::RecordingSet& set, const Model& m, const Params& final_p,
+                              const std::vector<ident::HfPointResult>& ids);
+
+}  // namespace fluxcal::diag::detail
+
+#endif  // FLUXCAL_DIAGNOSIS_INTERNAL_H_

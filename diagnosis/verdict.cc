@@ -1,0 +1,172 @@
+#include "diagnosis/internal.h"
+
+#include <algorithm>
+#include <cmath>
+#include <functional>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+
+namespace fluxcal::diag::detail {
+
+// The three phase gains of m1, m2 (g_x = m1 + 2 Re(m2 e^{-j 2 phi_x}), sum of
+// the deviations zero) and the zero-sum phase offsets of an alpha-beta
+// offset o (o_x = Re(o e^{-j phi_x})).
+extern const double kPhasePhi[3];
+const double kPhasePhi[3] = {0, 2 * kPi / 3, 4 * kPi / 3};
+double PhaseGain(double m1, Complex m2, int x) { return m1 + 2 * std::real(m2 * std::polar(1.0, -2 * kPhasePhi[x])); }
+double PhaseOffset(Complex o, int x) { return std::real(o * std::polar(1.0, -kPhasePhi[x])); }
+
+// The finding for an accepted candidate: the catalogue's explanation and
+// the block's parameters in the catalogue's names and units.
+Finding Describe(const Candidate& c, const Model& m, const FitOut& f) {
+  Finding out;
+  out.effect = c.effect;
+  const sim::EffectRow* row = sim::FindEffect(c.effect);
+  if (row != nullptr) out.explanation = std::string(row->explanation);
+  auto sd = [&](Block b, int i) { return f.stdev.count(b) ? f.stdev.at(b)[i] : 0.0; };
+  const auto ptr = f.p.Ptrs();
+  const double* const* p = ptr.data();
+  switch (c.block) {
+    case kDead:
+      // Effective dead time acting (declared uncompensated part included).
+      out.parameters["dead_time_s"] = m.DeadTime(p);
+      out.parameter_std["dead_time_s"] = kScaleDead * sd(kDead, 0);
+      break;
+    case kRs:
+      out.parameters["rs_ohm"] = m.Rs(p);
+      out.parameter_std["rs_ohm"] = kScaleRs * sd(kRs, 0);
+      break;
+    case kRhf:
+      out.parameters["r_hf_ohm"] = m.RHf(p);
+      out.parameter_std["r_hf_ohm"] = kScaleRhf * sd(kRhf, 0);
+      break;
+    case kOffset:
+      out.parameters["offset_rad"] = m.Offset(p);
+      out.parameter_std["offset_rad"] = kScaleOffset * sd(kOffset, 0);
+      break;
+    case kGain: {
+      const char* names[3] = {"gain_a", "gain_b", "gain_c"};
+      const double sdr = kScaleGain * std::max(sd(kGain, 0), sd(kGain, 1));
+      for (int x = 0; x < 3; ++x) {
+        out.parameters[names[x]] = PhaseGain(m.M1(p), m.M2(p), x);
+        out.parameter_std[names[x]] = std::hypot(2 * sdr, kScaleGain * sd(kGain, 2));
+      }
+      break;
+    }
+    case kPsi:
+      out.parameters["psi_pm_wb"] = m.psi_nom * (1 + kScalePsi * p[kPsi][0]);
+      out.parameter_std["psi_pm_wb"] = m.psi_nom * kScalePsi * sd(kPsi, 0);
+      break;
+    case kDelay:
+      out.parameters["delay_s"] = m.Delay(p);
+      out.parameter_std["delay_s"] = kScaleDelay * sd(kDelay, 0);
+      break;
+    case kHarm:
+      out.parameters["order"] = c.order;
+      out.parameters["amplitude_h"] = m.Harm(p);
+      out.parameter_std["amplitude_h"] = kScaleHarm * sd(kHarm, 0);
+      out.explanation = absl::StrFormat("the identified inductance at standstill varies with rotor angle as "
+                                        "cos(%d theta_e), beyond the saliency's 2 theta_e", c.order);
+      break;
+    case kSensorOffset: {
+      const char* names[3] = {"offset_a_a", "offset_b_a", "offset_c_a"};
+      const double sdo = kScaleSensorOffset * std::max(sd(kSensorOffset, 0), sd(kSensorOffset, 1));
+      for (int x = 0; x < 3; ++x) {
+        out.parameters[names[x]] = PhaseOffset(m.SensorOffset(p), x);
+        out.parameter_std[names[x]] = sdo;
+      }
+      break;
+    }
+    case kUdcGain:
+      out.parameters["udc_sense_gain"] = m.UdcGain(p);
+      out.parameter_std["udc_sense_gain"] = kScaleUdcGain * sd(kUdcGain, 0);
+      break;
+    case kRImb: {
+      // dr_x = 2 Re(r2 e^{-j 2 phi_x}), the zero-sum set (the common part is Rs).
+      const char* names[3] = {"dr_a_ohm", "dr_b_ohm", "dr_c_ohm"};
+      const double sdr = kScaleRImb * std::max(sd(kRImb, 0), sd(kRImb, 1));
+      for (int x = 0; x < 3; ++x) {
+        out.parameters[names[x]] = 2 * std::real(m.RImb(p) * std::polar(1.0, -2 * kPhasePhi[x]));
+        out.parameter_std[names[x]] = 2 * sdr;
+      }
+      break;
+    }
+    case kDrift:
+      out.parameters["winding_temp_rise_k"] = kScaleDrift * p[kDrift][0];
+      out.parameter_std["winding_temp_rise_k"] = kScaleDrift * sd(kDrift, 0);
+      break;
+    default:
+      break;
+  }
+  return out;
+}
+
+// Whether every parameter of a candidate's fit lies within its plausible
+// range (catalogue's plausible_min) or within 3 standard deviations of it.
+bool Plausible(const Candidate& c, const FitOut& f, const Model& m) {
+  const Finding d = Describe(c, m, f);
+  const sim::EffectRow* row = sim::FindEffect(c.effect);
+  if (row == nullptr) return true;
+  for (const auto& par : row->parameters) {
+    const auto it = d.parameters.find(std::string(par.name));
+    if (it == d.parameters.end()) continue;
+    const auto sd = d.parameter_std.find(std::string(par.name));
+    const double s = sd == d.parameter_std.end() ? 0.0 : sd->second;
+    if (it->second < par.plausible_min - 3 * s) return false;
+  }
+  return true;
+}
+
+// Distance of an effect's parameter from neutral, in standard deviations.
+// Cross saturation has no single parameter: it counts when the cross
+// coupling it fits is material, max |Ldq| over the measured points above the
+// identification's own Ldq accuracy (1 % of the mean inductance,
+// tests/identification); expressed on the same 3-sigma scale.
+double Significance(const Candidate& c, const FitOut& f, const Model& m) {
+  if (c.block == kCross) {
+    const auto ptr = f.p.Ptrs();
+    double max_ldq = 0, mean_l = 0;
+    for (const auto& o : m.hf) {
+      double ldd, lqq, ldq;
+      m.Inductance(ptr.data(), o.id_a, o.iq_a, &ldd, &lqq, &ldq);
+      max_ldq = std::max(max_ldq, std::abs(ldq));
+      mean_l += 0.5 * (ldd + lqq) / m.hf.size();
+    }
+    return 3.0 * max_ldq / (0.01 * mean_l);
+  }
+  // Materiality (the catalogue's floors): below them no calibration
+  // decision changes, however precisely the data pin the value down. The
+  // size of a finding is its largest parameter's distance from neutral.
+  const Finding d = Describe(c, m, f);
+  const sim::EffectRow* row = sim::FindEffect(c.effect);
+  if (row == nullptr) return 0.0;
+  bool material = false;
+  for (const auto& par : row->parameters) {
+    const auto it = d.parameters.find(std::string(par.name));
+    if (it == d.parameters.end() || par.name == "order") continue;
+    double size = 0, floor = par.floor;
+    if (par.floor_kind == sim::FloorKind::kRelativeNominal) {
+      const double nominal = par.name == "rs_ohm" ? m.rs_nom : m.psi_nom;
+      size = std::abs(it->second - nominal);
+      floor = par.floor * std::max(std::abs(nominal), par.name == "rs_ohm" ? 1e-3 : 0.0);
+    } else {
+      // The reported dead time includes what the manifest declares
+      // uncompensated (part of the nominal model); the finding is the rest.
+      const double reference = par.name == "dead_time_s" ? m.dead_nom_s : par.neutral;
+      size = std::abs(it->second - reference);
+    }
+    if (size >= floor) material = true;
+  }
+  if (!material) return 0.0;
+  if (!f.stdev.count(c.block)) return 0.0;
+  if (!Plausible(c, f, m)) return 0.0;
+  double best = 0;
+  for (int i = 0; i < kBlockSize[c.block]; ++i) {
+    const double sd = f.stdev.at(c.block)[i];
+    if (sd > 0) best = std::max(best, std::abs(f.p.b[c.block][i]) / sd);
+  }
+  return best;
+}
+
+}  // namespace fluxcal::diag::detail

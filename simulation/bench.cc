@@ -1,0 +1,393 @@
+#include "simulation/bench.h"
+
+#include <algorithm>
+#include <cmath>
+#include <deque>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+
+namespace fluxcal::sim {
+
+PointRun RunPoint(const TwinConfig& cfg, const PlantModel& m, double id_ref, double iq_ref,
+                  double speed_rpm, double theta0, double temperature_c, bool inject,
+                  double settle_s, double record_s, std::mt19937_64* rng,
+                  const RunAlignment& align) {
+  (void)temperature_c;
+  PointRun out;
+  const int pp = cfg.motor.pole_pairs;
+  const double fs = cfg.drive.f_pwm_hz, ts = 1.0 / fs;
+  const int S = std::max(1, cfg.drive.substeps);
+  const double h = ts / S;
+  const double we = RpmToElectricalRadS(speed_rpm, pp);
+  const size_t n_settle = static_cast<size_t>(std::llround(settle_s * fs));
+  const size_t n_rec = static_cast<size_t>(std::llround(record_s * fs));
+  const double wi = 2 * kPi * cfg.injection.frequency_hz;
+  const double vi = inject ? cfg.injection.amplitude_v : 0.0;
+  const size_t period = std::max<size_t>(1, static_cast<size_t>(std::llround(fs / cfg.injection.frequency_hz)));
+  const int delay_sub = static_cast<int>(std::llround(cfg.effects.delay_s / h));
+  const double dtheta_enc = cfg.sensors.encoder_counts_per_mech_rev > 0
+                                  ? 2 * kPi * pp / cfg.sensors.encoder_counts_per_mech_rev
+                                  : 0.0;
+  std::normal_distribution<double> noise(0.0, cfg.sensors.noise_a);
+  std::normal_distribution<double> unoise(0.0, cfg.sensors.udc_noise_v);
+
+  // Nominal controller (what the bench believes): PI with decoupling.
+  const double psi_pm_nom = cfg.motor.sat.psi_pm_wb;
+  const double kp_d = 2 * kPi * cfg.control.bandwidth_hz * cfg.control.ld_nominal_h;
+  const double kp_q = 2 * kPi * cfg.control.bandwidth_hz * cfg.control.lq_nominal_h;
+  const double wc_i = 2 * kPi * cfg.control.integral_corner_hz;
+
+  // Start in the steady state of the true machine at the reference.
+  State x;
+  m.Flux(id_ref, iq_ref, theta0, &x.psd, &x.psq);
+  x.lpd = id_ref; x.lpq = iq_ref;
+  x.i = Vec2{id_ref, iq_ref};
+  double int_d = cfg.motor.rs_ohm * id_ref, int_q = cfg.motor.rs_ohm * iq_ref;
+
+  std::deque<std::pair<double, double>> cmd_hist;   // alpha-beta commands by period
+  cmd_hist.push_back({0, 0});
+  // Seed the history with the steady-state command so the first periods are
+  // not a voltage step.
+  {
+    double pd, pq;
+    m.Flux(id_ref, iq_ref, theta0, &pd, &pq);
+    const double ud = m.rs_ohm * id_ref - we * pq, uq = m.rs_ohm * iq_ref + we * pd;
+    const double c = std::cos(theta0), s = std::sin(theta0);
+    cmd_hist.clear();
+    for (int k = 0; k < 4; ++k) cmd_hist.push_back({c * ud - s * uq, s * ud + c * uq});
+  }
+  std::deque<std::pair<double, double>> fb_hist;   // dq feedback for the moving average
+  double fb_sum_d = 0, fb_sum_q = 0;
+  const size_t n_total = n_settle + n_rec;
+  out.wave.t_s.reserve(n_rec);
+  double acc_ud_app = 0, acc_uq_app = 0;
+  size_t acc_app = 0;
+  std::vector<std::pair<double, double>> cmds(n_total + 2);
+
+  for (size_t k = 0; k < n_total; ++k) {
+    const double t = static_cast<double>(k) * ts;
+    const double th = theta0 + we * t;
+    // --- Sample: sensors.
+    const double c = std::cos(th), s = std::sin(th);
+    const double ial = c * x.i.d - s * x.i.q, ibe = s * x.i.d + c * x.i.q;
+    const Phases iph = InverseClarke(ial, ibe);
+    const double ia = iph.a, ib = iph.b, ic = iph.c;
+    const double lsb = cfg.sensors.adc_lsb_a;
+    auto sense = [&](double i, double g, double offset) {
+      double v = g * i + offset + noise(*rng);
+      if (lsb > 0) v = std::round(v / lsb) * lsb;
+      return v;
+    };
+    const double ma = sense(ia, cfg.effects.gain_a, cfg.effects.offset_a_a),
+                 mb = sense(ib, cfg.effects.gain_b, cfg.effects.offset_b_a),
+                 mc = sense(ic, cfg.effects.gain_c, cfg.effects.offset_c_a);
+    double th_meas = th + cfg.effects.offset_rad;
+    // Encoder counts, read to the nearest count (an encoder whose zero is
+    // aligned mid-count, as EOL benches calibrate it: no half-count bias).
+    if (dtheta_enc > 0) th_meas = std::round(WrapAngle(th_meas) / dtheta_enc) * dtheta_enc;
+    th_meas = WrapAngle(th_meas);
+    if (align.theta_meas_rad && k >= n_settle && k - n_settle < align.theta_meas_rad->size()) {
+      th_meas = WrapAngle((*align.theta_meas_rad)[k - n_settle]);
+    }
+    // --- Controller on injection-free feedback (moving average over one
+    // injection period of the measured dq current).
+    const AlphaBeta mab = Clarke(ma, mb, mc);
+    const double mal = mab.alpha, mbe = mab.beta;
+    const double cm = std::cos(th_meas), sm = std::sin(th_meas);
+    const double fd = cm * mal + sm * mbe, fq = -sm * mal + cm * mbe;
+    fb_hist.push_back({fd, fq});
+    fb_sum_d += fd; fb_sum_q += fq;
+    if (fb_hist.size() > period) {
+      fb_sum_d -= fb_hist.front().first;
+      fb_sum_q -= fb_hist.front().second;
+      fb_hist.pop_front();
+    }
+    const double ifd = fb_sum_d / fb_hist.size(), ifq = fb_sum_q / fb_hist.size();
+    const double ed = id_ref - ifd, eq = iq_ref - ifq;
+    int_d += kp_d * wc_i * ts * ed;
+    int_q += kp_q * wc_i * ts * eq;
+    const double ud = kp_d * ed + int_d - we * cfg.control.lq_nominal_h * ifq;
+    const double uq = kp_q * eq + int_q + we * (cfg.control.ld_nominal_h * ifd + psi_pm_nom);
+    const double inj_c = std::cos(wi * t + align.injection_phase_rad),
+                 inj_s = std::sin(wi * t + align.injection_phase_rad);
+    // Inverse Park at the angle the rotor will have in the middle of the
+    // period the command is applied in (theta + 1.5 w_e Ts): the usual ECU
+    // delay compensation, so the dq command is the fundamental voltage the
+    // machine sees (up to the hold's sinc gain), as steady_state.csv states.
+    const double thc = th_meas + 1.5 * we * ts;
+    const double cc = std::cos(thc), sc = std::sin(thc);
+    double ual = cc * ud - sc * uq + vi * inj_c, ube = sc * ud + cc * uq + vi * inj_s;
+    // Modulator: linear range of space-vector PWM, |u| <= Udc / sqrt(3)
+    // of the Udc the ECU measures.
+    const double umag = std::hypot(ual, ube), u_lim = m.u_max_v / m.voltage_gain;
+    if (umag > u_lim) {
+      ual *= u_lim / umag;
+      ube *= u_lim / umag;
+      if (k >= n_settle) out.clipped = true;
+    }
+    cmds[k] = {ual, ube};
+    // What was sent to the modulator, back in the controller's dq frame
+    // (differs from the PI output only when the voltage limit clipped).
+    const double ud_sent = cc * (ual - vi * inj_c) + sc * (ube - vi * inj_s);
+    const double uq_sent = -sc * (ual - vi * inj_c) + cc * (ube - vi * inj_s);
+    if (k >= n_settle) {
+      const size_t r = k - n_settle;
+      out.wave.t_s.push_back(static_cast<double>(r) * ts);
+      out.wave.ia_a.push_back(ma);
+      out.wave.ib_a.push_back(mb);
+      out.wave.ic_a.push_back(mc);
+      out.wave.theta_e_rad.push_back(th_meas);
+      out.wave.ualpha_ref_v.push_back(ual);
+      out.wave.ubeta_ref_v.push_back(ube);
+      out.wave.udc_v.push_back(m.udc_v / m.voltage_gain + unoise(*rng));
+      out.mean_id_true += x.i.d;
+      out.mean_iq_true += x.i.q;
+      out.mean_id_meas += fd;
+      out.mean_iq_meas += fq;
+      out.mean_ud_cmd += ud_sent;
+      out.mean_uq_cmd += uq_sent;
+      double pd, pq;
+      m.Flux(x.i.d, x.i.q, th, &pd, &pq);
+      out.mean_torque_nm += 1.5 * pp * (pd * x.i.q - pq * x.i.d);
+    }
+    // --- Plant over [t_k, t_{k+1}): the command of period k-1 (one PWM
+    // period late), shifted further by the sampling_delay effect.
+    for (int j = 0; j < S; ++j) {
+      const long sub = static_cast<long>(k) * S + j - delay_sub;
+      const long per = (sub >= 0 ? sub / S : (sub - S + 1) / S) - 1;
+      std::pair<double, double> u = per >= 0 ? cmds[per] : cmd_hist.front();
+      const double th_j = th + we * h * j;
+      if (k >= n_settle) {
+        // Exact mean of the held alpha-beta voltage in the rotating frame
+        // over the sub-step: e^{-j theta_mid} sin(y)/y, y = w_e h / 2.
+        const double y = 0.5 * we * h;
+        const double sinc = Sinc(y);
+        const double cj = sinc * std::cos(th_j + y), sj = sinc * std::sin(th_j + y);
+        double eal, ebe;
+        const double al = cj * x.i.d - sj * x.i.q, be = sj * x.i.d + cj * x.i.q;
+        DeadTimeError(m, al, -0.5 * al + 0.5 * kSqrt3 * be, -0.5 * al - 0.5 * kSqrt3 * be, &eal, &ebe);
+        const double ua = m.voltage_gain * u.first + eal, ub = m.voltage_gain * u.second + ebe;
+        acc_ud_app += cj * ua + sj * ub;
+        acc_uq_app += -sj * ua + cj * ub;
+        ++acc_app;
+      }
+      const State before = x;
+      Rk4(m, &x, th_j, we, h, u.first, u.second);
+      if (k >= n_settle) {
+        if (k == n_settle && j == 0) { out.dpsd = -before.psd; out.dpsq = -before.psq; }
+        out.avg_id += 0.5 * (before.i.d + x.i.d);
+        out.avg_iq += 0.5 * (before.i.q + x.i.q);
+        out.avg_psd += 0.5 * (before.psd + x.psd);
+        out.avg_psq += 0.5 * (before.psq + x.psq);
+      }
+    }
+  }
+  const double nr = static_cast<double>(std::max<size_t>(1, n_rec));
+  out.mean_id_true /= nr;
+  out.mean_iq_true /= nr;
+  out.mean_ud_cmd /= nr;
+  out.mean_id_meas /= nr;
+  out.mean_iq_meas /= nr;
+  out.mean_uq_cmd /= nr;
+  out.mean_torque_nm /= nr;
+  const double na = static_cast<double>(std::max<size_t>(1, acc_app));
+  out.avg_id /= na; out.avg_iq /= na; out.avg_psd /= na; out.avg_psq /= na;
+  out.dpsd = (out.dpsd + x.psd) / (nr * ts);
+  out.dpsq = (out.dpsq + x.psq) / (nr * ts);
+  out.mean_ud_applied = acc_ud_app / std::max<size_t>(1, acc_app);
+  out.mean_uq_applied = acc_uq_app / std::max<size_t>(1, acc_app);
+  return out;
+}
+
+PlantModel MakePlant(const TwinConfig& cfg, double temperature_c) {
+  PlantModel m;
+  ToArray(cfg.motor.sat, m.p);
+  const double psi_pm25 = cfg.effects.psi_pm_wb.value_or(cfg.motor.sat.psi_pm_wb);
+  m.p[0] = psi_pm25 * (1.0 + cfg.motor.psi_pm_temp_coeff_per_k * (temperature_c - 25.0));
+  if (cfg.effects.cross_saturation != 0.0) m.p[5] = cfg.effects.cross_saturation;
+  m.rs_ohm = cfg.effects.rs_ohm.value_or(cfg.motor.rs_ohm);
+  if (cfg.magnetics) {
+    m.map = cfg.magnetics.get();
+    m.map_temperature_c = temperature_c;
+    const double map_pm = cfg.magnetics->Flux(0, 0, 25.0).psi_d_wb;
+    m.map_psi_shift_wb = cfg.effects.psi_pm_wb ? *cfg.effects.psi_pm_wb - map_pm : 0.0;
+    m.p[0] = map_pm + m.map_psi_shift_wb;   // reported psi_pm
+  }
+  m.r_hf_ohm = cfg.effects.r_hf_ohm;
+  m.order = cfg.effects.order;
+  m.amplitude_h = cfg.effects.amplitude_h;
+  m.dead_time_s = cfg.effects.dead_time_s;
+  m.dead_time_i_th_a = cfg.effects.dead_time_i_th_a;
+  m.udc_v = cfg.drive.udc_v;
+  m.ts_s = 1.0 / cfg.drive.f_pwm_hz;
+  m.u_max_v = cfg.drive.udc_v / kSqrt3;
+  m.voltage_gain = 1.0 / cfg.effects.udc_sense_gain;
+  m.dr_a_ohm = cfg.effects.dr_a_ohm;
+  m.dr_b_ohm = cfg.effects.dr_b_ohm;
+  m.dr_c_ohm = cfg.effects.dr_c_ohm;
+  return m;
+}
+
+namespace {
+
+TruthPoint MakeTruth(const TwinConfig& cfg, const PlantModel& m, const std::string& id, double idt,
+                     double iqt, double speed_rpm, double temperature_c, double theta) {
+  TruthPoint t;
+  t.id = id;
+  t.id_true_a = idt;
+  t.iq_true_a = iqt;
+  t.speed_rpm = speed_rpm;
+  t.temperature_c = temperature_c;
+  // Locked points: at the rotor angle (matters for spatial harmonics only);
+  // rotating points: the angle-dependent term averages out.
+  PlantModel mm = m;
+  if (speed_rpm != 0.0) mm.order = 0;
+  mm.Flux(idt, iqt, theta, &t.psi_d_wb, &t.psi_q_wb);
+  mm.Jacobian(idt, iqt, theta, &t.ldd_h, &t.lqq_h, &t.ldq_h);
+  t.psi_pm_wb = m.p[0];
+  t.ld_app_h = std::abs(idt) > 1e-6 ? (t.psi_d_wb - m.p[0]) / idt : t.ldd_h;
+  t.lq_app_h = std::abs(iqt) > 1e-6 ? t.psi_q_wb / iqt : t.lqq_h;
+  t.torque_nm = 1.5 * cfg.motor.pole_pairs * (t.psi_d_wb * iqt - t.psi_q_wb * idt);
+  return t;
+}
+
+}  // namespace
+
+FluxLinkage AnalyticMotor::Flux(double id_a, double iq_a, double temperature_c) const {
+  double p[kSaturationParams];
+  ToArray(p_.sat, p);
+  p[0] *= 1.0 + p_.psi_pm_temp_coeff_per_k * (temperature_c - 25.0);
+  FluxLinkage f;
+  SaturationFlux(id_a, iq_a, p, &f.psi_d_wb, &f.psi_q_wb);
+  return f;
+}
+
+DifferentialInductance AnalyticMotor::Inductance(double id_a, double iq_a, double) const {
+  double p[kSaturationParams];
+  ToArray(p_.sat, p);
+  DifferentialInductance l;
+  SaturationInductance(id_a, iq_a, p, &l.ldd_h, &l.lqq_h, &l.ldq_h);
+  return l;
+}
+
+Plan DefaultPlan() {
+  Plan plan;
+  int k = 0;
+  for (int a = 0; a <= 5; ++a) {
+    for (int b = 0; b <= 5; ++b) {
+      PlanPoint p;
+      p.id = absl::StrFormat("p%03d", k);
+      p.id_ref_a = -100.0 + 20.0 * a;
+      p.iq_ref_a = 20.0 * b;
+      // Spread the locked angles over the electrical revolution (golden
+      // angle) so that angle-dependent effects are observable.
+      p.theta_e_rad = std::fmod(0.3 + 2.39996322972865332 * k, 2 * kPi);
+      plan.points.push_back(p);
+      ++k;
+    }
+  }
+  const double rot[][3] = {{-20, 40, 200}, {-40, 60, 500}, {-20, 40, 1000}, {-60, 80, 750}};
+  for (const auto& r : rot) {
+    PlanPoint p;
+    p.id = absl::StrFormat("p%03d", k++);
+    p.id_ref_a = r[0];
+    p.iq_ref_a = r[1];
+    p.speed_rpm = r[2];
+    p.theta_e_rad = 0.5;
+    plan.points.push_back(p);
+  }
+  const double ss[][3] = {{0, 40, 1000}, {-20, 60, 1000}, {-40, 80, 1500}, {-20, 100, 1500},
+                          {-60, 60, 2000}, {0, 20, 2000}, {-80, 100, 1500}, {-40, 40, 1200}};
+  for (const auto& r : ss) plan.steady_state.push_back({r[0], r[1], r[2], 25.0});
+  return plan;
+}
+
+absl::StatusOr<SimulationResult> Simulate(const TwinConfig& cfg, const Plan& plan) {
+  if (!io::IsValidSerial(cfg.serial)) {
+    return absl::InvalidArgumentError(absl::StrCat("field 'serial': illegal serial '", cfg.serial, "'"));
+  }
+  SimulationResult res;
+  io::RecordingSet& set = res.set;
+  io::Manifest& mf = set.manifest;
+  mf.serial = cfg.serial;
+  mf.motor.pole_pairs = cfg.motor.pole_pairs;
+  mf.motor.rs_ohm = cfg.motor.rs_ohm;               // nominal: what the bench believes
+  mf.motor.psi_pm_wb = cfg.motor.sat.psi_pm_wb;
+  mf.drive.udc_v = cfg.drive.udc_v;
+  mf.drive.f_pwm_hz = cfg.drive.f_pwm_hz;
+  mf.drive.f_sample_hz = cfg.drive.f_pwm_hz;
+  mf.drive.dead_time_s = cfg.drive.nominal_dead_time_s;
+  mf.drive.dead_time_compensated = true;
+  mf.injection = io::InjectionInfo{"rotating", cfg.injection.amplitude_v, cfg.injection.frequency_hz};
+  std::mt19937_64 rng(cfg.seed);
+  for (size_t k = 0; k < plan.points.size(); ++k) {
+    const auto& pt = plan.points[k];
+    PlantModel m = MakePlant(cfg, pt.temperature_c);
+    // stator_temperature_drift: the winding warms linearly over the locked
+    // and rotating points in plan order, then stays warm (steady state).
+    m.rs_ohm *= 1.0 + kCopperAlphaPerK * cfg.effects.winding_temp_rise_k *
+                          (plan.points.size() > 1 ? static_cast<double>(k) / (plan.points.size() - 1) : 0.0);
+    PointRun run = RunPoint(cfg, m, pt.id_ref_a, pt.iq_ref_a, pt.speed_rpm, pt.theta_e_rad,
+                            pt.temperature_c, true, plan.settle_s, plan.record_s, &rng);
+    res.clipped |= run.clipped;
+    io::PointSpec ps;
+    ps.id = pt.id;
+    ps.file = absl::StrCat("points/", pt.id, ".csv");
+    ps.id_ref_a = pt.id_ref_a;
+    ps.iq_ref_a = pt.iq_ref_a;
+    ps.speed_rpm = pt.speed_rpm;
+    ps.temperature_c = pt.temperature_c;
+    mf.points.push_back(ps);
+    set.waveforms.push_back(std::move(run.wave));
+    res.truth_points.push_back(MakeTruth(cfg, m, pt.id, run.mean_id_true, run.mean_iq_true,
+                                         pt.speed_rpm, pt.temperature_c, pt.theta_e_rad));
+  }
+  if (!plan.steady_state.empty()) {
+    mf.steady_state = "steady_state.csv";
+    std::normal_distribution<double> tnoise(0.0, 0.01);
+    for (const auto& ss : plan.steady_state) {
+      PlantModel m = MakePlant(cfg, ss.temperature_c);
+      m.rs_ohm *= 1.0 + kCopperAlphaPerK * cfg.effects.winding_temp_rise_k;
+      PointRun run = RunPoint(cfg, m, ss.id_ref_a, ss.iq_ref_a, ss.speed_rpm, 0.2,
+                              ss.temperature_c, false, plan.settle_s, 0.05, &rng);
+      io::SteadyStateRow row;
+      // The bench reports the measured mean current (it differs from the
+      // reference when the voltage limit is hit or a sensor is off).
+      row.id_a = run.mean_id_meas;
+      row.iq_a = run.mean_iq_meas;
+      row.speed_rpm = ss.speed_rpm;
+      row.ud_ref_v = run.mean_ud_cmd;
+      row.uq_ref_v = run.mean_uq_cmd;
+      row.torque_nm = run.mean_torque_nm + tnoise(rng);
+      row.temperature_c = ss.temperature_c;
+      set.steady_state.push_back(row);
+      res.truth_steady_state.push_back(MakeTruth(cfg, m, "", run.mean_id_true, run.mean_iq_true,
+                                                 ss.speed_rpm, ss.temperature_c, 0.0));
+      res.truth_steady_state.back().applied_ud_v = run.mean_ud_applied;
+      res.truth_steady_state.back().applied_uq_v = run.mean_uq_applied;
+      auto& tb = res.truth_steady_state.back();
+      tb.avg_id_a = run.avg_id; tb.avg_iq_a = run.avg_iq;
+      tb.avg_psi_d_wb = run.avg_psd; tb.avg_psi_q_wb = run.avg_psq;
+      tb.dpsi_d_dt = run.dpsd; tb.dpsi_q_dt = run.dpsq;
+    }
+  }
+  return res;
+}
+
+MotorParams PerturbForProduction(const MotorParams& nominal, uint64_t seed) {
+  std::mt19937_64 rng(seed * 0x9E3779B97F4A7C15ull + 12345);
+  std::normal_distribution<double> n(0.0, 1.0);
+  MotorParams m = nominal;
+  // Typical EOL spread: magnets +-1.5 %, lamination/air gap +-2 % on
+  // inductance, saturation onset +-3 %, winding resistance +-2 %.
+  m.sat.psi_pm_wb *= 1.0 + 0.015 * n(rng);
+  m.sat.ld0_h *= 1.0 + 0.02 * n(rng);
+  m.sat.lq0_h *= 1.0 + 0.02 * n(rng);
+  m.sat.id_sat_a *= 1.0 + 0.03 * n(rng);
+  m.sat.iq_sat_a *= 1.0 + 0.03 * n(rng);
+  m.rs_ohm *= 1.0 + 0.02 * n(rng);
+  return m;
+}
+
+}  // namespace fluxcal::sim

@@ -1,0 +1,108 @@
+// The twin's plant (internal to simulation/): the ODE right-hand side in
+// the true rotor frame with flux linkages as states, the inverter's dead-time
+// error, and an RK4 step with a held voltage. Shared by the bench
+// (bench.cc) and the replays (replay.cc); unit-tested against analytic
+// solutions in tests/simulation/plant_test.cc. Equations: docs/simulation.md.
+#ifndef FLUXCAL_SIMULATION_PLANT_H_
+#define FLUXCAL_SIMULATION_PLANT_H_
+
+#include <cmath>
+
+#include "simulation/frames.h"
+#include "simulation/magnetic_model.h"
+#include "simulation/saturation_model.h"
+
+namespace fluxcal::sim {
+
+struct Vec2 {
+  double d = 0, q = 0;
+};
+
+// Everything the ODE right-hand side needs for one operating point.
+struct PlantModel {
+  double p[kSaturationParams];   // saturation parameters with psi_pm(T)
+  const MagneticModel* map = nullptr;   // replaces p when set
+  double map_temperature_c = 25.0, map_psi_shift_wb = 0.0;
+  double rs_ohm;
+  double r_hf_ohm;
+  double hf_corner_rad_s = 2 * kPi * 50.0;   // eddy branch: high-pass corner
+  int order = 0;
+  double amplitude_h = 0;
+  double dead_time_s = 0, dead_time_i_th_a = 1, udc_v = 50, ts_s = 1e-4;
+  double u_max_v = 50 / kSqrt3;
+  // dc_link_sense_gain: the modulator divides the command by the measured
+  // Udc, so the applied voltage is command x voltage_gain (= 1 / gain).
+  double voltage_gain = 1.0;
+  // phase_resistance_imbalance: extra resistance per phase (a bad joint).
+  double dr_a_ohm = 0, dr_b_ohm = 0, dr_c_ohm = 0;
+
+  // psi(i, theta) including the spatial-harmonic term amp cos(n theta) i.
+  void Flux(double id, double iq, double th, double* pd, double* pq) const {
+    if (map) {
+      const auto f = map->Flux(id, iq, map_temperature_c);
+      *pd = f.psi_d_wb + map_psi_shift_wb;
+      *pq = f.psi_q_wb;
+    } else {
+      SaturationFlux(id, iq, p, pd, pq);
+    }
+    if (order != 0) {
+      const double h = amplitude_h * std::cos(order * th);
+      *pd += h * id;
+      *pq += h * iq;
+    }
+  }
+  void Jacobian(double id, double iq, double th, double* ldd, double* lqq, double* ldq) const {
+    if (map) {
+      const auto l = map->Inductance(id, iq, map_temperature_c);
+      *ldd = l.ldd_h;
+      *lqq = l.lqq_h;
+      *ldq = l.ldq_h;
+    } else {
+      SaturationInductance(id, iq, p, ldd, lqq, ldq);
+    }
+    if (order != 0) {
+      const double h = amplitude_h * std::cos(order * th);
+      *ldd += h;
+      *lqq += h;
+    }
+  }
+  // i(psi) by Newton from a warm start; converges in 2-3 steps because the
+  // model is smooth and the start is the previous sub-step's current.
+  Vec2 Current(double psd, double psq, double th, Vec2 guess) const {
+    Vec2 i = guess;
+    for (int it = 0; it < 20; ++it) {
+      double pd, pq, a, b, c;
+      Flux(i.d, i.q, th, &pd, &pq);
+      Jacobian(i.d, i.q, th, &a, &b, &c);
+      const double rd = psd - pd, rq = psq - pq;
+      const double det = a * b - c * c;
+      const double dd = (b * rd - c * rq) / det, dq = (a * rq - c * rd) / det;
+      i.d += dd;
+      i.q += dq;
+      if (std::abs(dd) + std::abs(dq) < 1e-12 * (1.0 + std::abs(i.d) + std::abs(i.q))) break;
+    }
+    return i;
+  }
+};
+
+// Inverter voltage error of an uncompensated dead time, per phase
+// -(Td/Ts) Udc tanh(i_x / i_th), common mode removed, in alpha-beta
+// (amplitude-invariant Clarke). The paper's eq. (9) is its Fourier series.
+void DeadTimeError(const PlantModel& m, double ia, double ib, double ic, double* ua, double* ub);
+
+struct State {
+  double psd, psq;       // flux linkage in the true dq frame
+  double lpd, lpq;       // low-passed current (eddy branch)
+  Vec2 i;                // current consistent with psi (cache)
+};
+
+// dx/dt in the true rotor frame: dpsi/dt = u - Rs i - R_hf (i - i_lp) - w J psi.
+void Derivative(const PlantModel& m, const State& x, double th, double we, double ual, double ube,
+                double* dpsd, double* dpsq, double* dlpd, double* dlpq, Vec2* i_out);
+
+// One RK4 step of length h with a held alpha-beta voltage.
+void Rk4(const PlantModel& m, State* x, double th0, double we, double h, double ual, double ube);
+
+}  // namespace fluxcal::sim
+
+#endif  // FLUXCAL_SIMULATION_PLANT_H_

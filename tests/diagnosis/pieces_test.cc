@@ -1,0 +1,143 @@
+// Diagnosis' pieces against analytic truth (diagnosis/internal.h): the
+// effect model's predictions, the staircase delay, the phasor solve, the
+// dead-time soft sign, locating, and the phase parameters of the verdict.
+#include <cmath>
+#include <complex>
+
+#include "diagnosis/internal.h"
+#include "gtest/gtest.h"
+#include "identification/inductance.h"
+
+namespace fluxcal::diag::detail {
+namespace {
+
+Model TestModel() {
+  Model m;
+  m.rs_nom = 0.011;
+  m.psi_nom = 0.0114;
+  m.ts = 1e-4;
+  m.w_i = 2 * kPi * 500;
+  return m;
+}
+
+// A delay of half a sample on a staircase-driven, sampled HF current:
+// magnitude cos(w T / 2), phase -w T / 2; whole samples: a pure rotation.
+TEST(EffectModel, StaircaseDelay) {
+  const Model m = TestModel();
+  const double w = m.w_i, T = m.ts;
+  const Complex half = m.StaircaseDelay(w, 0.5 * T);
+  EXPECT_NEAR(std::abs(half), std::cos(w * T / 2), 1e-12);
+  EXPECT_NEAR(std::arg(half), -w * T / 2, 1e-12);
+  const Complex two = m.StaircaseDelay(w, 2 * T);
+  EXPECT_NEAR(std::abs(two - std::polar(1.0, -2 * w * T)), 0.0, 1e-12);
+}
+
+// Only the positive sequence driven: the phasors of identification's own
+// forward model (eqs. (E1)-(E2)), at standstill and at speed.
+TEST(EffectModel, SolvePhasorsMatchesIdentificationForwardModel) {
+  const Model m = TestModel();
+  for (double we : {0.0, 400.0}) {
+    Complex i0, i1, j0, j1;
+    const Complex v(5.0, 0.3);
+    m.SolvePhasors(1.8e-4, 3.6e-4, 1e-5, 0.02, v, 0.0, we, &i0, &i1);
+    ident::PredictPhasors(1.8e-4, 3.6e-4, 1e-5, 0.02, v, m.w_i, we, &j0, &j1);
+    EXPECT_NEAR(std::abs(i0 - j0), 0.0, 1e-9 * std::abs(j0)) << we;
+    EXPECT_NEAR(std::abs(i1 - j1), 0.0, 1e-9 * std::abs(j0)) << we;
+  }
+}
+
+// Held DC voltage at standstill: Rs i; a sensor offset o (alpha-beta) holds
+// i - o e^{-j theta}; a DC-link sense gain g scales the command by g; a
+// resistance imbalance adds r2 e^{-j 2 theta} conj(i); a warm winding
+// multiplies Rs by 1 + 0.00393 rise progress.
+TEST(EffectModel, PredictDcAnalytic) {
+  const Model m = TestModel();
+  Params p;
+  DcObs o;
+  o.id_a = -40;
+  o.iq_a = 60;
+  o.theta = 0.7;
+  o.dead = 0.0;
+  o.progress = 0.5;
+  const Complex i(o.id_a, o.iq_a);
+  auto ptr = p.Ptrs();
+  EXPECT_NEAR(std::abs(m.PredictDc(ptr.data(), o) - m.rs_nom * i), 0.0, 1e-12);
+  p.b[kSensorOffset] = {3.0, -2.0};   // x 0.1 A
+  p.b[kUdcGain] = {2.0};              // x 1 %
+  p.b[kRImb] = {1.0, 0.5};            // x 1 mOhm
+  p.b[kDrift] = {20.0};               // K
+  ptr = p.Ptrs();
+  const Complex o_ab(0.3, -0.2), r2(1e-3, 0.5e-3);
+  const Complex it = i - o_ab * std::polar(1.0, -o.theta);
+  const double rs = m.rs_nom * (1 + sim::kCopperAlphaPerK * 20 * 0.5);
+  const Complex want = 1.02 * (rs * it + r2 * std::polar(1.0, -2 * o.theta) * std::conj(it));
+  EXPECT_NEAR(std::abs(m.PredictDc(ptr.data(), o) - want), 0.0, 1e-12);
+}
+
+// Steady state at speed: u = Rs i + j w psi(i) with psi from the surfaces;
+// a DC-link gain scales it, a delay rotates it by w_e tau.
+TEST(EffectModel, PredictSsAnalytic) {
+  Model m = TestModel();
+  Params p;
+  p.b[kBase][0] = 1.8;   // Ldd = 0.18 mH, constant
+  p.b[kBase][5] = 3.6;   // Lqq = 0.36 mH, constant
+  SsObs o{};
+  o.id_a = -20;
+  o.iq_a = 50;
+  o.w_e = 600;
+  auto ptr = p.Ptrs();
+  const double psd = m.psi_nom + 1.8e-4 * o.id_a, psq = 3.6e-4 * o.iq_a;
+  const Complex u0(m.rs_nom * o.id_a - o.w_e * psq, m.rs_nom * o.iq_a + o.w_e * psd);
+  EXPECT_NEAR(std::abs(m.PredictSs(ptr.data(), o) - u0), 0.0, 1e-12);
+  p.b[kUdcGain] = {-3.0};
+  p.b[kDelay] = {25.0};   // us
+  ptr = p.Ptrs();
+  EXPECT_NEAR(std::abs(m.PredictSs(ptr.data(), o) - 0.97 * u0 * std::polar(1.0, o.w_e * 25e-6)), 0.0, 1e-12);
+  // Torque: 1.5 p (psi_d iq - psi_q id), untouched by the DC-link gain.
+  EXPECT_NEAR(m.PredictTorque(ptr.data(), o), 1.5 * 4 * (psd * o.iq_a - psq * o.id_a), 1e-12);
+}
+
+// The mean of tanh(i / 1 A) over a linear ramp: tanh at a constant current,
+// +-1 far from zero, 0 over a symmetric ramp through zero.
+TEST(Observations, MeanSoftSign) {
+  EXPECT_NEAR(MeanSoftSign(0.3, 0.3), std::tanh(0.3), 1e-9);
+  EXPECT_NEAR(MeanSoftSign(40, 45), 1.0, 1e-12);
+  EXPECT_NEAR(MeanSoftSign(-2, 2), 0.0, 1e-12);
+  // (1/2) int_0^2 tanh = ln cosh(2) / 2.
+  EXPECT_NEAR(MeanSoftSign(0, 2), std::log(std::cosh(2.0)) / 2, 1e-12);
+}
+
+// A region's significance is (chi^2 - k) / sqrt(2k) over its points.
+TEST(Locate, RegionSignificance) {
+  std::vector<Z> zs;
+  for (int k = 0; k < 8; ++k) zs.push_back({"p" + std::to_string(k), "hf_current", -10, 10, 0, 4.0 * 5, 4});
+  zs.push_back({"ss", "torque", 0, 40, 1000, 1.0, 1});
+  const auto st = RegionStats(zs);
+  double low = 0;
+  for (const auto& r : st) {
+    if (r.signal == "hf_current" && r.where.find("low") != std::string::npos) low = r.Sigma();
+  }
+  EXPECT_NEAR(low, (160.0 - 32.0) / std::sqrt(64.0), 1e-12);
+  const auto mm = Locate(zs, 5.0);
+  ASSERT_EQ(mm.size(), 1u);
+  EXPECT_EQ(mm[0].signal, "hf_current");
+  EXPECT_EQ(mm[0].points.size(), 8u) << "points above 4 per degree of freedom are listed";
+}
+
+// Phase parameters: a gain on one phase g_a = 1 + d is m1 = 1 + d/3,
+// m2 = d/3 (measured = m1 i + m2 conj(i)); a zero-sum offset set round-trips
+// through its alpha-beta vector.
+TEST(Verdict, PhaseGainsAndOffsets) {
+  const double d = 0.02;
+  EXPECT_NEAR(PhaseGain(1 + d / 3, Complex(d / 3, 0), 0), 1 + d, 1e-12);
+  EXPECT_NEAR(PhaseGain(1 + d / 3, Complex(d / 3, 0), 1), 1.0, 1e-12);
+  EXPECT_NEAR(PhaseGain(1 + d / 3, Complex(d / 3, 0), 2), 1.0, 1e-12);
+  const double oa = 0.4, ob = -0.1, oc = -0.3;   // zero sum
+  const Complex o = sim::ClarkeComplex(oa, ob, oc);
+  EXPECT_NEAR(PhaseOffset(o, 0), oa, 1e-12);
+  EXPECT_NEAR(PhaseOffset(o, 1), ob, 1e-12);
+  EXPECT_NEAR(PhaseOffset(o, 2), oc, 1e-12);
+}
+
+}  // namespace
+}  // namespace fluxcal::diag::detail

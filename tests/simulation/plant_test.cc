@@ -1,0 +1,162 @@
+// The twin's pieces against analytic truth: frames (Clarke/Park, rpm ->
+// w_e, ZOH gain), the plant (RL step response, dead-time error, the
+// DC-link sense gain's voltage scaling), and the effect catalogue.
+#include <cmath>
+#include <complex>
+#include <fstream>
+#include <set>
+#include <sstream>
+
+#include "gtest/gtest.h"
+#include "simulation/effects.h"
+#include "simulation/frames.h"
+#include "simulation/plant.h"
+
+namespace fluxcal::sim {
+namespace {
+
+TEST(Frames, ClarkeInverseClarkeAndPark) {
+  // A balanced set of amplitude 10 A at angle 0.7 rad is the vector 10 e^{j 0.7}.
+  const double a = 10 * std::cos(0.7), b = 10 * std::cos(0.7 - 2 * kPi / 3), c = 10 * std::cos(0.7 + 2 * kPi / 3);
+  const AlphaBeta ab = Clarke(a, b, c);
+  EXPECT_NEAR(ab.alpha, 10 * std::cos(0.7), 1e-12);
+  EXPECT_NEAR(ab.beta, 10 * std::sin(0.7), 1e-12);
+  const Phases ph = InverseClarke(ab.alpha, ab.beta);
+  EXPECT_NEAR(ph.a, a, 1e-12);
+  EXPECT_NEAR(ph.b, b, 1e-12);
+  EXPECT_NEAR(ph.c, c, 1e-12);
+  // The zero sequence drops out.
+  EXPECT_NEAR(Clarke(a + 3, b + 3, c + 3).alpha, ab.alpha, 1e-12);
+  // Park at the vector's own angle: all on d.
+  double d, q;
+  Park(ab.alpha, ab.beta, 0.7, &d, &q);
+  EXPECT_NEAR(d, 10, 1e-12);
+  EXPECT_NEAR(q, 0, 1e-12);
+  double al, be;
+  InversePark(d, q, 0.7, &al, &be);
+  EXPECT_NEAR(al, ab.alpha, 1e-12);
+  EXPECT_NEAR(be, ab.beta, 1e-12);
+}
+
+TEST(Frames, SpeedAndZeroOrderHold) {
+  EXPECT_NEAR(RpmToElectricalRadS(1500, 4), 2 * kPi * 100, 1e-9);   // 1500 rpm x 4 pp = 100 Hz
+  EXPECT_NEAR(ElectricalRadSToRpm(2 * kPi * 100, 4), 1500, 1e-9);
+  // Mean of e^{j w t} over one period T, relative to its value at T/2.
+  const double w = 2 * kPi * 500, T = 1e-4;
+  std::complex<double> mean = 0;
+  const int n = 100000;
+  for (int k = 0; k < n; ++k) mean += std::polar(1.0, w * T * (k + 0.5) / n);
+  mean /= static_cast<double>(n);
+  EXPECT_NEAR(std::abs(mean), ZohGain(w, T), 1e-9);
+  EXPECT_NEAR(std::arg(mean), w * T / 2, 1e-9);
+  EXPECT_EQ(ZohGain(0.0, T), 1.0);
+}
+
+// A linear, unsaturated, non-salient winding: psi = psi_pm d + L i.
+class LinearWinding : public MagneticModel {
+ public:
+  explicit LinearWinding(double l_h) : l_(l_h) {}
+  FluxLinkage Flux(double id, double iq, double) const override { return {l_ * id, l_ * iq}; }
+  DifferentialInductance Inductance(double, double, double) const override { return {l_, l_, 0.0}; }
+
+ private:
+  double l_;
+};
+
+PlantModel LinearPlant(const MagneticModel& model, double rs) {
+  PlantModel m;
+  ToArray(SaturationParams{}, m.p);
+  m.map = &model;
+  m.rs_ohm = rs;
+  m.r_hf_ohm = 0;
+  return m;
+}
+
+// RL step at standstill: i(t) = U/R (1 - e^{-t R/L}); and with the DC-link
+// sense gain, the applied voltage is U / gain.
+TEST(Plant, RlStepResponseAndDcLinkSenseGain) {
+  const double l = 2e-4, r = 0.02, u = 1.0, h = 1e-5;
+  LinearWinding w(l);
+  for (double gain : {1.0, 0.95}) {
+    PlantModel m = LinearPlant(w, r);
+    m.voltage_gain = 1.0 / gain;
+    State x{0, 0, 0, 0, Vec2{0, 0}};
+    double t = 0;
+    for (int k = 0; k < 2000; ++k) {
+      Rk4(m, &x, 0.0, 0.0, h, u, 0.0);   // alpha = d at theta = 0
+      t += h;
+    }
+    const double want = u / gain / r * (1 - std::exp(-t * r / l));
+    EXPECT_NEAR(x.i.d, want, 1e-9 * want) << "gain " << gain;
+    EXPECT_NEAR(x.i.q, 0.0, 1e-12);
+  }
+}
+
+// Back-EMF: rotating at w with constant flux, holding i needs u = R i + j w psi.
+TEST(Plant, RotatingFrameDerivativeIsZeroAtSteadyState) {
+  LinearWinding w(2e-4);
+  PlantModel m = LinearPlant(w, 0.01);
+  const double we = 400, id = -5, iq = 20;
+  State x{2e-4 * id, 2e-4 * iq, id, iq, Vec2{id, iq}};
+  const double ud = 0.01 * id - we * 2e-4 * iq, uq = 0.01 * iq + we * 2e-4 * id;
+  // Command in alpha-beta at theta = 0.3.
+  double ual, ube;
+  InversePark(ud, uq, 0.3, &ual, &ube);
+  double dd, dq, dl1, dl2;
+  Vec2 i;
+  Derivative(m, x, 0.3, we, ual, ube, &dd, &dq, &dl1, &dl2, &i);
+  EXPECT_NEAR(dd, 0.0, 1e-12);
+  EXPECT_NEAR(dq, 0.0, 1e-12);
+}
+
+// Dead time at large currents (ia > 0, ib, ic < 0): the per-phase errors
+// -k, +k, +k (k = Td/Ts Udc) give alpha = -4k/3, beta = 0.
+TEST(Plant, DeadTimeErrorAtLargeCurrents) {
+  PlantModel m;
+  m.dead_time_s = 2e-6;
+  m.ts_s = 1e-4;
+  m.udc_v = 50;
+  double ua, ub;
+  DeadTimeError(m, 50, -25, -25, &ua, &ub);
+  const double k = 2e-6 / 1e-4 * 50;
+  EXPECT_NEAR(ua, -4 * k / 3, 1e-9);
+  EXPECT_NEAR(ub, 0.0, 1e-9);
+}
+
+TEST(Catalogue, RowsAreUniqueAndDocumented) {
+  std::ifstream f(std::string(FLUXCAL_SOURCE_DIR) + "/docs/diagnosis-report.md");
+  std::stringstream ss;
+  ss << f.rdbuf();
+  const std::string doc = ss.str();
+  std::set<std::string> names, params;
+  for (const auto& row : EffectCatalogue()) {
+    EXPECT_TRUE(names.insert(std::string(row.name)).second) << row.name;
+    EXPECT_NE(doc.find("`" + std::string(row.name) + "`"), std::string::npos) << row.name << " not in the report doc";
+    EXPECT_FALSE(row.explanation.empty()) << row.name;
+    for (const auto& p : row.parameters) {
+      EXPECT_TRUE(params.insert(std::string(p.name)).second) << p.name << " used by two effects";
+      EXPECT_GT(p.fit_scale, 0.0) << p.name;
+      EXPECT_NE(doc.find("`" + std::string(p.name) + "`"), std::string::npos) << p.name << " not documented";
+    }
+  }
+  EXPECT_EQ(&EffectParam("dead_time", "dead_time_s"), &FindEffect("dead_time")->parameters[0]);
+  EXPECT_EQ(FindEffect("no_such_effect"), nullptr);
+}
+
+TEST(Catalogue, ParseEffectsAndActiveNames) {
+  Effects e;
+  double noise = 0.05;
+  ASSERT_TRUE(ParseEffects("offset_b_a=0.8,udc_sense_gain=0.954,noise_a=0.1", &e, &noise).ok());
+  EXPECT_EQ(e.offset_b_a, 0.8);
+  EXPECT_EQ(e.udc_sense_gain, 0.954);
+  EXPECT_EQ(noise, 0.1);
+  EXPECT_EQ(ActiveEffectNames(e), (std::vector<std::string>{"current_sensor_offset", "dc_link_sense_gain"}));
+  EXPECT_EQ(EffectParameters(e, "current_sensor_offset").at("offset_b_a"), 0.8);
+  EXPECT_TRUE(ActiveEffectNames(Effects{}).empty());
+  const auto bad = ParseEffects("udc_gain=1", &e, &noise);
+  EXPECT_FALSE(bad.ok());
+  EXPECT_NE(bad.message().find("udc_sense_gain"), std::string::npos) << "lists the known keys";
+}
+
+}  // namespace
+}  // namespace fluxcal::sim
