@@ -66,7 +66,7 @@ int AddEntry(const std::vector<std::string>& argv, bool cert) {
   if (args->Has("json")) {
     nlohmann::json j = {{"name", name}, {"role", std::string(server::RoleName(*role))}};
     if (cert) j["cert_cn"] = e.cert_cn; else j["token"] = token;
-    std::cout << j.dump(2) << "\n";
+    std::cout << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
   } else if (cert) {
     std::printf("%s (%s): client certificate CN '%s'\n", name.c_str(), std::string(server::RoleName(*role)).c_str(),
                 e.cert_cn.c_str());
@@ -96,7 +96,7 @@ int RunRevoke(const std::vector<std::string>& argv) {
   }
   if (auto s = server::SaveKeys(*args->Get("keys"), *keys); !s.ok()) return Fail("revoke", s);
   if (args->Has("json")) {
-    std::cout << nlohmann::json{{"revoked", *args->Get("name")}}.dump(2) << "\n";
+    std::cout << nlohmann::json{{"revoked", *args->Get("name")}}.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
   } else {
     std::printf("revoked %s (a running server reads its keys at start: restart it)\n", args->Get("name")->c_str());
   }
@@ -120,7 +120,7 @@ int RunListKeys(const std::vector<std::string>& argv) {
                   e.cert_cn.empty() ? "token" : ("certificate CN " + e.cert_cn).c_str());
     }
   }
-  if (args->Has("json")) std::cout << nlohmann::json{{"keys", arr}}.dump(2) << "\n";
+  if (args->Has("json")) std::cout << nlohmann::json{{"keys", arr}}.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
   return 0;
 }
 
@@ -141,7 +141,7 @@ int RunKeygen(const std::vector<std::string>& argv) {
   if (auto s2 = io::WriteFileAtomically(pub, kp->public_pem); !s2.ok()) return Fail("keygen", s2);
   auto id = tables::KeyId(kp->public_pem);
   if (args->Has("json")) {
-    std::cout << nlohmann::json{{"private_key", key}, {"public_key", pub}, {"key_id", id.value_or("")}}.dump(2) << "\n";
+    std::cout << nlohmann::json{{"private_key", key}, {"public_key", pub}, {"key_id", id.value_or("")}}.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
   } else {
     std::printf("%s (private, keep on the server), %s (public, give to flashers), key id %s\n", key.c_str(),
                 pub.c_str(), id.value_or("?").c_str());
