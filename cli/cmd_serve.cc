@@ -1,5 +1,7 @@
-// fluxcal serve --db PATH --listen 127.0.0.1:50051
-// Runs the calibration service on a SQLite store until SIGINT/SIGTERM.
+// fluxcal serve --db PATH|sqlite:PATH|postgresql://... --listen 127.0.0.1:50051
+// Runs the calibration service until SIGINT/SIGTERM. A path is a SQLite
+// file (the embedded default); a postgresql:// URI makes the server
+// stateless, so several may share one database behind a load balancer.
 #include <csignal>
 #include <cstdio>
 #include <thread>
@@ -20,7 +22,7 @@ void OnSignal(int) { g_stop = 1; }
 int RunServe(const std::vector<std::string>& argv) {
   auto args = ParseArgs(argv, {"db", "listen"}, {});
   if (!args.ok() || !args->positional.empty()) {
-    std::fprintf(stderr, "usage: fluxcal serve --db PATH --listen 127.0.0.1:50051\n");
+    std::fprintf(stderr, "usage: fluxcal serve --db PATH|postgresql://USER@HOST:PORT/DB --listen 127.0.0.1:50051\n");
     return 2;
   }
   const std::string db = args->Get("db").value_or("fluxcal.db");
@@ -39,7 +41,9 @@ int RunServe(const std::vector<std::string>& argv) {
   }
   std::signal(SIGINT, OnSignal);
   std::signal(SIGTERM, OnSignal);
-  std::fprintf(stderr, "fluxcal serve: listening on %s (port %d), store %s\n", listen.c_str(), port, db.c_str());
+  // Never print a password from the URI.
+  const std::string shown = (*store)->Backend() == "postgresql" ? "postgresql" : db;
+  std::fprintf(stderr, "fluxcal serve: listening on %s (port %d), store %s\n", listen.c_str(), port, shown.c_str());
   std::fflush(stderr);
   std::thread waiter([&] { srv->Wait(); });
   while (!g_stop) std::this_thread::sleep_for(std::chrono::milliseconds(100));
@@ -51,6 +55,6 @@ int RunServe(const std::vector<std::string>& argv) {
 
 }  // namespace
 
-FLUXCAL_REGISTER_COMMAND("serve", "run the gRPC calibration service on a SQLite store", RunServe);
+FLUXCAL_REGISTER_COMMAND("serve", "run the gRPC calibration service (SQLite file or PostgreSQL)", RunServe);
 
 }  // namespace fluxcal::cli

@@ -122,6 +122,9 @@ class PgCluster {
     }
     return o;
   }
+
+ public:
+  // A port on 127.0.0.1 that was free a moment ago.
   static int FreePort() {
     const int fd = socket(AF_INET, SOCK_STREAM, 0);
     sockaddr_in a{};
@@ -137,6 +140,8 @@ class PgCluster {
     close(fd);
     return port;
   }
+
+ private:
 
   std::string bin_, dir_, as_;
   int port_ = 0;
