@@ -211,7 +211,13 @@ constexpr char kPointsOfRun[] =
 
 const std::vector<std::string>& PostgresMigrations() { return kPostgresMigrations; }
 
-absl::StatusOr<std::unique_ptr<PostgresStore>> PostgresStore::Open(const std::string& url, int max_connections) {
+absl::StatusOr<std::unique_ptr<PostgresStore>> PostgresStore::Open(const std::string& url_in, int max_connections) {
+  // A database that does not answer must fail a call, not hang it: bound
+  // the connect unless the URI says otherwise.
+  std::string url = url_in;
+  if (url.find("connect_timeout") == std::string::npos) {
+    url += url.find('?') == std::string::npos ? "?connect_timeout=5" : "&connect_timeout=5";
+  }
   std::unique_ptr<PostgresStore> s(new PostgresStore(url, std::max(1, max_connections)));
   if (auto st = s->Migrate(); !st.ok()) return st;
   return s;
