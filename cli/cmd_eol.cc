@@ -61,12 +61,7 @@ int RunEol(const std::vector<std::string>& argv) {
         mo->set_psi_pm_wb(set->manifest.motor.psi_pm_wb.value_or(0));
         first = false;
       }
-      auto* p = m.add_points();
-      p->set_point_id(r.point_id); p->set_id_a(r.id_a); p->set_iq_a(r.iq_a); p->set_speed_rpm(r.speed_rpm);
-      p->set_ld_h(r.ld_h); p->set_lq_h(r.lq_h);
-      if (r.ldq_h) p->set_ldq_h(*r.ldq_h);
-      p->set_ld_h_std(r.ld_h_std); p->set_lq_h_std(r.lq_h_std); p->set_ldq_h_std(r.ldq_h_std);
-      p->set_temperature_c(r.temperature_c); p->set_reliable(r.reliable);
+      *m.add_points() = pipeline::ToProto(r);
       if (!writer->Write(m)) break;
     }
     writer->WritesDone();

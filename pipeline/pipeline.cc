@@ -32,6 +32,28 @@ fit::InductanceObservation ToObservation(const IdentifiedPoint& p) {
   return o;
 }
 
+v1::HfPoint ToProto(const IdentifiedPoint& r) {
+  v1::HfPoint p;
+  p.set_point_id(r.point_id); p.set_id_a(r.id_a); p.set_iq_a(r.iq_a); p.set_speed_rpm(r.speed_rpm);
+  p.set_ld_h(r.ld_h); p.set_lq_h(r.lq_h);
+  if (r.ldq_h) p.set_ldq_h(*r.ldq_h);
+  p.set_ld_h_std(r.ld_h_std); p.set_lq_h_std(r.lq_h_std); p.set_ldq_h_std(r.ldq_h_std);
+  p.set_temperature_c(r.temperature_c); p.set_reliable(r.reliable);
+  return p;
+}
+
+IdentifiedPoint FromProto(const v1::HfPoint& p) {
+  IdentifiedPoint r;
+  r.point_id = p.point_id();
+  r.id_a = p.id_a(); r.iq_a = p.iq_a(); r.speed_rpm = p.speed_rpm();
+  r.ld_h = p.ld_h(); r.lq_h = p.lq_h();
+  if (p.has_ldq_h()) r.ldq_h = p.ldq_h();
+  r.ld_h_std = p.ld_h_std(); r.lq_h_std = p.lq_h_std(); r.ldq_h_std = p.ldq_h_std();
+  r.temperature_c = p.temperature_c();
+  r.reliable = p.reliable();
+  return r;
+}
+
 absl::StatusOr<IdentifiedSet> IdentifySet(const io::RecordingSet& set, const ident::IdentifyOptions& options) {
   auto ids = ident::IdentifySet(set, options);
   if (!ids.ok()) return ids.status();

@@ -1,7 +1,7 @@
 // The identified HF point: one type (storage::HfPointRow, as stored) and its
-// converters to and from every library shape, written once. The protobuf
-// converter lives with the server (server/service.cc), the only place that
-// speaks protobuf.
+// converters to and from every shape, written once: identification
+// results, fitting observations and the wire message (v1::HfPoint, used by
+// the server and by the EOL client).
 #ifndef FLUXCAL_PIPELINE_POINTS_H_
 #define FLUXCAL_PIPELINE_POINTS_H_
 
@@ -10,6 +10,7 @@
 
 #include "absl/status/statusor.h"
 #include "fitting/fit.h"
+#include "fluxcal/v1/calibration.pb.h"
 #include "identification/identify.h"
 #include "io/recording_set.h"
 #include "storage/store.h"
@@ -23,6 +24,9 @@ using IdentifiedPoint = storage::HfPointRow;
 bool FromIdentification(const ident::HfPointResult& r, IdentifiedPoint* out);
 // To a fitting observation (Ldd = ld_h, Lqq = lq_h, Ldq = ldq_h).
 fit::InductanceObservation ToObservation(const IdentifiedPoint& p);
+// The wire message and back (every field; ldq_h absent stays absent).
+v1::HfPoint ToProto(const IdentifiedPoint& p);
+IdentifiedPoint FromProto(const v1::HfPoint& p);
 
 // Identification of a whole set: the identified points (manifest order,
 // failed points left out) and one line per point that was not identified.

@@ -36,19 +36,6 @@ grpc::Status ToGrpcStatus(const absl::Status& s) {
 
 namespace {
 
-// The protobuf shape of the identified point (pipeline::IdentifiedPoint).
-pipeline::IdentifiedPoint ToRow(const v1::HfPoint& p) {
-  pipeline::IdentifiedPoint r;
-  r.point_id = p.point_id();
-  r.id_a = p.id_a(); r.iq_a = p.iq_a(); r.speed_rpm = p.speed_rpm();
-  r.ld_h = p.ld_h(); r.lq_h = p.lq_h();
-  if (p.has_ldq_h()) r.ldq_h = p.ldq_h();
-  r.ld_h_std = p.ld_h_std(); r.lq_h_std = p.lq_h_std(); r.ldq_h_std = p.ldq_h_std();
-  r.temperature_c = p.temperature_c();
-  r.reliable = p.reliable();
-  return r;
-}
-
 void ToProto(const storage::CalibrationRow& c, v1::CalibrationRecord* r) {
   r->set_serial(c.serial);
   r->set_version(c.version);
@@ -102,7 +89,7 @@ grpc::Status CalibrationServiceImpl::IngestHfResults(grpc::ServerContext* ctx,
         r->set_field(m.substr(0, m.find(':')));
         r->set_message(m);
       } else {
-        rows.push_back(ToRow(p));
+        rows.push_back(pipeline::FromProto(p));
       }
       ++index;
     }

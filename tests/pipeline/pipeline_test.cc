@@ -121,6 +121,24 @@ TEST(Pipeline, IdentifiedPointsFeedTheFitUnchanged) {
   }
 }
 
+TEST(Pipeline, WireConverterRoundTrips) {
+  for (const auto& p : Grid(1.0)) {
+    auto q = p;
+    q.reliable = false;
+    q.temperature_c = 71.5;
+    q.speed_rpm = -1234.5;
+    const auto back = FromProto(ToProto(q));
+    EXPECT_EQ(back.point_id, q.point_id);
+    EXPECT_EQ(back.ld_h, q.ld_h);
+    EXPECT_EQ(back.ldq_h, q.ldq_h);
+    EXPECT_EQ(back.speed_rpm, q.speed_rpm);
+    EXPECT_EQ(back.temperature_c, q.temperature_c);
+    EXPECT_FALSE(back.reliable);
+    q.ldq_h.reset();
+    EXPECT_FALSE(FromProto(ToProto(q)).ldq_h.has_value()) << "an absent Ldq must stay absent, not become 0";
+  }
+}
+
 // A store with everything in it: runs, a raw recording, calibrations.
 void Populate(storage::Store& s) {
   ASSERT_TRUE(IngestHfRun(s, "IPM-M-1", "st1", kMotor, Grid(1.0)).ok());
