@@ -178,6 +178,29 @@ TEST(Admin, MigrateSqliteToPostgresKeepsEverything) {
   // A change anywhere changes the hash; a second migrate into it is refused.
   EXPECT_NE(*ContentHash(**to), *ContentHash(**from));
   EXPECT_EQ(Migrate(**from, **to).status().code(), absl::StatusCode::kFailedPrecondition);
+  // The same through the command an operator runs, checked by `admin hash`.
+  ASSERT_TRUE(pg->CreateDatabase("migrated_cli"));
+  auto run = [](const std::string& cmd) {
+    std::string out;
+    FILE* p = popen(cmd.c_str(), "r");
+    char buf[512];
+    while (p && fgets(buf, sizeof buf, p)) out += buf;
+    const int rc = p ? pclose(p) : -1;
+    return std::make_pair(rc, out);
+  };
+  const std::string bin = FLUXCAL_BINARY;
+  auto [rc, out] = run(bin + " admin migrate --from sqlite:" + src + " --to " + pg->Url("migrated_cli") + " --json");
+  ASSERT_EQ(rc, 0) << out;
+  EXPECT_NE(out.find("\"verified\": true"), std::string::npos) << out;
+  EXPECT_NE(out.find("\"points\": 108"), std::string::npos) << out;
+  auto [rc1, h1] = run(bin + " admin hash --db sqlite:" + src);
+  auto [rc2, h2] = run(bin + " admin hash --db " + pg->Url("migrated_cli"));
+  ASSERT_EQ(rc1, 0);
+  ASSERT_EQ(rc2, 0);
+  EXPECT_EQ(h1, h2);
+  EXPECT_EQ(h1.size(), 65u);   // 64 hex digits and a newline
+  EXPECT_NE(run(bin + " admin migrate --from sqlite:" + src + " --to " + pg->Url("migrated_cli") + " 2>&1").first, 0)
+      << "a second migrate into a filled database must be refused";
   RemoveDb(src);
 }
 
