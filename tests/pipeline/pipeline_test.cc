@@ -153,7 +153,7 @@ void Populate(storage::Store& s) {
 TEST(Admin, MigrateSqliteToPostgresKeepsEverything) {
   std::string why;
   auto* pg = fluxcal::testing::SharedPgCluster(&why);
-  if (!pg) GTEST_SKIP() << "PostgreSQL migration test skipped: " << why;
+  FLUXCAL_PG_OR_SKIP(pg, why, "PostgreSQL migration test skipped");
   const std::string src = Temp("migrate_src.db");
   RemoveDb(src);
   auto from = storage::Store::Open("sqlite:" + src);

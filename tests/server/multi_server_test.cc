@@ -63,7 +63,7 @@ bool Retryable(const grpc::Status& s) {
 TEST(MultiServer, ThreeServersSixtyFourClientsEachWithKillNine) {
   std::string why;
   fluxcal::testing::PgCluster* pg = fluxcal::testing::SharedPgCluster(&why);
-  if (!pg) GTEST_SKIP() << "PostgreSQL multi-server test skipped: " << why;
+  FLUXCAL_PG_OR_SKIP(pg, why, "PostgreSQL multi-server test skipped");
   ASSERT_TRUE(pg->CreateDatabase("fleet"));
   const std::string url = pg->Url("fleet");
   std::vector<pid_t> pids;

@@ -65,7 +65,7 @@ class ServiceTest : public ::testing::TestWithParam<bool> {
       static int counter = 0;
       std::string why;
       auto* pg = fluxcal::testing::SharedPgCluster(&why);
-      if (!pg) GTEST_SKIP() << "PostgreSQL run skipped: " << why;
+      FLUXCAL_PG_OR_SKIP(pg, why, "PostgreSQL run skipped");
       const std::string name = "service_" + std::to_string(counter++);
       ASSERT_TRUE(pg->CreateDatabase(name));
       url = pg->Url(name);

@@ -48,7 +48,7 @@ class StoreTest : public ::testing::TestWithParam<Backend> {
       case Backend::kPostgres: {
         std::string why;
         pg_ = fluxcal::testing::SharedPgCluster(&why);
-        if (!pg_) GTEST_SKIP() << "PostgreSQL conformance run skipped: " << why;
+        FLUXCAL_PG_OR_SKIP(pg_, why, "PostgreSQL conformance run skipped");
         db_ = "conf_" + std::to_string(n);
         ASSERT_TRUE(pg_->CreateDatabase(db_));
         url_ = pg_->Url(db_);

@@ -148,6 +148,14 @@ class PgCluster {
   bool running_ = false, keep_ = false;
 };
 
+// Tests skip only when PostgreSQL is not installed; a cluster that is
+// installed but does not start is a failure.
+#define FLUXCAL_PG_OR_SKIP(pg, why, what)                                        \
+  if (!(pg)) {                                                                  \
+    if ((why).rfind("PostgreSQL is not installed", 0) == 0) GTEST_SKIP() << what << ": " << (why); \
+    FAIL() << what << ": " << (why);                                            \
+  }
+
 // One cluster per test program, started on first use.
 inline PgCluster* SharedPgCluster(std::string* why) {
   static std::string reason;
