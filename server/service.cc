@@ -28,6 +28,7 @@ grpc::Status ToGrpcStatus(const absl::Status& s) {
     case absl::StatusCode::kUnavailable: c = grpc::StatusCode::UNAVAILABLE; break;
     case absl::StatusCode::kDeadlineExceeded: c = grpc::StatusCode::DEADLINE_EXCEEDED; break;
     case absl::StatusCode::kCancelled: c = grpc::StatusCode::CANCELLED; break;
+    case absl::StatusCode::kAborted: c = grpc::StatusCode::ABORTED; break;   // e.g. a database deadlock: retry
     case absl::StatusCode::kDataLoss: c = grpc::StatusCode::DATA_LOSS; break;
     default: break;
   }
