@@ -13,7 +13,7 @@
 #include "cli/args.h"
 #include "cli/command.h"
 #include "cli/support_remote.h"
-#include "identification/identify.h"
+#include "pipeline/points.h"
 #include "io/csv.h"
 #include "io/recording_set.h"
 #include "nlohmann/json.hpp"
@@ -35,7 +35,7 @@ int RunEol(const std::vector<std::string>& argv) {
   }
   const std::string serial = set->manifest.serial;
   std::fprintf(stderr, "eol %s: identifying %zu points\n", serial.c_str(), set->waveforms.size());
-  auto ids = ident::IdentifySet(*set, {});
+  auto ids = pipeline::IdentifySet(*set);
   if (!ids.ok()) {
     std::fprintf(stderr, "fluxcal eol: %s\n", std::string(ids.status().message()).c_str());
     return 1;
@@ -50,11 +50,8 @@ int RunEol(const std::vector<std::string>& argv) {
     ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
     auto writer = stub->IngestHfResults(&ctx, &ing);
     bool first = true;
-    for (const auto& r : *ids) {
-      if (!std::isfinite(r.ld_h) || !std::isfinite(r.id_a)) {
-        std::fprintf(stderr, "eol %s: point %s not identified: %s\n", serial.c_str(), r.point.c_str(), r.failure.c_str());
-        continue;
-      }
+    for (const auto& f : ids->failures) std::fprintf(stderr, "eol %s: point not identified: %s\n", serial.c_str(), f.c_str());
+    for (const auto& r : ids->points) {
       v1::IngestHfResultsRequest m;
       if (first) {
         m.set_serial(serial);
@@ -65,12 +62,7 @@ int RunEol(const std::vector<std::string>& argv) {
         mo->set_psi_pm_wb(set->manifest.motor.psi_pm_wb.value_or(0));
         first = false;
       }
-      auto* p = m.add_points();
-      p->set_point_id(r.point); p->set_id_a(r.id_a); p->set_iq_a(r.iq_a); p->set_speed_rpm(r.speed_rpm);
-      p->set_ld_h(r.ld_h); p->set_lq_h(r.lq_h);
-      if (r.has_ldq) p->set_ldq_h(r.ldq_h);
-      p->set_ld_h_std(r.ld_h_std); p->set_lq_h_std(r.lq_h_std); p->set_ldq_h_std(r.ldq_h_std);
-      p->set_temperature_c(r.temperature_c); p->set_reliable(r.reliable);
+      *m.add_points() = pipeline::ToProto(r);
       if (!writer->Write(m)) break;
     }
     writer->WritesDone();

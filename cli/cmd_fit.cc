@@ -13,6 +13,7 @@
 #include "fitting/plot.h"
 #include "io/csv.h"
 #include "identification/identify.h"
+#include "pipeline/points.h"
 #include "nlohmann/json.hpp"
 
 namespace fluxcal::cli {
@@ -40,9 +41,9 @@ int RunFit(const std::vector<std::string>& argv) {
       std::fprintf(stderr, "\rfit: identifying point %zu/%zu", k + 1, n);
       if (k + 1 == n) std::fprintf(stderr, "\n");
     };
-    auto ids = ident::IdentifySet(*set, opt);
-    if (!ids.ok()) return Fail(std::string(ids.status().message()));
-    data = fit::FitDataFromRecording(*set, *ids);
+    auto d = pipeline::FitDataFromSet(*set, opt);
+    if (!d.ok()) return Fail(std::string(d.status().message()));
+    data = std::move(*d);
   } else {
     auto rows = io::ReadHfResultsCsv(input);
     if (!rows.ok()) return Fail(std::string(rows.status().message()));

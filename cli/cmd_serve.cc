@@ -1,12 +1,14 @@
-// fluxcal serve --db PATH --listen 127.0.0.1:50051
+// fluxcal serve --db PATH|sqlite:PATH|postgresql://... --listen 127.0.0.1:50051
 //   [--tls-cert PEM --tls-key PEM [--client-ca PEM [--require-client-cert]]]
 //   [--auth KEYS] [--signing-key ED25519.key] [--insecure] [--quiet]
-// Runs the calibration service on a SQLite store until SIGINT/SIGTERM.
+// Runs the calibration service until SIGINT/SIGTERM. A path is a SQLite
+// file (the embedded default); a postgresql:// URI makes the server
+// stateless, so several may share one database behind a load balancer.
 //
-// Transport and identity (docs/service.md, "Security"): off loopback the
-// service needs TLS (or an explicit --insecure) and a keys file (--auth):
-// deny by default. On loopback without --auth it runs open, for a bench PC
-// or development, and says so.
+// Transport and identity (docs/security.md): off loopback the service needs
+// TLS (or an explicit --insecure) and a keys file (--auth): deny by
+// default. On loopback without --auth it runs open, for a bench PC or
+// development, and says so.
 #include <csignal>
 #include <cstdio>
 #include <thread>
@@ -28,7 +30,8 @@ volatile std::sig_atomic_t g_stop = 0;
 void OnSignal(int) { g_stop = 1; }
 
 constexpr char kUsage[] =
-    "usage: fluxcal serve --db PATH --listen HOST:PORT [--tls-cert PEM --tls-key PEM [--client-ca PEM]]\n"
+    "usage: fluxcal serve --db PATH|postgresql://USER@HOST:PORT/DB --listen HOST:PORT\n"
+    "                     [--tls-cert PEM --tls-key PEM [--client-ca PEM]]\n"
     "                     [--require-client-cert] [--auth KEYS.json] [--signing-key ED25519.key] [--insecure]\n"
     "                     [--quiet]\n";
 
@@ -122,9 +125,11 @@ int RunServe(const std::vector<std::string>& argv) {
   }
   std::signal(SIGINT, OnSignal);
   std::signal(SIGTERM, OnSignal);
+  // Never print a password from the URI.
+  const std::string shown = (*store)->Backend() == "postgresql" ? "postgresql" : db;
   std::fprintf(stderr, "fluxcal serve: listening on %s (port %d, %s%s), store %s\n", listen.c_str(), port,
                tls ? "TLS" : "plaintext", tls && !opt.client_ca_pem.empty() ? " with client certificates" : "",
-               db.c_str());
+               shown.c_str());
   if (!auth) std::fprintf(stderr, "fluxcal serve: no --auth: open on loopback, every caller is admin\n");
   std::fflush(stderr);
   std::thread waiter([&] { srv->Wait(); });
@@ -137,6 +142,6 @@ int RunServe(const std::vector<std::string>& argv) {
 
 }  // namespace
 
-FLUXCAL_REGISTER_COMMAND("serve", "run the gRPC calibration service on a SQLite store", RunServe);
+FLUXCAL_REGISTER_COMMAND("serve", "run the gRPC calibration service (SQLite file or PostgreSQL)", RunServe);
 
 }  // namespace fluxcal::cli

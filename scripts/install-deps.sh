@@ -7,6 +7,7 @@ PKGS=(
   libceres-dev libeigen3-dev libabsl-dev
   libgrpc++-dev libprotobuf-dev protobuf-compiler protobuf-compiler-grpc
   libsqlite3-dev sqlite3 zlib1g-dev
+  libpq-dev postgresql
   nlohmann-json3-dev libtinyxml2-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   python3 python3-grpcio python3-protobuf

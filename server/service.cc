@@ -1,8 +1,6 @@
 #include "server/service.h"
 
 #include <cmath>
-#include <filesystem>
-#include <set>
 
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/health_check_service_interface.h>
@@ -14,15 +12,11 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
-#include "diagnosis/diagnose.h"
-#include "identification/identify.h"
-#include "nlohmann/json.hpp"
 #include "io/csv.h"
 #include "io/recording_set.h"
-#include "server/recording_archive.h"
+#include "nlohmann/json.hpp"
+#include "pipeline/pipeline.h"
 #include "server/validation.h"
-#include "storage/operations.h"
-#include "tables/sha256.h"
 #include "tables/signature.h"
 
 namespace fluxcal::server {
@@ -39,10 +33,10 @@ grpc::Status ToGrpcStatus(const absl::Status& s) {
     case absl::StatusCode::kUnavailable: c = grpc::StatusCode::UNAVAILABLE; break;
     case absl::StatusCode::kDeadlineExceeded: c = grpc::StatusCode::DEADLINE_EXCEEDED; break;
     case absl::StatusCode::kCancelled: c = grpc::StatusCode::CANCELLED; break;
+    case absl::StatusCode::kAborted: c = grpc::StatusCode::ABORTED; break;   // e.g. a database deadlock: retry
     case absl::StatusCode::kDataLoss: c = grpc::StatusCode::DATA_LOSS; break;
     case absl::StatusCode::kPermissionDenied: c = grpc::StatusCode::PERMISSION_DENIED; break;
     case absl::StatusCode::kUnauthenticated: c = grpc::StatusCode::UNAUTHENTICATED; break;
-    case absl::StatusCode::kAborted: c = grpc::StatusCode::ABORTED; break;
     case absl::StatusCode::kOutOfRange: c = grpc::StatusCode::OUT_OF_RANGE; break;
     case absl::StatusCode::kUnimplemented: c = grpc::StatusCode::UNIMPLEMENTED; break;
     default: break;
@@ -53,18 +47,6 @@ grpc::Status ToGrpcStatus(const absl::Status& s) {
 }
 
 namespace {
-
-storage::HfPointRow ToRow(const v1::HfPoint& p) {
-  storage::HfPointRow r;
-  r.point_id = p.point_id();
-  r.id_a = p.id_a(); r.iq_a = p.iq_a(); r.speed_rpm = p.speed_rpm();
-  r.ld_h = p.ld_h(); r.lq_h = p.lq_h();
-  if (p.has_ldq_h()) r.ldq_h = p.ldq_h();
-  r.ld_h_std = p.ld_h_std(); r.lq_h_std = p.lq_h_std(); r.ldq_h_std = p.ldq_h_std();
-  r.temperature_c = p.temperature_c();
-  r.reliable = p.reliable();
-  return r;
-}
 
 void ToProto(const storage::CalibrationRow& c, v1::CalibrationRecord* r) {
   r->set_serial(c.serial);
@@ -105,7 +87,7 @@ grpc::Status CalibrationServiceImpl::IngestHfResults(grpc::ServerContext* ctx,
   std::string serial, station;
   v1::MotorInfo motor;
   bool have_motor = false;
-  std::vector<storage::HfPointRow> rows;
+  std::vector<pipeline::IdentifiedPoint> rows;
   std::set<std::string> point_ids;
   int index = 0;
   while (reader->Read(&msg)) {
@@ -142,36 +124,25 @@ grpc::Status CalibrationServiceImpl::IngestHfResults(grpc::ServerContext* ctx,
         r->set_field(m.substr(0, m.find(':')));
         r->set_message(m);
       } else {
-        rows.push_back(ToRow(p));
+        rows.push_back(pipeline::FromProto(p));
       }
       ++index;
     }
   }
   if (serial.empty()) return ToGrpcStatus(absl::InvalidArgumentError("serial: the stream carried no message"));
   if (ctx->IsCancelled()) return grpc::Status(grpc::StatusCode::CANCELLED, "client cancelled the stream");
-  storage::MotorRow m{serial, 4, 0.0, 0.0};
-  if (have_motor) {
-    m.pole_pairs = motor.pole_pairs(); m.rs_ohm = motor.rs_ohm(); m.psi_pm_wb = motor.psi_pm_wb();
-  } else if (auto known = store_->GetMotor(serial); known.ok()) {
-    m = *known;
-  } else {
-    return ToGrpcStatus(absl::InvalidArgumentError(
-        absl::StrCat("motor: required for serial '", serial, "' (not known to the store yet)")));
-  }
-  if (rows.empty()) {
-    return ToGrpcStatus(absl::InvalidArgumentError(
-        absl::StrCat("points: no valid point in the stream (", response->rejects_size(), " rejected)")));
-  }
   {
     std::set<std::pair<double, double>> distinct;
     for (const auto& r : rows) distinct.insert({r.id_a, r.iq_a});
-    if (static_cast<int>(distinct.size()) < kMinDistinctOperatingPoints) {
+    if (!rows.empty() && static_cast<int>(distinct.size()) < kMinDistinctOperatingPoints) {
       return ToGrpcStatus(absl::InvalidArgumentError(absl::StrCat(
           "points: ", distinct.size(), " distinct operating points (id_a, iq_a); a calibration needs at least ",
           kMinDistinctOperatingPoints)));
     }
   }
-  auto run = store_->IngestHfRun(m, station, "hf_run", rows);
+  std::optional<pipeline::MotorNominal> m;
+  if (have_motor) m = pipeline::MotorNominal{motor.pole_pairs(), motor.rs_ohm(), motor.psi_pm_wb()};
+  auto run = pipeline::IngestHfRun(*store_, serial, station, m, rows, response->rejects_size());
   if (!run.ok()) return ToGrpcStatus(run.status());
   response->set_serial(serial);
   response->set_run_id(*run);
@@ -223,52 +194,14 @@ grpc::Status CalibrationServiceImpl::IngestRecording(grpc::ServerContext* ctx,
   }
   if (serial.empty()) return ToGrpcStatus(absl::InvalidArgumentError("serial: the stream carried no chunk"));
   if (ctx->IsCancelled()) return grpc::Status(grpc::StatusCode::CANCELLED, "client cancelled the stream");
-  auto set = io::ReadRecordingSetFromFiles(files, "");
-  if (!set.ok()) return ToGrpcStatus(absl::InvalidArgumentError(std::string(set.status().message())));
-  // Files the manifest does not name are junk: refuse rather than store them.
-  {
-    std::set<std::string> named = {"manifest.json"};
-    for (const auto& p : set->manifest.points) named.insert(std::filesystem::path(p.file).lexically_normal().generic_string());
-    if (set->manifest.steady_state) named.insert(std::filesystem::path(*set->manifest.steady_state).lexically_normal().generic_string());
-    if (set->manifest.hf_results) named.insert(std::filesystem::path(*set->manifest.hf_results).lexically_normal().generic_string());
-    for (const auto& [name, data] : files) {
-      if (!named.count(name)) {
-        return ToGrpcStatus(absl::InvalidArgumentError(
-            absl::StrCat("path: file '", name, "' is not referenced by manifest.json")));
-      }
-    }
-  }
-  if (set->manifest.serial != serial) {
-    return ToGrpcStatus(absl::InvalidArgumentError(
-        absl::StrCat("serial: stream serial '", serial, "' differs from the manifest's '", set->manifest.serial, "'")));
-  }
-  auto ids = ident::IdentifySet(*set, {});
-  if (!ids.ok()) return ToGrpcStatus(absl::InvalidArgumentError(std::string(ids.status().message())));
-  std::vector<storage::HfPointRow> rows;
-  for (const auto& r : *ids) {
-    if (!std::isfinite(r.ld_h) || !std::isfinite(r.id_a)) continue;   // identification_failed
-    storage::HfPointRow h;
-    h.point_id = r.point; h.id_a = r.id_a; h.iq_a = r.iq_a; h.speed_rpm = r.speed_rpm;
-    h.ld_h = r.ld_h; h.lq_h = r.lq_h;
-    if (r.has_ldq) h.ldq_h = r.ldq_h;
-    h.ld_h_std = r.ld_h_std; h.lq_h_std = r.lq_h_std; h.ldq_h_std = r.ldq_h_std;
-    h.temperature_c = r.temperature_c; h.reliable = r.reliable;
-    rows.push_back(h);
-  }
-  const std::string archive = EncodeRecordingArchive(files);
-  auto z = Deflate(archive);
-  if (!z.ok()) return ToGrpcStatus(z.status());
-  const std::string sha = tables::Sha256Hex(archive);
-  const auto& mm = set->manifest.motor;
-  storage::MotorRow motor{serial, mm.pole_pairs, mm.rs_ohm.value_or(0.0), mm.psi_pm_wb.value_or(0.0)};
-  auto run = store_->IngestHfRun(motor, station, "recording", rows, sha, *z, static_cast<int64_t>(archive.size()));
+  auto run = pipeline::IngestRecording(*store_, serial, station, files);
   if (!run.ok()) return ToGrpcStatus(run.status());
   response->set_serial(serial);
-  response->set_run_id(*run);
-  response->set_points(static_cast<int>(rows.size()));
-  response->set_recording_sha256(sha);
-  response->set_recording_bytes(static_cast<int64_t>(archive.size()));
-  response->set_stored_bytes(static_cast<int64_t>(z->size()));
+  response->set_run_id(run->run_id);
+  response->set_points(run->points);
+  response->set_recording_sha256(run->sha256);
+  response->set_recording_bytes(run->recording_bytes);
+  response->set_stored_bytes(run->stored_bytes);
   return grpc::Status::OK;
 }
 
@@ -276,7 +209,7 @@ grpc::Status CalibrationServiceImpl::Fit(grpc::ServerContext* ctx, const v1::Fit
   auto who = auth_->Authorize(*ctx, Rpc::kFit);
   if (!who.ok()) return ToGrpcStatus(who.status());
   if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
-  storage::FitTolerances tol;
+  pipeline::FitTolerances tol;
   if (req->max_rms_relative() < 0 || !std::isfinite(req->max_rms_relative()) ||
       req->psi_pm_tolerance_relative() < 0 || !std::isfinite(req->psi_pm_tolerance_relative())) {
     return ToGrpcStatus(absl::InvalidArgumentError("max_rms_relative, psi_pm_tolerance_relative: must be >= 0"));
@@ -290,7 +223,7 @@ grpc::Status CalibrationServiceImpl::Fit(grpc::ServerContext* ctx, const v1::Fit
   }
   if (req->max_rms_relative() > 0) tol.max_rms_relative = req->max_rms_relative();
   if (req->psi_pm_tolerance_relative() > 0) tol.psi_pm_tolerance_relative = req->psi_pm_tolerance_relative();
-  auto row = storage::FitSerial(*store_, req->serial(), req->model(), tol);
+  auto row = pipeline::FitSerial(*store_, req->serial(), req->model(), tol);
   if (!row.ok()) return ToGrpcStatus(row.status());
   ToProto(*row, resp->mutable_calibration());
   resp->set_pass(row->verdict == "pass");
@@ -359,12 +292,16 @@ grpc::Status CalibrationServiceImpl::QueryFlux(grpc::ServerContext* ctx, const v
   for (int k = 0; k < req->points_size(); ++k) {
     if (auto s = ValidateOperatingPoint(req->points(k), k); !s.ok()) return ToGrpcStatus(s);
   }
-  auto cal = storage::LoadCalibration(*store_, req->serial(), req->version());
-  if (!cal.ok()) return ToGrpcStatus(cal.status());
+  std::vector<std::pair<double, double>> pts;
+  pts.reserve(req->points_size());
+  for (const auto& p : req->points()) pts.push_back({p.id_a(), p.iq_a()});
+  auto q = pipeline::QueryFlux(*store_, req->serial(), req->version(), pts);
+  if (!q.ok()) return ToGrpcStatus(q.status());
   resp->set_serial(req->serial());
-  resp->set_version(cal->version);
-  for (const auto& p : req->points()) {
-    const auto x = cal->Predict(p.id_a(), p.iq_a());
+  resp->set_version(q->version);
+  for (int k = 0; k < req->points_size(); ++k) {
+    const auto& p = req->points(k);
+    const auto& x = q->values[k];
     auto* v = resp->add_values();
     v->set_id_a(p.id_a()); v->set_iq_a(p.iq_a());
     v->set_psi_d_wb(x.psi_d_wb); v->set_psi_q_wb(x.psi_q_wb);
@@ -406,7 +343,7 @@ grpc::Status CalibrationServiceImpl::ExportTable(grpc::ServerContext* ctx, const
     return ToGrpcStatus(absl::InvalidArgumentError("i_max_a: must be in (0, 10000] (0: measured limit)"));
   }
   if (!(lim.udc_v > 0 && lim.udc_v <= 5000)) return ToGrpcStatus(absl::InvalidArgumentError("udc_v: must be in (0, 5000]"));
-  auto r = storage::ExportTable(*store_, req->serial(), req->version(), spec, lim,
+  auto r = pipeline::ExportTable(*store_, req->serial(), req->version(), spec, lim,
                                 req->format().empty() ? "csv" : req->format());
   if (!r.ok()) return ToGrpcStatus(r.status());
   resp->set_serial(req->serial());
@@ -441,7 +378,7 @@ grpc::Status CalibrationServiceImpl::FleetStatistics(grpc::ServerContext* ctx, c
   }
   if (pts.empty()) pts = {{-20, 40}, {-60, 80}, {0, 100}};
   const double sigma = req->outlier_sigma() > 0 ? req->outlier_sigma() : 3.0;
-  auto stats = storage::FleetStatistics(*store_, pts, sigma);
+  auto stats = pipeline::FleetStatistics(*store_, pts, sigma);
   if (!stats.ok()) return ToGrpcStatus(stats.status());
   for (const auto& s : *stats) {
     auto* p = resp->add_points();
@@ -460,17 +397,7 @@ grpc::Status CalibrationServiceImpl::Diagnose(grpc::ServerContext* ctx, const v1
   auto who = auth_->Authorize(*ctx, Rpc::kDiagnose);
   if (!who.ok()) return ToGrpcStatus(who.status());
   if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
-  auto sha = store_->LatestRecordingSha(req->serial());
-  if (!sha.ok()) return ToGrpcStatus(sha.status());
-  auto blob = store_->GetRecording(*sha);
-  if (!blob.ok()) return ToGrpcStatus(blob.status());
-  // Unpacked in memory only (names re-checked), never onto the filesystem.
-  auto archive = Inflate(*blob, static_cast<size_t>(kMaxRecordingBytes) + (64u << 20));
-  if (!archive.ok()) return ToGrpcStatus(archive.status());
-  auto files = DecodeRecordingArchive(*archive);
-  if (!files.ok()) return ToGrpcStatus(files.status());
-  auto set = io::ReadRecordingSetFromFiles(*files, "");
-  absl::StatusOr<diag::DiagnosisReport> rep = set.ok() ? diag::Diagnose(*set) : absl::StatusOr<diag::DiagnosisReport>(set.status());
+  auto rep = pipeline::DiagnoseStored(*store_, req->serial());
   if (!rep.ok()) return ToGrpcStatus(rep.status());
   resp->set_serial(req->serial());
   resp->set_verdict(rep->verdict);

@@ -116,4 +116,29 @@ absl::Status Database::Transaction(const std::function<absl::Status()>& fn) {
 
 int64_t Database::LastInsertRowId() const { return sqlite3_last_insert_rowid(db_); }
 
+absl::Status Database::BackupTo(const std::string& dest_path) {
+  sqlite3* dest = nullptr;
+  if (sqlite3_open_v2(dest_path.c_str(), &dest, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE, nullptr) != SQLITE_OK) {
+    const std::string msg = dest ? sqlite3_errmsg(dest) : "out of memory";
+    if (dest) sqlite3_close(dest);
+    return absl::UnavailableError(absl::StrCat("sqlite: cannot create backup '", dest_path, "': ", msg));
+  }
+  sqlite3_backup* b = sqlite3_backup_init(dest, "main", db_, "main");
+  if (!b) {
+    const std::string msg = sqlite3_errmsg(dest);
+    sqlite3_close(dest);
+    return absl::InternalError(absl::StrCat("sqlite: backup to '", dest_path, "': ", msg));
+  }
+  // Whole database in one step: the copy is one consistent snapshot.
+  const int rc = sqlite3_backup_step(b, -1);
+  sqlite3_backup_finish(b);
+  const int rc2 = sqlite3_errcode(dest);
+  const std::string msg = sqlite3_errmsg(dest);
+  sqlite3_close(dest);
+  if (rc != SQLITE_DONE || rc2 != SQLITE_OK) {
+    return absl::InternalError(absl::StrCat("sqlite: backup to '", dest_path, "' failed: ", msg));
+  }
+  return absl::OkStatus();
+}
+
 }  // namespace fluxcal::storage

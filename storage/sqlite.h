@@ -59,6 +59,8 @@ class Database {
   // Runs fn inside BEGIN IMMEDIATE ... COMMIT; rolls back when fn fails.
   absl::Status Transaction(const std::function<absl::Status()>& fn);
   int64_t LastInsertRowId() const;
+  // Online backup (sqlite3_backup_*) of the main database into a new file.
+  absl::Status BackupTo(const std::string& dest_path);
   sqlite3* raw() const { return db_; }
 
  private:

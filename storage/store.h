@@ -1,25 +1,30 @@
-// The SQLite store of fluxcal: motors per serial, ingest runs with their HF
-// points, raw recordings (zlib-compressed, keyed by SHA-256 content hash)
-// and immutable calibration versions. Schema in docs/service.md.
+// The store of fluxcal: motors per serial, ingest runs with their HF points,
+// raw recordings (zlib-compressed, keyed by SHA-256 content hash) and
+// immutable calibration versions. Schema in docs/service.md.
 //
-// Concurrency: one connection guarded by a mutex (SQLite has one writer
-// anyway; reads are short). Every write is one transaction, durable on
-// return (WAL, synchronous=FULL). Several processes may open the same file.
+// `Store` is the storage interface; it only stores (no fitting, no tables:
+// the use cases live in pipeline/). Two backends:
+//   - SQLite (storage/sqlite_store.h): the embedded default, one file;
+//   - PostgreSQL (storage/postgres_store.h, libpq): several stateless
+//     servers on one database.
+// Both apply the same ordered migrations (version table `schema_version`),
+// refuse UPDATE/DELETE of calibration versions with triggers, and make
+// every write one transaction that is durable when the call returns.
+// Calibration versions per serial are unique and gap-free also under
+// concurrent AddCalibration calls from different processes.
 //
 // Errors: InvalidArgument (bad input), NotFound (unknown serial/version),
-// AlreadyExists (constraint), Internal/Unavailable (SQLite).
+// AlreadyExists (constraint), Internal/Unavailable (database).
 #ifndef FLUXCAL_STORAGE_STORE_H_
 #define FLUXCAL_STORAGE_STORE_H_
 
 #include <cstdint>
 #include <memory>
-#include <mutex>
 #include <optional>
 #include <string>
 #include <vector>
 
 #include "absl/status/statusor.h"
-#include "storage/sqlite.h"
 
 namespace fluxcal::storage {
 
@@ -29,14 +34,29 @@ struct MotorRow {
   std::string serial;
   int pole_pairs = 4;
   double rs_ohm = 0, psi_pm_wb = 0;
+  std::string created_utc;   // set by the store
 };
 
+// One identified HF point as stored (the project's identified-point type;
+// converters from/to identification, fitting and protobuf live in
+// pipeline/points.h and server/service.cc).
 struct HfPointRow {
   std::string point_id;
   double id_a = 0, iq_a = 0, speed_rpm = 0, ld_h = 0, lq_h = 0;
   std::optional<double> ldq_h;
   double ld_h_std = 0, lq_h_std = 0, ldq_h_std = 0, temperature_c = 25;
   bool reliable = true;
+};
+
+struct RunRow {
+  int64_t run_id = 0;
+  std::string serial, station, kind, recording_sha256 /* "" = none */, created_utc;
+};
+
+struct RecordingRow {
+  std::string sha256;
+  int64_t size_bytes = 0;               // uncompressed
+  std::vector<uint8_t> zlib_data;
 };
 
 struct CalibrationRow {
@@ -60,45 +80,59 @@ struct HistoryRow {
 
 class Store {
  public:
-  // Opens or creates the database and applies pending migrations in order.
-  static absl::StatusOr<std::unique_ptr<Store>> Open(const std::string& path);
+  virtual ~Store() = default;
 
-  absl::StatusOr<int> SchemaVersion();
+  // Opens (creating) a store and applies pending migrations in order:
+  //   "postgresql://..." or "postgres://..."  -> PostgreSQL (libpq URI);
+  //   "sqlite:PATH", a file path or ":memory:" -> SQLite.
+  static absl::StatusOr<std::unique_ptr<Store>> Open(const std::string& url);
 
-  // One transaction: upserts the motor, creates a run, inserts all points.
-  absl::StatusOr<int64_t> IngestHfRun(const MotorRow& motor, const std::string& station,
-                                      const std::string& kind, const std::vector<HfPointRow>& points,
-                                      const std::string& recording_sha256 = "",
-                                      const std::vector<uint8_t>& recording_compressed = {},
-                                      int64_t recording_bytes = 0);
+  virtual std::string Backend() const = 0;   // "sqlite" | "postgresql"
+  virtual absl::StatusOr<int> SchemaVersion() = 0;
 
-  absl::StatusOr<MotorRow> GetMotor(const std::string& serial);
+  // One transaction: upserts the motor, stores the recording (if any, by
+  // content hash), creates a run, inserts all points.
+  virtual absl::StatusOr<int64_t> IngestHfRun(const MotorRow& motor, const std::string& station,
+                                              const std::string& kind, const std::vector<HfPointRow>& points,
+                                              const std::string& recording_sha256 = "",
+                                              const std::vector<uint8_t>& recording_compressed = {},
+                                              int64_t recording_bytes = 0) = 0;
+
+  virtual absl::StatusOr<MotorRow> GetMotor(const std::string& serial) = 0;
   // Points of the serial's latest run (and its id).
-  absl::StatusOr<std::vector<HfPointRow>> LatestRunPoints(const std::string& serial, int64_t* run_id);
+  virtual absl::StatusOr<std::vector<HfPointRow>> LatestRunPoints(const std::string& serial, int64_t* run_id) = 0;
 
   // Appends version n+1 for the serial (immutable; never overwrites).
-  absl::StatusOr<int> AddCalibration(const CalibrationRow& row);
-  absl::StatusOr<CalibrationRow> GetCalibration(const std::string& serial, int version /*0 latest*/);
-  absl::StatusOr<std::vector<CalibrationRow>> LatestCalibrations();
+  virtual absl::StatusOr<int> AddCalibration(const CalibrationRow& row) = 0;
+  virtual absl::StatusOr<CalibrationRow> GetCalibration(const std::string& serial, int version /*0 latest*/) = 0;
+  virtual absl::StatusOr<std::vector<CalibrationRow>> LatestCalibrations() = 0;
 
-  absl::StatusOr<std::vector<MotorSummaryRow>> ListMotors(const std::string& prefix, bool only_failed,
-                                                          int offset, int limit);
-  absl::StatusOr<std::vector<HistoryRow>> History(const std::string& serial);
-  absl::StatusOr<std::vector<uint8_t>> GetRecording(const std::string& sha256);
+  virtual absl::StatusOr<std::vector<MotorSummaryRow>> ListMotors(const std::string& prefix, bool only_failed,
+                                                                  int offset, int limit) = 0;
+  virtual absl::StatusOr<std::vector<HistoryRow>> History(const std::string& serial) = 0;
+  virtual absl::StatusOr<std::vector<uint8_t>> GetRecording(const std::string& sha256) = 0;
   // SHA-256 of the serial's latest stored raw recording.
-  absl::StatusOr<std::string> LatestRecordingSha(const std::string& serial);
+  virtual absl::StatusOr<std::string> LatestRecordingSha(const std::string& serial) = 0;
 
- private:
-  explicit Store(std::string path, std::unique_ptr<Database> writer)
-      : path_(std::move(path)), writer_(std::move(writer)) {}
-  absl::Status Migrate();
-
-  std::string path_;
-  std::mutex write_mu_;
-  std::unique_ptr<Database> writer_;
+  // --- Whole-store access, for `fluxcal admin migrate` and content hashes.
+  virtual absl::StatusOr<std::vector<MotorRow>> AllMotors() = 0;            // by serial
+  virtual absl::StatusOr<std::vector<RunRow>> AllRuns() = 0;                // by run_id
+  virtual absl::StatusOr<std::vector<HfPointRow>> RunPoints(int64_t run_id) = 0;
+  virtual absl::StatusOr<RecordingRow> GetRecordingRow(const std::string& sha256) = 0;
+  virtual absl::StatusOr<std::vector<CalibrationRow>> AllCalibrations() = 0;  // by serial, version
+  // Copies keeping ids, versions and timestamps (into an empty store). Each
+  // call is one transaction.
+  virtual absl::Status ImportMotor(const MotorRow& motor) = 0;
+  virtual absl::Status ImportRun(const RunRow& run, const std::vector<HfPointRow>& points,
+                                 const RecordingRow* recording) = 0;
+  virtual absl::Status ImportCalibration(const CalibrationRow& row) = 0;
 };
 
 std::string NowUtc();
+
+// The migrations of each backend, in order (index k: version k -> k + 1).
+const std::vector<std::string>& SqliteMigrations();
+const std::vector<std::string>& PostgresMigrations();
 
 }  // namespace fluxcal::storage
 

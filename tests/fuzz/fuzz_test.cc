@@ -18,7 +18,7 @@
 #include <vector>
 
 #include "gtest/gtest.h"
-#include "server/recording_archive.h"
+#include "pipeline/recording_archive.h"
 #include "tests/fuzz/recording_fuzz.h"
 
 namespace fluxcal::fuzz {
@@ -150,13 +150,13 @@ TEST_F(FuzzTest, MutatedFilesNeverCrashAndAlwaysNameFileAndField) {
 
 TEST_F(FuzzTest, MutatedArchivesNeverCrash) {
   std::mt19937_64 rng(7);
-  const std::string good = server::EncodeRecordingArchive(BaseSet());
+  const std::string good = pipeline::EncodeRecordingArchive(BaseSet());
   std::string legacy;
   for (const auto& [name, data] : BaseSet()) legacy += name + "\n" + std::to_string(data.size()) + "\n" + data;
   size_t ok = 0;
   for (size_t i = 0; i < Runs(); ++i) {
     g_current = Mutate(i % 2 ? good : legacy, rng);
-    auto files = server::DecodeRecordingArchive(g_current);
+    auto files = pipeline::DecodeRecordingArchive(g_current);
     if (!files.ok()) continue;
     ++ok;
     for (const auto& [name, data] : *files) ASSERT_TRUE(io::ValidateRecordingFileName(name).ok()) << name;

@@ -11,7 +11,7 @@
 #include "gtest/gtest.h"
 #include "io/csv.h"
 #include "io/recording_set.h"
-#include "server/recording_archive.h"
+#include "pipeline/recording_archive.h"
 #include "server/service.h"
 #include "server/validation.h"
 #include "simulation/twin.h"
@@ -21,6 +21,11 @@
 
 namespace fluxcal::server {
 namespace {
+
+using pipeline::DecodeRecordingArchive;
+using pipeline::Deflate;
+using pipeline::EncodeRecordingArchive;
+using pipeline::Inflate;
 
 namespace fs = std::filesystem;
 
@@ -198,7 +203,7 @@ TEST_F(HostileTest, LegacyArchiveWithHostileNameWritesNothing) {
   absl::StrAppend(&legacy, target, "\n5\nhello");
   auto z = Deflate(legacy);
   ASSERT_TRUE(z.ok());
-  storage::MotorRow m{"IPM-HOST-5", 4, 0.01, 0.01};
+  storage::MotorRow m{"IPM-HOST-5", 4, 0.01, 0.01, ""};
   storage::HfPointRow p;
   p.point_id = "p0"; p.id_a = -10; p.iq_a = 10; p.ld_h = 1e-4; p.lq_h = 2e-4; p.reliable = true;
   ASSERT_TRUE(store_->IngestHfRun(m, "legacy", "recording", {p}, tables::Sha256Hex(legacy), *z,

@@ -1,11 +1,13 @@
-// The service end to end over loopback: validation rules (status code and
-// message), NOT_FOUND, 8 concurrent station streams, fit, export, query, and
-// kill -9 of a real `fluxcal serve` mid-stream.
+// The service end to end over loopback, on SQLite and on PostgreSQL (a
+// server started by the test): validation rules (status code and message),
+// NOT_FOUND, 8 concurrent station streams, fit, export, query, recording
+// ingest and diagnosis; and kill -9 of a real `fluxcal serve` mid-stream.
 #include <signal.h>
 #include <sqlite3.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -19,6 +21,7 @@
 #include "simulation/twin.h"
 #include "storage/store.h"
 #include "tables/signature.h"
+#include "tests/support/pg_cluster.h"
 
 namespace fluxcal::server {
 namespace {
@@ -50,12 +53,25 @@ std::vector<v1::HfPoint> GridPoints(double scale = 1.0) {
   return out;
 }
 
-class ServiceTest : public ::testing::Test {
+// Param: false SQLite file, true PostgreSQL.
+class ServiceTest : public ::testing::TestWithParam<bool> {
  protected:
   void SetUp() override {
-    db_ = TempPath(::testing::UnitTest::GetInstance()->current_test_info()->name() + std::string(".db"));
+    std::string name = ::testing::UnitTest::GetInstance()->current_test_info()->name();
+    std::replace(name.begin(), name.end(), '/', '_');   // "Test/Param"
+    db_ = TempPath(name + ".db");
     fs::remove(db_);
-    auto s = storage::Store::Open(db_);
+    std::string url = db_;
+    if (GetParam()) {
+      static int counter = 0;
+      std::string why;
+      auto* pg = fluxcal::testing::SharedPgCluster(&why);
+      FLUXCAL_PG_OR_SKIP(pg, why, "PostgreSQL run skipped");
+      const std::string name = "service_" + std::to_string(counter++);
+      ASSERT_TRUE(pg->CreateDatabase(name));
+      url = pg->Url(name);
+    }
+    auto s = storage::Store::Open(url);
     ASSERT_TRUE(s.ok());
     store_ = std::move(*s);
     service_ = std::make_unique<CalibrationServiceImpl>(store_.get());
@@ -66,7 +82,7 @@ class ServiceTest : public ::testing::Test {
         grpc::CreateChannel("127.0.0.1:" + std::to_string(port), grpc::InsecureChannelCredentials()));
   }
   void TearDown() override {
-    server_->Shutdown();
+    if (server_) server_->Shutdown();
     store_.reset();
     for (auto sfx : {"", "-wal", "-shm"}) fs::remove(db_ + sfx);
   }
@@ -102,7 +118,7 @@ void ExpectStatus(const grpc::Status& s, grpc::StatusCode code, const std::strin
   EXPECT_NE(s.error_message().find(fragment), std::string::npos) << "message: " << s.error_message();
 }
 
-TEST_F(ServiceTest, StreamLevelValidation) {
+TEST_P(ServiceTest, StreamLevelValidation) {
   v1::IngestHfResultsResponse r;
   ExpectStatus(Ingest("", GridPoints(), &r), grpc::StatusCode::INVALID_ARGUMENT, "serial: must not be empty");
   ExpectStatus(Ingest("bad serial!", GridPoints(), &r), grpc::StatusCode::INVALID_ARGUMENT, "serial: illegal serial");
@@ -133,7 +149,7 @@ TEST_F(ServiceTest, StreamLevelValidation) {
 }
 
 // Each point rule rejects the point, names field and index, stores the rest.
-TEST_F(ServiceTest, PointValidationRules) {
+TEST_P(ServiceTest, PointValidationRules) {
   struct Case { std::function<void(v1::HfPoint*)> breakit; std::string field; };
   const std::vector<Case> cases = {
       {[](v1::HfPoint* p) { p->set_ld_h(std::nan("")); }, "points[3].ld_h"},
@@ -166,7 +182,7 @@ TEST_F(ServiceTest, PointValidationRules) {
   ExpectStatus(Ingest("IPM-V", pts, &r), grpc::StatusCode::INVALID_ARGUMENT, "no valid point");
 }
 
-TEST_F(ServiceTest, UnknownSerialIsNotFound) {
+TEST_P(ServiceTest, UnknownSerialIsNotFound) {
   grpc::ClientContext c1, c2, c3, c4;
   v1::FitRequest f;
   f.set_serial("IPM-NONE");
@@ -186,7 +202,7 @@ TEST_F(ServiceTest, UnknownSerialIsNotFound) {
   ExpectStatus(stub_->History(&c4, h, &hr), grpc::StatusCode::NOT_FOUND, "IPM-NONE");
 }
 
-TEST_F(ServiceTest, UnaryValidation) {
+TEST_P(ServiceTest, UnaryValidation) {
   grpc::ClientContext c1, c2, c3;
   v1::ListMotorsRequest l;
   l.set_page_size(5000);
@@ -204,7 +220,7 @@ TEST_F(ServiceTest, UnaryValidation) {
   ExpectStatus(stub_->ExportTable(&c3, e, &er), grpc::StatusCode::INVALID_ARGUMENT, "points");
 }
 
-TEST_F(ServiceTest, EightConcurrentStationsThenFitExportQuery) {
+TEST_P(ServiceTest, EightConcurrentStationsThenFitExportQuery) {
   std::vector<std::thread> threads;
   std::vector<grpc::Status> st(8);
   std::vector<v1::IngestHfResultsResponse> resp(8);
@@ -268,7 +284,7 @@ TEST_F(ServiceTest, EightConcurrentStationsThenFitExportQuery) {
 
 // A raw recording streamed in chunks is validated, identified, stored by
 // content hash, and can be diagnosed from the store.
-TEST_F(ServiceTest, IngestRecordingThenDiagnose) {
+TEST_P(ServiceTest, IngestRecordingThenDiagnose) {
   sim::TwinConfig cfg;
   cfg.serial = "IPM-REC-1";
   cfg.effects.dead_time_s = 2e-6;
@@ -320,6 +336,9 @@ TEST_F(ServiceTest, IngestRecordingThenDiagnose) {
   w2->WritesDone();
   ExpectStatus(w2->Finish(), grpc::StatusCode::INVALID_ARGUMENT, "path");
 }
+
+INSTANTIATE_TEST_SUITE_P(Backends, ServiceTest, ::testing::Bool(),
+                         [](const ::testing::TestParamInfo<bool>& i) { return i.param ? "PostgreSQL" : "Sqlite"; });
 
 // kill -9 of a real server while a stream is open: every acknowledged
 // stream is intact, the open one left nothing, the file is consistent.

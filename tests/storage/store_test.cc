@@ -1,80 +1,151 @@
-// Store conformance, run on ":memory:" and on a file: migrations, all-or-
-// nothing runs, immutable calibration versions, listing and history.
+// Store conformance: one suite, run on SQLite (":memory:" and a file) and on
+// a real PostgreSQL server started in a temporary directory: migrations,
+// all-or-nothing runs, exact round trips, immutable calibration versions
+// (refused by the database itself), gap-free versions under concurrent
+// writers on separate connections, listing, history, whole-store access.
 #include "storage/store.h"
 
+#include <unistd.h>
+
+#include <atomic>
 #include <filesystem>
+#include <set>
+#include <thread>
 
 #include "gtest/gtest.h"
 #include "storage/sqlite.h"
+#include "tests/support/pg_cluster.h"
 
 namespace fluxcal::storage {
 namespace {
 
 namespace fs = std::filesystem;
 
-class StoreTest : public ::testing::TestWithParam<bool> {
+enum class Backend { kSqliteMemory, kSqliteFile, kPostgres };
+
+std::string Name(const ::testing::TestParamInfo<Backend>& i) {
+  switch (i.param) {
+    case Backend::kSqliteMemory: return "SqliteMemory";
+    case Backend::kSqliteFile: return "SqliteFile";
+    default: return "PostgreSQL";
+  }
+}
+
+class StoreTest : public ::testing::TestWithParam<Backend> {
  protected:
   void SetUp() override {
-    if (GetParam()) {
-      path_ = (fs::temp_directory_path() / ("fluxcal_store_" + std::to_string(::getpid()) + ".db")).string();
-      fs::remove(path_);
-    } else {
-      path_ = ":memory:";
+    static std::atomic<int> counter{0};
+    const int n = counter++;
+    switch (GetParam()) {
+      case Backend::kSqliteMemory:
+        url_ = ":memory:";
+        break;
+      case Backend::kSqliteFile:
+        path_ = (fs::temp_directory_path() / ("fluxcal_store_" + std::to_string(::getpid()) + "_" + std::to_string(n) + ".db")).string();
+        fs::remove(path_);
+        url_ = "sqlite:" + path_;
+        break;
+      case Backend::kPostgres: {
+        std::string why;
+        pg_ = fluxcal::testing::SharedPgCluster(&why);
+        FLUXCAL_PG_OR_SKIP(pg_, why, "PostgreSQL conformance run skipped");
+        db_ = "conf_" + std::to_string(n);
+        ASSERT_TRUE(pg_->CreateDatabase(db_));
+        url_ = pg_->Url(db_);
+        break;
+      }
     }
-    auto s = Store::Open(path_);
+    auto s = Store::Open(url_);
     ASSERT_TRUE(s.ok()) << s.status();
     store_ = std::move(*s);
   }
   void TearDown() override {
     store_.reset();
-    if (GetParam()) {
-      fs::remove(path_);
-      fs::remove(path_ + "-wal");
-      fs::remove(path_ + "-shm");
+    if (!path_.empty()) {
+      for (auto sfx : {"", "-wal", "-shm"}) fs::remove(path_ + sfx);
     }
+  }
+  // Runs raw SQL against the backend, bypassing the Store.
+  bool RawSql(const std::string& sql) {
+    if (GetParam() == Backend::kPostgres) return pg_->Sql(db_, sql);
+    auto db = Database::Open(path_);
+    return db.ok() && (*db)->Exec(sql).ok();
   }
   std::vector<HfPointRow> Points(int n) {
     std::vector<HfPointRow> v;
     for (int k = 0; k < n; ++k) {
       HfPointRow p;
       p.point_id = "p" + std::to_string(k);
-      p.id_a = -20.0 * k; p.iq_a = 40; p.ld_h = 1.8e-4; p.lq_h = 3.6e-4; p.ld_h_std = 1e-7; p.lq_h_std = 1e-7;
+      p.id_a = -20.0 * k; p.iq_a = 40; p.ld_h = 1.8e-4 + k * 1e-19 + 1.0 / 3.0 * 1e-7; p.lq_h = 3.6e-4;
+      p.ld_h_std = 1e-7; p.lq_h_std = 1e-7;
+      if (k % 2) p.ldq_h = -1.234567890123456789e-6;
+      p.reliable = k % 3 != 0;
       v.push_back(p);
     }
     return v;
   }
-  std::string path_;
+  bool SeparateConnections() const { return GetParam() != Backend::kSqliteMemory; }
+
+  fluxcal::testing::PgCluster* pg_ = nullptr;
+  std::string url_, path_, db_;
   std::unique_ptr<Store> store_;
 };
 
 TEST_P(StoreTest, MigratesToCurrentSchema) {
   auto v = store_->SchemaVersion();
-  ASSERT_TRUE(v.ok());
+  ASSERT_TRUE(v.ok()) << v.status();
   EXPECT_EQ(*v, kSchemaVersion);
-  if (GetParam()) {
+  EXPECT_EQ(store_->Backend(), GetParam() == Backend::kPostgres ? "postgresql" : "sqlite");
+  if (SeparateConnections()) {
     store_.reset();
-    auto again = Store::Open(path_);   // idempotent re-open
-    ASSERT_TRUE(again.ok());
+    auto again = Store::Open(url_);   // idempotent re-open
+    ASSERT_TRUE(again.ok()) << again.status();
     EXPECT_EQ(*(*again)->SchemaVersion(), kSchemaVersion);
     store_ = std::move(*again);
   }
 }
 
-TEST_P(StoreTest, RunAndPointsRoundTrip) {
-  auto run = store_->IngestHfRun({"IPM-1", 4, 0.011, 0.0114}, "st1", "hf_run", Points(36));
+TEST_P(StoreTest, RunAndPointsRoundTripExactly) {
+  const auto in = Points(36);
+  auto run = store_->IngestHfRun({"IPM-1", 4, 0.011, 0.0114, ""}, "st1", "hf_run", in);
   ASSERT_TRUE(run.ok()) << run.status();
   int64_t id = 0;
   auto pts = store_->LatestRunPoints("IPM-1", &id);
   ASSERT_TRUE(pts.ok());
   EXPECT_EQ(id, *run);
   ASSERT_EQ(pts->size(), 36u);
+  for (size_t k = 0; k < in.size(); ++k) {
+    EXPECT_EQ((*pts)[k].point_id, in[k].point_id);
+    EXPECT_EQ((*pts)[k].ld_h, in[k].ld_h) << "doubles must round-trip bit-exactly";
+    EXPECT_EQ((*pts)[k].ldq_h, in[k].ldq_h);
+    EXPECT_EQ((*pts)[k].reliable, in[k].reliable);
+  }
   EXPECT_DOUBLE_EQ((*pts)[5].id_a, -100.0);
-  EXPECT_FALSE((*pts)[5].ldq_h.has_value());
+  EXPECT_FALSE((*pts)[4].ldq_h.has_value());
+  auto m = store_->GetMotor("IPM-1");
+  ASSERT_TRUE(m.ok());
+  EXPECT_EQ(m->rs_ohm, 0.011);
+  EXPECT_EQ(m->created_utc.size(), 20u);
   EXPECT_EQ(store_->LatestRunPoints("NOPE", &id).status().code(), absl::StatusCode::kNotFound);
+  EXPECT_EQ(store_->GetMotor("NOPE").status().code(), absl::StatusCode::kNotFound);
+}
+
+TEST_P(StoreTest, RecordingsAreContentAddressed) {
+  std::vector<uint8_t> blob = {0, 1, 2, 0, 255, '\\', '\n', 0};
+  for (int k = 0; k < 5000; ++k) blob.push_back(static_cast<uint8_t>(k * 7));
+  ASSERT_TRUE(store_->IngestHfRun({"IPM-R", 4, 0.01, 0.01, ""}, "st", "recording", Points(2), "abc", blob, 12345).ok());
+  ASSERT_TRUE(store_->IngestHfRun({"IPM-R", 4, 0.01, 0.01, ""}, "st", "recording", Points(2), "abc", blob, 12345).ok());
+  EXPECT_EQ(*store_->LatestRecordingSha("IPM-R"), "abc");
+  EXPECT_EQ(*store_->GetRecording("abc"), blob);
+  auto row = store_->GetRecordingRow("abc");
+  ASSERT_TRUE(row.ok());
+  EXPECT_EQ(row->size_bytes, 12345);
+  EXPECT_EQ(store_->GetRecording("nope").status().code(), absl::StatusCode::kNotFound);
+  EXPECT_EQ(store_->LatestRecordingSha("IPM-1").status().code(), absl::StatusCode::kNotFound);
 }
 
 TEST_P(StoreTest, CalibrationVersionsAreImmutable) {
-  ASSERT_TRUE(store_->IngestHfRun({"IPM-2", 4, 0.011, 0.0114}, "st", "hf_run", Points(3)).ok());
+  ASSERT_TRUE(store_->IngestHfRun({"IPM-2", 4, 0.011, 0.0114, ""}, "st", "hf_run", Points(3)).ok());
   CalibrationRow c;
   c.serial = "IPM-2"; c.model = "analytic"; c.verdict = "pass"; c.calibration_json = "{}";
   EXPECT_EQ(*store_->AddCalibration(c), 1);
@@ -82,15 +153,111 @@ TEST_P(StoreTest, CalibrationVersionsAreImmutable) {
   EXPECT_EQ(*store_->AddCalibration(c), 2);
   EXPECT_EQ(store_->GetCalibration("IPM-2", 1)->verdict, "pass");
   EXPECT_EQ(store_->GetCalibration("IPM-2", 0)->version, 2);
-  // The database itself refuses to change a stored version.
-  auto db = Database::Open(path_);
-  if (GetParam()) {
-    ASSERT_TRUE(db.ok());
-    EXPECT_FALSE((*db)->Exec("UPDATE calibrations SET verdict = 'pass' WHERE version = 2").ok());
-    EXPECT_FALSE((*db)->Exec("DELETE FROM calibrations").ok());
+  if (SeparateConnections()) {
+    // The database itself refuses to change a stored version.
+    EXPECT_FALSE(RawSql("UPDATE calibrations SET verdict = 'pass' WHERE version = 2"));
+    EXPECT_FALSE(RawSql("DELETE FROM calibrations"));
+    EXPECT_TRUE(RawSql("SELECT 1 FROM calibrations")) << "raw access works, so the refusals above are real";
+    EXPECT_EQ(store_->GetCalibration("IPM-2", 2)->verdict, "fail: x");
   }
   EXPECT_EQ(store_->GetCalibration("IPM-2", 3).status().code(), absl::StatusCode::kNotFound);
+  c.serial = "IPM-UNKNOWN";
+  EXPECT_FALSE(store_->AddCalibration(c).ok());
 }
+
+// Writers on separate connections (separate Store objects, as separate
+// server processes have) fit one serial at once: versions 1..N, each once.
+TEST_P(StoreTest, ConcurrentVersionsAreUniqueAndGapFree) {
+  ASSERT_TRUE(store_->IngestHfRun({"IPM-V", 4, 0.011, 0.0114, ""}, "st", "hf_run", Points(3)).ok());
+  constexpr int kWriters = 6, kEach = 5;
+  std::vector<std::unique_ptr<Store>> stores;
+  for (int w = 0; w < kWriters; ++w) {
+    if (!SeparateConnections()) break;
+    auto s = Store::Open(url_);
+    ASSERT_TRUE(s.ok()) << s.status();
+    stores.push_back(std::move(*s));
+  }
+  std::vector<std::vector<int>> got(kWriters);
+  std::atomic<int> errors{0};
+  std::vector<std::thread> th;
+  for (int w = 0; w < kWriters; ++w) {
+    th.emplace_back([&, w] {
+      Store& s = stores.empty() ? *store_ : *stores[w];
+      for (int k = 0; k < kEach; ++k) {
+        CalibrationRow c;
+        c.serial = "IPM-V"; c.model = "analytic"; c.verdict = "pass"; c.calibration_json = "{}";
+        auto v = s.AddCalibration(c);
+        if (v.ok()) got[w].push_back(*v); else ++errors;
+      }
+    });
+  }
+  for (auto& t : th) t.join();
+  EXPECT_EQ(errors.load(), 0);
+  std::set<int> all;
+  size_t n = 0;
+  for (const auto& g : got) { all.insert(g.begin(), g.end()); n += g.size(); }
+  EXPECT_EQ(n, all.size()) << "duplicate version";
+  ASSERT_EQ(all.size(), static_cast<size_t>(kWriters * kEach));
+  EXPECT_EQ(*all.begin(), 1);
+  EXPECT_EQ(*all.rbegin(), kWriters * kEach) << "gap in versions";
+  EXPECT_EQ(store_->GetCalibration("IPM-V", 0)->version, kWriters * kEach);
+}
+
+TEST_P(StoreTest, ListHistoryAndLatest) {
+  for (const char* s : {"A-1", "A-2", "B-1"}) {
+    ASSERT_TRUE(store_->IngestHfRun({s, 4, 0.01, 0.01, ""}, "st", "hf_run", Points(2)).ok());
+  }
+  EXPECT_EQ(store_->ListMotors("A-", false, 0, 10)->size(), 2u);
+  EXPECT_EQ(store_->ListMotors("", false, 1, 1)->at(0).serial, "A-2");
+  CalibrationRow c;
+  c.serial = "A-2"; c.model = "analytic"; c.verdict = "fail: residual"; c.calibration_json = "{}";
+  ASSERT_TRUE(store_->AddCalibration(c).ok());
+  auto failed = store_->ListMotors("", true, 0, 10);
+  ASSERT_EQ(failed->size(), 1u);
+  EXPECT_EQ(failed->at(0).serial, "A-2");
+  EXPECT_EQ(failed->at(0).latest_version, 1);
+  EXPECT_EQ(failed->at(0).runs, 1);
+  auto h = store_->History("A-2");
+  ASSERT_TRUE(h.ok());
+  ASSERT_EQ(h->size(), 2u);
+  const auto& cal = h->at(0).kind == "calibration" ? h->at(0) : h->at(1);
+  EXPECT_EQ(cal.kind, "calibration");
+  EXPECT_EQ(cal.version, 1);
+  EXPECT_EQ(cal.detail, "analytic fail: residual");
+  EXPECT_EQ(store_->History("Z").status().code(), absl::StatusCode::kNotFound);
+  auto latest = store_->LatestCalibrations();
+  ASSERT_EQ(latest->size(), 1u);
+  EXPECT_EQ(latest->at(0).serial, "A-2");
+}
+
+TEST_P(StoreTest, WholeStoreExportAndImport) {
+  ASSERT_TRUE(store_->IngestHfRun({"W-1", 4, 0.01, 0.02, ""}, "st", "recording", Points(3), "sha-w", {1, 2, 3}, 3).ok());
+  CalibrationRow c;
+  c.serial = "W-1"; c.model = "analytic"; c.verdict = "pass"; c.calibration_json = "{\"a\":1}"; c.run_id = 1;
+  ASSERT_TRUE(store_->AddCalibration(c).ok());
+  auto runs = store_->AllRuns();
+  ASSERT_EQ(runs->size(), 1u);
+  EXPECT_EQ(runs->at(0).recording_sha256, "sha-w");
+  EXPECT_EQ(store_->AllMotors()->size(), 1u);
+  EXPECT_EQ(store_->AllCalibrations()->size(), 1u);
+  // Import keeps ids, versions and timestamps; later runs continue after them.
+  RunRow r{41, "W-2", "old", "hf_run", "", "2020-01-02T03:04:05Z"};
+  ASSERT_TRUE(store_->ImportMotor({"W-2", 3, 0.5, 0.25, "2020-01-01T00:00:00Z"}).ok());
+  ASSERT_TRUE(store_->ImportRun(r, Points(4), nullptr).ok());
+  CalibrationRow ic = c;
+  ic.serial = "W-2"; ic.version = 7; ic.run_id = 41; ic.created_utc = "2020-01-03T00:00:00Z";
+  ASSERT_TRUE(store_->ImportCalibration(ic).ok());
+  EXPECT_EQ(store_->GetCalibration("W-2", 0)->created_utc, "2020-01-03T00:00:00Z");
+  EXPECT_EQ(store_->RunPoints(41)->size(), 4u);
+  EXPECT_EQ(store_->GetMotor("W-2")->created_utc, "2020-01-01T00:00:00Z");
+  auto next = store_->IngestHfRun({"W-2", 3, 0.5, 0.25, ""}, "st", "hf_run", Points(1));
+  ASSERT_TRUE(next.ok()) << next.status();
+  EXPECT_GT(*next, 41);
+  EXPECT_EQ(*store_->AddCalibration(ic), 8);
+}
+
+INSTANTIATE_TEST_SUITE_P(Backends, StoreTest,
+                         ::testing::Values(Backend::kSqliteMemory, Backend::kSqliteFile, Backend::kPostgres), Name);
 
 TEST(Transaction, RollsBackOnError) {
   auto db = Database::Open(":memory:");
@@ -109,15 +276,6 @@ TEST(Transaction, RollsBackOnError) {
   ASSERT_TRUE(*q->Step());
   EXPECT_EQ(q->Int(0), 0) << "the failed transaction left a row behind";
 }
-
-TEST_P(StoreTest, ListAndHistory) {
-  for (const char* s : {"A-1", "A-2", "B-1"}) ASSERT_TRUE(store_->IngestHfRun({s, 4, 0.01, 0.01}, "st", "hf_run", Points(2)).ok());
-  EXPECT_EQ(store_->ListMotors("A-", false, 0, 10)->size(), 2u);
-  EXPECT_EQ(store_->ListMotors("", false, 1, 1)->at(0).serial, "A-2");
-  EXPECT_EQ(store_->History("Z").status().code(), absl::StatusCode::kNotFound);
-}
-
-INSTANTIATE_TEST_SUITE_P(MemoryAndFile, StoreTest, ::testing::Values(false, true));
 
 }  // namespace
 }  // namespace fluxcal::storage

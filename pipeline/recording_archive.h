@@ -2,8 +2,8 @@
 // Diagnose): named files in a RecordingArchive protobuf, zlib-compressed.
 // Decoding checks every name again and never touches the filesystem, so a
 // stored recording cannot make the service write a file.
-#ifndef FLUXCAL_SERVER_RECORDING_ARCHIVE_H_
-#define FLUXCAL_SERVER_RECORDING_ARCHIVE_H_
+#ifndef FLUXCAL_PIPELINE_RECORDING_ARCHIVE_H_
+#define FLUXCAL_PIPELINE_RECORDING_ARCHIVE_H_
 
 #include <cstdint>
 #include <string>
@@ -13,7 +13,11 @@
 #include "absl/status/statusor.h"
 #include "io/recording_set.h"
 
-namespace fluxcal::server {
+namespace fluxcal::pipeline {
+
+// Largest archive a stored recording may expand to: an upload at the
+// service's limit (256 MiB, server/validation.h) plus archive framing.
+inline constexpr size_t kMaxStoredRecordingBytes = (size_t{256} << 20) + (size_t{64} << 20);
 
 // Serialised archive (uncompressed): the magic line, then the protobuf.
 std::string EncodeRecordingArchive(const io::RecordingFiles& files);
@@ -29,6 +33,6 @@ absl::StatusOr<std::vector<uint8_t>> Deflate(std::string_view bytes);
 // a small hostile blob cannot expand without bound.
 absl::StatusOr<std::string> Inflate(const std::vector<uint8_t>& z, size_t max_bytes);
 
-}  // namespace fluxcal::server
+}  // namespace fluxcal::pipeline
 
-#endif  // FLUXCAL_SERVER_RECORDING_ARCHIVE_H_
+#endif  // FLUXCAL_PIPELINE_RECORDING_ARCHIVE_H_

@@ -1,4 +1,4 @@
-#include "server/recording_archive.h"
+#include "pipeline/recording_archive.h"
 
 #include <zlib.h>
 
@@ -7,7 +7,7 @@
 #include "absl/strings/str_cat.h"
 #include "fluxcal/v1/calibration.pb.h"
 
-namespace fluxcal::server {
+namespace fluxcal::pipeline {
 namespace {
 
 constexpr std::string_view kMagicV2 = "fluxcal.recording-archive.v2\n";
@@ -115,4 +115,4 @@ absl::StatusOr<std::string> Inflate(const std::vector<uint8_t>& z, size_t max_by
   return out;
 }
 
-}  // namespace fluxcal::server
+}  // namespace fluxcal::pipeline

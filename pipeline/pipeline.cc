@@ -1,0 +1,402 @@
+#include "pipeline/pipeline.h"
+
+#include <cmath>
+#include <filesystem>
+#include <set>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "nlohmann/json.hpp"
+#include "pipeline/recording_archive.h"
+#include "tables/sha256.h"
+
+namespace fluxcal::pipeline {
+
+// ---------------------------------------------------------------- points
+
+bool FromIdentification(const ident::HfPointResult& r, IdentifiedPoint* h) {
+  if (!std::isfinite(r.ld_h) || !std::isfinite(r.id_a)) return false;   // identification_failed
+  *h = IdentifiedPoint{};
+  h->point_id = r.point; h->id_a = r.id_a; h->iq_a = r.iq_a; h->speed_rpm = r.speed_rpm;
+  h->ld_h = r.ld_h; h->lq_h = r.lq_h;
+  if (r.has_ldq) h->ldq_h = r.ldq_h;
+  h->ld_h_std = r.ld_h_std; h->lq_h_std = r.lq_h_std; h->ldq_h_std = r.ldq_h_std;
+  h->temperature_c = r.temperature_c; h->reliable = r.reliable;
+  return true;
+}
+
+fit::InductanceObservation ToObservation(const IdentifiedPoint& p) {
+  fit::InductanceObservation o;
+  o.id_a = p.id_a; o.iq_a = p.iq_a; o.ldd_h = p.ld_h; o.lqq_h = p.lq_h; o.ldq_h = p.ldq_h;
+  o.ldd_h_std = p.ld_h_std; o.lqq_h_std = p.lq_h_std; o.ldq_h_std = p.ldq_h_std;
+  return o;
+}
+
+v1::HfPoint ToProto(const IdentifiedPoint& r) {
+  v1::HfPoint p;
+  p.set_point_id(r.point_id); p.set_id_a(r.id_a); p.set_iq_a(r.iq_a); p.set_speed_rpm(r.speed_rpm);
+  p.set_ld_h(r.ld_h); p.set_lq_h(r.lq_h);
+  if (r.ldq_h) p.set_ldq_h(*r.ldq_h);
+  p.set_ld_h_std(r.ld_h_std); p.set_lq_h_std(r.lq_h_std); p.set_ldq_h_std(r.ldq_h_std);
+  p.set_temperature_c(r.temperature_c); p.set_reliable(r.reliable);
+  return p;
+}
+
+IdentifiedPoint FromProto(const v1::HfPoint& p) {
+  IdentifiedPoint r;
+  r.point_id = p.point_id();
+  r.id_a = p.id_a(); r.iq_a = p.iq_a(); r.speed_rpm = p.speed_rpm();
+  r.ld_h = p.ld_h(); r.lq_h = p.lq_h();
+  if (p.has_ldq_h()) r.ldq_h = p.ldq_h();
+  r.ld_h_std = p.ld_h_std(); r.lq_h_std = p.lq_h_std(); r.ldq_h_std = p.ldq_h_std();
+  r.temperature_c = p.temperature_c();
+  r.reliable = p.reliable();
+  return r;
+}
+
+absl::StatusOr<IdentifiedSet> IdentifySet(const io::RecordingSet& set, const ident::IdentifyOptions& options) {
+  auto ids = ident::IdentifySet(set, options);
+  if (!ids.ok()) return ids.status();
+  IdentifiedSet out;
+  out.results = std::move(*ids);
+  for (const auto& r : out.results) {
+    IdentifiedPoint p;
+    if (FromIdentification(r, &p)) {
+      out.points.push_back(std::move(p));
+    } else {
+      out.failures.push_back(absl::StrCat(r.point, ": ", r.failure));
+    }
+  }
+  return out;
+}
+
+absl::StatusOr<fit::FitData> FitDataFromSet(const io::RecordingSet& set, const ident::IdentifyOptions& options) {
+  auto ids = ident::IdentifySet(set, options);
+  if (!ids.ok()) return ids.status();
+  return fit::FitDataFromRecording(set, *ids);
+}
+
+// ---------------------------------------------------------------- ingest
+
+absl::StatusOr<int64_t> IngestHfRun(storage::Store& store, const std::string& serial, const std::string& station,
+                                    const std::optional<MotorNominal>& motor,
+                                    const std::vector<IdentifiedPoint>& points, int rejected) {
+  storage::MotorRow m{serial, 4, 0.0, 0.0, ""};
+  if (motor) {
+    m.pole_pairs = motor->pole_pairs; m.rs_ohm = motor->rs_ohm; m.psi_pm_wb = motor->psi_pm_wb;
+  } else if (auto known = store.GetMotor(serial); known.ok()) {
+    m = *known;
+  } else if (known.status().code() == absl::StatusCode::kNotFound) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("motor: required for serial '", serial, "' (not known to the store yet)"));
+  } else {
+    return known.status();
+  }
+  if (points.empty()) {
+    return absl::InvalidArgumentError(absl::StrCat("points: no valid point in the stream (", rejected, " rejected)"));
+  }
+  return store.IngestHfRun(m, station, "hf_run", points);
+}
+
+absl::StatusOr<IngestRecordingResult> IngestRecording(storage::Store& store, const std::string& serial,
+                                                      const std::string& station, const io::RecordingFiles& files) {
+  auto set = io::ReadRecordingSetFromFiles(files, "");
+  if (!set.ok()) return absl::InvalidArgumentError(std::string(set.status().message()));
+  // Files the manifest does not name are junk: refuse rather than store them.
+  {
+    auto norm = [](const std::string& f) { return std::filesystem::path(f).lexically_normal().generic_string(); };
+    std::set<std::string> named = {"manifest.json"};
+    for (const auto& p : set->manifest.points) named.insert(norm(p.file));
+    if (set->manifest.steady_state) named.insert(norm(*set->manifest.steady_state));
+    if (set->manifest.hf_results) named.insert(norm(*set->manifest.hf_results));
+    for (const auto& [name, data] : files) {
+      if (!named.count(name)) {
+        return absl::InvalidArgumentError(absl::StrCat("path: file '", name, "' is not referenced by manifest.json"));
+      }
+    }
+  }
+  if (set->manifest.serial != serial) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("serial: stream serial '", serial, "' differs from the manifest's '", set->manifest.serial, "'"));
+  }
+  auto ids = IdentifySet(*set);
+  if (!ids.ok()) return absl::InvalidArgumentError(std::string(ids.status().message()));
+  const std::string archive = EncodeRecordingArchive(files);
+  auto z = Deflate(archive);
+  if (!z.ok()) return z.status();
+  IngestRecordingResult out;
+  out.sha256 = tables::Sha256Hex(archive);
+  const auto& mm = set->manifest.motor;
+  storage::MotorRow motor{serial, mm.pole_pairs, mm.rs_ohm.value_or(0.0), mm.psi_pm_wb.value_or(0.0), ""};
+  auto run = store.IngestHfRun(motor, station, "recording", ids->points, out.sha256, *z,
+                               static_cast<int64_t>(archive.size()));
+  if (!run.ok()) return run.status();
+  out.run_id = *run;
+  out.points = static_cast<int>(ids->points.size());
+  out.recording_bytes = static_cast<int64_t>(archive.size());
+  out.stored_bytes = static_cast<int64_t>(z->size());
+  return out;
+}
+
+// ---------------------------------------------------------------- fit
+
+std::string Verdict(const fit::Calibration& cal, double nominal_psi_pm_wb, size_t points, size_t unreliable,
+                    const FitTolerances& tol) {
+  if (!cal.summary.usable) return "fail: fit did not converge";
+  if (cal.summary.rms_relative > tol.max_rms_relative) {
+    return absl::StrFormat("fail: fit residual %.2f %% above %.2f %%", 100 * cal.summary.rms_relative,
+                           100 * tol.max_rms_relative);
+  }
+  if (nominal_psi_pm_wb > 0 && std::abs(cal.psi_pm_wb() / nominal_psi_pm_wb - 1) > tol.psi_pm_tolerance_relative) {
+    return absl::StrFormat("fail: psi_pm %.5g Wb deviates %.1f %% from nominal", cal.psi_pm_wb(),
+                           100 * (cal.psi_pm_wb() / nominal_psi_pm_wb - 1));
+  }
+  if (unreliable * 2 > points) {
+    // Points near a phase-current zero crossing are flagged by design (the
+    // paper's Sec. 3.3); only a majority of unreliable points fails a motor.
+    return absl::StrFormat("fail: %zu of %zu points flagged unreliable", unreliable, points);
+  }
+  return "pass";
+}
+
+absl::StatusOr<storage::CalibrationRow> FitSerial(storage::Store& store, const std::string& serial,
+                                                  const std::string& model, const FitTolerances& tol) {
+  auto motor = store.GetMotor(serial);
+  if (!motor.ok()) return motor.status();
+  int64_t run_id = 0;
+  auto pts = store.LatestRunPoints(serial, &run_id);
+  if (!pts.ok()) return pts.status();
+  fit::FitData d;
+  d.serial = serial;
+  d.pole_pairs = motor->pole_pairs;
+  d.rs_ohm = motor->rs_ohm;
+  if (motor->psi_pm_wb > 0) d.psi_pm_prior_wb = motor->psi_pm_wb;
+  size_t unreliable = 0;
+  for (const auto& p : *pts) {
+    if (!p.reliable) ++unreliable;
+    d.inductances.push_back(ToObservation(p));
+  }
+  fit::FitOptions fo;
+  fo.model = model.empty() ? "auto" : model;
+  auto cal = fit::Fit(d, fo);
+  if (!cal.ok()) return cal.status();
+  storage::CalibrationRow row;
+  row.serial = serial;
+  row.run_id = run_id;
+  row.model = cal->family().Name();
+  row.psi_pm_wb = cal->psi_pm_wb();
+  row.rms_relative = cal->summary.rms_relative;
+  row.verdict = Verdict(*cal, motor->psi_pm_wb, pts->size(), unreliable, tol);
+  row.calibration_json = cal->ToJson().dump();
+  auto version = store.AddCalibration(row);
+  if (!version.ok()) return version.status();
+  return store.GetCalibration(serial, *version);
+}
+
+// ---------------------------------------------------------------- read
+
+absl::StatusOr<fit::Calibration> LoadCalibration(storage::Store& store, const std::string& serial, int version) {
+  auto row = store.GetCalibration(serial, version);
+  if (!row.ok()) return row.status();
+  nlohmann::json j;
+  try {
+    j = nlohmann::json::parse(row->calibration_json);
+  } catch (const nlohmann::json::exception& e) {
+    return absl::DataLossError(absl::StrCat("stored calibration of ", serial, " is corrupt: ", e.what()));
+  }
+  // The stored JSON carries the version it is stored under.
+  j["version"] = row->version;
+  return fit::Calibration::FromJson(j);
+}
+
+absl::StatusOr<QueryResult> QueryFlux(storage::Store& store, const std::string& serial, int version,
+                                      const std::vector<std::pair<double, double>>& points) {
+  auto cal = LoadCalibration(store, serial, version);
+  if (!cal.ok()) return cal.status();
+  QueryResult out;
+  out.version = cal->version;
+  out.values.reserve(points.size());
+  for (const auto& [id, iq] : points) out.values.push_back(cal->Predict(id, iq));
+  return out;
+}
+
+absl::StatusOr<ExportResult> ExportTable(storage::Store& store, const std::string& serial, int version,
+                                         const tables::TableSpec& spec_in, const tables::MachineLimits& lim_in,
+                                         const std::string& format) {
+  auto fmt = tables::ParseFormat(format);
+  if (!fmt.ok()) return fmt.status();
+  auto cal = LoadCalibration(store, serial, version);
+  if (!cal.ok()) return cal.status();
+  tables::TableSpec spec = spec_in;
+  spec.serial = serial;
+  spec.calibration_version = cal->version;
+  spec.model = cal->family().Name();
+  tables::MachineLimits lim = lim_in;
+  if (lim.i_max_a <= 0) lim.i_max_a = cal->MeasuredCurrentLimitA() > 0 ? cal->MeasuredCurrentLimitA() : 150.0;
+  lim.pole_pairs = cal->pole_pairs();
+  lim.rs_ohm = cal->rs_ohm();
+  auto t = tables::BuildTable(*cal, lim, spec);
+  if (!t.ok()) return t.status();
+  auto e = tables::Export(*t, *fmt);
+  if (!e.ok()) return e.status();
+  ExportResult r;
+  r.exported = *e;
+  r.version = cal->version;
+  for (auto c : t->clamped) r.clamped_cells += c;
+  return r;
+}
+
+absl::StatusOr<std::vector<FleetPoint>> FleetStatistics(storage::Store& store,
+                                                        const std::vector<std::pair<double, double>>& points,
+                                                        double outlier_sigma) {
+  auto rows = store.LatestCalibrations();
+  if (!rows.ok()) return rows.status();
+  std::vector<std::pair<std::string, fit::Calibration>> cals;
+  for (const auto& r : *rows) {
+    nlohmann::json j = nlohmann::json::parse(r.calibration_json, nullptr, false);
+    if (j.is_discarded()) continue;
+    j["version"] = r.version;
+    auto c = fit::Calibration::FromJson(j);
+    if (c.ok()) cals.push_back({r.serial, std::move(*c)});
+  }
+  std::vector<FleetPoint> out;
+  for (const auto& [id, iq] : points) {
+    FleetPoint fp;
+    fp.id_a = id;
+    fp.iq_a = iq;
+    fp.serials = static_cast<int>(cals.size());
+    std::vector<fit::FluxPrediction> p;
+    for (const auto& c : cals) p.push_back(c.second.Predict(id, iq));
+    auto stats = [&](auto get, double* mean, double* sd) {
+      double s = 0, s2 = 0;
+      for (const auto& x : p) { s += get(x); s2 += get(x) * get(x); }
+      const double n = std::max<size_t>(1, p.size());
+      *mean = s / n;
+      *sd = p.size() > 1 ? std::sqrt(std::max(0.0, (s2 - s * s / n) / (n - 1))) : 0.0;
+    };
+    stats([](const fit::FluxPrediction& x) { return x.ldd_h; }, &fp.ldd_mean, &fp.ldd_std);
+    stats([](const fit::FluxPrediction& x) { return x.lqq_h; }, &fp.lqq_mean, &fp.lqq_std);
+    stats([](const fit::FluxPrediction& x) { return x.psi_d_wb; }, &fp.psi_d_mean, &fp.psi_d_std);
+    stats([](const fit::FluxPrediction& x) { return x.torque_nm; }, &fp.torque_mean, &fp.torque_std);
+    // Outliers: any quantity more than outlier_sigma standard deviations from
+    // the fleet mean (leave-one-out would be better for tiny fleets).
+    for (size_t k = 0; k < p.size(); ++k) {
+      auto z = [&](double v, double m, double s) { return s > 0 ? std::abs(v - m) / s : 0.0; };
+      if (z(p[k].ldd_h, fp.ldd_mean, fp.ldd_std) > outlier_sigma || z(p[k].lqq_h, fp.lqq_mean, fp.lqq_std) > outlier_sigma ||
+          z(p[k].torque_nm, fp.torque_mean, fp.torque_std) > outlier_sigma) {
+        fp.outliers.push_back(cals[k].first);
+      }
+    }
+    out.push_back(fp);
+  }
+  return out;
+}
+
+absl::StatusOr<diag::DiagnosisReport> DiagnoseStored(storage::Store& store, const std::string& serial) {
+  auto sha = store.LatestRecordingSha(serial);
+  if (!sha.ok()) return sha.status();
+  auto blob = store.GetRecording(*sha);
+  if (!blob.ok()) return blob.status();
+  // Unpacked in memory only (names re-checked), never onto the filesystem.
+  auto archive = Inflate(*blob, kMaxStoredRecordingBytes);
+  if (!archive.ok()) return archive.status();
+  auto files = DecodeRecordingArchive(*archive);
+  if (!files.ok()) return files.status();
+  auto set = io::ReadRecordingSetFromFiles(*files, "");
+  if (!set.ok()) return set.status();
+  return diag::Diagnose(*set);
+}
+
+// ---------------------------------------------------------------- admin
+
+absl::StatusOr<std::string> ContentHash(storage::Store& store) {
+  std::string dump;
+  auto d = [&](double v) { absl::StrAppendFormat(&dump, "%.17g\t", v); };
+  auto motors = store.AllMotors();
+  if (!motors.ok()) return motors.status();
+  for (const auto& m : *motors) {
+    absl::StrAppend(&dump, "motor\t", m.serial, "\t", m.pole_pairs, "\t");
+    d(m.rs_ohm); d(m.psi_pm_wb);
+    absl::StrAppend(&dump, m.created_utc, "\n");
+  }
+  auto runs = store.AllRuns();
+  if (!runs.ok()) return runs.status();
+  for (const auto& r : *runs) {
+    absl::StrAppend(&dump, "run\t", r.run_id, "\t", r.serial, "\t", r.station, "\t", r.kind, "\t", r.recording_sha256,
+                    "\t", r.created_utc, "\n");
+    if (!r.recording_sha256.empty()) {
+      auto rec = store.GetRecordingRow(r.recording_sha256);
+      if (!rec.ok()) return rec.status();
+      const std::string_view z(reinterpret_cast<const char*>(rec->zlib_data.data()), rec->zlib_data.size());
+      absl::StrAppend(&dump, "recording\t", rec->size_bytes, "\t", tables::Sha256Hex(z), "\n");
+    }
+    auto pts = store.RunPoints(r.run_id);
+    if (!pts.ok()) return pts.status();
+    for (const auto& p : *pts) {
+      absl::StrAppend(&dump, "point\t", p.point_id, "\t");
+      for (double v : {p.id_a, p.iq_a, p.speed_rpm, p.ld_h, p.lq_h}) d(v);
+      if (p.ldq_h) d(*p.ldq_h); else dump += "null\t";
+      for (double v : {p.ld_h_std, p.lq_h_std, p.ldq_h_std, p.temperature_c}) d(v);
+      absl::StrAppend(&dump, p.reliable ? 1 : 0, "\n");
+    }
+  }
+  auto cals = store.AllCalibrations();
+  if (!cals.ok()) return cals.status();
+  for (const auto& c : *cals) {
+    absl::StrAppend(&dump, "calibration\t", c.serial, "\t", c.version, "\t", c.run_id, "\t", c.created_utc, "\t",
+                    c.model, "\t");
+    d(c.psi_pm_wb); d(c.rms_relative);
+    absl::StrAppend(&dump, c.verdict, "\t", tables::Sha256Hex(c.calibration_json), "\n");
+  }
+  return tables::Sha256Hex(dump);
+}
+
+absl::StatusOr<MigrateResult> Migrate(storage::Store& from, storage::Store& to) {
+  if (auto m = to.AllMotors(); !m.ok()) {
+    return m.status();
+  } else if (!m->empty()) {
+    return absl::FailedPreconditionError("migrate: the target store is not empty");
+  }
+  MigrateResult out;
+  auto motors = from.AllMotors();
+  if (!motors.ok()) return motors.status();
+  for (const auto& m : *motors) {
+    if (auto s = to.ImportMotor(m); !s.ok()) return s;
+    ++out.motors;
+  }
+  auto runs = from.AllRuns();
+  if (!runs.ok()) return runs.status();
+  std::set<std::string> recordings;
+  for (const auto& r : *runs) {
+    auto pts = from.RunPoints(r.run_id);
+    if (!pts.ok()) return pts.status();
+    std::optional<storage::RecordingRow> rec;
+    if (!r.recording_sha256.empty() && recordings.insert(r.recording_sha256).second) {
+      auto x = from.GetRecordingRow(r.recording_sha256);
+      if (!x.ok()) return x.status();
+      rec = std::move(*x);
+      ++out.recordings;
+    }
+    if (auto s = to.ImportRun(r, *pts, rec ? &*rec : nullptr); !s.ok()) return s;
+    ++out.runs;
+    out.points += static_cast<int>(pts->size());
+  }
+  auto cals = from.AllCalibrations();
+  if (!cals.ok()) return cals.status();
+  for (const auto& c : *cals) {
+    if (auto s = to.ImportCalibration(c); !s.ok()) return s;
+    ++out.calibrations;
+  }
+  auto a = ContentHash(from);
+  if (!a.ok()) return a.status();
+  auto b = ContentHash(to);
+  if (!b.ok()) return b.status();
+  if (*a != *b) {
+    return absl::DataLossError(absl::StrCat("migrate: content hashes differ after the copy (source ", *a,
+                                            ", target ", *b, ")"));
+  }
+  out.content_sha256 = *a;
+  return out;
+}
+
+}  // namespace fluxcal::pipeline

@@ -1,0 +1,107 @@
+// The use cases of fluxcal, written once over library calls and the storage
+// interface (storage::Store): ingest an HF run, ingest a raw recording, fit
+// and judge, export, query, diagnose, fleet statistics. The gRPC server and
+// the CLI only translate their inputs to these calls (docs/architecture.md).
+#ifndef FLUXCAL_PIPELINE_PIPELINE_H_
+#define FLUXCAL_PIPELINE_PIPELINE_H_
+
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "diagnosis/diagnose.h"
+#include "fitting/calibration.h"
+#include "io/recording_set.h"
+#include "pipeline/points.h"
+#include "storage/store.h"
+#include "tables/tables.h"
+
+namespace fluxcal::pipeline {
+
+// --- Ingest.
+struct MotorNominal {
+  int pole_pairs = 4;
+  double rs_ohm = 0, psi_pm_wb = 0;
+};
+// One durable transaction. Without `motor` the serial must already be
+// known (InvalidArgument otherwise); no point at all is InvalidArgument.
+absl::StatusOr<int64_t> IngestHfRun(storage::Store& store, const std::string& serial, const std::string& station,
+                                    const std::optional<MotorNominal>& motor,
+                                    const std::vector<IdentifiedPoint>& points, int rejected = 0);
+
+struct IngestRecordingResult {
+  int64_t run_id = 0;
+  int points = 0;
+  std::string sha256;
+  int64_t recording_bytes = 0, stored_bytes = 0;
+};
+// A recording set held in memory (never written to disk): validated with
+// the same reader as `fluxcal`, every file named by the manifest, serial
+// equal to `serial`; identified (lsq); points stored with the archived,
+// compressed set keyed by its SHA-256. Bad input is InvalidArgument.
+absl::StatusOr<IngestRecordingResult> IngestRecording(storage::Store& store, const std::string& serial,
+                                                      const std::string& station, const io::RecordingFiles& files);
+
+// --- Fit and judge.
+struct FitTolerances {
+  double max_rms_relative = 0.02;          // fit residual vs the identified points
+  double psi_pm_tolerance_relative = 0.10; // vs the nominal magnet flux
+};
+// "pass" or "fail: <reason>" for a fitted calibration.
+std::string Verdict(const fit::Calibration& cal, double nominal_psi_pm_wb, size_t points, size_t unreliable,
+                    const FitTolerances& tol);
+// Fits the latest run of `serial` and stores calibration version n+1.
+absl::StatusOr<storage::CalibrationRow> FitSerial(storage::Store& store, const std::string& serial,
+                                                  const std::string& model, const FitTolerances& tol);
+
+// --- Read.
+absl::StatusOr<fit::Calibration> LoadCalibration(storage::Store& store, const std::string& serial, int version);
+
+struct QueryResult {
+  int version = 0;
+  std::vector<fit::FluxPrediction> values;
+};
+absl::StatusOr<QueryResult> QueryFlux(storage::Store& store, const std::string& serial, int version,
+                                      const std::vector<std::pair<double, double>>& points);
+
+struct ExportResult {
+  tables::Exported exported;
+  int version = 0;
+  int clamped_cells = 0;
+};
+// lim.i_max_a <= 0: the calibration's measured current limit.
+absl::StatusOr<ExportResult> ExportTable(storage::Store& store, const std::string& serial, int version,
+                                         const tables::TableSpec& spec, const tables::MachineLimits& limits,
+                                         const std::string& format);
+
+struct FleetPoint {
+  double id_a = 0, iq_a = 0;
+  int serials = 0;
+  double ldd_mean = 0, ldd_std = 0, lqq_mean = 0, lqq_std = 0, psi_d_mean = 0, psi_d_std = 0;
+  double torque_mean = 0, torque_std = 0;
+  std::vector<std::string> outliers;
+};
+absl::StatusOr<std::vector<FleetPoint>> FleetStatistics(storage::Store& store,
+                                                        const std::vector<std::pair<double, double>>& points,
+                                                        double outlier_sigma);
+
+// Diagnosis of the serial's latest stored raw recording, unpacked in memory.
+absl::StatusOr<diag::DiagnosisReport> DiagnoseStored(storage::Store& store, const std::string& serial);
+
+// --- Whole stores (fluxcal admin).
+// SHA-256 over a canonical dump of everything stored (motors, runs, points,
+// recordings, calibrations; ids, versions and timestamps included): equal
+// hashes mean equal content, whatever the backend.
+absl::StatusOr<std::string> ContentHash(storage::Store& store);
+struct MigrateResult {
+  int motors = 0, runs = 0, points = 0, recordings = 0, calibrations = 0;
+  std::string content_sha256;   // equal on both sides
+};
+// Copies `from` into the empty store `to` and verifies both content hashes.
+absl::StatusOr<MigrateResult> Migrate(storage::Store& from, storage::Store& to);
+
+}  // namespace fluxcal::pipeline
+
+#endif  // FLUXCAL_PIPELINE_PIPELINE_H_

@@ -1,0 +1,451 @@
+#include "storage/sqlite_store.h"
+
+#include "absl/strings/str_cat.h"
+
+namespace fluxcal::storage {
+namespace {
+
+// Ordered migrations: index k brings the schema from version k to k + 1.
+const std::vector<std::string> kSqliteMigrations = {
+    // v1: motors, runs, points, recordings, calibrations.
+    R"sql(
+CREATE TABLE motors (
+  serial TEXT PRIMARY KEY,
+  pole_pairs INTEGER NOT NULL,
+  rs_ohm REAL NOT NULL,
+  psi_pm_wb REAL NOT NULL,
+  created_utc TEXT NOT NULL);
+CREATE TABLE recordings (
+  sha256 TEXT PRIMARY KEY,
+  size_bytes INTEGER NOT NULL,
+  zlib_data BLOB NOT NULL);
+CREATE TABLE runs (
+  run_id INTEGER PRIMARY KEY AUTOINCREMENT,
+  serial TEXT NOT NULL REFERENCES motors(serial),
+  station TEXT NOT NULL,
+  kind TEXT NOT NULL,
+  recording_sha256 TEXT REFERENCES recordings(sha256),
+  created_utc TEXT NOT NULL);
+CREATE TABLE hf_points (
+  run_id INTEGER NOT NULL REFERENCES runs(run_id),
+  idx INTEGER NOT NULL,
+  point_id TEXT NOT NULL,
+  id_a REAL NOT NULL, iq_a REAL NOT NULL, speed_rpm REAL NOT NULL,
+  ld_h REAL NOT NULL, lq_h REAL NOT NULL, ldq_h REAL,
+  ld_h_std REAL NOT NULL, lq_h_std REAL NOT NULL, ldq_h_std REAL NOT NULL,
+  temperature_c REAL NOT NULL, reliable INTEGER NOT NULL,
+  PRIMARY KEY (run_id, idx));
+CREATE TABLE calibrations (
+  serial TEXT NOT NULL REFERENCES motors(serial),
+  version INTEGER NOT NULL,
+  run_id INTEGER REFERENCES runs(run_id),
+  created_utc TEXT NOT NULL,
+  model TEXT NOT NULL,
+  psi_pm_wb REAL NOT NULL,
+  rms_relative REAL NOT NULL,
+  verdict TEXT NOT NULL,
+  calibration_json TEXT NOT NULL,
+  PRIMARY KEY (serial, version));
+CREATE INDEX runs_by_serial ON runs(serial, run_id);
+)sql",
+    // v2: calibration versions are immutable, enforced by the database.
+    R"sql(
+CREATE TRIGGER calibrations_no_update BEFORE UPDATE ON calibrations
+  BEGIN SELECT RAISE(ABORT, 'calibration versions are immutable'); END;
+CREATE TRIGGER calibrations_no_delete BEFORE DELETE ON calibrations
+  BEGIN SELECT RAISE(ABORT, 'calibration versions are immutable'); END;
+CREATE INDEX calibrations_by_verdict ON calibrations(verdict);
+)sql",
+};
+
+}  // namespace
+
+const std::vector<std::string>& SqliteMigrations() { return kSqliteMigrations; }
+
+absl::StatusOr<std::unique_ptr<SqliteStore>> SqliteStore::Open(const std::string& path) {
+  auto db = Database::Open(path);
+  if (!db.ok()) return db.status();
+  std::unique_ptr<SqliteStore> s(new SqliteStore(path, std::move(*db)));
+  if (auto st = s->Migrate(); !st.ok()) return st;
+  return s;
+}
+
+absl::Status SqliteStore::Migrate() {
+  std::lock_guard<std::mutex> lock(write_mu_);
+  if (auto st = writer_->Exec("CREATE TABLE IF NOT EXISTS schema_version (version INTEGER NOT NULL)"); !st.ok()) return st;
+  return writer_->Transaction([&]() -> absl::Status {
+    auto q = writer_->Prepare("SELECT COALESCE(MAX(version), 0) FROM schema_version");
+    if (!q.ok()) return q.status();
+    auto row = q->Step();
+    if (!row.ok()) return row.status();
+    int v = static_cast<int>(q->Int(0));
+    if (v > kSchemaVersion) {
+      return absl::FailedPreconditionError(absl::StrCat("database schema version ", v,
+                                                        " is newer than this fluxcal (", kSchemaVersion, ")"));
+    }
+    for (; v < kSchemaVersion; ++v) {
+      if (auto st = writer_->Exec(kSqliteMigrations[v]); !st.ok()) return st;
+      auto ins = writer_->Prepare("INSERT INTO schema_version (version) VALUES (?)");
+      if (!ins.ok()) return ins.status();
+      if (auto st = ins->Bind(1, int64_t{v + 1}); !st.ok()) return st;
+      if (auto r = ins->Step(); !r.ok()) return r.status();
+    }
+    return absl::OkStatus();
+  });
+}
+
+absl::StatusOr<int> SqliteStore::SchemaVersion() {
+  std::lock_guard<std::mutex> lock(write_mu_);
+  auto q = writer_->Prepare("SELECT MAX(version) FROM schema_version");
+  if (!q.ok()) return q.status();
+  if (auto r = q->Step(); !r.ok()) return r.status();
+  return static_cast<int>(q->Int(0));
+}
+
+absl::StatusOr<int64_t> SqliteStore::IngestHfRun(const MotorRow& m, const std::string& station, const std::string& kind,
+                                           const std::vector<HfPointRow>& points, const std::string& sha,
+                                           const std::vector<uint8_t>& blob, int64_t recording_bytes) {
+  std::lock_guard<std::mutex> lock(write_mu_);
+  int64_t run_id = 0;
+  auto st = writer_->Transaction([&]() -> absl::Status {
+    auto up = writer_->Prepare(
+        "INSERT INTO motors (serial, pole_pairs, rs_ohm, psi_pm_wb, created_utc) VALUES (?,?,?,?,?) "
+        "ON CONFLICT(serial) DO UPDATE SET pole_pairs = excluded.pole_pairs, rs_ohm = excluded.rs_ohm, "
+        "psi_pm_wb = excluded.psi_pm_wb");
+    if (!up.ok()) return up.status();
+    if (auto s = up->BindAll({m.serial, int64_t{m.pole_pairs}, m.rs_ohm, m.psi_pm_wb, NowUtc()}); !s.ok()) return s;
+    if (auto r = up->Step(); !r.ok()) return r.status();
+    if (!sha.empty()) {
+      auto rec = writer_->Prepare("INSERT OR IGNORE INTO recordings (sha256, size_bytes, zlib_data) VALUES (?,?,?)");
+      if (!rec.ok()) return rec.status();
+      if (auto s = rec->BindAll({sha, recording_bytes, blob}); !s.ok()) return s;
+      if (auto r = rec->Step(); !r.ok()) return r.status();
+    }
+    auto run = writer_->Prepare("INSERT INTO runs (serial, station, kind, recording_sha256, created_utc) VALUES (?,?,?,?,?)");
+    if (!run.ok()) return run.status();
+    if (auto s = run->BindAll({m.serial, station, kind, sha.empty() ? SqlValue(nullptr) : SqlValue(sha), NowUtc()}); !s.ok()) return s;
+    if (auto r = run->Step(); !r.ok()) return r.status();
+    run_id = writer_->LastInsertRowId();
+    return InsertPointsLocked(run_id, points);
+  });
+  if (!st.ok()) return st;
+  return run_id;
+}
+
+absl::StatusOr<MotorRow> SqliteStore::GetMotor(const std::string& serial) {
+  std::lock_guard<std::mutex> lock(write_mu_);
+  auto q = writer_->Prepare("SELECT pole_pairs, rs_ohm, psi_pm_wb, created_utc FROM motors WHERE serial = ?");
+  if (!q.ok()) return q.status();
+  (void)q->Bind(1, serial);
+  auto r = q->Step();
+  if (!r.ok()) return r.status();
+  if (!*r) return absl::NotFoundError(absl::StrCat("serial '", serial, "' not found"));
+  return MotorRow{serial, static_cast<int>(q->Int(0)), q->Double(1), q->Double(2), q->Text(3)};
+}
+
+absl::StatusOr<std::vector<HfPointRow>> SqliteStore::LatestRunPoints(const std::string& serial, int64_t* run_id) {
+  std::lock_guard<std::mutex> lock(write_mu_);
+  auto q = writer_->Prepare("SELECT MAX(run_id) FROM runs WHERE serial = ?");
+  if (!q.ok()) return q.status();
+  (void)q->Bind(1, serial);
+  if (auto r = q->Step(); !r.ok()) return r.status();
+  if (q->IsNull(0)) return absl::NotFoundError(absl::StrCat("serial '", serial, "' has no ingested run"));
+  *run_id = q->Int(0);
+  return PointsLocked(*run_id);
+}
+
+absl::StatusOr<int> SqliteStore::AddCalibration(const CalibrationRow& c) {
+  std::lock_guard<std::mutex> lock(write_mu_);
+  int version = 0;
+  auto st = writer_->Transaction([&]() -> absl::Status {
+    auto q = writer_->Prepare("SELECT COALESCE(MAX(version), 0) FROM calibrations WHERE serial = ?");
+    if (!q.ok()) return q.status();
+    (void)q->Bind(1, c.serial);
+    if (auto r = q->Step(); !r.ok()) return r.status();
+    version = static_cast<int>(q->Int(0)) + 1;
+    auto ins = writer_->Prepare(
+        "INSERT INTO calibrations (serial, version, run_id, created_utc, model, psi_pm_wb, rms_relative, verdict, "
+        "calibration_json) VALUES (?,?,?,?,?,?,?,?,?)");
+    if (!ins.ok()) return ins.status();
+    if (auto s = ins->BindAll({c.serial, int64_t{version}, c.run_id ? SqlValue(c.run_id) : SqlValue(nullptr),
+                               NowUtc(), c.model, c.psi_pm_wb, c.rms_relative, c.verdict, c.calibration_json});
+        !s.ok()) {
+      return s;
+    }
+    auto r = ins->Step();
+    return r.ok() ? absl::OkStatus() : r.status();
+  });
+  if (!st.ok()) return st;
+  return version;
+}
+
+namespace {
+CalibrationRow ReadCal(const Statement& q) {
+  CalibrationRow c;
+  c.serial = q.Text(0); c.version = static_cast<int>(q.Int(1)); c.run_id = q.Int(2);
+  c.created_utc = q.Text(3); c.model = q.Text(4); c.psi_pm_wb = q.Double(5);
+  c.rms_relative = q.Double(6); c.verdict = q.Text(7); c.calibration_json = q.Text(8);
+  return c;
+}
+constexpr char kCalCols[] =
+    "SELECT serial, version, COALESCE(run_id, 0), created_utc, model, psi_pm_wb, rms_relative, verdict, "
+    "calibration_json FROM calibrations ";
+}  // namespace
+
+absl::StatusOr<CalibrationRow> SqliteStore::GetCalibration(const std::string& serial, int version) {
+  std::lock_guard<std::mutex> lock(write_mu_);
+  auto q = writer_->Prepare(absl::StrCat(kCalCols, version > 0 ? "WHERE serial = ? AND version = ?"
+                                                               : "WHERE serial = ? ORDER BY version DESC LIMIT 1"));
+  if (!q.ok()) return q.status();
+  (void)q->Bind(1, serial);
+  if (version > 0) (void)q->Bind(2, int64_t{version});
+  auto r = q->Step();
+  if (!r.ok()) return r.status();
+  if (!*r) {
+    return absl::NotFoundError(version > 0 ? absl::StrCat("serial '", serial, "' has no calibration version ", version)
+                                           : absl::StrCat("serial '", serial, "' has no calibration"));
+  }
+  return ReadCal(*q);
+}
+
+absl::StatusOr<std::vector<CalibrationRow>> SqliteStore::LatestCalibrations() {
+  std::lock_guard<std::mutex> lock(write_mu_);
+  auto q = writer_->Prepare(absl::StrCat(
+      kCalCols, "c WHERE version = (SELECT MAX(version) FROM calibrations d WHERE d.serial = c.serial) ORDER BY serial"));
+  if (!q.ok()) return q.status();
+  std::vector<CalibrationRow> out;
+  while (true) {
+    auto r = q->Step();
+    if (!r.ok()) return r.status();
+    if (!*r) break;
+    out.push_back(ReadCal(*q));
+  }
+  return out;
+}
+
+absl::StatusOr<std::vector<MotorSummaryRow>> SqliteStore::ListMotors(const std::string& prefix, bool only_failed,
+                                                               int offset, int limit) {
+  std::lock_guard<std::mutex> lock(write_mu_);
+  auto q = writer_->Prepare(
+      "SELECT m.serial, COALESCE(c.version, 0), COALESCE(c.verdict, ''), "
+      "(SELECT COUNT(*) FROM runs r WHERE r.serial = m.serial), "
+      "COALESCE(c.created_utc, m.created_utc) FROM motors m "
+      "LEFT JOIN calibrations c ON c.serial = m.serial AND c.version = "
+      "(SELECT MAX(version) FROM calibrations d WHERE d.serial = m.serial) "
+      "WHERE substr(m.serial, 1, length(?1)) = ?1 AND (?2 = 0 OR c.verdict LIKE 'fail%') "
+      "ORDER BY m.serial LIMIT ?3 OFFSET ?4");
+  if (!q.ok()) return q.status();
+  if (auto s = q->BindAll({prefix, int64_t{only_failed ? 1 : 0}, int64_t{limit}, int64_t{offset}}); !s.ok()) return s;
+  std::vector<MotorSummaryRow> out;
+  while (true) {
+    auto r = q->Step();
+    if (!r.ok()) return r.status();
+    if (!*r) break;
+    out.push_back({q->Text(0), q->Text(2), q->Text(4), static_cast<int>(q->Int(1)), static_cast<int>(q->Int(3))});
+  }
+  return out;
+}
+
+absl::StatusOr<std::vector<HistoryRow>> SqliteStore::History(const std::string& serial) {
+  if (auto m = GetMotor(serial); !m.ok()) return m.status();
+  std::lock_guard<std::mutex> lock(write_mu_);
+  auto q = writer_->Prepare(
+      "SELECT created_utc, kind, run_id, 0, COALESCE(recording_sha256, '') FROM runs WHERE serial = ?1 "
+      "UNION ALL SELECT created_utc, 'calibration', COALESCE(run_id, 0), version, model || ' ' || verdict "
+      "FROM calibrations WHERE serial = ?1 ORDER BY 1, 3, 4");
+  if (!q.ok()) return q.status();
+  (void)q->Bind(1, serial);
+  std::vector<HistoryRow> out;
+  while (true) {
+    auto r = q->Step();
+    if (!r.ok()) return r.status();
+    if (!*r) break;
+    out.push_back({q->Text(0), q->Text(1), q->Text(4), q->Int(2), static_cast<int>(q->Int(3))});
+  }
+  return out;
+}
+
+absl::StatusOr<std::vector<uint8_t>> SqliteStore::GetRecording(const std::string& sha) {
+  std::lock_guard<std::mutex> lock(write_mu_);
+  auto q = writer_->Prepare("SELECT zlib_data FROM recordings WHERE sha256 = ?");
+  if (!q.ok()) return q.status();
+  (void)q->Bind(1, sha);
+  auto r = q->Step();
+  if (!r.ok()) return r.status();
+  if (!*r) return absl::NotFoundError(absl::StrCat("recording ", sha, " not found"));
+  return q->Blob(0);
+}
+
+absl::StatusOr<std::string> SqliteStore::LatestRecordingSha(const std::string& serial) {
+  std::lock_guard<std::mutex> lock(write_mu_);
+  auto q = writer_->Prepare(
+      "SELECT recording_sha256 FROM runs WHERE serial = ? AND recording_sha256 IS NOT NULL "
+      "ORDER BY run_id DESC LIMIT 1");
+  if (!q.ok()) return q.status();
+  (void)q->Bind(1, serial);
+  auto r = q->Step();
+  if (!r.ok()) return r.status();
+  if (!*r) return absl::NotFoundError(absl::StrCat("serial '", serial, "' has no stored raw recording"));
+  return q->Text(0);
+}
+
+absl::Status SqliteStore::InsertPointsLocked(int64_t run_id, const std::vector<HfPointRow>& points) {
+  auto ins = writer_->Prepare(
+      "INSERT INTO hf_points (run_id, idx, point_id, id_a, iq_a, speed_rpm, ld_h, lq_h, ldq_h, ld_h_std, "
+      "lq_h_std, ldq_h_std, temperature_c, reliable) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?)");
+  if (!ins.ok()) return ins.status();
+  for (size_t k = 0; k < points.size(); ++k) {
+    const auto& p = points[k];
+    if (auto s = ins->BindAll({run_id, static_cast<int64_t>(k), p.point_id, p.id_a, p.iq_a, p.speed_rpm, p.ld_h,
+                               p.lq_h, p.ldq_h ? SqlValue(*p.ldq_h) : SqlValue(nullptr), p.ld_h_std, p.lq_h_std,
+                               p.ldq_h_std, p.temperature_c, int64_t{p.reliable ? 1 : 0}});
+        !s.ok()) {
+      return s;
+    }
+    if (auto r = ins->Step(); !r.ok()) return r.status();
+    (void)ins->Reset();
+  }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<std::vector<HfPointRow>> SqliteStore::PointsLocked(int64_t run_id) {
+  auto p = writer_->Prepare(
+      "SELECT point_id, id_a, iq_a, speed_rpm, ld_h, lq_h, ldq_h, ld_h_std, lq_h_std, ldq_h_std, temperature_c, "
+      "reliable FROM hf_points WHERE run_id = ? ORDER BY idx");
+  if (!p.ok()) return p.status();
+  (void)p->Bind(1, run_id);
+  std::vector<HfPointRow> out;
+  while (true) {
+    auto r = p->Step();
+    if (!r.ok()) return r.status();
+    if (!*r) break;
+    HfPointRow h;
+    h.point_id = p->Text(0);
+    h.id_a = p->Double(1); h.iq_a = p->Double(2); h.speed_rpm = p->Double(3);
+    h.ld_h = p->Double(4); h.lq_h = p->Double(5);
+    if (!p->IsNull(6)) h.ldq_h = p->Double(6);
+    h.ld_h_std = p->Double(7); h.lq_h_std = p->Double(8); h.ldq_h_std = p->Double(9);
+    h.temperature_c = p->Double(10); h.reliable = p->Int(11) != 0;
+    out.push_back(h);
+  }
+  return out;
+}
+
+absl::StatusOr<std::vector<MotorRow>> SqliteStore::AllMotors() {
+  std::lock_guard<std::mutex> lock(write_mu_);
+  auto q = writer_->Prepare("SELECT serial, pole_pairs, rs_ohm, psi_pm_wb, created_utc FROM motors ORDER BY serial");
+  if (!q.ok()) return q.status();
+  std::vector<MotorRow> out;
+  while (true) {
+    auto r = q->Step();
+    if (!r.ok()) return r.status();
+    if (!*r) break;
+    out.push_back({q->Text(0), static_cast<int>(q->Int(1)), q->Double(2), q->Double(3), q->Text(4)});
+  }
+  return out;
+}
+
+absl::StatusOr<std::vector<RunRow>> SqliteStore::AllRuns() {
+  std::lock_guard<std::mutex> lock(write_mu_);
+  auto q = writer_->Prepare(
+      "SELECT run_id, serial, station, kind, COALESCE(recording_sha256, ''), created_utc FROM runs ORDER BY run_id");
+  if (!q.ok()) return q.status();
+  std::vector<RunRow> out;
+  while (true) {
+    auto r = q->Step();
+    if (!r.ok()) return r.status();
+    if (!*r) break;
+    out.push_back({q->Int(0), q->Text(1), q->Text(2), q->Text(3), q->Text(4), q->Text(5)});
+  }
+  return out;
+}
+
+absl::StatusOr<std::vector<HfPointRow>> SqliteStore::RunPoints(int64_t run_id) {
+  std::lock_guard<std::mutex> lock(write_mu_);
+  return PointsLocked(run_id);
+}
+
+absl::StatusOr<RecordingRow> SqliteStore::GetRecordingRow(const std::string& sha) {
+  std::lock_guard<std::mutex> lock(write_mu_);
+  auto q = writer_->Prepare("SELECT size_bytes, zlib_data FROM recordings WHERE sha256 = ?");
+  if (!q.ok()) return q.status();
+  (void)q->Bind(1, sha);
+  auto r = q->Step();
+  if (!r.ok()) return r.status();
+  if (!*r) return absl::NotFoundError(absl::StrCat("recording ", sha, " not found"));
+  return RecordingRow{sha, q->Int(0), q->Blob(1)};
+}
+
+absl::StatusOr<std::vector<CalibrationRow>> SqliteStore::AllCalibrations() {
+  std::lock_guard<std::mutex> lock(write_mu_);
+  auto q = writer_->Prepare(absl::StrCat(kCalCols, "ORDER BY serial, version"));
+  if (!q.ok()) return q.status();
+  std::vector<CalibrationRow> out;
+  while (true) {
+    auto r = q->Step();
+    if (!r.ok()) return r.status();
+    if (!*r) break;
+    out.push_back(ReadCal(*q));
+  }
+  return out;
+}
+
+absl::Status SqliteStore::ImportMotor(const MotorRow& m) {
+  std::lock_guard<std::mutex> lock(write_mu_);
+  return writer_->Transaction([&]() -> absl::Status {
+    auto q = writer_->Prepare(
+        "INSERT INTO motors (serial, pole_pairs, rs_ohm, psi_pm_wb, created_utc) VALUES (?,?,?,?,?)");
+    if (!q.ok()) return q.status();
+    if (auto s = q->BindAll({m.serial, int64_t{m.pole_pairs}, m.rs_ohm, m.psi_pm_wb, m.created_utc}); !s.ok()) return s;
+    auto r = q->Step();
+    return r.ok() ? absl::OkStatus() : r.status();
+  });
+}
+
+absl::Status SqliteStore::ImportRun(const RunRow& run, const std::vector<HfPointRow>& points,
+                                    const RecordingRow* rec) {
+  std::lock_guard<std::mutex> lock(write_mu_);
+  return writer_->Transaction([&]() -> absl::Status {
+    if (rec) {
+      auto q = writer_->Prepare("INSERT OR IGNORE INTO recordings (sha256, size_bytes, zlib_data) VALUES (?,?,?)");
+      if (!q.ok()) return q.status();
+      if (auto s = q->BindAll({rec->sha256, rec->size_bytes, rec->zlib_data}); !s.ok()) return s;
+      if (auto r = q->Step(); !r.ok()) return r.status();
+    }
+    auto q = writer_->Prepare(
+        "INSERT INTO runs (run_id, serial, station, kind, recording_sha256, created_utc) VALUES (?,?,?,?,?,?)");
+    if (!q.ok()) return q.status();
+    if (auto s = q->BindAll({run.run_id, run.serial, run.station, run.kind,
+                             run.recording_sha256.empty() ? SqlValue(nullptr) : SqlValue(run.recording_sha256),
+                             run.created_utc});
+        !s.ok()) {
+      return s;
+    }
+    if (auto r = q->Step(); !r.ok()) return r.status();
+    return InsertPointsLocked(run.run_id, points);
+  });
+}
+
+absl::Status SqliteStore::ImportCalibration(const CalibrationRow& c) {
+  std::lock_guard<std::mutex> lock(write_mu_);
+  return writer_->Transaction([&]() -> absl::Status {
+    auto ins = writer_->Prepare(
+        "INSERT INTO calibrations (serial, version, run_id, created_utc, model, psi_pm_wb, rms_relative, verdict, "
+        "calibration_json) VALUES (?,?,?,?,?,?,?,?,?)");
+    if (!ins.ok()) return ins.status();
+    if (auto s = ins->BindAll({c.serial, int64_t{c.version}, c.run_id ? SqlValue(c.run_id) : SqlValue(nullptr),
+                               c.created_utc, c.model, c.psi_pm_wb, c.rms_relative, c.verdict, c.calibration_json});
+        !s.ok()) {
+      return s;
+    }
+    auto r = ins->Step();
+    return r.ok() ? absl::OkStatus() : r.status();
+  });
+}
+
+absl::Status SqliteStore::Backup(const std::string& dest_path) {
+  std::lock_guard<std::mutex> lock(write_mu_);
+  return writer_->BackupTo(dest_path);
+}
+
+}  // namespace fluxcal::storage

@@ -1,0 +1,67 @@
+// SQLite backend of storage::Store: one file (or ":memory:"), WAL journal,
+// synchronous=FULL, one connection guarded by a mutex (SQLite has one
+// writer anyway; reads are short). Several processes may open the same file;
+// BEGIN IMMEDIATE takes the file's write lock before the version number is
+// read, so versions stay gap-free across processes too.
+#ifndef FLUXCAL_STORAGE_SQLITE_STORE_H_
+#define FLUXCAL_STORAGE_SQLITE_STORE_H_
+
+#include <memory>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include "storage/sqlite.h"
+#include "storage/store.h"
+
+namespace fluxcal::storage {
+
+class SqliteStore final : public Store {
+ public:
+  static absl::StatusOr<std::unique_ptr<SqliteStore>> Open(const std::string& path);
+
+  std::string Backend() const override { return "sqlite"; }
+  absl::StatusOr<int> SchemaVersion() override;
+  absl::StatusOr<int64_t> IngestHfRun(const MotorRow& motor, const std::string& station, const std::string& kind,
+                                      const std::vector<HfPointRow>& points, const std::string& recording_sha256,
+                                      const std::vector<uint8_t>& recording_compressed,
+                                      int64_t recording_bytes) override;
+  absl::StatusOr<MotorRow> GetMotor(const std::string& serial) override;
+  absl::StatusOr<std::vector<HfPointRow>> LatestRunPoints(const std::string& serial, int64_t* run_id) override;
+  absl::StatusOr<int> AddCalibration(const CalibrationRow& row) override;
+  absl::StatusOr<CalibrationRow> GetCalibration(const std::string& serial, int version) override;
+  absl::StatusOr<std::vector<CalibrationRow>> LatestCalibrations() override;
+  absl::StatusOr<std::vector<MotorSummaryRow>> ListMotors(const std::string& prefix, bool only_failed, int offset,
+                                                          int limit) override;
+  absl::StatusOr<std::vector<HistoryRow>> History(const std::string& serial) override;
+  absl::StatusOr<std::vector<uint8_t>> GetRecording(const std::string& sha256) override;
+  absl::StatusOr<std::string> LatestRecordingSha(const std::string& serial) override;
+
+  absl::StatusOr<std::vector<MotorRow>> AllMotors() override;
+  absl::StatusOr<std::vector<RunRow>> AllRuns() override;
+  absl::StatusOr<std::vector<HfPointRow>> RunPoints(int64_t run_id) override;
+  absl::StatusOr<RecordingRow> GetRecordingRow(const std::string& sha256) override;
+  absl::StatusOr<std::vector<CalibrationRow>> AllCalibrations() override;
+  absl::Status ImportMotor(const MotorRow& motor) override;
+  absl::Status ImportRun(const RunRow& run, const std::vector<HfPointRow>& points,
+                         const RecordingRow* recording) override;
+  absl::Status ImportCalibration(const CalibrationRow& row) override;
+
+  // Online backup (sqlite3_backup_*) into a new file at `dest_path`: a
+  // consistent copy while the store keeps serving.
+  absl::Status Backup(const std::string& dest_path);
+
+ private:
+  SqliteStore(std::string path, std::unique_ptr<Database> writer) : path_(std::move(path)), writer_(std::move(writer)) {}
+  absl::Status Migrate();
+  absl::StatusOr<std::vector<HfPointRow>> PointsLocked(int64_t run_id);
+  absl::Status InsertPointsLocked(int64_t run_id, const std::vector<HfPointRow>& points);
+
+  std::string path_;
+  std::mutex write_mu_;
+  std::unique_ptr<Database> writer_;
+};
+
+}  // namespace fluxcal::storage
+
+#endif  // FLUXCAL_STORAGE_SQLITE_STORE_H_

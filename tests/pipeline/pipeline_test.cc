@@ -1,0 +1,238 @@
+// The use cases over the storage interface: ingest rules, fit and verdict
+// against the twin's known motor, query accuracy, diagnosis of a stored
+// recording, and moving a store (migrate SQLite -> PostgreSQL, backup,
+// content hashes) including through the `fluxcal admin` command.
+#include "pipeline/pipeline.h"
+
+#include <unistd.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+
+#include "gtest/gtest.h"
+#include "simulation/twin.h"
+#include "storage/sqlite_store.h"
+#include "tests/support/pg_cluster.h"
+
+namespace fluxcal::pipeline {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string Temp(const std::string& name) {
+  return (fs::temp_directory_path() / ("fluxcal_pipe_" + std::to_string(::getpid()) + "_" + name)).string();
+}
+
+void RemoveDb(const std::string& p) {
+  for (auto sfx : {"", "-wal", "-shm"}) fs::remove(p + sfx);
+}
+
+// 36 identified points of the twin's analytic motor, scaled.
+std::vector<IdentifiedPoint> Grid(double scale) {
+  sim::AnalyticMotor m{sim::MotorParams{}};
+  std::vector<IdentifiedPoint> out;
+  for (int a = 0; a < 6; ++a) {
+    for (int b = 0; b < 6; ++b) {
+      IdentifiedPoint p;
+      p.point_id = "p" + std::to_string(6 * a + b);
+      p.id_a = -100 + 20 * a;
+      p.iq_a = 20 * b;
+      const auto L = m.Inductance(p.id_a, p.iq_a);
+      p.ld_h = scale * L.ldd_h; p.lq_h = scale * L.lqq_h; p.ldq_h = L.ldq_h;
+      p.ld_h_std = p.lq_h_std = p.ldq_h_std = 1e-7;
+      out.push_back(p);
+    }
+  }
+  return out;
+}
+
+const MotorNominal kMotor{4, 0.011, 0.0114};
+
+TEST(Pipeline, IngestRules) {
+  auto store = storage::Store::Open(":memory:");
+  ASSERT_TRUE(store.ok());
+  auto r = IngestHfRun(**store, "IPM-N", "st", std::nullopt, Grid(1));
+  EXPECT_EQ(r.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(r.status().message().find("motor: required"), std::string::npos);
+  r = IngestHfRun(**store, "IPM-N", "st", kMotor, {}, 3);
+  EXPECT_EQ(r.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(r.status().message().find("(3 rejected)"), std::string::npos);
+  ASSERT_TRUE(IngestHfRun(**store, "IPM-N", "st", kMotor, Grid(1)).ok());
+  // Known serial: the motor may be left out.
+  EXPECT_TRUE(IngestHfRun(**store, "IPM-N", "st", std::nullopt, Grid(1)).ok());
+  EXPECT_EQ((*store)->GetMotor("IPM-N")->psi_pm_wb, 0.0114);
+}
+
+TEST(Pipeline, FitJudgeQueryExport) {
+  auto store = storage::Store::Open(":memory:");
+  ASSERT_TRUE(store.ok());
+  ASSERT_TRUE(IngestHfRun(**store, "IPM-F", "st", kMotor, Grid(1.02)).ok());
+  auto row = FitSerial(**store, "IPM-F", "analytic", {});
+  ASSERT_TRUE(row.ok()) << row.status();
+  EXPECT_EQ(row->version, 1);
+  EXPECT_EQ(row->verdict, "pass");
+  // Points that scatter 8 % fail the motor, naming the reason; the version
+  // still counts (a refit is n+1, the failed one stays on record).
+  auto noisy = Grid(1.0);
+  for (size_t k = 0; k < noisy.size(); ++k) noisy[k].lq_h *= k % 2 ? 1.08 : 0.92;
+  ASSERT_TRUE(IngestHfRun(**store, "IPM-F", "st", std::nullopt, noisy).ok());
+  auto bad = FitSerial(**store, "IPM-F", "analytic", {});
+  ASSERT_TRUE(bad.ok());
+  EXPECT_EQ(bad->version, 2);
+  EXPECT_EQ(bad->verdict.rfind("fail: fit residual", 0), 0u) << bad->verdict;
+  auto q = QueryFlux(**store, "IPM-F", 1, {{-40, 60}, {-20, 40}});
+  ASSERT_TRUE(q.ok());
+  EXPECT_EQ(q->version, 1);
+  sim::AnalyticMotor truth{sim::MotorParams{}};
+  EXPECT_NEAR(q->values[0].ldd_h / (1.02 * truth.Inductance(-40, 60).ldd_h), 1.0, 0.005);
+  EXPECT_NEAR(q->values[1].lqq_h / (1.02 * truth.Inductance(-20, 40).lqq_h), 1.0, 0.005);
+  tables::TableSpec spec;
+  spec.points = 16;
+  tables::MachineLimits lim;
+  lim.i_max_a = -1;
+  auto e = ExportTable(**store, "IPM-F", 0, spec, lim, "csv");
+  ASSERT_TRUE(e.ok()) << e.status();
+  EXPECT_EQ(e->version, 2);
+  EXPECT_EQ(e->exported.sha256.size(), 64u);
+  EXPECT_EQ(QueryFlux(**store, "NOPE", 0, {{0, 0}}).status().code(), absl::StatusCode::kNotFound);
+}
+
+// Identified points of a simulated set go through the one converter; the
+// identify-then-fit glue feeds the fit exactly those points.
+TEST(Pipeline, IdentifiedPointsFeedTheFitUnchanged) {
+  sim::TwinConfig cfg;
+  cfg.serial = "IPM-ID-1";
+  sim::Plan plan = sim::DefaultPlan();
+  plan.record_s = 0.02;
+  auto r = sim::Simulate(cfg, plan);
+  ASSERT_TRUE(r.ok());
+  auto ids = IdentifySet(r->set);
+  ASSERT_TRUE(ids.ok());
+  EXPECT_EQ(ids->points.size() + ids->failures.size(), ids->results.size());
+  EXPECT_GE(ids->points.size(), 30u);
+  auto data = FitDataFromSet(r->set);
+  ASSERT_TRUE(data.ok());
+  EXPECT_EQ(data->inductances.size(), ids->points.size());
+  for (size_t k = 0; k < ids->points.size(); ++k) {
+    const auto o = ToObservation(ids->points[k]);
+    EXPECT_EQ(o.ldd_h, data->inductances[k].ldd_h);
+    EXPECT_EQ(o.id_a, data->inductances[k].id_a);
+  }
+}
+
+TEST(Pipeline, WireConverterRoundTrips) {
+  for (const auto& p : Grid(1.0)) {
+    auto q = p;
+    q.reliable = false;
+    q.temperature_c = 71.5;
+    q.speed_rpm = -1234.5;
+    const auto back = FromProto(ToProto(q));
+    EXPECT_EQ(back.point_id, q.point_id);
+    EXPECT_EQ(back.ld_h, q.ld_h);
+    EXPECT_EQ(back.ldq_h, q.ldq_h);
+    EXPECT_EQ(back.speed_rpm, q.speed_rpm);
+    EXPECT_EQ(back.temperature_c, q.temperature_c);
+    EXPECT_FALSE(back.reliable);
+    q.ldq_h.reset();
+    EXPECT_FALSE(FromProto(ToProto(q)).ldq_h.has_value()) << "an absent Ldq must stay absent, not become 0";
+  }
+}
+
+// A store with everything in it: runs, a raw recording, calibrations.
+void Populate(storage::Store& s) {
+  ASSERT_TRUE(IngestHfRun(s, "IPM-M-1", "st1", kMotor, Grid(1.0)).ok());
+  ASSERT_TRUE(IngestHfRun(s, "IPM-M-2", "st2", kMotor, Grid(1.01)).ok());
+  ASSERT_TRUE(FitSerial(s, "IPM-M-1", "analytic", {}).ok());
+  ASSERT_TRUE(FitSerial(s, "IPM-M-1", "analytic", {}).ok());
+  std::vector<uint8_t> blob(3000);
+  for (size_t k = 0; k < blob.size(); ++k) blob[k] = static_cast<uint8_t>(k * 31);
+  ASSERT_TRUE(s.IngestHfRun({"IPM-M-2", 4, 0.011, 0.0114, ""}, "st2", "recording", Grid(1.0), "feed", blob, 9000).ok());
+}
+
+TEST(Admin, MigrateSqliteToPostgresKeepsEverything) {
+  std::string why;
+  auto* pg = fluxcal::testing::SharedPgCluster(&why);
+  FLUXCAL_PG_OR_SKIP(pg, why, "PostgreSQL migration test skipped");
+  const std::string src = Temp("migrate_src.db");
+  RemoveDb(src);
+  auto from = storage::Store::Open("sqlite:" + src);
+  ASSERT_TRUE(from.ok());
+  Populate(**from);
+  ASSERT_TRUE(pg->CreateDatabase("migrated"));
+  auto to = storage::Store::Open(pg->Url("migrated"));
+  ASSERT_TRUE(to.ok()) << to.status();
+  auto r = Migrate(**from, **to);
+  ASSERT_TRUE(r.ok()) << r.status();
+  EXPECT_EQ(r->motors, 2);
+  EXPECT_EQ(r->runs, 3);
+  EXPECT_EQ(r->points, 108);
+  EXPECT_EQ(r->recordings, 1);
+  EXPECT_EQ(r->calibrations, 2);
+  EXPECT_EQ(*ContentHash(**to), *ContentHash(**from));
+  // The migrated store serves: the same calibration, and version 3 next.
+  EXPECT_EQ((*to)->GetCalibration("IPM-M-1", 2)->calibration_json, (*from)->GetCalibration("IPM-M-1", 2)->calibration_json);
+  auto v3 = FitSerial(**to, "IPM-M-1", "analytic", {});
+  ASSERT_TRUE(v3.ok());
+  EXPECT_EQ(v3->version, 3);
+  // A change anywhere changes the hash; a second migrate into it is refused.
+  EXPECT_NE(*ContentHash(**to), *ContentHash(**from));
+  EXPECT_EQ(Migrate(**from, **to).status().code(), absl::StatusCode::kFailedPrecondition);
+  // The same through the command an operator runs, checked by `admin hash`.
+  ASSERT_TRUE(pg->CreateDatabase("migrated_cli"));
+  auto run = [](const std::string& cmd) {
+    std::string out;
+    FILE* p = popen(cmd.c_str(), "r");
+    char buf[512];
+    while (p && fgets(buf, sizeof buf, p)) out += buf;
+    const int rc = p ? pclose(p) : -1;
+    return std::make_pair(rc, out);
+  };
+  const std::string bin = FLUXCAL_BINARY;
+  auto [rc, out] = run(bin + " admin migrate --from sqlite:" + src + " --to " + pg->Url("migrated_cli") + " --json");
+  ASSERT_EQ(rc, 0) << out;
+  EXPECT_NE(out.find("\"verified\": true"), std::string::npos) << out;
+  EXPECT_NE(out.find("\"points\": 108"), std::string::npos) << out;
+  auto [rc1, h1] = run(bin + " admin hash --db sqlite:" + src);
+  auto [rc2, h2] = run(bin + " admin hash --db " + pg->Url("migrated_cli"));
+  ASSERT_EQ(rc1, 0);
+  ASSERT_EQ(rc2, 0);
+  EXPECT_EQ(h1, h2);
+  EXPECT_EQ(h1.size(), 65u);   // 64 hex digits and a newline
+  EXPECT_NE(run(bin + " admin migrate --from sqlite:" + src + " --to " + pg->Url("migrated_cli") + " 2>&1").first, 0)
+      << "a second migrate into a filled database must be refused";
+  RemoveDb(src);
+}
+
+TEST(Admin, SqliteBackupAndTheCommand) {
+  const std::string src = Temp("backup_src.db"), out = Temp("backup_out.db");
+  RemoveDb(src);
+  RemoveDb(out);
+  {
+    auto s = storage::SqliteStore::Open(src);
+    ASSERT_TRUE(s.ok());
+    Populate(**s);
+  }
+  // The command, as an operator runs it, while nothing else writes.
+  const std::string cmd = std::string(FLUXCAL_BINARY) + " admin backup --db " + src + " --out " + out + " --json";
+  FILE* p = popen(cmd.c_str(), "r");
+  ASSERT_NE(p, nullptr);
+  std::string json;
+  char buf[512];
+  while (fgets(buf, sizeof buf, p)) json += buf;
+  ASSERT_EQ(pclose(p), 0) << json;
+  EXPECT_NE(json.find("\"equal\": true"), std::string::npos) << json;
+  auto a = storage::Store::Open(src);
+  auto b = storage::Store::Open(out);
+  ASSERT_TRUE(a.ok() && b.ok());
+  EXPECT_EQ(*ContentHash(**a), *ContentHash(**b));
+  EXPECT_EQ((*b)->GetRecording("feed")->size(), 3000u);
+  // Refuses to overwrite, and sends PostgreSQL users to pg_dump.
+  EXPECT_NE(std::system((cmd + " > /dev/null 2>&1").c_str()), 0);
+  EXPECT_EQ(std::system((std::string(FLUXCAL_BINARY) + " admin backup --db postgresql://x/y --out /tmp/x 2>&1 | grep -q pg_dump").c_str()), 0);
+  RemoveDb(src);
+  RemoveDb(out);
+}
+
+}  // namespace
+}  // namespace fluxcal::pipeline
