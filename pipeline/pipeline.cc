@@ -80,7 +80,8 @@ absl::StatusOr<fit::FitData> FitDataFromSet(const io::RecordingSet& set, const i
 
 absl::StatusOr<int64_t> IngestHfRun(storage::Store& store, const std::string& serial, const std::string& station,
                                     const std::optional<MotorNominal>& motor,
-                                    const std::vector<IdentifiedPoint>& points, int rejected) {
+                                    const std::vector<IdentifiedPoint>& points, int rejected,
+                                    const std::string& idempotency_key, bool* replayed) {
   storage::MotorRow m{serial, 4, 0.0, 0.0, ""};
   if (motor) {
     m.pole_pairs = motor->pole_pairs; m.rs_ohm = motor->rs_ohm; m.psi_pm_wb = motor->psi_pm_wb;
@@ -95,11 +96,12 @@ absl::StatusOr<int64_t> IngestHfRun(storage::Store& store, const std::string& se
   if (points.empty()) {
     return absl::InvalidArgumentError(absl::StrCat("points: no valid point in the stream (", rejected, " rejected)"));
   }
-  return store.IngestHfRun(m, station, "hf_run", points);
+  return store.IngestHfRun(m, station, "hf_run", points, "", {}, 0, idempotency_key, replayed);
 }
 
 absl::StatusOr<IngestRecordingResult> IngestRecording(storage::Store& store, const std::string& serial,
-                                                      const std::string& station, const io::RecordingFiles& files) {
+                                                      const std::string& station, const io::RecordingFiles& files,
+                                                      const std::string& idempotency_key) {
   auto set = io::ReadRecordingSetFromFiles(files, "");
   if (!set.ok()) return absl::InvalidArgumentError(std::string(set.status().message()));
   // Files the manifest does not name are junk: refuse rather than store them.
@@ -129,7 +131,7 @@ absl::StatusOr<IngestRecordingResult> IngestRecording(storage::Store& store, con
   const auto& mm = set->manifest.motor;
   storage::MotorRow motor{serial, mm.pole_pairs, mm.rs_ohm.value_or(0.0), mm.psi_pm_wb.value_or(0.0), ""};
   auto run = store.IngestHfRun(motor, station, "recording", ids->points, out.sha256, *z,
-                               static_cast<int64_t>(archive.size()));
+                               static_cast<int64_t>(archive.size()), idempotency_key, &out.replayed);
   if (!run.ok()) return run.status();
   out.run_id = *run;
   out.points = static_cast<int>(ids->points.size());

@@ -29,20 +29,23 @@ struct MotorNominal {
 // known (InvalidArgument otherwise); no point at all is InvalidArgument.
 absl::StatusOr<int64_t> IngestHfRun(storage::Store& store, const std::string& serial, const std::string& station,
                                     const std::optional<MotorNominal>& motor,
-                                    const std::vector<IdentifiedPoint>& points, int rejected = 0);
+                                    const std::vector<IdentifiedPoint>& points, int rejected = 0,
+                                    const std::string& idempotency_key = "", bool* replayed = nullptr);
 
 struct IngestRecordingResult {
   int64_t run_id = 0;
   int points = 0;
   std::string sha256;
   int64_t recording_bytes = 0, stored_bytes = 0;
+  bool replayed = false;   // the idempotency key named a run stored before
 };
 // A recording set held in memory (never written to disk): validated with
 // the same reader as `fluxcal`, every file named by the manifest, serial
 // equal to `serial`; identified (lsq); points stored with the archived,
 // compressed set keyed by its SHA-256. Bad input is InvalidArgument.
 absl::StatusOr<IngestRecordingResult> IngestRecording(storage::Store& store, const std::string& serial,
-                                                      const std::string& station, const io::RecordingFiles& files);
+                                                      const std::string& station, const io::RecordingFiles& files,
+                                                      const std::string& idempotency_key = "");
 
 // --- Fit and judge.
 struct FitTolerances {

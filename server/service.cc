@@ -84,7 +84,7 @@ grpc::Status CalibrationServiceImpl::IngestHfResults(grpc::ServerContext* ctx,
   auto who = auth_->Authorize(*ctx, Rpc::kIngestHfResults);
   if (!who.ok()) return ToGrpcStatus(who.status());
   v1::IngestHfResultsRequest msg;
-  std::string serial, station;
+  std::string serial, station, key;
   v1::MotorInfo motor;
   bool have_motor = false;
   std::vector<pipeline::IdentifiedPoint> rows;
@@ -96,6 +96,8 @@ grpc::Status CalibrationServiceImpl::IngestHfResults(grpc::ServerContext* ctx,
       if (auto s = ValidateSerial(msg.serial()); !s.ok()) return ToGrpcStatus(s);
       if (auto s = ValidateIdentifier(msg.station_id(), "station_id"); !s.ok()) return ToGrpcStatus(s);
       if (auto s = StationOf(*who, msg.station_id(), &station); !s.ok()) return ToGrpcStatus(s);
+      if (auto s = ValidateIdentifier(msg.idempotency_key(), "idempotency_key"); !s.ok()) return ToGrpcStatus(s);
+      key = msg.idempotency_key();
       serial = msg.serial();
     } else if (!msg.serial().empty() && msg.serial() != serial) {
       return ToGrpcStatus(absl::InvalidArgumentError(
@@ -142,11 +144,13 @@ grpc::Status CalibrationServiceImpl::IngestHfResults(grpc::ServerContext* ctx,
   }
   std::optional<pipeline::MotorNominal> m;
   if (have_motor) m = pipeline::MotorNominal{motor.pole_pairs(), motor.rs_ohm(), motor.psi_pm_wb()};
-  auto run = pipeline::IngestHfRun(*store_, serial, station, m, rows, response->rejects_size());
+  bool replayed = false;
+  auto run = pipeline::IngestHfRun(*store_, serial, station, m, rows, response->rejects_size(), key, &replayed);
   if (!run.ok()) return ToGrpcStatus(run.status());
   response->set_serial(serial);
   response->set_run_id(*run);
   response->set_accepted(static_cast<int>(rows.size()));
+  response->set_replayed(replayed);
   return grpc::Status::OK;
 }
 
@@ -158,7 +162,7 @@ grpc::Status CalibrationServiceImpl::IngestRecording(grpc::ServerContext* ctx,
   // The set is assembled, validated and identified in memory: a file name
   // from the client never becomes a path on this machine.
   v1::RecordingChunk chunk;
-  std::string serial, station;
+  std::string serial, station, key;
   io::RecordingFiles files;
   long long total = 0;
   int index = 0;
@@ -168,6 +172,10 @@ grpc::Status CalibrationServiceImpl::IngestRecording(grpc::ServerContext* ctx,
       if (auto s = ValidateSerial(chunk.serial(), field + ".serial"); !s.ok()) return ToGrpcStatus(s);
       if (auto s = ValidateIdentifier(chunk.station_id(), field + ".station_id"); !s.ok()) return ToGrpcStatus(s);
       if (auto s = StationOf(*who, chunk.station_id(), &station); !s.ok()) return ToGrpcStatus(s);
+      if (auto s = ValidateIdentifier(chunk.idempotency_key(), field + ".idempotency_key"); !s.ok()) {
+        return ToGrpcStatus(s);
+      }
+      key = chunk.idempotency_key();
       serial = chunk.serial();
     } else if (!chunk.serial().empty() && chunk.serial() != serial) {
       return ToGrpcStatus(absl::InvalidArgumentError(
@@ -194,7 +202,7 @@ grpc::Status CalibrationServiceImpl::IngestRecording(grpc::ServerContext* ctx,
   }
   if (serial.empty()) return ToGrpcStatus(absl::InvalidArgumentError("serial: the stream carried no chunk"));
   if (ctx->IsCancelled()) return grpc::Status(grpc::StatusCode::CANCELLED, "client cancelled the stream");
-  auto run = pipeline::IngestRecording(*store_, serial, station, files);
+  auto run = pipeline::IngestRecording(*store_, serial, station, files, key);
   if (!run.ok()) return ToGrpcStatus(run.status());
   response->set_serial(serial);
   response->set_run_id(run->run_id);
@@ -202,6 +210,7 @@ grpc::Status CalibrationServiceImpl::IngestRecording(grpc::ServerContext* ctx,
   response->set_recording_sha256(run->sha256);
   response->set_recording_bytes(run->recording_bytes);
   response->set_stored_bytes(run->stored_bytes);
+  response->set_replayed(run->replayed);
   return grpc::Status::OK;
 }
 

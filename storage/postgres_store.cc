@@ -67,6 +67,12 @@ CREATE TRIGGER calibrations_no_truncate BEFORE TRUNCATE ON calibrations
   FOR EACH STATEMENT EXECUTE FUNCTION fluxcal_calibrations_immutable();
 CREATE INDEX calibrations_by_verdict ON calibrations(verdict);
 )sql",
+    // v3: idempotency keys on runs: a retried ingest with the same key
+    // returns the first run instead of storing a second one.
+    R"sql(
+ALTER TABLE runs ADD COLUMN idempotency_key TEXT;
+CREATE UNIQUE INDEX runs_idempotency ON runs(serial, idempotency_key) WHERE idempotency_key IS NOT NULL;
+)sql",
 };
 
 // Any constant: the advisory lock that serialises migrations across servers.
@@ -320,9 +326,11 @@ absl::StatusOr<int> PostgresStore::SchemaVersion() {
 absl::StatusOr<int64_t> PostgresStore::IngestHfRun(const MotorRow& m, const std::string& station,
                                                    const std::string& kind, const std::vector<HfPointRow>& points,
                                                    const std::string& sha, const std::vector<uint8_t>& blob,
-                                                   int64_t recording_bytes) {
+                                                   int64_t recording_bytes, const std::string& key, bool* replayed) {
   int64_t run_id = 0;
+  if (replayed != nullptr) *replayed = false;
   auto st = WithTransaction([&](PGconn* c) -> absl::Status {
+    if (replayed != nullptr) *replayed = false;
     if (auto r = Exec(c,
                       "INSERT INTO motors (serial, pole_pairs, rs_ohm, psi_pm_wb, created_utc) VALUES ($1,$2,$3,$4,$5) "
                       "ON CONFLICT (serial) DO UPDATE SET pole_pairs = EXCLUDED.pole_pairs, rs_ohm = EXCLUDED.rs_ohm, "
@@ -330,6 +338,17 @@ absl::StatusOr<int64_t> PostgresStore::IngestHfRun(const MotorRow& m, const std:
                       {T(m.serial), I(m.pole_pairs), D(m.rs_ohm), D(m.psi_pm_wb), T(NowUtc())});
         !r.ok()) {
       return r.status();
+    }
+    // The upsert above holds the motor row's lock until commit, so ingests
+    // of one serial are serialised and a retry sees the first run.
+    if (!key.empty()) {
+      auto q = Exec(c, "SELECT run_id FROM runs WHERE serial = $1 AND idempotency_key = $2", {T(m.serial), T(key)});
+      if (!q.ok()) return q.status();
+      if (PQntuples(q->get()) > 0) {
+        run_id = Int(q->get(), 0, 0);
+        if (replayed != nullptr) *replayed = true;
+        return absl::OkStatus();
+      }
     }
     if (!sha.empty()) {
       if (auto r = Exec(c,
@@ -341,9 +360,10 @@ absl::StatusOr<int64_t> PostgresStore::IngestHfRun(const MotorRow& m, const std:
       }
     }
     auto run = Exec(c,
-                    "INSERT INTO runs (serial, station, kind, recording_sha256, created_utc) VALUES ($1,$2,$3,$4,$5) "
-                    "RETURNING run_id",
-                    {T(m.serial), T(station), T(kind), sha.empty() ? Null() : T(sha), T(NowUtc())});
+                    "INSERT INTO runs (serial, station, kind, recording_sha256, created_utc, idempotency_key) "
+                    "VALUES ($1,$2,$3,$4,$5,$6) RETURNING run_id",
+                    {T(m.serial), T(station), T(kind), sha.empty() ? Null() : T(sha), T(NowUtc()),
+                     key.empty() ? Null() : T(key)});
     if (!run.ok()) return run.status();
     run_id = Int(run->get(), 0, 0);
     return CopyPoints(c, run_id, points);

@@ -56,6 +56,12 @@ CREATE TRIGGER calibrations_no_delete BEFORE DELETE ON calibrations
   BEGIN SELECT RAISE(ABORT, 'calibration versions are immutable'); END;
 CREATE INDEX calibrations_by_verdict ON calibrations(verdict);
 )sql",
+    // v3: idempotency keys on runs: a retried ingest with the same key
+    // returns the first run instead of storing a second one.
+    R"sql(
+ALTER TABLE runs ADD COLUMN idempotency_key TEXT;
+CREATE UNIQUE INDEX runs_idempotency ON runs(serial, idempotency_key) WHERE idempotency_key IS NOT NULL;
+)sql",
 };
 
 }  // namespace
@@ -104,10 +110,24 @@ absl::StatusOr<int> SqliteStore::SchemaVersion() {
 
 absl::StatusOr<int64_t> SqliteStore::IngestHfRun(const MotorRow& m, const std::string& station, const std::string& kind,
                                            const std::vector<HfPointRow>& points, const std::string& sha,
-                                           const std::vector<uint8_t>& blob, int64_t recording_bytes) {
+                                           const std::vector<uint8_t>& blob, int64_t recording_bytes,
+                                           const std::string& key, bool* replayed) {
   std::lock_guard<std::mutex> lock(write_mu_);
   int64_t run_id = 0;
+  if (replayed != nullptr) *replayed = false;
   auto st = writer_->Transaction([&]() -> absl::Status {
+    if (!key.empty()) {
+      auto q = writer_->Prepare("SELECT run_id FROM runs WHERE serial = ? AND idempotency_key = ?");
+      if (!q.ok()) return q.status();
+      if (auto s = q->BindAll({m.serial, key}); !s.ok()) return s;
+      auto r = q->Step();
+      if (!r.ok()) return r.status();
+      if (*r) {
+        run_id = q->Int(0);
+        if (replayed != nullptr) *replayed = true;
+        return absl::OkStatus();
+      }
+    }
     auto up = writer_->Prepare(
         "INSERT INTO motors (serial, pole_pairs, rs_ohm, psi_pm_wb, created_utc) VALUES (?,?,?,?,?) "
         "ON CONFLICT(serial) DO UPDATE SET pole_pairs = excluded.pole_pairs, rs_ohm = excluded.rs_ohm, "
@@ -121,9 +141,14 @@ absl::StatusOr<int64_t> SqliteStore::IngestHfRun(const MotorRow& m, const std::s
       if (auto s = rec->BindAll({sha, recording_bytes, blob}); !s.ok()) return s;
       if (auto r = rec->Step(); !r.ok()) return r.status();
     }
-    auto run = writer_->Prepare("INSERT INTO runs (serial, station, kind, recording_sha256, created_utc) VALUES (?,?,?,?,?)");
+    auto run = writer_->Prepare(
+        "INSERT INTO runs (serial, station, kind, recording_sha256, created_utc, idempotency_key) VALUES (?,?,?,?,?,?)");
     if (!run.ok()) return run.status();
-    if (auto s = run->BindAll({m.serial, station, kind, sha.empty() ? SqlValue(nullptr) : SqlValue(sha), NowUtc()}); !s.ok()) return s;
+    if (auto s = run->BindAll({m.serial, station, kind, sha.empty() ? SqlValue(nullptr) : SqlValue(sha), NowUtc(),
+                               key.empty() ? SqlValue(nullptr) : SqlValue(key)});
+        !s.ok()) {
+      return s;
+    }
     if (auto r = run->Step(); !r.ok()) return r.status();
     run_id = writer_->LastInsertRowId();
     return InsertPointsLocked(run_id, points);

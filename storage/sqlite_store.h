@@ -25,7 +25,8 @@ class SqliteStore final : public Store {
   absl::StatusOr<int64_t> IngestHfRun(const MotorRow& motor, const std::string& station, const std::string& kind,
                                       const std::vector<HfPointRow>& points, const std::string& recording_sha256,
                                       const std::vector<uint8_t>& recording_compressed,
-                                      int64_t recording_bytes) override;
+                                      int64_t recording_bytes, const std::string& idempotency_key = "",
+                                      bool* replayed = nullptr) override;
   absl::StatusOr<MotorRow> GetMotor(const std::string& serial) override;
   absl::StatusOr<std::vector<HfPointRow>> LatestRunPoints(const std::string& serial, int64_t* run_id) override;
   absl::StatusOr<int> AddCalibration(const CalibrationRow& row) override;

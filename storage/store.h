@@ -28,7 +28,7 @@
 
 namespace fluxcal::storage {
 
-inline constexpr int kSchemaVersion = 2;
+inline constexpr int kSchemaVersion = 3;
 
 struct MotorRow {
   std::string serial;
@@ -91,12 +91,16 @@ class Store {
   virtual absl::StatusOr<int> SchemaVersion() = 0;
 
   // One transaction: upserts the motor, stores the recording (if any, by
-  // content hash), creates a run, inserts all points.
+  // content hash), creates a run, inserts all points. With a non-empty
+  // idempotency key a run already stored for (serial, key) is returned as
+  // is (*replayed = true) and nothing is written: a client's retry after a
+  // lost reply creates no duplicate.
   virtual absl::StatusOr<int64_t> IngestHfRun(const MotorRow& motor, const std::string& station,
                                               const std::string& kind, const std::vector<HfPointRow>& points,
                                               const std::string& recording_sha256 = "",
                                               const std::vector<uint8_t>& recording_compressed = {},
-                                              int64_t recording_bytes = 0) = 0;
+                                              int64_t recording_bytes = 0, const std::string& idempotency_key = "",
+                                              bool* replayed = nullptr) = 0;
 
   virtual absl::StatusOr<MotorRow> GetMotor(const std::string& serial) = 0;
   // Points of the serial's latest run (and its id).

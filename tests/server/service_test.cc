@@ -87,11 +87,12 @@ class ServiceTest : public ::testing::TestWithParam<bool> {
     for (auto sfx : {"", "-wal", "-shm"}) fs::remove(db_ + sfx);
   }
   grpc::Status Ingest(const std::string& serial, const std::vector<v1::HfPoint>& pts,
-                      v1::IngestHfResultsResponse* resp, bool with_motor = true) {
+                      v1::IngestHfResultsResponse* resp, bool with_motor = true, const std::string& key = "") {
     grpc::ClientContext ctx;
     auto w = stub_->IngestHfResults(&ctx, resp);
     v1::IngestHfResultsRequest first;
     first.set_serial(serial);
+    first.set_idempotency_key(key);
     if (with_motor) {
       first.mutable_motor()->set_pole_pairs(4);
       first.mutable_motor()->set_rs_ohm(0.011);
@@ -180,6 +181,27 @@ TEST_P(ServiceTest, PointValidationRules) {
   for (auto& p : pts) p.set_ld_h(-1);
   v1::IngestHfResultsResponse r;
   ExpectStatus(Ingest("IPM-V", pts, &r), grpc::StatusCode::INVALID_ARGUMENT, "no valid point");
+}
+
+// A retry with the same idempotency key (the reply was lost, the client
+// sends the run again) returns the first run and stores nothing new; another
+// key is another run.
+TEST_P(ServiceTest, RetriedIngestWithTheSameKeyCreatesNoDuplicate) {
+  v1::IngestHfResultsResponse a, b, c;
+  ASSERT_TRUE(Ingest("IPM-IDEM", GridPoints(), &a, true, "eol-7/run-0042").ok());
+  EXPECT_FALSE(a.replayed());
+  ASSERT_TRUE(Ingest("IPM-IDEM", GridPoints(), &b, true, "eol-7/run-0042").ok());
+  EXPECT_TRUE(b.replayed());
+  EXPECT_EQ(b.run_id(), a.run_id());
+  ASSERT_TRUE(Ingest("IPM-IDEM", GridPoints(), &c, true, "eol-7/run-0043").ok());
+  EXPECT_FALSE(c.replayed());
+  EXPECT_NE(c.run_id(), a.run_id());
+  auto hist = store_->History("IPM-IDEM");
+  ASSERT_TRUE(hist.ok());
+  EXPECT_EQ(hist->size(), 2u);   // two runs, not three
+  v1::IngestHfResultsResponse d;
+  const grpc::Status bad = Ingest("IPM-IDEM", GridPoints(), &d, true, "key\nwith newline");
+  EXPECT_EQ(bad.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << bad.error_message();
 }
 
 TEST_P(ServiceTest, UnknownSerialIsNotFound) {
