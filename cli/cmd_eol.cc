@@ -3,6 +3,7 @@
 // The EOL station flow: identify every point locally, stream the results
 // for the serial, ask for a fit and its verdict, fetch the ECU tables.
 #include <chrono>
+#include <thread>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -13,6 +14,7 @@
 #include "cli/args.h"
 #include "cli/command.h"
 #include "cli/support_remote.h"
+#include "tables/sha256.h"
 #include "pipeline/points.h"
 #include "io/csv.h"
 #include "io/recording_set.h"
@@ -46,27 +48,45 @@ int RunEol(const std::vector<std::string>& argv) {
   // while the motor is on the bench).
   v1::IngestHfResultsResponse ing;
   {
-    grpc::ClientContext ctx;
-    ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
-    auto writer = stub->IngestHfResults(&ctx, &ing);
-    bool first = true;
     for (const auto& f : ids->failures) std::fprintf(stderr, "eol %s: point not identified: %s\n", serial.c_str(), f.c_str());
+    std::vector<v1::IngestHfResultsRequest> msgs;
+    std::string content;
     for (const auto& r : ids->points) {
       v1::IngestHfResultsRequest m;
-      if (first) {
-        m.set_serial(serial);
-        m.set_station_id(args->Get("station").value_or("eol"));
-        auto* mo = m.mutable_motor();
-        mo->set_pole_pairs(set->manifest.motor.pole_pairs);
-        mo->set_rs_ohm(set->manifest.motor.rs_ohm.value_or(0));
-        mo->set_psi_pm_wb(set->manifest.motor.psi_pm_wb.value_or(0));
-        first = false;
-      }
       *m.add_points() = pipeline::ToProto(r);
-      if (!writer->Write(m)) break;
+      m.AppendToString(&content);
+      msgs.push_back(std::move(m));
     }
-    writer->WritesDone();
-    auto s = writer->Finish();
+    if (msgs.empty()) msgs.emplace_back();
+    auto& first = msgs.front();
+    first.set_serial(serial);
+    first.set_station_id(args->Get("station").value_or("eol"));
+    auto* mo = first.mutable_motor();
+    mo->set_pole_pairs(set->manifest.motor.pole_pairs);
+    mo->set_rs_ohm(set->manifest.motor.rs_ohm.value_or(0));
+    mo->set_psi_pm_wb(set->manifest.motor.psi_pm_wb.value_or(0));
+    // The run's idempotency key is its content: a retry after a lost reply
+    // (UNAVAILABLE, DEADLINE_EXCEEDED) stores nothing twice.
+    first.set_idempotency_key("eol-" + tables::Sha256Hex(content).substr(0, 40));
+    grpc::Status s;
+    for (int attempt = 0; attempt < 3; ++attempt) {
+      if (attempt > 0) {
+        std::fprintf(stderr, "eol %s: %s; retrying the same run\n", serial.c_str(), s.error_message().c_str());
+        std::this_thread::sleep_for(std::chrono::milliseconds(500 << attempt));
+      }
+      grpc::ClientContext ctx;
+      ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
+      auto writer = stub->IngestHfResults(&ctx, &ing);
+      // One message per point, as a station does while the motor is on the bench.
+      for (const auto& m : msgs) {
+        if (!writer->Write(m)) break;
+      }
+      writer->WritesDone();
+      s = writer->Finish();
+      if (s.error_code() != grpc::StatusCode::UNAVAILABLE && s.error_code() != grpc::StatusCode::DEADLINE_EXCEEDED) {
+        break;
+      }
+    }
     if (!s.ok()) return ReportRpcError("eol", s);
   }
   std::fprintf(stderr, "eol %s: %d points stored (run %lld, %d rejected); fitting\n", serial.c_str(), ing.accepted(),
