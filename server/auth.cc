@@ -56,6 +56,7 @@ std::string_view RpcName(Rpc r) {
     case Rpc::kExportTable: return "ExportTable";
     case Rpc::kFleetStatistics: return "FleetStatistics";
     case Rpc::kDiagnose: return "Diagnose";
+    case Rpc::kRelease: return "Release";
   }
   return "?";
 }
@@ -79,6 +80,8 @@ bool RoleMayCall(Role role, Rpc rpc) {
     case Rpc::kFleetStatistics:
     case Rpc::kDiagnose:
       return role == Role::kEngineer;
+    case Rpc::kRelease:
+      return role == Role::kRelease;
   }
   return false;
 }

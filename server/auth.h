@@ -8,8 +8,8 @@
 //
 // Roles and what they may call (docs/service.md, "Roles"):
 //   station   ingest HF results and recordings (as itself), fit, fetch tables
-//   release   read, query, fetch tables (and, with release states, approve)
-//   flasher   fetch tables only
+//   release   read, query, fetch tables, release a passing calibration
+//   flasher   fetch released tables only
 //   engineer  read, query, history, fleet statistics, diagnose, fit
 //   admin     everything
 // Without a keys file the service runs open (every caller is "local" with
@@ -37,11 +37,12 @@ std::optional<Role> ParseRole(std::string_view name);
 
 enum class Rpc {
   kIngestHfResults, kIngestRecording, kFit, kGetCalibration, kListMotors, kHistory,
-  kQueryFlux, kExportTable, kFleetStatistics, kDiagnose,
+  kQueryFlux, kExportTable, kFleetStatistics, kDiagnose, kRelease,
 };
 inline constexpr Rpc kAllRpcs[] = {Rpc::kIngestHfResults, Rpc::kIngestRecording, Rpc::kFit, Rpc::kGetCalibration,
                                    Rpc::kListMotors,      Rpc::kHistory,         Rpc::kQueryFlux,
-                                   Rpc::kExportTable,     Rpc::kFleetStatistics, Rpc::kDiagnose};
+                                   Rpc::kExportTable,     Rpc::kFleetStatistics, Rpc::kDiagnose,
+                                   Rpc::kRelease};
 std::string_view RpcName(Rpc r);
 // The permission table above, in one place.
 bool RoleMayCall(Role role, Rpc rpc);

@@ -352,7 +352,25 @@ grpc::Status CalibrationServiceImpl::ExportTable(grpc::ServerContext* ctx, const
     return ToGrpcStatus(absl::InvalidArgumentError("i_max_a: must be in (0, 10000] (0: measured limit)"));
   }
   if (!(lim.udc_v > 0 && lim.udc_v <= 5000)) return ToGrpcStatus(absl::InvalidArgumentError("udc_v: must be in (0, 5000]"));
-  auto r = pipeline::ExportTable(*store_, req->serial(), req->version(), spec, lim,
+  // Flashers get released calibrations only: version 0 is the newest
+  // released one, an explicit version must be released.
+  int version = req->version();
+  if (who->role == Role::kFlasher) {
+    if (version == 0) {
+      auto v = store_->LatestReleasedVersion(req->serial());
+      if (!v.ok()) return ToGrpcStatus(v.status());
+      if (*v == 0) {
+        return ToGrpcStatus(absl::FailedPreconditionError(
+            absl::StrCat("serial '", req->serial(), "' has no released calibration (fluxcal release)")));
+      }
+      version = *v;
+    } else if (auto rel = store_->IsReleased(req->serial(), version); !rel.ok() || !*rel) {
+      return ToGrpcStatus(rel.ok() ? absl::FailedPreconditionError(absl::StrCat(
+                                         "version ", version, " of '", req->serial(), "' is not released for flashing"))
+                                   : rel.status());
+    }
+  }
+  auto r = pipeline::ExportTable(*store_, req->serial(), version, spec, lim,
                                 req->format().empty() ? "csv" : req->format());
   if (!r.ok()) return ToGrpcStatus(r.status());
   resp->set_serial(req->serial());
@@ -361,6 +379,8 @@ grpc::Status CalibrationServiceImpl::ExportTable(grpc::ServerContext* ctx, const
   resp->set_crc32(absl::StrFormat("%08x", r->exported.crc32));
   resp->set_sha256(r->exported.sha256);
   resp->set_clamped_cells(r->clamped_cells);
+  if (auto cal = store_->GetCalibration(req->serial(), r->version); cal.ok()) resp->set_verdict(cal->verdict);
+  if (auto rel = store_->IsReleased(req->serial(), r->version); rel.ok()) resp->set_released(*rel);
   if (!signing_key_pem_.empty()) {
     auto sig = tables::SignDetached(r->exported.bytes, signing_key_pem_);
     if (!sig.ok()) return ToGrpcStatus(sig.status());
@@ -412,6 +432,21 @@ grpc::Status CalibrationServiceImpl::Diagnose(grpc::ServerContext* ctx, const v1
   resp->set_verdict(rep->verdict);
   resp->set_report_json(diag::ToJson(*rep).dump(-1, ' ', false, nlohmann::json::error_handler_t::replace));
   for (const auto& f : rep->findings) resp->add_effects(f.effect);
+  return grpc::Status::OK;
+}
+
+grpc::Status CalibrationServiceImpl::Release(grpc::ServerContext* ctx, const v1::ReleaseRequest* req,
+                                             v1::ReleaseResponse* resp) {
+  auto who = auth_->Authorize(*ctx, Rpc::kRelease);
+  if (!who.ok()) return ToGrpcStatus(who.status());
+  if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
+  if (req->version() <= 0) {
+    return ToGrpcStatus(absl::InvalidArgumentError("version: a release names the version it approves (> 0)"));
+  }
+  if (auto s = store_->Release(req->serial(), req->version(), who->name); !s.ok()) return ToGrpcStatus(s);
+  resp->set_serial(req->serial());
+  resp->set_version(req->version());
+  resp->set_released_by(who->name);
   return grpc::Status::OK;
 }
 

@@ -49,6 +49,7 @@ class CalibrationServiceImpl final : public fluxcal::v1::CalibrationService::Ser
   grpc::Status FleetStatistics(grpc::ServerContext* ctx, const v1::FleetStatisticsRequest* req,
                                v1::FleetStatisticsResponse* resp) override;
   grpc::Status Diagnose(grpc::ServerContext* ctx, const v1::DiagnoseRequest* req, v1::DiagnoseResponse* resp) override;
+  grpc::Status Release(grpc::ServerContext* ctx, const v1::ReleaseRequest* req, v1::ReleaseResponse* resp) override;
 
  private:
   storage::Store* store_;

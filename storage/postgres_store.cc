@@ -73,6 +73,23 @@ CREATE INDEX calibrations_by_verdict ON calibrations(verdict);
 ALTER TABLE runs ADD COLUMN idempotency_key TEXT;
 CREATE UNIQUE INDEX runs_idempotency ON runs(serial, idempotency_key) WHERE idempotency_key IS NOT NULL;
 )sql",
+    // v4: releases. A calibration becomes flashable only by an explicit,
+    // recorded release; rows are insert-only like calibrations.
+    R"sql(
+CREATE TABLE releases (
+  serial TEXT NOT NULL,
+  version INTEGER NOT NULL,
+  released_by TEXT NOT NULL,
+  released_utc TEXT NOT NULL,
+  PRIMARY KEY (serial, version),
+  FOREIGN KEY (serial, version) REFERENCES calibrations(serial, version));
+CREATE FUNCTION releases_immutable() RETURNS trigger LANGUAGE plpgsql AS $$
+  BEGIN RAISE EXCEPTION 'releases are immutable'; END $$;
+CREATE TRIGGER releases_no_update BEFORE UPDATE OR DELETE ON releases
+  FOR EACH ROW EXECUTE FUNCTION releases_immutable();
+CREATE TRIGGER releases_no_truncate BEFORE TRUNCATE ON releases
+  FOR EACH STATEMENT EXECUTE FUNCTION releases_immutable();
+)sql",
 };
 
 // Any constant: the advisory lock that serialises migrations across servers.
@@ -370,6 +387,57 @@ absl::StatusOr<int64_t> PostgresStore::IngestHfRun(const MotorRow& m, const std:
   });
   if (!st.ok()) return st;
   return run_id;
+}
+
+absl::Status PostgresStore::Release(const std::string& serial, int version, const std::string& by) {
+  return WithTransaction([&](PGconn* c) -> absl::Status {
+    // FOR SHARE: the calibration row cannot change anyway (immutable), but
+    // the lock orders concurrent releases of one version.
+    auto q = Exec(c, "SELECT verdict FROM calibrations WHERE serial = $1 AND version = $2 FOR SHARE",
+                  {T(serial), I(version)});
+    if (!q.ok()) return q.status();
+    if (PQntuples(q->get()) == 0) {
+      return absl::NotFoundError(absl::StrCat("serial '", serial, "' has no calibration version ", version));
+    }
+    const std::string verdict = Text(q->get(), 0, 0);
+    if (verdict != "pass") {
+      return absl::FailedPreconditionError(
+          absl::StrCat("version ", version, " of '", serial, "' has verdict '", verdict, "'; only 'pass' can be released"));
+    }
+    auto ins = Exec(c,
+                    "INSERT INTO releases (serial, version, released_by, released_utc) VALUES ($1,$2,$3,$4) "
+                    "ON CONFLICT DO NOTHING RETURNING version",
+                    {T(serial), I(version), T(by), T(NowUtc())});
+    if (!ins.ok()) return ins.status();
+    if (PQntuples(ins->get()) == 0) {
+      return absl::AlreadyExistsError(absl::StrCat("version ", version, " of '", serial, "' is released already"));
+    }
+    return absl::OkStatus();
+  });
+}
+
+absl::StatusOr<int> PostgresStore::LatestReleasedVersion(const std::string& serial) {
+  int v = 0;
+  auto st = WithConn([&](PGconn* c) -> absl::Status {
+    auto q = Exec(c, "SELECT COALESCE(MAX(version), 0) FROM releases WHERE serial = $1", {T(serial)});
+    if (!q.ok()) return q.status();
+    v = static_cast<int>(Int(q->get(), 0, 0));
+    return absl::OkStatus();
+  });
+  if (!st.ok()) return st;
+  return v;
+}
+
+absl::StatusOr<bool> PostgresStore::IsReleased(const std::string& serial, int version) {
+  bool out = false;
+  auto st = WithConn([&](PGconn* c) -> absl::Status {
+    auto q = Exec(c, "SELECT COUNT(*) FROM releases WHERE serial = $1 AND version = $2", {T(serial), I(version)});
+    if (!q.ok()) return q.status();
+    out = Int(q->get(), 0, 0) > 0;
+    return absl::OkStatus();
+  });
+  if (!st.ok()) return st;
+  return out;
 }
 
 absl::StatusOr<MotorRow> PostgresStore::GetMotor(const std::string& serial) {

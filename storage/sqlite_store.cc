@@ -62,6 +62,21 @@ CREATE INDEX calibrations_by_verdict ON calibrations(verdict);
 ALTER TABLE runs ADD COLUMN idempotency_key TEXT;
 CREATE UNIQUE INDEX runs_idempotency ON runs(serial, idempotency_key) WHERE idempotency_key IS NOT NULL;
 )sql",
+    // v4: releases. A calibration becomes flashable only by an explicit,
+    // recorded release; rows are insert-only like calibrations.
+    R"sql(
+CREATE TABLE releases (
+  serial TEXT NOT NULL,
+  version INTEGER NOT NULL,
+  released_by TEXT NOT NULL,
+  released_utc TEXT NOT NULL,
+  PRIMARY KEY (serial, version),
+  FOREIGN KEY (serial, version) REFERENCES calibrations(serial, version));
+CREATE TRIGGER releases_no_update BEFORE UPDATE ON releases
+  BEGIN SELECT RAISE(ABORT, 'releases are immutable'); END;
+CREATE TRIGGER releases_no_delete BEFORE DELETE ON releases
+  BEGIN SELECT RAISE(ABORT, 'releases are immutable'); END;
+)sql",
 };
 
 }  // namespace
@@ -155,6 +170,54 @@ absl::StatusOr<int64_t> SqliteStore::IngestHfRun(const MotorRow& m, const std::s
   });
   if (!st.ok()) return st;
   return run_id;
+}
+
+absl::Status SqliteStore::Release(const std::string& serial, int version, const std::string& by) {
+  std::lock_guard<std::mutex> lock(write_mu_);
+  return writer_->Transaction([&]() -> absl::Status {
+    auto q = writer_->Prepare("SELECT verdict FROM calibrations WHERE serial = ? AND version = ?");
+    if (!q.ok()) return q.status();
+    if (auto s = q->BindAll({serial, int64_t{version}}); !s.ok()) return s;
+    auto r = q->Step();
+    if (!r.ok()) return r.status();
+    if (!*r) return absl::NotFoundError(absl::StrCat("serial '", serial, "' has no calibration version ", version));
+    const std::string verdict = q->Text(0);
+    if (verdict != "pass") {
+      return absl::FailedPreconditionError(
+          absl::StrCat("version ", version, " of '", serial, "' has verdict '", verdict, "'; only 'pass' can be released"));
+    }
+    auto e = writer_->Prepare("SELECT 1 FROM releases WHERE serial = ? AND version = ?");
+    if (!e.ok()) return e.status();
+    if (auto s = e->BindAll({serial, int64_t{version}}); !s.ok()) return s;
+    auto er = e->Step();
+    if (!er.ok()) return er.status();
+    if (*er) return absl::AlreadyExistsError(absl::StrCat("version ", version, " of '", serial, "' is released already"));
+    auto ins = writer_->Prepare("INSERT INTO releases (serial, version, released_by, released_utc) VALUES (?,?,?,?)");
+    if (!ins.ok()) return ins.status();
+    if (auto s = ins->BindAll({serial, int64_t{version}, by, NowUtc()}); !s.ok()) return s;
+    auto ir = ins->Step();
+    return ir.ok() ? absl::OkStatus() : ir.status();
+  });
+}
+
+absl::StatusOr<int> SqliteStore::LatestReleasedVersion(const std::string& serial) {
+  std::lock_guard<std::mutex> lock(write_mu_);
+  auto q = writer_->Prepare("SELECT COALESCE(MAX(version), 0) FROM releases WHERE serial = ?");
+  if (!q.ok()) return q.status();
+  (void)q->Bind(1, serial);
+  auto r = q->Step();
+  if (!r.ok()) return r.status();
+  return static_cast<int>(q->Int(0));
+}
+
+absl::StatusOr<bool> SqliteStore::IsReleased(const std::string& serial, int version) {
+  std::lock_guard<std::mutex> lock(write_mu_);
+  auto q = writer_->Prepare("SELECT COUNT(*) FROM releases WHERE serial = ? AND version = ?");
+  if (!q.ok()) return q.status();
+  if (auto s = q->BindAll({serial, int64_t{version}}); !s.ok()) return s;
+  auto r = q->Step();
+  if (!r.ok()) return r.status();
+  return q->Int(0) > 0;
 }
 
 absl::StatusOr<MotorRow> SqliteStore::GetMotor(const std::string& serial) {

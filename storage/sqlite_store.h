@@ -28,6 +28,9 @@ class SqliteStore final : public Store {
                                       int64_t recording_bytes, const std::string& idempotency_key = "",
                                       bool* replayed = nullptr) override;
   absl::StatusOr<MotorRow> GetMotor(const std::string& serial) override;
+  absl::Status Release(const std::string& serial, int version, const std::string& released_by) override;
+  absl::StatusOr<int> LatestReleasedVersion(const std::string& serial) override;
+  absl::StatusOr<bool> IsReleased(const std::string& serial, int version) override;
   absl::StatusOr<std::vector<HfPointRow>> LatestRunPoints(const std::string& serial, int64_t* run_id) override;
   absl::StatusOr<int> AddCalibration(const CalibrationRow& row) override;
   absl::StatusOr<CalibrationRow> GetCalibration(const std::string& serial, int version) override;

@@ -28,7 +28,7 @@
 
 namespace fluxcal::storage {
 
-inline constexpr int kSchemaVersion = 3;
+inline constexpr int kSchemaVersion = 4;
 
 struct MotorRow {
   std::string serial;
@@ -110,6 +110,15 @@ class Store {
   virtual absl::StatusOr<int> AddCalibration(const CalibrationRow& row) = 0;
   virtual absl::StatusOr<CalibrationRow> GetCalibration(const std::string& serial, int version /*0 latest*/) = 0;
   virtual absl::StatusOr<std::vector<CalibrationRow>> LatestCalibrations() = 0;
+
+  // Releases (immutable rows): a calibration version approved for
+  // flashing. Release: NotFound (no such version), FailedPrecondition (its
+  // verdict is not "pass"), AlreadyExists (released before). The verdict is
+  // checked inside the same transaction as the insert.
+  virtual absl::Status Release(const std::string& serial, int version, const std::string& released_by) = 0;
+  // The newest released version, 0 when none.
+  virtual absl::StatusOr<int> LatestReleasedVersion(const std::string& serial) = 0;
+  virtual absl::StatusOr<bool> IsReleased(const std::string& serial, int version) = 0;
 
   virtual absl::StatusOr<std::vector<MotorSummaryRow>> ListMotors(const std::string& prefix, bool only_failed,
                                                                   int offset, int limit) = 0;

@@ -119,6 +119,10 @@ grpc::Status Call(v1::CalibrationService::Stub* stub, Rpc rpc) {
       v1::FleetStatisticsRequest q; v1::FleetStatisticsResponse r; return stub->FleetStatistics(&ctx, q, &r);
     }
     case Rpc::kDiagnose: { v1::DiagnoseRequest q; q.set_serial("IPM-AUTH-1"); v1::DiagnoseResponse r; return stub->Diagnose(&ctx, q, &r); }
+    case Rpc::kRelease: {
+      v1::ReleaseRequest q; q.set_serial("IPM-AUTH-1"); q.set_version(1); v1::ReleaseResponse r;
+      return stub->Release(&ctx, q, &r);
+    }
   }
   return grpc::Status::CANCELLED;
 }
@@ -259,6 +263,97 @@ TEST(Roles, AStationIngestsAsItselfAndCannotLoosenTheVerdict) {
   const grpc::Status s = stub->Fit(&ctx, q, &r);
   EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
   EXPECT_NE(s.error_message().find("may only tighten the server policy"), std::string::npos) << s.error_message();
+}
+
+// Release and flashing: a failed calibration cannot be released; flashers
+// see nothing before a release and then exactly the released version, even
+// after a newer (unreleased) fit; a station cannot release.
+TEST(Roles, OnlyAReleasedPassingCalibrationIsFlashed) {
+  Fixture f("release");
+  auto as = [&](Role r) {
+    return v1::CalibrationService::NewStub(Channel(f.addr(), grpc::InsecureChannelCredentials(), f.tokens[r]));
+  };
+  auto admin = as(Role::kAdmin), release = as(Role::kRelease), flasher = as(Role::kFlasher), station = as(Role::kStation);
+  // A run of the twin's analytic motor (`scatter` alternates Lqq by that
+  // fraction point to point) and its fit.
+  auto ingest = [&](double scatter) {
+    sim::MotorParams mp;
+    sim::AnalyticMotor m(mp);
+    grpc::ClientContext ctx;
+    v1::IngestHfResultsResponse r;
+    auto w = admin->IngestHfResults(&ctx, &r);
+    v1::IngestHfResultsRequest msg;
+    msg.set_serial("IPM-REL-1");
+    msg.mutable_motor()->set_pole_pairs(4);
+    msg.mutable_motor()->set_psi_pm_wb(mp.sat.psi_pm_wb);
+    for (int a = 0; a < 6; ++a) {
+      for (int b = 0; b < 6; ++b) {
+        auto* p = msg.add_points();
+        p->set_point_id("p" + std::to_string(6 * a + b));
+        p->set_id_a(-100 + 20 * a); p->set_iq_a(20 * b);
+        const auto L = m.Inductance(p->id_a(), p->iq_a());
+        p->set_ld_h(L.ldd_h); p->set_lq_h(L.lqq_h * (1 + ((a + b) % 2 ? scatter : -scatter)));
+        p->set_ldq_h(L.ldq_h);
+        p->set_temperature_c(25); p->set_reliable(true);
+      }
+    }
+    w->Write(msg);
+    w->WritesDone();
+    EXPECT_TRUE(w->Finish().ok());
+  };
+  auto fit = [&](double max_rms) {
+    grpc::ClientContext c;
+    v1::FitRequest q;
+    q.set_serial("IPM-REL-1");
+    q.set_max_rms_relative(max_rms);
+    v1::FitResponse r;
+    EXPECT_TRUE(admin->Fit(&c, q, &r).ok());
+    return r;
+  };
+  auto release_v = [&](v1::CalibrationService::Stub* st, int v) {
+    grpc::ClientContext c;
+    v1::ReleaseRequest q;
+    q.set_serial("IPM-REL-1");
+    q.set_version(v);
+    v1::ReleaseResponse r;
+    return st->Release(&c, q, &r);
+  };
+  auto flash = [&](int v, v1::ExportTableResponse* r) {
+    grpc::ClientContext c;
+    v1::ExportTableRequest q;
+    q.set_serial("IPM-REL-1");
+    q.set_version(v);
+    q.set_points(8);
+    return flasher->ExportTable(&c, q, r);
+  };
+  ingest(0.0);
+  const auto v1r = fit(0);
+  ASSERT_TRUE(v1r.pass());
+  ingest(0.15);                 // a bad run: +-15 % scatter fails the 2 % policy
+  const auto v2r = fit(0);
+  ASSERT_FALSE(v2r.pass()) << v2r.calibration().verdict();
+  v1::ExportTableResponse e;
+  EXPECT_EQ(flash(0, &e).error_code(), grpc::StatusCode::FAILED_PRECONDITION);
+  EXPECT_EQ(release_v(station.get(), 1).error_code(), grpc::StatusCode::PERMISSION_DENIED);
+  EXPECT_EQ(release_v(release.get(), 2).error_code(), grpc::StatusCode::FAILED_PRECONDITION);
+  EXPECT_EQ(release_v(release.get(), 9).error_code(), grpc::StatusCode::NOT_FOUND);
+  ASSERT_TRUE(release_v(release.get(), 1).ok());
+  EXPECT_EQ(release_v(release.get(), 1).error_code(), grpc::StatusCode::ALREADY_EXISTS);
+  ASSERT_TRUE(flash(0, &e).ok());
+  EXPECT_EQ(e.version(), 1);
+  EXPECT_TRUE(e.released());
+  EXPECT_EQ(e.verdict(), "pass");
+  EXPECT_EQ(flash(2, &e).error_code(), grpc::StatusCode::FAILED_PRECONDITION);
+  // An engineer may export any version and sees its state.
+  grpc::ClientContext c;
+  v1::ExportTableRequest q;
+  q.set_serial("IPM-REL-1");
+  q.set_points(8);
+  v1::ExportTableResponse er;
+  ASSERT_TRUE(as(Role::kEngineer)->ExportTable(&c, q, &er).ok());
+  EXPECT_EQ(er.version(), 2);
+  EXPECT_FALSE(er.released());
+  EXPECT_NE(er.verdict(), "pass");
 }
 
 // A throwaway CA, a server certificate for 127.0.0.1 and a client
