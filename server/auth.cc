@@ -57,6 +57,7 @@ std::string_view RpcName(Rpc r) {
     case Rpc::kFleetStatistics: return "FleetStatistics";
     case Rpc::kDiagnose: return "Diagnose";
     case Rpc::kRelease: return "Release";
+    case Rpc::kAudit: return "Audit";
   }
   return "?";
 }
@@ -82,6 +83,8 @@ bool RoleMayCall(Role role, Rpc rpc) {
       return role == Role::kEngineer;
     case Rpc::kRelease:
       return role == Role::kRelease;
+    case Rpc::kAudit:
+      return role == Role::kEngineer || role == Role::kRelease;
   }
   return false;
 }

@@ -151,6 +151,8 @@ grpc::Status CalibrationServiceImpl::IngestHfResults(grpc::ServerContext* ctx,
   response->set_run_id(*run);
   response->set_accepted(static_cast<int>(rows.size()));
   response->set_replayed(replayed);
+  RecordAudit(ctx, *who, Rpc::kIngestHfResults, serial,
+              absl::StrCat(replayed ? "replayed run " : "run ", *run, ", ", rows.size(), " points, station ", station));
   return grpc::Status::OK;
 }
 
@@ -211,6 +213,9 @@ grpc::Status CalibrationServiceImpl::IngestRecording(grpc::ServerContext* ctx,
   response->set_recording_bytes(run->recording_bytes);
   response->set_stored_bytes(run->stored_bytes);
   response->set_replayed(run->replayed);
+  RecordAudit(ctx, *who, Rpc::kIngestRecording, serial,
+              absl::StrCat(run->replayed ? "replayed run " : "run ", run->run_id, ", recording ",
+                           run->sha256.substr(0, 16), ", station ", station));
   return grpc::Status::OK;
 }
 
@@ -236,6 +241,8 @@ grpc::Status CalibrationServiceImpl::Fit(grpc::ServerContext* ctx, const v1::Fit
   if (!row.ok()) return ToGrpcStatus(row.status());
   ToProto(*row, resp->mutable_calibration());
   resp->set_pass(row->verdict == "pass");
+  RecordAudit(ctx, *who, Rpc::kFit, req->serial(),
+              absl::StrCat("version ", row->version, " (", row->model, "): ", row->verdict));
   return grpc::Status::OK;
 }
 
@@ -447,6 +454,44 @@ grpc::Status CalibrationServiceImpl::Release(grpc::ServerContext* ctx, const v1:
   resp->set_serial(req->serial());
   resp->set_version(req->version());
   resp->set_released_by(who->name);
+  RecordAudit(ctx, *who, Rpc::kRelease, req->serial(), absl::StrCat("released version ", req->version()));
+  return grpc::Status::OK;
+}
+
+void CalibrationServiceImpl::RecordAudit(grpc::ServerContext* ctx, const Identity& who, Rpc rpc,
+                                         const std::string& serial, const std::string& detail) {
+  storage::AuditRow a;
+  a.identity = who.name;
+  a.role = std::string(RoleName(who.role));
+  a.peer = ctx->peer().substr(0, 128);
+  const auto& md = ctx->client_metadata();
+  if (auto it = md.find("x-request-id"); it != md.end()) {
+    const std::string id(it->second.data(), it->second.size());
+    if (ValidateIdentifier(id, "x-request-id").ok()) a.request_id = id;
+  }
+  if (a.request_id.empty()) a.request_id = NewToken().value_or("none").substr(0, 16);
+  a.rpc = std::string(RpcName(rpc));
+  a.serial = serial;
+  a.detail = detail;
+  if (auto s = store_->AppendAudit(a); !s.ok()) {
+    std::fprintf(stderr, "fluxcal serve: audit row for %s %s not written: %s\n", a.rpc.c_str(), serial.c_str(),
+                 std::string(s.message()).c_str());
+  }
+}
+
+grpc::Status CalibrationServiceImpl::Audit(grpc::ServerContext* ctx, const v1::AuditRequest* req,
+                                           v1::AuditResponse* resp) {
+  auto who = auth_->Authorize(*ctx, Rpc::kAudit);
+  if (!who.ok()) return ToGrpcStatus(who.status());
+  if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
+  auto rows = store_->AuditOf(req->serial());
+  if (!rows.ok()) return ToGrpcStatus(rows.status());
+  resp->set_serial(req->serial());
+  for (const auto& r : *rows) {
+    auto* e = resp->add_entries();
+    e->set_id(r.id); e->set_utc(r.utc); e->set_identity(r.identity); e->set_role(r.role); e->set_peer(r.peer);
+    e->set_request_id(r.request_id); e->set_rpc(r.rpc); e->set_detail(r.detail);
+  }
   return grpc::Status::OK;
 }
 

@@ -50,8 +50,14 @@ class CalibrationServiceImpl final : public fluxcal::v1::CalibrationService::Ser
                                v1::FleetStatisticsResponse* resp) override;
   grpc::Status Diagnose(grpc::ServerContext* ctx, const v1::DiagnoseRequest* req, v1::DiagnoseResponse* resp) override;
   grpc::Status Release(grpc::ServerContext* ctx, const v1::ReleaseRequest* req, v1::ReleaseResponse* resp) override;
+  grpc::Status Audit(grpc::ServerContext* ctx, const v1::AuditRequest* req, v1::AuditResponse* resp) override;
 
  private:
+  // Appends one audit row for a write that succeeded (after its commit: a
+  // crash in between loses the row, never the write).
+  void RecordAudit(grpc::ServerContext* ctx, const Identity& who, Rpc rpc, const std::string& serial,
+                   const std::string& detail);
+
   storage::Store* store_;
   Authorizer open_;
   const Authorizer* auth_ = &open_;

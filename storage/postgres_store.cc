@@ -90,6 +90,27 @@ CREATE TRIGGER releases_no_update BEFORE UPDATE OR DELETE ON releases
 CREATE TRIGGER releases_no_truncate BEFORE TRUNCATE ON releases
   FOR EACH STATEMENT EXECUTE FUNCTION releases_immutable();
 )sql",
+    // v5: audit trail: who (authenticated identity and role), from where
+    // (peer), when, with which request id, did what to which serial.
+    R"sql(
+CREATE TABLE audit (
+  id BIGSERIAL PRIMARY KEY,
+  utc TEXT NOT NULL,
+  identity TEXT NOT NULL,
+  role TEXT NOT NULL,
+  peer TEXT NOT NULL,
+  request_id TEXT NOT NULL,
+  rpc TEXT NOT NULL,
+  serial TEXT NOT NULL,
+  detail TEXT NOT NULL);
+CREATE INDEX audit_by_serial ON audit(serial, id);
+CREATE FUNCTION audit_append_only() RETURNS trigger LANGUAGE plpgsql AS $$
+  BEGIN RAISE EXCEPTION 'the audit trail is append-only'; END $$;
+CREATE TRIGGER audit_no_update BEFORE UPDATE OR DELETE ON audit
+  FOR EACH ROW EXECUTE FUNCTION audit_append_only();
+CREATE TRIGGER audit_no_truncate BEFORE TRUNCATE ON audit
+  FOR EACH STATEMENT EXECUTE FUNCTION audit_append_only();
+)sql",
 };
 
 // Any constant: the advisory lock that serialises migrations across servers.
@@ -434,6 +455,36 @@ absl::StatusOr<bool> PostgresStore::IsReleased(const std::string& serial, int ve
     auto q = Exec(c, "SELECT COUNT(*) FROM releases WHERE serial = $1 AND version = $2", {T(serial), I(version)});
     if (!q.ok()) return q.status();
     out = Int(q->get(), 0, 0) > 0;
+    return absl::OkStatus();
+  });
+  if (!st.ok()) return st;
+  return out;
+}
+
+absl::Status PostgresStore::AppendAudit(const AuditRow& a) {
+  return WithConn([&](PGconn* c) -> absl::Status {
+    auto r = Exec(c,
+                  "INSERT INTO audit (utc, identity, role, peer, request_id, rpc, serial, detail) "
+                  "VALUES ($1,$2,$3,$4,$5,$6,$7,$8)",
+                  {T(NowUtc()), T(a.identity), T(a.role), T(a.peer), T(a.request_id), T(a.rpc), T(a.serial),
+                   T(a.detail)});
+    return r.ok() ? absl::OkStatus() : r.status();
+  });
+}
+
+absl::StatusOr<std::vector<AuditRow>> PostgresStore::AuditOf(const std::string& serial) {
+  std::vector<AuditRow> out;
+  auto st = WithConn([&](PGconn* c) -> absl::Status {
+    auto q = Exec(c,
+                  "SELECT id, utc, identity, role, peer, request_id, rpc, serial, detail FROM audit "
+                  "WHERE serial = $1 ORDER BY id",
+                  {T(serial)});
+    if (!q.ok()) return q.status();
+    for (int i = 0; i < PQntuples(q->get()); ++i) {
+      const PGresult* r = q->get();
+      out.push_back({Int(r, i, 0), Text(r, i, 1), Text(r, i, 2), Text(r, i, 3), Text(r, i, 4), Text(r, i, 5),
+                     Text(r, i, 6), Text(r, i, 7), Text(r, i, 8)});
+    }
     return absl::OkStatus();
   });
   if (!st.ok()) return st;

@@ -43,6 +43,8 @@ class PostgresStore final : public Store {
   absl::Status Release(const std::string& serial, int version, const std::string& released_by) override;
   absl::StatusOr<int> LatestReleasedVersion(const std::string& serial) override;
   absl::StatusOr<bool> IsReleased(const std::string& serial, int version) override;
+  absl::Status AppendAudit(const AuditRow& row) override;
+  absl::StatusOr<std::vector<AuditRow>> AuditOf(const std::string& serial) override;
   absl::StatusOr<std::vector<HfPointRow>> LatestRunPoints(const std::string& serial, int64_t* run_id) override;
   absl::StatusOr<int> AddCalibration(const CalibrationRow& row) override;
   absl::StatusOr<CalibrationRow> GetCalibration(const std::string& serial, int version) override;

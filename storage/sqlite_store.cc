@@ -77,6 +77,25 @@ CREATE TRIGGER releases_no_update BEFORE UPDATE ON releases
 CREATE TRIGGER releases_no_delete BEFORE DELETE ON releases
   BEGIN SELECT RAISE(ABORT, 'releases are immutable'); END;
 )sql",
+    // v5: audit trail: who (authenticated identity and role), from where
+    // (peer), when, with which request id, did what to which serial.
+    R"sql(
+CREATE TABLE audit (
+  id INTEGER PRIMARY KEY AUTOINCREMENT,
+  utc TEXT NOT NULL,
+  identity TEXT NOT NULL,
+  role TEXT NOT NULL,
+  peer TEXT NOT NULL,
+  request_id TEXT NOT NULL,
+  rpc TEXT NOT NULL,
+  serial TEXT NOT NULL,
+  detail TEXT NOT NULL);
+CREATE INDEX audit_by_serial ON audit(serial, id);
+CREATE TRIGGER audit_no_update BEFORE UPDATE ON audit
+  BEGIN SELECT RAISE(ABORT, 'the audit trail is append-only'); END;
+CREATE TRIGGER audit_no_delete BEFORE DELETE ON audit
+  BEGIN SELECT RAISE(ABORT, 'the audit trail is append-only'); END;
+)sql",
 };
 
 }  // namespace
@@ -218,6 +237,35 @@ absl::StatusOr<bool> SqliteStore::IsReleased(const std::string& serial, int vers
   auto r = q->Step();
   if (!r.ok()) return r.status();
   return q->Int(0) > 0;
+}
+
+absl::Status SqliteStore::AppendAudit(const AuditRow& a) {
+  std::lock_guard<std::mutex> lock(write_mu_);
+  auto q = writer_->Prepare(
+      "INSERT INTO audit (utc, identity, role, peer, request_id, rpc, serial, detail) VALUES (?,?,?,?,?,?,?,?)");
+  if (!q.ok()) return q.status();
+  if (auto s = q->BindAll({NowUtc(), a.identity, a.role, a.peer, a.request_id, a.rpc, a.serial, a.detail}); !s.ok()) {
+    return s;
+  }
+  auto r = q->Step();
+  return r.ok() ? absl::OkStatus() : r.status();
+}
+
+absl::StatusOr<std::vector<AuditRow>> SqliteStore::AuditOf(const std::string& serial) {
+  std::lock_guard<std::mutex> lock(write_mu_);
+  auto q = writer_->Prepare(
+      "SELECT id, utc, identity, role, peer, request_id, rpc, serial, detail FROM audit WHERE serial = ? ORDER BY id");
+  if (!q.ok()) return q.status();
+  (void)q->Bind(1, serial);
+  std::vector<AuditRow> out;
+  while (true) {
+    auto r = q->Step();
+    if (!r.ok()) return r.status();
+    if (!*r) break;
+    out.push_back({q->Int(0), q->Text(1), q->Text(2), q->Text(3), q->Text(4), q->Text(5), q->Text(6), q->Text(7),
+                   q->Text(8)});
+  }
+  return out;
 }
 
 absl::StatusOr<MotorRow> SqliteStore::GetMotor(const std::string& serial) {

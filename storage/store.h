@@ -28,7 +28,7 @@
 
 namespace fluxcal::storage {
 
-inline constexpr int kSchemaVersion = 4;
+inline constexpr int kSchemaVersion = 5;
 
 struct MotorRow {
   std::string serial;
@@ -70,6 +70,12 @@ struct CalibrationRow {
 struct MotorSummaryRow {
   std::string serial, verdict, updated_utc;
   int latest_version = 0, runs = 0;
+};
+
+// One write to the store, as the service saw it (append-only).
+struct AuditRow {
+  int64_t id = 0;
+  std::string utc, identity, role, peer, request_id, rpc, serial, detail;
 };
 
 struct HistoryRow {
@@ -119,6 +125,11 @@ class Store {
   // The newest released version, 0 when none.
   virtual absl::StatusOr<int> LatestReleasedVersion(const std::string& serial) = 0;
   virtual absl::StatusOr<bool> IsReleased(const std::string& serial, int version) = 0;
+
+  // Audit trail (append-only): Append sets utc; AuditOf lists a serial's
+  // rows oldest first.
+  virtual absl::Status AppendAudit(const AuditRow& row) = 0;
+  virtual absl::StatusOr<std::vector<AuditRow>> AuditOf(const std::string& serial) = 0;
 
   virtual absl::StatusOr<std::vector<MotorSummaryRow>> ListMotors(const std::string& prefix, bool only_failed,
                                                                   int offset, int limit) = 0;

@@ -119,6 +119,7 @@ grpc::Status Call(v1::CalibrationService::Stub* stub, Rpc rpc) {
       v1::FleetStatisticsRequest q; v1::FleetStatisticsResponse r; return stub->FleetStatistics(&ctx, q, &r);
     }
     case Rpc::kDiagnose: { v1::DiagnoseRequest q; q.set_serial("IPM-AUTH-1"); v1::DiagnoseResponse r; return stub->Diagnose(&ctx, q, &r); }
+    case Rpc::kAudit: { v1::AuditRequest q; q.set_serial("IPM-AUTH-1"); v1::AuditResponse r; return stub->Audit(&ctx, q, &r); }
     case Rpc::kRelease: {
       v1::ReleaseRequest q; q.set_serial("IPM-AUTH-1"); q.set_version(1); v1::ReleaseResponse r;
       return stub->Release(&ctx, q, &r);
@@ -354,6 +355,60 @@ TEST(Roles, OnlyAReleasedPassingCalibrationIsFlashed) {
   EXPECT_EQ(er.version(), 2);
   EXPECT_FALSE(er.released());
   EXPECT_NE(er.verdict(), "pass");
+  // The audit trail names who did each write, with the client's request id
+  // where it sent one; a flasher may not read it.
+  grpc::ClientContext ac;
+  ac.AddMetadata("x-request-id", "bench-7-0001");
+  v1::AuditRequest aq;
+  aq.set_serial("IPM-REL-1");
+  v1::AuditResponse ar;
+  ASSERT_TRUE(as(Role::kEngineer)->Audit(&ac, aq, &ar).ok());
+  std::vector<std::string> seen;
+  for (const auto& e : ar.entries()) seen.push_back(e.rpc() + ":" + e.identity() + ":" + e.role());
+  EXPECT_EQ(seen, (std::vector<std::string>{"IngestHfResults:admin-1:admin", "Fit:admin-1:admin",
+                                            "IngestHfResults:admin-1:admin", "Fit:admin-1:admin",
+                                            "Release:release-1:release"}));
+  for (const auto& e : ar.entries()) {
+    EXPECT_NE(e.peer().find("127.0.0.1"), std::string::npos) << e.peer();
+    EXPECT_FALSE(e.request_id().empty());
+    EXPECT_FALSE(e.utc().empty());
+  }
+  EXPECT_EQ(ar.entries(4).detail(), "released version 1");
+  grpc::ClientContext fc;
+  v1::AuditResponse fr;
+  EXPECT_EQ(flasher->Audit(&fc, aq, &fr).error_code(), grpc::StatusCode::PERMISSION_DENIED);
+  // The request id a client sends is kept.
+  grpc::ClientContext rc;
+  rc.AddMetadata("x-request-id", "bench-7-0002");
+  v1::ReleaseRequest rq;
+  rq.set_serial("IPM-REL-1");
+  rq.set_version(1);
+  v1::ReleaseResponse rr;
+  EXPECT_EQ(release->Release(&rc, rq, &rr).error_code(), grpc::StatusCode::ALREADY_EXISTS);
+}
+
+TEST(Audit, RequestIdFromTheClientIsKept) {
+  Fixture f("audit-id");
+  auto st = v1::CalibrationService::NewStub(
+      Channel(f.addr(), grpc::InsecureChannelCredentials(), f.tokens[Role::kStation]));
+  grpc::ClientContext ctx;
+  ctx.AddMetadata("x-request-id", "eol-7-run-0042");
+  v1::IngestHfResultsResponse r;
+  auto w = st->IngestHfResults(&ctx, &r);
+  v1::IngestHfResultsRequest m;
+  m.set_serial("IPM-AUD-1");
+  m.mutable_motor()->set_pole_pairs(4);
+  for (const auto& p : SmallGrid()) *m.add_points() = p;
+  w->Write(m);
+  w->WritesDone();
+  ASSERT_TRUE(w->Finish().ok());
+  auto rows = f.store->AuditOf("IPM-AUD-1");
+  ASSERT_TRUE(rows.ok());
+  ASSERT_EQ(rows->size(), 1u);
+  EXPECT_EQ((*rows)[0].request_id, "eol-7-run-0042");
+  EXPECT_EQ((*rows)[0].identity, "station-1");
+  EXPECT_EQ((*rows)[0].role, "station");
+  EXPECT_NE((*rows)[0].detail.find("6 points"), std::string::npos) << (*rows)[0].detail;
 }
 
 // A throwaway CA, a server certificate for 127.0.0.1 and a client

@@ -165,6 +165,52 @@ TEST_P(StoreTest, CalibrationVersionsAreImmutable) {
   EXPECT_FALSE(store_->AddCalibration(c).ok());
 }
 
+// Releases: only a passing version, once, immutable; the audit trail is
+// append-only; idempotency keys return the first run.
+TEST_P(StoreTest, ReleasesAuditAndIdempotency) {
+  bool replayed = true;
+  auto r1 = store_->IngestHfRun({"IPM-R", 4, 0.011, 0.0114, ""}, "st", "hf_run", Points(3), "", {}, 0, "k1", &replayed);
+  ASSERT_TRUE(r1.ok()) << r1.status();
+  EXPECT_FALSE(replayed);
+  auto r2 = store_->IngestHfRun({"IPM-R", 4, 0.011, 0.0114, ""}, "st", "hf_run", Points(5), "", {}, 0, "k1", &replayed);
+  ASSERT_TRUE(r2.ok());
+  EXPECT_TRUE(replayed);
+  EXPECT_EQ(*r2, *r1);
+  int64_t latest = 0;
+  EXPECT_EQ(store_->LatestRunPoints("IPM-R", &latest)->size(), 3u);   // the retry stored nothing
+  CalibrationRow c;
+  c.serial = "IPM-R"; c.model = "analytic"; c.verdict = "pass"; c.calibration_json = "{}";
+  ASSERT_EQ(*store_->AddCalibration(c), 1);
+  c.verdict = "fail: residual";
+  ASSERT_EQ(*store_->AddCalibration(c), 2);
+  EXPECT_EQ(*store_->LatestReleasedVersion("IPM-R"), 0);
+  EXPECT_EQ(store_->Release("IPM-R", 2, "rel").code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_EQ(store_->Release("IPM-R", 7, "rel").code(), absl::StatusCode::kNotFound);
+  ASSERT_TRUE(store_->Release("IPM-R", 1, "rel").ok());
+  EXPECT_EQ(store_->Release("IPM-R", 1, "rel").code(), absl::StatusCode::kAlreadyExists);
+  EXPECT_EQ(*store_->LatestReleasedVersion("IPM-R"), 1);
+  EXPECT_TRUE(*store_->IsReleased("IPM-R", 1));
+  EXPECT_FALSE(*store_->IsReleased("IPM-R", 2));
+  AuditRow a;
+  a.identity = "station-7"; a.role = "station"; a.peer = "ipv4:127.0.0.1:1"; a.request_id = "r1";
+  a.rpc = "Fit"; a.serial = "IPM-R"; a.detail = "version 1";
+  ASSERT_TRUE(store_->AppendAudit(a).ok());
+  a.rpc = "Release";
+  ASSERT_TRUE(store_->AppendAudit(a).ok());
+  auto rows = store_->AuditOf("IPM-R");
+  ASSERT_TRUE(rows.ok());
+  ASSERT_EQ(rows->size(), 2u);
+  EXPECT_EQ((*rows)[0].rpc, "Fit");
+  EXPECT_EQ((*rows)[1].rpc, "Release");
+  EXPECT_FALSE((*rows)[0].utc.empty());
+  if (SeparateConnections()) {
+    EXPECT_FALSE(RawSql("UPDATE audit SET identity = 'someone'"));
+    EXPECT_FALSE(RawSql("DELETE FROM audit"));
+    EXPECT_FALSE(RawSql("DELETE FROM releases"));
+    EXPECT_TRUE(RawSql("SELECT 1 FROM audit"));
+  }
+}
+
 // Writers on separate connections (separate Store objects, as separate
 // server processes have) fit one serial at once: versions 1..N, each once.
 TEST_P(StoreTest, ConcurrentVersionsAreUniqueAndGapFree) {
