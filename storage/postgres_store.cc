@@ -111,6 +111,19 @@ CREATE TRIGGER audit_no_update BEFORE UPDATE OR DELETE ON audit
 CREATE TRIGGER audit_no_truncate BEFORE TRUNCATE ON audit
   FOR EACH STATEMENT EXECUTE FUNCTION audit_append_only();
 )sql",
+    // v6: a hash chain over calibration versions (storage/store.h,
+    // CalibrationRowSha256): editing a stored row, even with the triggers
+    // dropped, is detected by `fluxcal admin verify-db`.
+    R"sql(
+CREATE TABLE calibration_chain (
+  serial TEXT NOT NULL,
+  version INTEGER NOT NULL,
+  prev_sha256 TEXT NOT NULL,
+  row_sha256 TEXT NOT NULL,
+  PRIMARY KEY (serial, version));
+CREATE TRIGGER chain_no_update BEFORE UPDATE OR DELETE ON calibration_chain
+  FOR EACH ROW EXECUTE FUNCTION audit_append_only();
+)sql",
 };
 
 // Any constant: the advisory lock that serialises migrations across servers.
@@ -491,6 +504,21 @@ absl::StatusOr<std::vector<AuditRow>> PostgresStore::AuditOf(const std::string& 
   return out;
 }
 
+absl::StatusOr<std::vector<ChainRow>> PostgresStore::AllChainRows() {
+  std::vector<ChainRow> out;
+  auto st = WithConn([&](PGconn* c) -> absl::Status {
+    auto q = Exec(c, "SELECT serial, version, prev_sha256, row_sha256 FROM calibration_chain ORDER BY serial, version");
+    if (!q.ok()) return q.status();
+    for (int i = 0; i < PQntuples(q->get()); ++i) {
+      out.push_back({Text(q->get(), i, 0), static_cast<int>(Int(q->get(), i, 1)), Text(q->get(), i, 2),
+                     Text(q->get(), i, 3)});
+    }
+    return absl::OkStatus();
+  });
+  if (!st.ok()) return st;
+  return out;
+}
+
 absl::StatusOr<MotorRow> PostgresStore::GetMotor(const std::string& serial) {
   MotorRow m;
   auto st = WithConn([&](PGconn* c) -> absl::Status {
@@ -532,12 +560,22 @@ absl::StatusOr<int> PostgresStore::AddCalibration(const CalibrationRow& cr) {
     auto q = Exec(c, "SELECT COALESCE(MAX(version), 0) FROM calibrations WHERE serial = $1", {T(cr.serial)});
     if (!q.ok()) return q.status();
     version = static_cast<int>(Int(q->get(), 0, 0)) + 1;
+    CalibrationRow row = cr;
+    row.version = version;
+    row.created_utc = NowUtc();
     auto ins = Exec(c,
                     "INSERT INTO calibrations (serial, version, run_id, created_utc, model, psi_pm_wb, rms_relative, "
                     "verdict, calibration_json) VALUES ($1,$2,$3,$4,$5,$6,$7,$8,$9)",
-                    {T(cr.serial), I(version), cr.run_id ? I(cr.run_id) : Null(), T(NowUtc()), T(cr.model),
+                    {T(cr.serial), I(version), cr.run_id ? I(cr.run_id) : Null(), T(row.created_utc), T(cr.model),
                      D(cr.psi_pm_wb), D(cr.rms_relative), T(cr.verdict), T(cr.calibration_json)});
-    return ins.status();
+    if (!ins.ok()) return ins.status();
+    auto prev = Exec(c, "SELECT row_sha256 FROM calibration_chain WHERE serial = $1 ORDER BY version DESC LIMIT 1",
+                     {T(cr.serial)});
+    if (!prev.ok()) return prev.status();
+    const std::string prev_sha = PQntuples(prev->get()) > 0 ? Text(prev->get(), 0, 0) : std::string();
+    auto link = Exec(c, "INSERT INTO calibration_chain (serial, version, prev_sha256, row_sha256) VALUES ($1,$2,$3,$4)",
+                     {T(cr.serial), I(version), T(prev_sha), T(CalibrationRowSha256(prev_sha, row))});
+    return link.status();
   });
   if (!st.ok()) return st;
   return version;

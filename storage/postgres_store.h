@@ -45,6 +45,7 @@ class PostgresStore final : public Store {
   absl::StatusOr<bool> IsReleased(const std::string& serial, int version) override;
   absl::Status AppendAudit(const AuditRow& row) override;
   absl::StatusOr<std::vector<AuditRow>> AuditOf(const std::string& serial) override;
+  absl::StatusOr<std::vector<ChainRow>> AllChainRows() override;
   absl::StatusOr<std::vector<HfPointRow>> LatestRunPoints(const std::string& serial, int64_t* run_id) override;
   absl::StatusOr<int> AddCalibration(const CalibrationRow& row) override;
   absl::StatusOr<CalibrationRow> GetCalibration(const std::string& serial, int version) override;

@@ -96,6 +96,21 @@ CREATE TRIGGER audit_no_update BEFORE UPDATE ON audit
 CREATE TRIGGER audit_no_delete BEFORE DELETE ON audit
   BEGIN SELECT RAISE(ABORT, 'the audit trail is append-only'); END;
 )sql",
+    // v6: a hash chain over calibration versions (storage/store.h,
+    // CalibrationRowSha256): editing a stored row, even with the triggers
+    // dropped, is detected by `fluxcal admin verify-db`.
+    R"sql(
+CREATE TABLE calibration_chain (
+  serial TEXT NOT NULL,
+  version INTEGER NOT NULL,
+  prev_sha256 TEXT NOT NULL,
+  row_sha256 TEXT NOT NULL,
+  PRIMARY KEY (serial, version));
+CREATE TRIGGER chain_no_update BEFORE UPDATE ON calibration_chain
+  BEGIN SELECT RAISE(ABORT, 'the calibration chain is append-only'); END;
+CREATE TRIGGER chain_no_delete BEFORE DELETE ON calibration_chain
+  BEGIN SELECT RAISE(ABORT, 'the calibration chain is append-only'); END;
+)sql",
 };
 
 }  // namespace
@@ -268,6 +283,21 @@ absl::StatusOr<std::vector<AuditRow>> SqliteStore::AuditOf(const std::string& se
   return out;
 }
 
+absl::StatusOr<std::vector<ChainRow>> SqliteStore::AllChainRows() {
+  std::lock_guard<std::mutex> lock(write_mu_);
+  auto q = writer_->Prepare(
+      "SELECT serial, version, prev_sha256, row_sha256 FROM calibration_chain ORDER BY serial, version");
+  if (!q.ok()) return q.status();
+  std::vector<ChainRow> out;
+  while (true) {
+    auto r = q->Step();
+    if (!r.ok()) return r.status();
+    if (!*r) break;
+    out.push_back({q->Text(0), static_cast<int>(q->Int(1)), q->Text(2), q->Text(3)});
+  }
+  return out;
+}
+
 absl::StatusOr<MotorRow> SqliteStore::GetMotor(const std::string& serial) {
   std::lock_guard<std::mutex> lock(write_mu_);
   auto q = writer_->Prepare("SELECT pole_pairs, rs_ohm, psi_pm_wb, created_utc FROM motors WHERE serial = ?");
@@ -299,16 +329,32 @@ absl::StatusOr<int> SqliteStore::AddCalibration(const CalibrationRow& c) {
     (void)q->Bind(1, c.serial);
     if (auto r = q->Step(); !r.ok()) return r.status();
     version = static_cast<int>(q->Int(0)) + 1;
+    CalibrationRow row = c;
+    row.version = version;
+    row.created_utc = NowUtc();
     auto ins = writer_->Prepare(
         "INSERT INTO calibrations (serial, version, run_id, created_utc, model, psi_pm_wb, rms_relative, verdict, "
         "calibration_json) VALUES (?,?,?,?,?,?,?,?,?)");
     if (!ins.ok()) return ins.status();
     if (auto s = ins->BindAll({c.serial, int64_t{version}, c.run_id ? SqlValue(c.run_id) : SqlValue(nullptr),
-                               NowUtc(), c.model, c.psi_pm_wb, c.rms_relative, c.verdict, c.calibration_json});
+                               row.created_utc, c.model, c.psi_pm_wb, c.rms_relative, c.verdict, c.calibration_json});
         !s.ok()) {
       return s;
     }
-    auto r = ins->Step();
+    if (auto r = ins->Step(); !r.ok()) return r.status();
+    auto prev = writer_->Prepare("SELECT row_sha256 FROM calibration_chain WHERE serial = ? ORDER BY version DESC LIMIT 1");
+    if (!prev.ok()) return prev.status();
+    (void)prev->Bind(1, c.serial);
+    auto pr = prev->Step();
+    if (!pr.ok()) return pr.status();
+    const std::string prev_sha = *pr ? prev->Text(0) : std::string();
+    auto link = writer_->Prepare(
+        "INSERT INTO calibration_chain (serial, version, prev_sha256, row_sha256) VALUES (?,?,?,?)");
+    if (!link.ok()) return link.status();
+    if (auto s = link->BindAll({c.serial, int64_t{version}, prev_sha, CalibrationRowSha256(prev_sha, row)}); !s.ok()) {
+      return s;
+    }
+    auto r = link->Step();
     return r.ok() ? absl::OkStatus() : r.status();
   });
   if (!st.ok()) return st;

@@ -1,8 +1,15 @@
 #include "storage/store.h"
 
+#include <openssl/evp.h>
+
+#include <map>
+#include <set>
+
 #include <ctime>
 
 #include "absl/strings/match.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 #include "storage/postgres_store.h"
 #include "storage/sqlite_store.h"
 
@@ -27,6 +34,78 @@ absl::StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& url) {
   auto s = SqliteStore::Open(path);
   if (!s.ok()) return s.status();
   return std::unique_ptr<Store>(std::move(*s));
+}
+
+std::string CalibrationRowSha256(const std::string& prev_sha256, const CalibrationRow& r) {
+  std::string buf;
+  auto put = [&](const std::string& field) { absl::StrAppend(&buf, field.size(), ":", field, ";"); };
+  put(prev_sha256);
+  put(r.serial);
+  put(std::to_string(r.version));
+  put(std::to_string(r.run_id));
+  put(r.created_utc);
+  put(r.model);
+  put(absl::StrFormat("%.17g", r.psi_pm_wb));
+  put(absl::StrFormat("%.17g", r.rms_relative));
+  put(r.verdict);
+  put(r.calibration_json);
+  unsigned char md[EVP_MAX_MD_SIZE];
+  unsigned int n = 0;
+  EVP_Digest(buf.data(), buf.size(), md, &n, EVP_sha256(), nullptr);
+  static constexpr char kHex[] = "0123456789abcdef";
+  std::string out(2 * n, '0');
+  for (unsigned int k = 0; k < n; ++k) {
+    out[2 * k] = kHex[md[k] >> 4];
+    out[2 * k + 1] = kHex[md[k] & 15];
+  }
+  return out;
+}
+
+absl::StatusOr<ChainReport> VerifyCalibrationChain(Store& store) {
+  auto cals = store.AllCalibrations();
+  if (!cals.ok()) return cals.status();
+  auto links = store.AllChainRows();
+  if (!links.ok()) return links.status();
+  std::map<std::pair<std::string, int>, ChainRow> by_key;
+  for (auto& l : *links) by_key[{l.serial, l.version}] = l;
+  ChainReport rep;
+  std::string serial, prev;
+  bool chained_seen = false;
+  std::set<std::pair<std::string, int>> present;
+  for (const auto& c : *cals) {
+    if (c.serial != serial) {
+      serial = c.serial;
+      prev.clear();
+      chained_seen = false;
+    }
+    present.insert({c.serial, c.version});
+    auto it = by_key.find({c.serial, c.version});
+    if (it == by_key.end()) {
+      if (chained_seen) {
+        rep.problems.push_back(absl::StrCat(c.serial, " v", c.version, ": no chain link (row inserted around the store)"));
+      } else {
+        ++rep.unchained;
+      }
+      continue;
+    }
+    chained_seen = true;
+    const ChainRow& l = it->second;
+    if (l.prev_sha256 != prev) {
+      rep.problems.push_back(absl::StrCat(c.serial, " v", c.version, ": chain broken (a version before it was changed or removed)"));
+    }
+    if (CalibrationRowSha256(l.prev_sha256, c) != l.row_sha256) {
+      rep.problems.push_back(absl::StrCat(c.serial, " v", c.version, ": row changed after it was stored"));
+    } else {
+      ++rep.chained;
+    }
+    prev = l.row_sha256;
+  }
+  for (const auto& [key, l] : by_key) {
+    if (!present.count(key)) {
+      rep.problems.push_back(absl::StrCat(key.first, " v", key.second, ": calibration row removed"));
+    }
+  }
+  return rep;
 }
 
 }  // namespace fluxcal::storage

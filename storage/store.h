@@ -28,7 +28,7 @@
 
 namespace fluxcal::storage {
 
-inline constexpr int kSchemaVersion = 5;
+inline constexpr int kSchemaVersion = 6;
 
 struct MotorRow {
   std::string serial;
@@ -76,6 +76,13 @@ struct MotorSummaryRow {
 struct AuditRow {
   int64_t id = 0;
   std::string utc, identity, role, peer, request_id, rpc, serial, detail;
+};
+
+// One link of the per-serial hash chain over calibration versions.
+struct ChainRow {
+  std::string serial;
+  int version = 0;
+  std::string prev_sha256, row_sha256;
 };
 
 struct HistoryRow {
@@ -130,6 +137,8 @@ class Store {
   // rows oldest first.
   virtual absl::Status AppendAudit(const AuditRow& row) = 0;
   virtual absl::StatusOr<std::vector<AuditRow>> AuditOf(const std::string& serial) = 0;
+  // Every chain link, by serial and version.
+  virtual absl::StatusOr<std::vector<ChainRow>> AllChainRows() = 0;
 
   virtual absl::StatusOr<std::vector<MotorSummaryRow>> ListMotors(const std::string& prefix, bool only_failed,
                                                                   int offset, int limit) = 0;
@@ -153,6 +162,20 @@ class Store {
 };
 
 std::string NowUtc();
+
+// The chain hash of a calibration row: SHA-256 (OpenSSL) over `prev_sha256`
+// and every stored field, each length-prefixed, doubles as %.17g. Version 1
+// (or the first version written with schema v6) has prev_sha256 "".
+std::string CalibrationRowSha256(const std::string& prev_sha256, const CalibrationRow& row);
+
+struct ChainReport {
+  int chained = 0;                     // versions whose link checks
+  int unchained = 0;                   // versions stored before the chain existed (schema < 6)
+  std::vector<std::string> problems;   // "IPM-1 v3: row changed after it was stored", ...
+};
+// Recomputes every link: a changed, removed or reordered calibration row
+// shows up as a problem naming serial and version.
+absl::StatusOr<ChainReport> VerifyCalibrationChain(Store& store);
 
 // The migrations of each backend, in order (index k: version k -> k + 1).
 const std::vector<std::string>& SqliteMigrations();

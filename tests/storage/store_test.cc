@@ -211,6 +211,41 @@ TEST_P(StoreTest, ReleasesAuditAndIdempotency) {
   }
 }
 
+// The hash chain over calibration versions: intact after normal use; a
+// verdict edited behind the store's back (triggers dropped) is found with
+// serial and version, and so is a removed version.
+TEST_P(StoreTest, TamperingWithACalibrationIsDetected) {
+  ASSERT_TRUE(store_->IngestHfRun({"IPM-T", 4, 0.011, 0.0114, ""}, "st", "hf_run", Points(3)).ok());
+  CalibrationRow c;
+  c.serial = "IPM-T"; c.model = "spline4"; c.psi_pm_wb = 0.0114 + 1e-17; c.rms_relative = 1.0 / 3.0;
+  c.calibration_json = "{\"params\": [1, 2, 3]}";
+  c.verdict = "pass";
+  ASSERT_TRUE(store_->AddCalibration(c).ok());
+  c.verdict = "fail: fit residual 3 %";
+  ASSERT_TRUE(store_->AddCalibration(c).ok());
+  c.verdict = "pass";
+  ASSERT_TRUE(store_->AddCalibration(c).ok());
+  auto ok = VerifyCalibrationChain(*store_);
+  ASSERT_TRUE(ok.ok()) << ok.status();
+  EXPECT_EQ(ok->chained, 3);
+  EXPECT_TRUE(ok->problems.empty());
+  if (!SeparateConnections()) return;
+  const bool pg = GetParam() == Backend::kPostgres;
+  ASSERT_TRUE(RawSql(pg ? "ALTER TABLE calibrations DISABLE TRIGGER USER" : "DROP TRIGGER calibrations_no_update"));
+  ASSERT_TRUE(RawSql("UPDATE calibrations SET verdict = 'pass' WHERE serial = 'IPM-T' AND version = 2"));
+  auto bad = VerifyCalibrationChain(*store_);
+  ASSERT_TRUE(bad.ok());
+  ASSERT_EQ(bad->problems.size(), 1u);
+  EXPECT_EQ(bad->problems[0], "IPM-T v2: row changed after it was stored");
+  ASSERT_TRUE(RawSql(pg ? "DELETE FROM calibrations WHERE serial = 'IPM-T' AND version = 3"
+                        : "DROP TRIGGER calibrations_no_delete"));
+  if (!pg) ASSERT_TRUE(RawSql("DELETE FROM calibrations WHERE serial = 'IPM-T' AND version = 3"));
+  auto gone = VerifyCalibrationChain(*store_);
+  ASSERT_TRUE(gone.ok());
+  EXPECT_EQ(gone->problems.size(), 2u);
+  EXPECT_EQ(gone->problems.back(), "IPM-T v3: calibration row removed");
+}
+
 // Writers on separate connections (separate Store objects, as separate
 // server processes have) fit one serial at once: versions 1..N, each once.
 TEST_P(StoreTest, ConcurrentVersionsAreUniqueAndGapFree) {
