@@ -188,6 +188,10 @@ Built Build(const Family& fam, const FitData& d, const FitOptions& o) {
       add(Make(new TorqueResidual(fam, d.pole_pairs, s.id_a, s.iq_a, *s.torque_nm, st), n), true);
     }
   }
+  for (const auto& f : d.fluxes) {
+    add(Make(new FluxResidual(fam, f.id_a, f.iq_a, 0, f.psi_d_wb, f.psi_std_wb), n), true);
+    add(Make(new FluxResidual(fam, f.id_a, f.iq_a, 1, f.psi_q_wb, f.psi_std_wb), n), true);
+  }
   if (d.psi_pm_prior_wb) {
     b.has_prior = true;
     add(Make(new PriorResidual(*d.psi_pm_prior_wb, o.psi_pm_prior_relative_std * *d.psi_pm_prior_wb), n),
@@ -467,7 +471,7 @@ FitData FitDataFromHfRows(const io::Manifest* m, const std::vector<io::HfResultR
 }
 
 absl::StatusOr<Calibration> Fit(const FitData& d, const FitOptions& o) {
-  if (d.inductances.size() < 3 && d.steady_state.size() < 3) {
+  if (d.inductances.size() < 3 && d.steady_state.size() < 3 && d.fluxes.size() < 3) {
     return absl::InvalidArgumentError(absl::StrCat(
         "field 'points': need at least 3 identified points to fit, got ", d.inductances.size()));
   }
@@ -483,6 +487,10 @@ absl::StatusOr<Calibration> Fit(const FitData& d, const FitOptions& o) {
     iq_min = std::min(iq_min, std::abs(obs.iq_a)); iq_max = std::max(iq_max, std::abs(obs.iq_a));
   }
   for (const auto& s : d.steady_state) {
+    id_min = std::min(id_min, s.id_a); id_max = std::max(id_max, s.id_a);
+    iq_min = std::min(iq_min, std::abs(s.iq_a)); iq_max = std::max(iq_max, std::abs(s.iq_a));
+  }
+  for (const auto& s : d.fluxes) {
     id_min = std::min(id_min, s.id_a); id_max = std::max(id_max, s.id_a);
     iq_min = std::min(iq_min, std::abs(s.iq_a)); iq_max = std::max(iq_max, std::abs(s.iq_a));
   }
@@ -546,7 +554,7 @@ absl::StatusOr<Calibration> Fit(const FitData& d, const FitOptions& o) {
       continue;
     }
     // A flexible family needs more observations than parameters.
-    if (f.NumParams() + 2 > static_cast<int>(2 * d.inductances.size() + 2 * d.steady_state.size())) continue;
+    if (f.NumParams() + 2 > static_cast<int>(2 * d.inductances.size() + 2 * d.steady_state.size() + 2 * d.fluxes.size())) continue;
     solved.push_back(Solve(f, d, o));
     solved_smoothing.push_back(false);
   }

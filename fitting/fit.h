@@ -37,6 +37,12 @@ struct SteadyStateObservation {
   std::optional<double> torque_nm;
 };
 
+// A flux linkage known directly: a measured or FEA flux map's node
+// (io/flux_map.h), sigma its standard deviation per component.
+struct FluxObservation {
+  double id_a = 0, iq_a = 0, psi_d_wb = 0, psi_q_wb = 0, psi_std_wb = 0;
+};
+
 struct FitData {
   std::string serial;
   int pole_pairs = 4;
@@ -45,6 +51,7 @@ struct FitData {
   std::optional<double> psi_pm_prior_wb;
   std::vector<InductanceObservation> inductances;
   std::vector<SteadyStateObservation> steady_state;
+  std::vector<FluxObservation> fluxes;
 };
 
 struct FitOptions {
