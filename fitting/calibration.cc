@@ -104,6 +104,11 @@ nlohmann::json Calibration::ToJson() const {
   if (family_.kind == Family::kSpline) {
     j["spline_knots"] = {{"id_lo_a", family_.spline.id_lo_a}, {"id_hi_a", family_.spline.id_hi_a},
                          {"iq_hi_a", family_.spline.iq_hi_a}};
+    if (family_.spline.smoothing) {
+      j["spline_knots"]["iq_lo_a"] = family_.spline.iq_lo_a;
+      j["spline_knots"]["spans_id"] = family_.spline.spans;
+      j["spline_knots"]["spans_iq"] = family_.spline.spans_q;
+    }
   }
   j["pole_pairs"] = pole_pairs_;
   j["rs_ohm"] = rs_ohm_;
@@ -114,7 +119,8 @@ nlohmann::json Calibration::ToJson() const {
                  {"iq_min_a", iq_min_a_}, {"iq_max_a", iq_max_a_}};
   j["fit"] = {{"observations", summary.observations}, {"chi2", summary.chi2}, {"bic", summary.bic},
               {"rms_relative", summary.rms_relative}, {"termination", summary.termination},
-              {"usable", summary.usable}, {"candidates", summary.candidates}};
+              {"usable", summary.usable}, {"candidates", summary.candidates},
+              {"excluded", summary.excluded}};
   return j;
 }
 
@@ -131,6 +137,25 @@ absl::StatusOr<Calibration> Calibration::FromJson(const nlohmann::json& j) {
       fam.kind = Family::kPoly;
       fam.degree = std::stoi(model.substr(4));
       if (fam.degree < 2 || fam.degree > 12) return absl::InvalidArgumentError("field 'model': bad degree");
+    } else if (model == "smooth" || model == "smooth-asym") {
+      fam.kind = Family::kSpline;
+      fam.spline.smoothing = true;
+      fam.spline.symmetric = model == "smooth";
+      const auto& k = j.at("spline_knots");
+      fam.spline.spans = k.at("spans_id").get<int>();
+      fam.spline.spans_q = k.at("spans_iq").get<int>();
+      fam.spline.id_lo_a = k.at("id_lo_a").get<double>();
+      fam.spline.id_hi_a = k.at("id_hi_a").get<double>();
+      fam.spline.iq_lo_a = k.at("iq_lo_a").get<double>();
+      fam.spline.iq_hi_a = k.at("iq_hi_a").get<double>();
+      if (fam.spline.spans < 1 || fam.spline.spans > 32 || fam.spline.spans_q < 1 || fam.spline.spans_q > 64 ||
+          (fam.spline.symmetric && (fam.spline.spans_q % 2 != 0 || fam.spline.iq_lo_a != -fam.spline.iq_hi_a))) {
+        return absl::InvalidArgumentError("field 'spline_knots': spans_id 1..32, spans_iq 1..64 (even and a "
+                                          "symmetric range for 'smooth')");
+      }
+      if (!(fam.spline.id_hi_a > fam.spline.id_lo_a) || !(fam.spline.iq_hi_a > fam.spline.iq_lo_a)) {
+        return absl::InvalidArgumentError("field 'spline_knots': empty knot range");
+      }
     } else if (model.rfind("spline", 0) == 0) {
       fam.kind = Family::kSpline;
       fam.spline.spans = std::stoi(model.substr(6));
@@ -171,6 +196,7 @@ absl::StatusOr<Calibration> Calibration::FromJson(const nlohmann::json& j) {
       c.summary.termination = f.value("termination", "");
       c.summary.usable = f.value("usable", false);
       c.summary.candidates = f.value("candidates", std::vector<std::string>{});
+      c.summary.excluded = f.value("excluded", std::vector<std::string>{});
     }
     return c;
   } catch (const nlohmann::json::exception& e) {

@@ -30,7 +30,10 @@ struct FitSummary {
   double chi2 = 0, bic = 0, rms_relative = 0;
   std::string termination;
   bool usable = false;
-  std::vector<std::string> candidates;   // model-selection table "name bic"
+  std::vector<std::string> candidates;   // model-selection table "name cv bic ..."
+  // Observations the fit left out or the robust loss down-weighted, each
+  // with its point and reason ("hf point 31 (id 0 A, iq 0 A): ldd_h ...").
+  std::vector<std::string> excluded;
 };
 
 class Calibration : public sim::MagneticModel {

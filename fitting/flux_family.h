@@ -23,6 +23,10 @@
 //    Taylor polynomial at the edge: the co-energy stays C2 and a gradient
 //    field (inductance symmetric) everywhere, the inductance continues
 //    smoothly instead of oscillating. R is chosen by BIC.
+//  smooth / smooth-asym: the same quartic co-energy spline with ~8 spans per
+//    axis over the data box and a roughness penalty on all third derivatives
+//    of W (fit.cc, SmoothingPenalty); "smooth" folds the iq basis like
+//    spline<R>, "smooth-asym" lets psi_q(id, 0) differ from zero.
 #ifndef FLUXCAL_FITTING_FLUX_FAMILY_H_
 #define FLUXCAL_FITTING_FLUX_FAMILY_H_
 
@@ -88,15 +92,29 @@ void PolyInductance(int n, const T& id, const T& iq, const P* p, T* ldd, T* lqq,
 
 inline constexpr int kSplineDegree = 4;
 
-// The knot layout of a spline family: `spans` uniform spans over
-// [id_lo_a, id_hi_a] and 2 spans over [-iq_hi_a, iq_hi_a].
+// The knot layout of a spline family. Legacy spline<R>: `spans` uniform
+// spans over [id_lo_a, id_hi_a] and 2R over [-iq_hi_a, iq_hi_a], folded to
+// even functions of iq. Smoothing splines (`smoothing`, name "smooth"):
+// `spans` over id and `spans_q` over [iq_lo_a, iq_hi_a]; `symmetric` folds
+// the iq basis (psi_q(id, 0) = 0, needs iq_lo_a = -iq_hi_a and even
+// spans_q), otherwise psi_q(id, 0) is free: symmetry is a hypothesis the
+// fit weighs by cross-validation (fit.cc), not a constraint.
 struct SplineDomain {
   int spans = 0;
   double id_lo_a = -100, id_hi_a = 0, iq_hi_a = 100;
+  bool smoothing = false;
+  int spans_q = 0;            // smoothing only
+  double iq_lo_a = -100;      // smoothing only
+  bool symmetric = true;
+  int SpansQ() const { return smoothing ? spans_q : 2 * spans; }
+  double IqLo() const { return smoothing ? iq_lo_a : -iq_hi_a; }
+  bool Folded() const { return !smoothing || symmetric; }
   int NumD() const { return spans + kSplineDegree; }            // id basis
-  int NumQ() const { return 2 * spans + kSplineDegree; }        // iq basis
-  int NumEven() const { return NumQ() / 2; }                    // folded
+  int NumQ() const { return SpansQ() + kSplineDegree; }         // iq basis
+  int NumEven() const { return Folded() ? NumQ() / 2 : NumQ(); }  // iq coefficients
   int NumCoefficients() const { return NumD() * NumEven(); }
+  // Coefficient index of iq basis j (folded: B_j and B_{NumQ-1-j} share one).
+  int QIndex(int j) const { return Folded() && j >= NumEven() ? NumQ() - 1 - j : j; }
 };
 
 // Values and first two derivatives of the kSplineDegree + 1 uniform B-spline
@@ -160,8 +178,8 @@ inline Basis1d EvalBasis(double x, double lo, double hi, int spans) {
 template <typename T, typename P>
 void SplineFluxAndInductance(const SplineDomain& dom, double id, double iq, const P* p, T* psi_d,
                              T* psi_q, T* ldd, T* lqq, T* ldq) {
-  const int nq = dom.NumQ(), ne = dom.NumEven();
-  auto even = [&](int j) { return j < ne ? j : nq - 1 - j; };
+  const int ne = dom.NumEven();
+  auto even = [&](int j) { return dom.QIndex(j); };
   // sum over the nonzero basis products of coefficient * f(bd, bq, a, c).
   auto sum = [&](const Basis1d& bd, const Basis1d& bq, auto f) {
     T s(0.0);
@@ -170,12 +188,12 @@ void SplineFluxAndInductance(const SplineDomain& dom, double id, double iq, cons
     return s;
   };
   const Basis1d bd = EvalBasis(id, dom.id_lo_a, dom.id_hi_a, dom.spans);
-  const Basis1d bq = EvalBasis(iq, -dom.iq_hi_a, dom.iq_hi_a, 2 * dom.spans);
+  const Basis1d bq = EvalBasis(iq, dom.IqLo(), dom.iq_hi_a, dom.SpansQ());
   // Coefficients scaled like the polynomial family's: W' in L0 I0^2 units.
   const double kW = kPolyL0H * kPolyI0A * kPolyI0A;
   if (psi_d != nullptr) {
     const Basis1d b0d = EvalBasis(0.0, dom.id_lo_a, dom.id_hi_a, dom.spans);
-    const Basis1d b0q = EvalBasis(0.0, -dom.iq_hi_a, dom.iq_hi_a, 2 * dom.spans);
+    const Basis1d b0q = EvalBasis(0.0, dom.IqLo(), dom.iq_hi_a, dom.SpansQ());
     const T slope0 = sum(b0d, b0q, [&](int a, int c) { return b0d.d1[a] * b0q.v[c]; });
     *psi_d = p[0] + kW * (sum(bd, bq, [&](int a, int c) { return bd.d1[a] * bq.v[c]; }) - slope0);
     *psi_q = kW * sum(bd, bq, [&](int a, int c) { return bd.v[a] * bq.d1[c]; });
@@ -209,6 +227,7 @@ struct Family {
   std::string Name() const {
     if (kind == kAnalytic) return "analytic";
     if (kind == kPoly) return "poly" + std::to_string(degree);
+    if (spline.smoothing) return spline.symmetric ? "smooth" : "smooth-asym";
     return "spline" + std::to_string(spline.spans);
   }
 };

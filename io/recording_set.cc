@@ -490,12 +490,9 @@ absl::StatusOr<std::vector<HfResultRow>> ParseHfResults(std::string_view text, c
     o.lq_h = t->columns[4][r];
     o.ldq_h = Opt(t->columns[5][r]);
     o.temperature_c = Opt(t->columns[6][r]);
-    for (auto [name, v] : {std::pair<const char*, double>{"ld_h", o.ld_h}, {"lq_h", o.lq_h}}) {
-      if (v <= 0) {
-        return absl::InvalidArgumentError(absl::StrFormat(
-            "%s:%d: field '%s': inductance must be positive, got %.9g", path, r + 2, name, v));
-      }
-    }
+    // A non-positive inductance is well-formed data (a real map can fall in
+    // id near zero current): the fit excludes it and says so
+    // (fit::FitSummary::excluded), instead of the whole file failing here.
   }
   return rows;
 }
