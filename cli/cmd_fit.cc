@@ -1,10 +1,14 @@
 // fluxcal fit <recording-set | hf_results.csv> [--model auto|analytic|spline|splineR|poly|polyN]
 //             --out calibration.json [--svg PLOT.svg] [--json] [--serial S --pole-pairs P]
+// fluxcal fit --map map.csv --pole-pairs P [--psi-std-wb S] [--rs-ohm R] [--serial S] --out calibration.json
 // Identifies every waveform point (least squares), then fits the
-// flux-linkage surfaces jointly with hf_results and steady-state rows.
+// flux-linkage surfaces jointly with hf_results and steady-state rows; or
+// fits them to a flux map's nodes (io/flux_map.h, fit::FitDataFromFluxMap).
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <optional>
 
 #include "absl/strings/numbers.h"
 #include "cli/args.h"
@@ -12,9 +16,11 @@
 #include "fitting/fit.h"
 #include "fitting/plot.h"
 #include "io/csv.h"
+#include "io/flux_map.h"
 #include "identification/identify.h"
 #include "pipeline/points.h"
 #include "nlohmann/json.hpp"
+#include "tables/flux_map_export.h"
 
 namespace fluxcal::cli {
 namespace {
@@ -25,15 +31,57 @@ int Fail(const std::string& m, int code = 1) {
 }
 
 int RunFit(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, {"model", "out", "serial", "pole-pairs", "svg"}, {"json"});
+  auto args = ParseArgs(argv, {"model", "out", "serial", "pole-pairs", "svg", "map", "psi-std-wb", "rs-ohm"},
+                        {"json"});
   if (!args.ok()) return Fail(std::string(args.status().message()), 2);
-  if (args->positional.size() != 1 || !args->Get("out")) {
+  const bool from_map = args->Get("map").has_value();
+  if (args->positional.size() != (from_map ? 0u : 1u) || !args->Get("out")) {
     return Fail("usage: fluxcal fit <recording-set | hf_results.csv> [--model auto|analytic|spline|splineR|poly|polyN] "
-                "--out calibration.json [--svg PLOT.svg] [--json]", 2);
+                "--out calibration.json [--svg PLOT.svg] [--json]\n"
+                "       fluxcal fit --map map.csv --pole-pairs P [--psi-std-wb S] [--rs-ohm R] [--serial S] "
+                "[--model M] --out calibration.json [--json]", 2);
   }
-  const std::string input = args->positional[0];
+  if (!from_map && (args->Get("psi-std-wb") || args->Get("rs-ohm"))) {
+    return Fail("flags --psi-std-wb and --rs-ohm need --map", 2);
+  }
+  if (from_map && args->Get("svg")) {
+    // The plot draws the fit against identified inductances; a map has none.
+    return Fail("--svg plots identified inductances, which a flux map does not have; check a map fit with "
+                "`fluxcal compare`", 2);
+  }
+  const std::string input = from_map ? *args->Get("map") : args->positional[0];
   fit::FitData data;
-  if (std::filesystem::is_directory(input)) {
+  std::optional<io::FluxMap> map;
+  if (from_map) {
+    int pole_pairs = 0;
+    auto pp = args->Get("pole-pairs");
+    if (!pp || !absl::SimpleAtoi(*pp, &pole_pairs) || pole_pairs < 1 || pole_pairs > 100) {
+      return Fail("--map needs --pole-pairs P (an integer 1..100): a flux map does not say", 2);
+    }
+    auto std_wb = args->GetDouble("psi-std-wb");
+    auto rs = args->GetDouble("rs-ohm");
+    if (!std_wb.ok()) return Fail(std::string(std_wb.status().message()), 2);
+    if (!rs.ok()) return Fail(std::string(rs.status().message()), 2);
+    if (std_wb->has_value() && !(**std_wb > 0)) return Fail("flag --psi-std-wb: must be positive", 2);
+    if (rs->has_value() && !(**rs >= 0)) return Fail("flag --rs-ohm: must not be negative", 2);
+    const std::string serial = args->Get("serial").value_or(std::filesystem::path(input).stem().string());
+    if (!io::IsValidSerial(serial)) {
+      return Fail("serial '" + io::Printable(serial) + "' (from " + (args->Get("serial") ? "--serial" : "the file name") +
+                      ") is not 1 to 64 characters of A-Z a-z 0-9 - _ .; give --serial", 2);
+    }
+    auto m = io::ReadFluxMapCsv(input);
+    if (!m.ok()) return Fail(std::string(m.status().message()));
+    double scale = 0;
+    for (const auto& p : m->Points()) scale = std::max(scale, std::hypot(p.psi_d_wb, p.psi_q_wb));
+    if (!(scale > 0)) return Fail(input + ": field 'psi_d': the map's flux is zero at every node");
+    data = fit::FitDataFromFluxMap(*m, pole_pairs, std_wb->value_or(0.0));
+    data.serial = serial;
+    data.rs_ohm = rs->value_or(0.0);
+    std::fprintf(stderr, "fit: map %s, %zu x %zu nodes, sigma %.3g Wb per component%s\n", input.c_str(),
+                 m->id_a.size(), m->iq_a.size(), data.fluxes.front().psi_std_wb,
+                 data.psi_pm_prior_wb ? ", psi_pm prior from the node at (0, 0)" : "");
+    map = std::move(*m);
+  } else if (std::filesystem::is_directory(input)) {
     auto set = io::ReadRecordingSet(input);
     if (!set.ok()) return Fail(std::string(set.status().message()));
     ident::IdentifyOptions opt;
@@ -57,8 +105,8 @@ int RunFit(const std::vector<std::string>& argv) {
   }
   fit::FitOptions fo;
   fo.model = args->Get("model").value_or("auto");
-  std::fprintf(stderr, "fit: %zu inductance points, %zu steady-state rows, model %s\n",
-               data.inductances.size(), data.steady_state.size(), fo.model.c_str());
+  std::fprintf(stderr, "fit: %zu inductance points, %zu steady-state rows, %zu flux nodes, model %s\n",
+               data.inductances.size(), data.steady_state.size(), data.fluxes.size(), fo.model.c_str());
   auto cal = fit::Fit(data, fo);
   if (!cal.ok()) return Fail(std::string(cal.status().message()));
   if (auto st = fit::SaveCalibrationFile(*args->Get("out"), *cal); !st.ok()) return Fail(std::string(st.message()));
@@ -70,10 +118,28 @@ int RunFit(const std::vector<std::string>& argv) {
     }
     std::fprintf(stderr, "fit: plot %s\n", svg->c_str());
   }
+  // The fit's own rms_relative covers inductances; against a map the
+  // figure that matters is the flux error over all of its nodes.
+  std::optional<tables::FluxMapComparison> vs_map;
+  if (map) {
+    auto c = tables::CompareWithFluxMap(*cal, *map, {map->id_a.front(), map->id_a.back(), map->iq_a.front(),
+                                                     map->iq_a.back()});
+    if (!c.ok()) return Fail(std::string(c.status().message()));
+    vs_map = *c;
+  }
   if (args->Has("json")) {
     nlohmann::json j = cal->ToJson();
     j["out"] = *args->Get("out");
+    if (vs_map) {
+      j["map"] = {{"path", input}, {"nodes", vs_map->nodes}, {"rms_relative", vs_map->rms_relative},
+                  {"max_relative", vs_map->max_relative}, {"rms_wb", vs_map->rms_wb}, {"max_wb", vs_map->max_wb}};
+    }
     std::cout << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
+  } else if (vs_map) {
+    std::printf("serial %s: model %s, %d observations, flux error against the map RMS %.3f %% max %.3f %%, "
+                "psi_pm %.6g Wb -> %s\n",
+                cal->serial().c_str(), cal->family().Name().c_str(), cal->summary.observations,
+                100 * vs_map->rms_relative, 100 * vs_map->max_relative, cal->psi_pm_wb(), args->Get("out")->c_str());
   } else {
     std::printf("serial %s: model %s, %d observations, rms %.3f %%, psi_pm %.6g Wb -> %s\n",
                 cal->serial().c_str(), cal->family().Name().c_str(), cal->summary.observations,

@@ -60,6 +60,8 @@ class Calibration : public sim::MagneticModel {
   bool InMeasuredRegion(double id_a, double iq_a) const;
   double id_min_a() const { return id_min_a_; }
   double id_max_a() const { return id_max_a_; }
+  // Fit stores the range of |iq|; InMeasuredRegion mirrors it to iq < 0.
+  double iq_min_a() const { return iq_min_a_; }
   double iq_max_a() const { return iq_max_a_; }
   // Inductance positive definite (Ldd > 0, Lqq > 0, det > 0) on a grid over
   // the measured region widened by `factor` (towards negative id and larger

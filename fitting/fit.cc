@@ -13,6 +13,7 @@
 #include <Eigen/Dense>
 #include <Eigen/Sparse>
 #include "identification/identify.h"
+#include "io/flux_map.h"
 
 namespace fluxcal::fit {
 namespace {
@@ -539,6 +540,24 @@ FitData FitDataFromHfRows(const io::Manifest* m, const std::vector<io::HfResultR
     InductanceObservation o;
     o.id_a = r.id_a; o.iq_a = r.iq_a; o.ldd_h = r.ld_h; o.lqq_h = r.lq_h; o.ldq_h = r.ldq_h;
     d.inductances.push_back(o);
+  }
+  return d;
+}
+
+FitData FitDataFromFluxMap(const io::FluxMap& map, int pole_pairs, double psi_std_wb) {
+  FitData d;
+  d.pole_pairs = pole_pairs;
+  const auto points = map.Points();
+  if (!(psi_std_wb > 0)) {
+    double scale = 0;
+    for (const auto& p : points) scale = std::max(scale, std::hypot(p.psi_d_wb, p.psi_q_wb));
+    psi_std_wb = 0.002 * scale;
+  }
+  for (const auto& p : points) {
+    d.fluxes.push_back({p.id_a, p.iq_a, p.psi_d_wb, p.psi_q_wb, psi_std_wb});
+    // The prior's sigma is relative to it: only a magnet flux (> 0) is one
+    // (a synchronous reluctance map has psi_d(0, 0) = 0).
+    if (p.id_a == 0 && p.iq_a == 0 && p.psi_d_wb > 0) d.psi_pm_prior_wb = p.psi_d_wb;
   }
   return d;
 }

@@ -22,6 +22,9 @@
 namespace fluxcal::ident {
 struct HfPointResult;
 }
+namespace fluxcal::io {
+struct FluxMap;
+}
 
 namespace fluxcal::fit {
 
@@ -72,6 +75,13 @@ struct FitOptions {
 FitData FitDataFromRecording(const io::RecordingSet& set,
                              const std::vector<ident::HfPointResult>& identified);
 FitData FitDataFromHfRows(const io::Manifest* manifest, const std::vector<io::HfResultRow>& rows);
+// Observations from a flux map's nodes (io/flux_map.h): each node a
+// FluxObservation with standard deviation psi_std_wb per component (<= 0:
+// 0.2 % of the map's largest |psi|, the relative floor the fit also puts on
+// inductances), and psi_pm's prior from the node at (0, 0) when the map has
+// one with psi_d > 0. Serial stays empty and rs_ohm 0: a map carries
+// neither (nor pole pairs, which the caller gives).
+FitData FitDataFromFluxMap(const io::FluxMap& map, int pole_pairs, double psi_std_wb = 0.0);
 
 absl::StatusOr<Calibration> Fit(const FitData& data, const FitOptions& options = {});
 

@@ -153,4 +153,78 @@ TEST(Cli, BadInputNamesTheFile) {
   fs::remove_all(dir);
 }
 
+// Flux maps in and out: fit a calibration to the published map of a real
+// machine, compare it with that map, export it as a map and an inverse map,
+// and compare it with its own export; each --json output is one document.
+TEST(Cli, FluxMapsInAndOut) {
+  const fs::path dir = fs::temp_directory_path() / ("fluxcal_e2e_maps_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const std::string measured = std::string(FLUXCAL_SHARED_DIR) + "/examples/real/baldor_fluxmap_measured.csv";
+  const std::string cal = (dir / "cal.json").string(), map = (dir / "map.csv").string(),
+                    inv = (dir / "inv.csv").string();
+  auto fit = Json(Fluxcal("fit --map " + measured + " --pole-pairs 2 --serial BALDOR-MAP-1 --out " + cal + " --json"));
+  EXPECT_EQ(fit["serial"], "BALDOR-MAP-1");
+  EXPECT_EQ(fit["pole_pairs"], 2);
+  EXPECT_EQ(fit["map"]["nodes"], 567);
+  EXPECT_LT(fit["map"]["rms_relative"].get<double>(), 0.01);
+  EXPECT_EQ(Fluxcal("fit --map " + measured + " --out " + cal).code, 2);   // --pole-pairs missing
+
+  // Against the measured map over the region the bench samples.
+  auto c = Json(Fluxcal("compare " + cal + " " + measured + " --region -18:0,0:24 --json"));
+  EXPECT_EQ(c["nodes"], 130);
+  EXPECT_EQ(c["columns"], "raw");
+  EXPECT_EQ(c["region"]["source"], "flag");
+  for (const char* k : {"rms_relative", "max_relative", "rms_wb", "max_wb", "rms_d_wb", "rms_q_wb", "psi_scale_wb"}) {
+    ASSERT_TRUE(c[k].is_number()) << k;
+  }
+  EXPECT_LT(c["rms_relative"].get<double>(), 0.01);
+  EXPECT_LE(c["rms_relative"].get<double>(), c["max_relative"].get<double>());
+  EXPECT_TRUE(c["worst"]["id_a"].is_number());
+  EXPECT_TRUE(c["worst"]["error_wb"].is_number());
+  auto sym = Json(Fluxcal("compare " + cal + " " + measured + " --sym --json"));
+  EXPECT_EQ(sym["columns"], "sym");
+  EXPECT_EQ(sym["region"]["source"], "measured");
+  EXPECT_EQ(sym["nodes"], 294);   // id -20..20 A, iq 0..26 A: 21 x 14 nodes
+
+  // Export, never overwriting without --force.
+  auto e = Json(Fluxcal("map export " + cal + " --out " + map + " --json"));
+  EXPECT_EQ(e["rows"], 441);
+  EXPECT_EQ(e["extrapolated"], 0);
+  EXPECT_EQ(e["sha256"].get<std::string>().size(), 64u);
+  EXPECT_EQ(Fluxcal("map export " + cal + " --out " + map).code, 1);
+  auto e2 = Json(Fluxcal("map export " + cal + " --out " + map + " --grid -20:0:11,0:26:14 --force --json"));
+  EXPECT_EQ(e2["rows"], 154);
+  auto self = Json(Fluxcal("compare " + cal + " " + map + " --json"));
+  EXPECT_EQ(self["nodes"], 154);
+  EXPECT_LT(self["rms_relative"].get<double>(), 1e-12);
+  auto i = Json(Fluxcal("map export " + cal + " --out " + inv + " --inverse --json"));
+  EXPECT_EQ(i["kind"], "inverse");
+  EXPECT_EQ(i["rows"], 441);
+  EXPECT_GT(i["valid"].get<int>(), 200);
+  EXPECT_EQ(i["valid"].get<int>() + i["invalid"].get<int>(), 441);
+  {
+    std::ifstream in(inv);
+    std::string header;
+    std::getline(in, header);
+    EXPECT_EQ(header, "psi_d_Vs,psi_q_Vs,id_A,iq_A,valid");
+  }
+  EXPECT_EQ(Fluxcal("map export " + cal + " --out " + inv + " --psi-grid 0:1:3,0:1:3 --force").code, 2);
+  EXPECT_EQ(Fluxcal("map export " + cal + " --out " + inv + " --inverse --grid 0:1:3,0:1:3 --force").code, 2);
+
+  // Bad input: exit 1, the message names file, line and field.
+  const std::string bad = (dir / "bad.csv").string();
+  std::ofstream(bad) << "id_A,iq_A,psi_d_Vs,psi_q_Vs\n0,0,0.44,0\n0,2,0.45,x\n";
+  const std::string cmd = std::string(FLUXCAL_BINARY) + " compare " + cal + " " + bad + " --json 2>&1";
+  FILE* p = popen(cmd.c_str(), "r");
+  std::string out;
+  std::array<char, 4096> buf;
+  size_t n;
+  while ((n = fread(buf.data(), 1, buf.size(), p)) > 0) out.append(buf.data(), n);
+  EXPECT_EQ(WEXITSTATUS(pclose(p)), 1);
+  EXPECT_NE(out.find(bad + ":3: field 'psi_q_Vs': expected a number, got 'x'"), std::string::npos) << out;
+  EXPECT_EQ(Fluxcal("compare " + cal + " " + measured + " --region 0:1").code, 2);
+  fs::remove_all(dir);
+}
+
 }  // namespace

@@ -1,0 +1,132 @@
+// fluxcal map export calibration.json --out map.csv [--grid IDMIN:IDMAX:N,IQMIN:IQMAX:M]
+//                   [--inverse [--psi-grid PDMIN:PDMAX:N,PQMIN:PQMAX:M]] [--force] [--json]
+// Writes a calibration as a flux map the field's tools read
+// (tables/flux_map_export.h):
+//   default    psi(id, iq) on a current grid, `id_A,iq_A,psi_d_Vs,psi_q_Vs`
+//              (default grid: the measured region, 21 x 21 nodes);
+//   --inverse  i(psi_d, psi_q) on a flux grid, `psi_d_Vs,psi_q_Vs,id_A,iq_A,valid`
+//              (default grid: the flux range over the measured region,
+//              21 x 21; nodes without a solution there are valid = 0).
+// Never overwrites an existing file unless --force.
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <vector>
+
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_split.h"
+#include "cli/args.h"
+#include "cli/command.h"
+#include "fitting/calibration.h"
+#include "io/csv.h"
+#include "io/flux_map.h"
+#include "nlohmann/json.hpp"
+#include "tables/flux_map_export.h"
+#include "tables/sha256.h"
+
+namespace fluxcal::cli {
+namespace {
+
+int Fail(const std::string& m, int code = 1) {
+  std::fprintf(stderr, "fluxcal map export: %s\n", m.c_str());
+  return code;
+}
+
+// "MIN:MAX:N,MIN:MAX:M" -> two axes (checked again by the library).
+bool ParseGrid(const std::string& s, tables::LinearAxis* a, tables::LinearAxis* b) {
+  std::vector<std::string> axes = absl::StrSplit(s, ',');
+  if (axes.size() != 2) return false;
+  for (int k = 0; k < 2; ++k) {
+    tables::LinearAxis* ax = k == 0 ? a : b;
+    std::vector<std::string> f = absl::StrSplit(axes[k], ':');
+    if (f.size() != 3 || !absl::SimpleAtod(f[0], &ax->min) || !absl::SimpleAtod(f[1], &ax->max) ||
+        !absl::SimpleAtoi(f[2], &ax->n)) {
+      return false;
+    }
+  }
+  return true;
+}
+
+nlohmann::json AxisJson(const tables::LinearAxis& a) { return {{"min", a.min}, {"max", a.max}, {"n", a.n}}; }
+
+int RunMapExport(const std::vector<std::string>& argv) {
+  auto args = ParseArgs(argv, {"out", "grid", "psi-grid"}, {"inverse", "force", "json"});
+  if (!args.ok()) return Fail(std::string(args.status().message()), 2);
+  const char* usage =
+      "usage: fluxcal map export calibration.json --out map.csv [--grid IDMIN:IDMAX:N,IQMIN:IQMAX:M] "
+      "[--inverse [--psi-grid PDMIN:PDMAX:N,PQMIN:PQMAX:M]] [--force] [--json]";
+  if (args->positional.size() != 1 || !args->Get("out")) return Fail(usage, 2);
+  const bool inverse = args->Has("inverse");
+  if (inverse && args->Get("grid")) return Fail("--grid is the current grid of a forward map; with --inverse use --psi-grid", 2);
+  if (!inverse && args->Get("psi-grid")) return Fail("--psi-grid needs --inverse", 2);
+  const std::string out = *args->Get("out");
+  if (std::filesystem::exists(out) && !args->Has("force")) {
+    return Fail(out + ": exists; not overwritten (use --force)");
+  }
+  auto cal = fit::LoadCalibrationFile(args->positional[0]);
+  if (!cal.ok()) return Fail(std::string(cal.status().message()));
+
+  tables::LinearAxis a, b;
+  const char* grid_flag = inverse ? "psi-grid" : "grid";
+  if (auto g = args->Get(grid_flag)) {
+    if (!ParseGrid(*g, &a, &b)) {
+      return Fail(std::string("flag --") + grid_flag + ": expected MIN:MAX:N,MIN:MAX:M, got '" + *g + "'", 2);
+    }
+  } else if (inverse) {
+    tables::DefaultFluxGrid(*cal, &a, &b);
+  } else {
+    tables::DefaultCurrentGrid(*cal, &a, &b);
+  }
+
+  std::string text;
+  nlohmann::json summary = {{"out", out}, {"serial", cal->serial()}, {"model", cal->family().Name()},
+                            {"kind", inverse ? "inverse" : "forward"}};
+  size_t rows = 0;
+  if (inverse) {
+    std::fprintf(stderr, "map export: inverse map on psi_d %g..%g Wb (%d) x psi_q %g..%g Wb (%d)\n", a.min, a.max,
+                 a.n, b.min, b.max, b.n);
+    auto inv = tables::InvertCalibration(*cal, a, b);
+    if (!inv.ok()) return Fail("flag --psi-grid: " + std::string(inv.status().message()), 2);
+    text = tables::InverseFluxMapCsv(*inv);
+    rows = inv->size();
+    summary["grid"] = {{"psi_d_wb", AxisJson(a)}, {"psi_q_wb", AxisJson(b)}};
+    summary["valid"] = inv->valid_nodes;
+    summary["invalid"] = rows - inv->valid_nodes;
+  } else {
+    std::fprintf(stderr, "map export: flux map on id %g..%g A (%d) x iq %g..%g A (%d)\n", a.min, a.max, a.n, b.min,
+                 b.max, b.n);
+    auto m = tables::SampleCalibration(*cal, a, b);
+    if (!m.ok()) {
+      const std::string msg(m.status().message());
+      return msg.rfind("field 'grid", 0) == 0 ? Fail("flag --grid: " + msg, 2) : Fail(msg);
+    }
+    auto csv = io::FluxMapCsv(m->map);
+    if (!csv.ok()) return Fail(std::string(csv.status().message()));
+    text = std::move(*csv);
+    rows = m->map.size();
+    summary["grid"] = {{"id_a", AxisJson(a)}, {"iq_a", AxisJson(b)}};
+    summary["extrapolated"] = m->extrapolated;
+  }
+  if (auto st = io::WriteFileAtomically(out, text); !st.ok()) return Fail(std::string(st.message()));
+  const std::string sha = tables::Sha256Hex(text);
+  summary["rows"] = rows;
+  summary["bytes"] = text.size();
+  summary["sha256"] = sha;
+  if (args->Has("json")) {
+    std::cout << summary.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
+  } else if (inverse) {
+    std::printf("%s: inverse flux map of %s, %zu nodes (%d valid), sha256 %s\n", out.c_str(), cal->serial().c_str(),
+                rows, summary["valid"].get<int>(), sha.c_str());
+  } else {
+    std::printf("%s: flux map of %s, %zu nodes (%d extrapolated), sha256 %s\n", out.c_str(), cal->serial().c_str(),
+                rows, summary["extrapolated"].get<int>(), sha.c_str());
+  }
+  return 0;
+}
+
+}  // namespace
+
+FLUXCAL_REGISTER_COMMAND("map export", "write a calibration as a flux map psi(id, iq) or its inverse i(psi) (CSV)",
+                         RunMapExport);
+
+}  // namespace fluxcal::cli
