@@ -111,7 +111,7 @@ int RunFit(const std::vector<std::string>& argv) {
   if (!cal.ok()) return Fail(std::string(cal.status().message()));
   if (auto st = fit::SaveCalibrationFile(*args->Get("out"), *cal); !st.ok()) return Fail(std::string(st.message()));
   for (const auto& c : cal->summary.candidates) std::fprintf(stderr, "fit:   %s\n", c.c_str());
-  for (const auto& e : cal->summary.excluded) std::fprintf(stderr, "fit: point %s\n", e.c_str());
+  for (const auto& e : cal->summary.excluded) std::fprintf(stderr, "fit: %s\n", e.c_str());
   if (auto svg = args->Get("svg")) {
     if (auto st = io::WriteFileAtomically(*svg, fit::PlotFitSvg(*cal, data)); !st.ok()) {
       return Fail(std::string(st.message()));
