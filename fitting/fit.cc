@@ -3,10 +3,13 @@
 #include <algorithm>
 #include <cmath>
 #include <complex>
+#include <cstdio>
+#include <cstdlib>
 #include <functional>
 #include <limits>
 #include <numbers>
 
+#include "absl/container/inlined_vector.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "ceres/ceres.h"
@@ -20,6 +23,63 @@ namespace {
 
 constexpr double kPi = std::numbers::pi;
 
+
+// An affine form c + sum_j a_j p_j in the parameters. The polynomial and
+// spline families are linear in their coefficients, so evaluating the very
+// cost functors Ceres differentiates (below) with T = Affine gives each
+// residual's value at p = 0 and its exact, sparse gradient in one pass: a
+// spline residual touches 25 of ~145 coefficients, where the dynamic-size
+// autodiff carried all of them through every evaluation. Only products with
+// a constant exist in those families; anything else is a programming error
+// (the analytic family never takes this path) and aborts.
+struct Affine {
+  double c = 0;
+  // Inline storage: the one-term forms p_j * a (most of them) never allocate.
+  absl::InlinedVector<std::pair<int, double>, 2> t;
+  Affine() = default;
+  Affine(double v) : c(v) {}  // NOLINT: T(0.0), T(id) in the templates
+  bool Constant() const { return t.empty(); }
+};
+Affine operator*(Affine a, double s) {
+  a.c *= s;
+  for (auto& x : a.t) x.second *= s;
+  return a;
+}
+Affine operator*(double s, Affine a) { return std::move(a) * s; }
+Affine operator+(Affine a, const Affine& b) {
+  a.c += b.c;
+  a.t.insert(a.t.end(), b.t.begin(), b.t.end());
+  return a;
+}
+Affine operator-(const Affine& a) { return a * -1.0; }
+Affine operator-(Affine a, const Affine& b) {
+  a.c -= b.c;
+  for (const auto& x : b.t) a.t.push_back({x.first, -x.second});
+  return a;
+}
+Affine& operator+=(Affine& a, const Affine& b) {
+  a.c += b.c;
+  a.t.insert(a.t.end(), b.t.begin(), b.t.end());
+  return a;
+}
+Affine operator*(const Affine& a, const Affine& b) {
+  if (b.Constant()) return a * b.c;
+  if (a.Constant()) return b * a.c;
+  std::fprintf(stderr, "fit: a product of parameters in a linear family\n");
+  std::abort();
+}
+Affine operator/(const Affine& a, double s) { return a * (1.0 / s); }
+Affine operator/(const Affine& a, const Affine& b) {
+  if (b.Constant()) return a * (1.0 / b.c);
+  std::fprintf(stderr, "fit: division by a parameter in a linear family\n");
+  std::abort();
+}
+Affine sqrt(const Affine& a) {
+  if (a.Constant()) return Affine(std::sqrt(a.c));
+  std::fprintf(stderr, "fit: sqrt of a parameter in a linear family\n");
+  std::abort();
+}
+double ScalarOf(const Affine& a) { return a.c; }
 
 // Residual of one differential-inductance component: (L_model - L_obs)/sigma,
 // L_model = d^2 W'/di di (flux_family.h). component: 0 Ldd, 1 Lqq, 2 Ldq.
@@ -133,9 +193,13 @@ ceres::CostFunction* Make(F* f, int n) {
 
 struct Built {
   std::vector<double> params;
-  std::unique_ptr<ceres::Problem> problem;
+  std::unique_ptr<ceres::Problem> problem;   // analytic family only
   int residuals = 0;
   bool has_prior = false;
+  // Linear families: every residual as an affine form of the parameters
+  // (same functors, T = Affine), and whether it carries the robust loss.
+  std::vector<Affine> linear_rows;
+  std::vector<bool> robust;
 };
 
 std::vector<double> InitialParams(const Family& f, const FitData& d) {
@@ -156,27 +220,45 @@ std::vector<double> InitialParams(const Family& f, const FitData& d) {
 Built Build(const Family& fam, const FitData& d, const FitOptions& o) {
   Built b;
   b.params = InitialParams(fam, d);
-  b.problem = std::make_unique<ceres::Problem>();
+  const bool linear = fam.kind != Family::kAnalytic;
+  if (!linear) b.problem = std::make_unique<ceres::Problem>();
   const int n = fam.NumParams();
   double* p = b.params.data();
-  auto add = [&](ceres::CostFunction* c, bool robust) {
-    b.problem->AddResidualBlock(c, robust ? new ceres::CauchyLoss(o.robust_scale) : nullptr, p);
+  // Parameter j as the affine form p_j.
+  std::vector<Affine> unit;
+  if (linear) {
+    unit.resize(n);
+    for (int j = 0; j < n; ++j) unit[j].t.push_back({j, 1.0});
+  }
+  // The functor goes to Ceres (analytic) or is evaluated once in affine
+  // arithmetic (linear families): one set of residual equations either way.
+  auto add = [&](auto* functor, bool robust) {
+    if (linear) {
+      const Affine* pp[1] = {unit.data()};
+      Affine r;
+      (*functor)(pp, &r);
+      b.linear_rows.push_back(std::move(r));
+      b.robust.push_back(robust);
+      delete functor;
+    } else {
+      b.problem->AddResidualBlock(Make(functor, n), robust ? new ceres::CauchyLoss(o.robust_scale) : nullptr, p);
+    }
     ++b.residuals;
   };
   for (const auto& obs : d.inductances) {
     const double sd = std::max(obs.ldd_h_std, o.relative_sigma_floor * std::abs(obs.ldd_h));
     const double sq = std::max(obs.lqq_h_std, o.relative_sigma_floor * std::abs(obs.lqq_h));
     if (o.differential_as_apparent) {
-      add(Make(new ApparentResidual(fam, obs.id_a, obs.iq_a, 0, obs.ldd_h, sd), n), true);
-      add(Make(new ApparentResidual(fam, obs.id_a, obs.iq_a, 1, obs.lqq_h, sq), n), true);
+      add(new ApparentResidual(fam, obs.id_a, obs.iq_a, 0, obs.ldd_h, sd), true);
+      add(new ApparentResidual(fam, obs.id_a, obs.iq_a, 1, obs.lqq_h, sq), true);
       continue;
     }
-    add(Make(new InductanceResidual(fam, obs.id_a, obs.iq_a, 0, obs.ldd_h, sd), n), true);
-    add(Make(new InductanceResidual(fam, obs.id_a, obs.iq_a, 1, obs.lqq_h, sq), n), true);
+    add(new InductanceResidual(fam, obs.id_a, obs.iq_a, 0, obs.ldd_h, sd), true);
+    add(new InductanceResidual(fam, obs.id_a, obs.iq_a, 1, obs.lqq_h, sq), true);
     if (obs.ldq_h) {
       const double mean = 0.5 * (obs.ldd_h + obs.lqq_h);
       const double sx = std::max(obs.ldq_h_std, o.relative_sigma_floor * mean);
-      add(Make(new InductanceResidual(fam, obs.id_a, obs.iq_a, 2, *obs.ldq_h, sx), n), true);
+      add(new InductanceResidual(fam, obs.id_a, obs.iq_a, 2, *obs.ldq_h, sx), true);
     }
   }
   for (const auto& s : d.steady_state) {
@@ -185,20 +267,20 @@ Built Build(const Family& fam, const FitData& d, const FitOptions& o) {
     const double we = std::abs(s.speed_rpm) * d.pole_pairs * 2 * kPi / 60.0;
     // Voltage noise ~0.05 V plus 0.5 % for the nominal Rs and delay model.
     const double sigma = 0.05 / std::max(we, 1.0) + 0.005 * std::hypot(pd, pq);
-    add(Make(new FluxResidual(fam, s.id_a, s.iq_a, 0, pd, sigma), n), true);
-    add(Make(new FluxResidual(fam, s.id_a, s.iq_a, 1, pq, sigma), n), true);
+    add(new FluxResidual(fam, s.id_a, s.iq_a, 0, pd, sigma), true);
+    add(new FluxResidual(fam, s.id_a, s.iq_a, 1, pq, sigma), true);
     if (s.torque_nm) {
       const double st = 0.02 + 0.005 * std::abs(*s.torque_nm);
-      add(Make(new TorqueResidual(fam, d.pole_pairs, s.id_a, s.iq_a, *s.torque_nm, st), n), true);
+      add(new TorqueResidual(fam, d.pole_pairs, s.id_a, s.iq_a, *s.torque_nm, st), true);
     }
   }
   for (const auto& f : d.fluxes) {
-    add(Make(new FluxResidual(fam, f.id_a, f.iq_a, 0, f.psi_d_wb, f.psi_std_wb), n), true);
-    add(Make(new FluxResidual(fam, f.id_a, f.iq_a, 1, f.psi_q_wb, f.psi_std_wb), n), true);
+    add(new FluxResidual(fam, f.id_a, f.iq_a, 0, f.psi_d_wb, f.psi_std_wb), true);
+    add(new FluxResidual(fam, f.id_a, f.iq_a, 1, f.psi_q_wb, f.psi_std_wb), true);
   }
   if (d.psi_pm_prior_wb) {
     b.has_prior = true;
-    add(Make(new PriorResidual(*d.psi_pm_prior_wb, o.psi_pm_prior_relative_std * *d.psi_pm_prior_wb), n),
+    add(new PriorResidual(*d.psi_pm_prior_wb, o.psi_pm_prior_relative_std * *d.psi_pm_prior_wb),
         false);
   }
   if (fam.kind == Family::kAnalytic) {
@@ -275,30 +357,39 @@ Solved SolveLinear(const Family& fam, Built& b, const FitOptions& o, const Eigen
   Solved s;
   s.family = fam;
   std::fill(b.params.begin(), b.params.end(), 0.0);
-  ceres::Problem::EvaluateOptions eo;
-  eo.apply_loss_function = false;
-  double cost = 0;
-  std::vector<double> r0;
-  ceres::CRSMatrix crs;
-  b.problem->Evaluate(eo, &cost, &r0, nullptr, &crs);
-  const int n = crs.num_rows, k = crs.num_cols;
-  // Sparse: a spline row touches 25 of 100+ coefficients (local support),
-  // which makes J^T W J ~30x cheaper than the dense product.
+  const int n = static_cast<int>(b.linear_rows.size()), k = fam.NumParams();
+  // r(p) = r0 + J p from the affine residuals (Build); J sparse: a spline
+  // row touches 25 of 100+ coefficients (local support).
   std::vector<Eigen::Triplet<double>> nz;
-  for (int r = 0; r < n; ++r)
-    for (int i = crs.rows[r]; i < crs.rows[r + 1]; ++i)
-      if (crs.values[i] != 0.0) nz.emplace_back(r, crs.cols[i], crs.values[i]);
+  Eigen::VectorXd r0v(n);
+  for (int r = 0; r < n; ++r) {
+    r0v(r) = b.linear_rows[r].c;
+    for (const auto& [j, a] : b.linear_rows[r].t) nz.emplace_back(r, j, a);
+  }
   Eigen::SparseMatrix<double> J(n, k);
-  J.setFromTriplets(nz.begin(), nz.end());
-  const Eigen::Map<const Eigen::VectorXd> r0v(r0.data(), n);
-  // Which residual rows carry the robust loss: all but the prior (last row
-  // when a prior exists; Build adds it last).
-  const int robust_rows = n - (b.has_prior ? 1 : 0);
+  J.setFromTriplets(nz.begin(), nz.end());   // sums repeated (folded) entries
   Eigen::VectorXd p = Eigen::VectorXd::Zero(k), w = Eigen::VectorXd::Ones(n);
   const double c2 = o.robust_scale * o.robust_scale;
-  // Normal matrix J^T W J from the sparse rows (it dominates the fit time).
-  auto normal = [&](const Eigen::SparseMatrix<double>& Jw) {
-    return Eigen::MatrixXd(Eigen::SparseMatrix<double>(Jw.transpose() * Jw));
+  // Normal matrix J^T W J = sum_i w_i a_i a_i^T accumulated row by row over
+  // each row's nonzeros (nnz^2 per row; a general sparse-sparse product
+  // spent most of the fit time on bookkeeping).
+  const Eigen::SparseMatrix<double, Eigen::RowMajor> Jr = J;
+  const int* outer = Jr.outerIndexPtr();
+  const int* cols = Jr.innerIndexPtr();
+  const double* vals = Jr.valuePtr();
+  auto normal_w = [&](const Eigen::VectorXd& wt) {
+    Eigen::MatrixXd A = Eigen::MatrixXd::Zero(k, k);
+    double* a = A.data();   // column-major: A(i, j) = a[i + j k]
+    for (int r = 0; r < n; ++r) {
+      const double wr = wt(r);
+      for (int u = outer[r]; u < outer[r + 1]; ++u) {
+        const double va = wr * vals[u];
+        double* col = a + static_cast<Eigen::Index>(cols[u]) * k;   // column cols[u]
+        // Columns are sorted within a row: the lower triangle A(v, u), v >= u.
+        for (int v = u; v < outer[r + 1]; ++v) col[cols[v]] += va * vals[v];
+      }
+    }
+    return Eigen::MatrixXd(A.selfadjointView<Eigen::Lower>());
   };
   Eigen::MatrixXd B;
   Eigen::LLT<Eigen::MatrixXd> chol;
@@ -314,10 +405,9 @@ Solved SolveLinear(const Family& fam, Built& b, const FitOptions& o, const Eigen
   Eigen::MatrixXd M;        // R^-T U
   Eigen::VectorXd dvals;    // D
   for (int it = 0; it < 30; ++it) {
-    const Eigen::SparseMatrix<double> Jw = w.cwiseSqrt().asDiagonal() * J;
     const Eigen::VectorXd rw = w.cwiseSqrt().asDiagonal() * r0v;
-    const Eigen::MatrixXd A = normal(Jw);
-    const Eigen::VectorXd g = -Jw.transpose() * rw;
+    const Eigen::MatrixXd A = normal_w(w);
+    const Eigen::VectorXd g = -(Jr.transpose() * w.cwiseProduct(r0v));
     Eigen::VectorXd np;
     if (penalty != nullptr) {
       if (it == 0) {
@@ -330,7 +420,7 @@ Solved SolveLinear(const Family& fam, Built& b, const FitOptions& o, const Eigen
         dvals = es.eigenvalues().cwiseMax(0.0);
         M = Linv.transpose() * es.eigenvectors();
         const Eigen::VectorXd z = M.transpose() * g;
-        const Eigen::MatrixXd JM = Jw * M;
+        const Eigen::MatrixXd JM = w.cwiseSqrt().asDiagonal() * (Jr * M);
         // lambda on a log grid around the ratio of the two matrices' scales
         // (not the largest eigenvalue: the penalty's null space makes that
         // one huge).
@@ -364,24 +454,24 @@ Solved SolveLinear(const Family& fam, Built& b, const FitOptions& o, const Eigen
     }
     const double step = (np - p).norm();
     p = np;
-    const Eigen::VectorXd r = r0v + J * p;
-    for (int i = 0; i < robust_rows; ++i) w(i) = std::max(1e-3, 1.0 / (1.0 + r(i) * r(i) / c2));
+    const Eigen::VectorXd r = r0v + Jr * p;
+    for (int i = 0; i < n; ++i)
+      if (b.robust[i]) w(i) = std::max(1e-3, 1.0 / (1.0 + r(i) * r(i) / c2));
     // Weights settle geometrically; 1e-10 of |p| is far below the
     // parameters' standard errors. The penalised fits (a hundred and more
     // coefficients, ~10 ms per step at 441 points) stop at 1e-7: their
     // lambda already bounds the resolution far coarser than that.
     if (step < (penalty != nullptr ? 1e-7 : 1e-10) * (1.0 + p.norm())) break;
   }
-  const Eigen::VectorXd r = r0v + J * p;
+  const Eigen::VectorXd r = r0v + Jr * p;
   double chi2 = 0;
-  for (int i = 0; i < n; ++i) chi2 += i < robust_rows ? c2 * std::log1p(r(i) * r(i) / c2) : r(i) * r(i);
+  for (int i = 0; i < n; ++i) chi2 += b.robust[i] ? c2 * std::log1p(r(i) * r(i) / c2) : r(i) * r(i);
   for (int i = 0; i < k; ++i) b.params[i] = p(i);
   s.params = b.params;
   s.chi2 = chi2;
   s.n_obs = b.residuals;
   s.k = k - fam.NullDirections();
-  const Eigen::SparseMatrix<double> Jw = w.cwiseSqrt().asDiagonal() * J;
-  Eigen::MatrixXd A = normal(Jw);
+  Eigen::MatrixXd A = normal_w(w);
   if (penalty != nullptr) {
     // Effective parameters at the final weights.
     A += lambda * B;
