@@ -26,7 +26,8 @@
 //  smooth / smooth-asym: the same quartic co-energy spline with ~8 spans per
 //    axis over the data box and a roughness penalty on all third derivatives
 //    of W (fit.cc, SmoothingPenalty); "smooth" folds the iq basis like
-//    spline<R>, "smooth-asym" lets psi_q(id, 0) differ from zero.
+//    spline<R>, "smooth-asym" lets psi_q(id, 0) differ from zero away from
+//    id = 0 (psi_q(0, 0) = 0: d is the magnet axis).
 #ifndef FLUXCAL_FITTING_FLUX_FAMILY_H_
 #define FLUXCAL_FITTING_FLUX_FAMILY_H_
 
@@ -197,6 +198,12 @@ void SplineFluxAndInductance(const SplineDomain& dom, double id, double iq, cons
     const T slope0 = sum(b0d, b0q, [&](int a, int c) { return b0d.d1[a] * b0q.v[c]; });
     *psi_d = p[0] + kW * (sum(bd, bq, [&](int a, int c) { return bd.d1[a] * bq.v[c]; }) - slope0);
     *psi_q = kW * sum(bd, bq, [&](int a, int c) { return bd.v[a] * bq.d1[c]; });
+    if (!dom.Folded()) {
+      // psi_q(0, 0) = 0 also without the fold: d is the magnet axis
+      // (recording-format.md), so zero current links no q flux; psi_q(id, 0)
+      // away from id = 0 stays free.
+      *psi_q = *psi_q - kW * sum(b0d, b0q, [&](int a, int c) { return b0d.v[a] * b0q.d1[c]; });
+    }
   }
   if (ldd != nullptr) {
     *ldd = kW * sum(bd, bq, [&](int a, int c) { return bd.d2[a] * bq.v[c]; });
@@ -223,7 +230,7 @@ struct Family {
   }
   // Parameter combinations the surfaces do not depend on (the spline's
   // constant and its slope in id at the origin, removed by construction).
-  int NullDirections() const { return kind == kSpline ? 2 : 0; }
+  int NullDirections() const { return kind == kSpline ? (spline.Folded() ? 2 : 3) : 0; }
   std::string Name() const {
     if (kind == kAnalytic) return "analytic";
     if (kind == kPoly) return "poly" + std::to_string(degree);

@@ -239,11 +239,12 @@ std::vector<MachineMap> Machines() {
 }
 
 // Five noise draws per machine, `--model auto`. The issue asks 0.5 % RMS on
-// every draw; what holds today (docs/fitting.md, "Real machines"): mean
-// over draws below 0.6 % and every draw below 1 % on the measured map and
-// the three smooth trait maps; the map with negative Ldd near zero current
-// (which no positive-definite surface can follow) below 1.2 %, its
-// non-positive points excluded and listed.
+// every draw. What holds today (docs/fitting.md, "Real machines"): every
+// draw below 0.5 % on the three smooth trait maps; on the measured map the
+// mean below 0.5 % and every draw below 0.8 % (one draw in five interpolates
+// its noise between the measured id columns); on the map with negative Ldd
+// near zero current (which no positive-definite surface can follow) below
+// 0.8 %, its non-positive points excluded and listed.
 TEST(RealMaps, FluxErrorOnEveryDraw) {
   for (const auto& m : Machines()) {
     double worst = 0, sum = 0;
@@ -264,10 +265,12 @@ TEST(RealMaps, FluxErrorOnEveryDraw) {
     std::printf("%-15s mean %.3f %% worst %.3f %%  [%s]\n", m.name.c_str(), 100 * sum / 5, 100 * worst,
                 families.c_str());
     if (m.name == "negative-slope") {
-      EXPECT_LT(worst, 0.012) << m.name;
+      EXPECT_LT(worst, 0.008) << m.name;
+    } else if (m.name == "baldor") {
+      EXPECT_LT(sum / 5, 0.005) << m.name;
+      EXPECT_LT(worst, 0.008) << m.name;
     } else {
-      EXPECT_LT(sum / 5, 0.006) << m.name;
-      EXPECT_LT(worst, 0.01) << m.name;
+      EXPECT_LT(worst, 0.005) << m.name;
     }
   }
 }
