@@ -734,7 +734,7 @@ std::vector<Scalar> Scalars(const Table& t) {
     s.push_back({"speed_max_rpm", t.speed_max_rpm, "rpm", "top of the speed axis (axis from 0 rpm)", false});
   }
   s.push_back({"allow_extrapolation", t.allow_extrapolation ? 1.0 : 0.0, "-",
-               "1: computed beyond the measured region on request (--allow-extrapolation)", true});
+               "1: computed beyond the measured region on request (allow-extrapolation flag)", true});
   s.push_back({"calibration_version", static_cast<double>(t.calibration_version), "-",
                "stored version of the calibration", true});
   return s;
