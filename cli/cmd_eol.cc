@@ -124,7 +124,9 @@ int RunEol(const std::vector<std::string>& argv) {
         std::fprintf(stderr, "fluxcal eol: %s\n", std::string(st.message()).c_str());
         return 1;
       }
-      out["tables"].push_back({{"path", path}, {"crc32", resp.crc32()}, {"sha256", resp.sha256()}});
+      // sha256 of the file written (= sha256sum); crc32/sha256 of the reply are over the values.
+      out["tables"].push_back({{"path", path}, {"sha256", tables::Sha256Hex(resp.data())},
+                               {"payload_crc32", resp.crc32()}, {"payload_sha256", resp.sha256()}});
     }
   }
   if (args->Has("json")) {
@@ -133,7 +135,7 @@ int RunEol(const std::vector<std::string>& argv) {
     std::printf("%s: calibration v%d (%s), verdict %s, psi_pm %.5g Wb, fit rms %.3f %%\n", serial.c_str(),
                 fit.calibration().version(), fit.calibration().model().c_str(), fit.calibration().verdict().c_str(),
                 fit.calibration().psi_pm_wb(), 100 * fit.calibration().rms_relative());
-    for (const auto& t : out["tables"]) std::printf("  %s crc32 %s\n", t["path"].get<std::string>().c_str(), t["crc32"].get<std::string>().c_str());
+    for (const auto& t : out["tables"]) std::printf("  %s payload_crc32 %s\n", t["path"].get<std::string>().c_str(), t["payload_crc32"].get<std::string>().c_str());
   }
   return fit.pass() ? 0 : 3;
 }

@@ -1,10 +1,14 @@
 // fluxcal export calibration.json --table mtpa|mtpv|fw --format csv|json|h|cdfx|dcm
 //                [--points N] [--speed-points M] [--speed-max-rpm R] [--i-max-a A]
-//                [--udc-v V] [--svg FILE] [--sign-key ED25519.key] --out FILE [--json]
+//                [--udc-v V] [--ctype double|float] [--allow-extrapolation]
+//                [--svg FILE] [--sign-key ED25519.key] --out FILE [--json]
 // With --sign-key, FILE.sig holds a detached Ed25519 signature
 // (tables/signature.h; `fluxcal verify FILE --pubkey KEY.pub`).
 // Builds an ECU lookup table from a fitted calibration and writes it with
-// CRC-32 and SHA-256 of its payload (docs/tables.md).
+// limits, provenance, flags and the CRC-32 / SHA-256 of its payload (the
+// values, docs/tables.md) inside. It prints the SHA-256 of the written file
+// (`sha256`, equal to `sha256sum FILE`) and the payload checksums under
+// their own names (`payload_crc32`, `payload_sha256`).
 #include <cstdio>
 #include <iostream>
 
@@ -15,6 +19,7 @@
 #include "fitting/calibration.h"
 #include "io/csv.h"
 #include "nlohmann/json.hpp"
+#include "tables/sha256.h"
 #include "tables/signature.h"
 #include "tables/tables.h"
 
@@ -31,22 +36,30 @@ int RunExport(const std::vector<std::string>& argv) {
     if (a == "--server" || a.rfind("--server=", 0) == 0) return RunRemoteExport(argv);
   }
   auto args = ParseArgs(argv, {"table", "format", "points", "speed-points", "speed-max-rpm", "i-max-a",
-                               "udc-v", "out", "svg", "sign-key"},
-                        {"json"});
+                               "udc-v", "out", "svg", "sign-key", "ctype"},
+                        {"json", "allow-extrapolation"});
   if (!args.ok()) return Fail(std::string(args.status().message()), 2);
   if (args->positional.size() != 1 || !args->Get("out")) {
     return Fail("usage: fluxcal export calibration.json --table mtpa|mtpv|fw --format "
-                "csv|json|h|cdfx|dcm [--points N] --out FILE", 2);
+                "csv|json|h|cdfx|dcm [--points N] [--ctype double|float] [--allow-extrapolation] --out FILE", 2);
   }
   auto cal = fit::LoadCalibrationFile(args->positional[0]);
   if (!cal.ok()) return Fail(std::string(cal.status().message()));
   auto fmt = tables::ParseFormat(args->Get("format").value_or("csv"));
   if (!fmt.ok()) return Fail(std::string(fmt.status().message()), 2);
+  auto ctype = tables::ParseCType(args->Get("ctype").value_or("double"));
+  if (!ctype.ok()) return Fail(std::string(ctype.status().message()), 2);
   tables::TableSpec spec;
   spec.kind = args->Get("table").value_or("mtpa");
   spec.serial = cal->serial();
   spec.calibration_version = cal->version;
   spec.model = cal->family().Name();
+  // A calibration file carries no verdict or release decision (those live in
+  // the store, fluxcal release): say so in the file rather than guess.
+  spec.verdict = tables::kVerdictUnknown;
+  spec.release_state = tables::kReleaseUnknown;
+  spec.measured_current_limit_a = cal->MeasuredCurrentLimitA();
+  spec.allow_extrapolation = args->Has("allow-extrapolation");
   tables::MachineLimits lim;
   lim.pole_pairs = cal->pole_pairs();
   lim.rs_ohm = cal->rs_ohm();
@@ -70,7 +83,9 @@ int RunExport(const std::vector<std::string>& argv) {
                spec.serial.c_str());
   auto table = tables::BuildTable(*cal, lim, spec);
   if (!table.ok()) return Fail(std::string(table.status().message()), 2);
-  auto out = tables::Export(*table, *fmt);
+  tables::ExportOptions options;
+  options.ctype = *ctype;
+  auto out = tables::Export(*table, *fmt, options);
   if (!out.ok()) return Fail(std::string(out.status().message()));
   if (auto st = io::WriteFileAtomically(*args->Get("out"), out->bytes); !st.ok()) return Fail(std::string(st.message()));
   std::string sig_path;
@@ -96,22 +111,32 @@ int RunExport(const std::vector<std::string>& argv) {
     }
     if (auto st = io::WriteFileAtomically(*svg, text); !st.ok()) return Fail(std::string(st.message()));
   }
-  size_t clamped = 0;
+  size_t clamped = 0, extrapolated = 0;
   for (auto c : table->clamped) clamped += c;
+  for (auto c : table->extrapolated) extrapolated += c;
   char crc[16];
-  std::snprintf(crc, sizeof crc, "%08x", out->crc32);
+  std::snprintf(crc, sizeof crc, "%08x", out->payload_crc32);
+  // The file checksum is recomputed from the bytes just written, so that
+  // what is printed is what `sha256sum FILE` gives.
+  auto written = io::ReadFileToString(*args->Get("out"));
+  if (!written.ok()) return Fail(std::string(written.status().message()));
+  const std::string file_sha256 = tables::Sha256Hex(*written);
   if (args->Has("json")) {
     std::cout << nlohmann::json{{"out", *args->Get("out")}, {"table", spec.kind}, {"format", args->Get("format").value_or("csv")},
                                 {"serial", spec.serial}, {"calibration_version", spec.calibration_version},
                                 {"rows", table->clamped.size()}, {"clamped_rows", clamped},
-                                {"crc32", crc}, {"sha256", out->sha256}, {"bytes", out->bytes.size()},
-                                {"signature", sig_path}}
+                                {"extrapolated_cells", extrapolated},
+                                {"i_max_a", lim.i_max_a}, {"udc_v", lim.udc_v}, {"u_max_v", lim.UMaxV()},
+                                {"verdict", table->verdict}, {"release_state", table->release_state},
+                                {"sha256", file_sha256}, {"payload_crc32", crc}, {"payload_sha256", out->payload_sha256},
+                                {"bytes", written->size()}, {"signature", sig_path}}
                      .dump(2, ' ', false, nlohmann::json::error_handler_t::replace)
               << "\n";
   } else {
-    std::printf("%s: %s table, %zu cells (%zu clamped at limits), crc32 %s sha256 %s\n",
-                args->Get("out")->c_str(), spec.kind.c_str(), table->clamped.size(), clamped, crc,
-                out->sha256.c_str());
+    std::printf("%s: %s table, %zu cells (%zu clamped at limits, %zu extrapolated), i_max %.6g A, u_max %.6g V\n"
+                "  sha256 %s (file)\n  payload_crc32 %s payload_sha256 %s (values, docs/tables.md)\n",
+                args->Get("out")->c_str(), spec.kind.c_str(), table->clamped.size(), clamped, extrapolated,
+                lim.i_max_a, lim.UMaxV(), file_sha256.c_str(), crc, out->payload_sha256.c_str());
   }
   return 0;
 }

@@ -13,6 +13,7 @@
 #include "cli/args.h"
 #include "io/csv.h"
 #include "nlohmann/json.hpp"
+#include "tables/sha256.h"
 
 namespace fluxcal::cli {
 
@@ -214,17 +215,20 @@ int RunRemoteQuery(const std::vector<std::string>& argv) {
 
 int RunRemoteExport(const std::vector<std::string>& argv) {
   auto args = ParseArgs(argv, {"server", "table", "format", "points", "speed-points", "speed-max-rpm", "i-max-a",
-                               "udc-v", "out", "version"},
-                        {"json"});
+                               "udc-v", "out", "version", "ctype"},
+                        {"json", "allow-extrapolation"});
   if (!args.ok() || args->positional.size() != 1 || !args->Get("out")) {
     std::fprintf(stderr, "usage: fluxcal export SERIAL --server ADDR --table mtpa|mtpv|fw --format "
-                         "csv|json|h|cdfx|dcm [--points N] [--version N] --out FILE [--json]\n");
+                         "csv|json|h|cdfx|dcm [--points N] [--version N] [--ctype double|float] [--allow-extrapolation] "
+                         "--out FILE [--json]\n");
     return 2;
   }
   v1::ExportTableRequest req;
   req.set_serial(args->positional[0]);
   req.set_table(args->Get("table").value_or("mtpa"));
   req.set_format(args->Get("format").value_or("csv"));
+  req.set_ctype(args->Get("ctype").value_or(""));
+  req.set_allow_extrapolation(args->Has("allow-extrapolation"));
   int n = 0;
   if (auto v = args->Get("points")) { if (!absl::SimpleAtoi(*v, &n)) return 2; req.set_points(n); }
   if (auto v = args->Get("speed-points")) { if (!absl::SimpleAtoi(*v, &n)) return 2; req.set_speed_points(n); }
@@ -254,16 +258,22 @@ int RunRemoteExport(const std::vector<std::string>& argv) {
       return 1;
     }
   }
+  // sha256: of the bytes written (= sha256sum FILE); the reply's crc32 and
+  // sha256 are over the values (payload) and printed under those names.
+  const std::string file_sha256 = tables::Sha256Hex(resp.data());
   if (args->Has("json")) {
     std::cout << nlohmann::json{{"out", *args->Get("out")}, {"serial", resp.serial()}, {"version", resp.version()},
-                                {"table", req.table()}, {"format", req.format()}, {"crc32", resp.crc32()},
-                                {"sha256", resp.sha256()}, {"clamped_cells", resp.clamped_cells()},
-                                {"bytes", resp.data().size()}}
+                                {"table", req.table()}, {"format", req.format()}, {"sha256", file_sha256},
+                                {"payload_crc32", resp.crc32()}, {"payload_sha256", resp.sha256()},
+                                {"clamped_cells", resp.clamped_cells()}, {"verdict", resp.verdict()},
+                                {"released", resp.released()}, {"bytes", resp.data().size()}}
                      .dump(2, ' ', false, nlohmann::json::error_handler_t::replace)
               << "\n";
   } else {
-    std::printf("%s: %s v%d %s table (%s), crc32 %s sha256 %s\n", args->Get("out")->c_str(), resp.serial().c_str(),
-                resp.version(), req.table().c_str(), req.format().c_str(), resp.crc32().c_str(), resp.sha256().c_str());
+    std::printf("%s: %s v%d %s table (%s), verdict %s, %s\n  sha256 %s (file)\n  payload_crc32 %s payload_sha256 %s (values)\n",
+                args->Get("out")->c_str(), resp.serial().c_str(), resp.version(), req.table().c_str(),
+                req.format().c_str(), resp.verdict().c_str(), resp.released() ? "released" : "not released",
+                file_sha256.c_str(), resp.crc32().c_str(), resp.sha256().c_str());
   }
   return 0;
 }

@@ -224,27 +224,39 @@ absl::StatusOr<QueryResult> QueryFlux(storage::Store& store, const std::string& 
 
 absl::StatusOr<ExportResult> ExportTable(storage::Store& store, const std::string& serial, int version,
                                          const tables::TableSpec& spec_in, const tables::MachineLimits& lim_in,
-                                         const std::string& format) {
+                                         const std::string& format, const tables::ExportOptions& options) {
   auto fmt = tables::ParseFormat(format);
   if (!fmt.ok()) return fmt.status();
   auto cal = LoadCalibration(store, serial, version);
   if (!cal.ok()) return cal.status();
+  // Verdict and release state travel inside the file, so that a flashing
+  // tool that only sees the file sees them too.
+  auto row = store.GetCalibration(serial, cal->version);
+  if (!row.ok()) return row.status();
+  auto released = store.IsReleased(serial, cal->version);
+  if (!released.ok()) return released.status();
   tables::TableSpec spec = spec_in;
   spec.serial = serial;
   spec.calibration_version = cal->version;
   spec.model = cal->family().Name();
+  spec.verdict = row->verdict.empty() ? tables::kVerdictUnknown : row->verdict;
+  spec.release_state = *released ? tables::kReleased : tables::kNotReleased;
+  spec.measured_current_limit_a = cal->MeasuredCurrentLimitA();
   tables::MachineLimits lim = lim_in;
   if (lim.i_max_a <= 0) lim.i_max_a = cal->MeasuredCurrentLimitA() > 0 ? cal->MeasuredCurrentLimitA() : 150.0;
   lim.pole_pairs = cal->pole_pairs();
   lim.rs_ohm = cal->rs_ohm();
   auto t = tables::BuildTable(*cal, lim, spec);
   if (!t.ok()) return t.status();
-  auto e = tables::Export(*t, *fmt);
+  auto e = tables::Export(*t, *fmt, options);
   if (!e.ok()) return e.status();
   ExportResult r;
   r.exported = *e;
   r.version = cal->version;
+  r.verdict = row->verdict;
+  r.released = *released;
   for (auto c : t->clamped) r.clamped_cells += c;
+  for (auto c : t->extrapolated) r.extrapolated_cells += c;
   return r;
 }
 

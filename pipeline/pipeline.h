@@ -73,11 +73,17 @@ struct ExportResult {
   tables::Exported exported;
   int version = 0;
   int clamped_cells = 0;
+  int extrapolated_cells = 0;
+  std::string verdict;     // the stored verdict of the exported version
+  bool released = false;   // the version is released for flashing
 };
-// lim.i_max_a <= 0: the calibration's measured current limit.
+// lim.i_max_a <= 0: the calibration's measured current limit. The stored
+// verdict and release state of the version, and the measured current limit,
+// are written into the exported file (tables::Table); spec.verdict and
+// spec.release_state are overwritten from the store.
 absl::StatusOr<ExportResult> ExportTable(storage::Store& store, const std::string& serial, int version,
                                          const tables::TableSpec& spec, const tables::MachineLimits& limits,
-                                         const std::string& format);
+                                         const std::string& format, const tables::ExportOptions& options = {});
 
 struct FleetPoint {
   double id_a = 0, iq_a = 0;

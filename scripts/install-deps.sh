@@ -8,7 +8,7 @@ PKGS=(
   libgrpc++-dev libprotobuf-dev protobuf-compiler protobuf-compiler-grpc
   libsqlite3-dev sqlite3 zlib1g-dev
   libpq-dev postgresql
-  nlohmann-json3-dev libtinyxml2-dev
+  nlohmann-json3-dev libtinyxml2-dev libxml2-utils
   libgtest-dev libgmock-dev libbenchmark-dev
   python3 python3-grpcio python3-protobuf
   openssl libssl-dev

@@ -377,17 +377,24 @@ grpc::Status CalibrationServiceImpl::ExportTable(grpc::ServerContext* ctx, const
                                    : rel.status());
     }
   }
+  spec.allow_extrapolation = req->allow_extrapolation();
+  tables::ExportOptions options;
+  if (!req->ctype().empty()) {
+    auto ct = tables::ParseCType(req->ctype());
+    if (!ct.ok()) return ToGrpcStatus(ct.status());
+    options.ctype = *ct;
+  }
   auto r = pipeline::ExportTable(*store_, req->serial(), version, spec, lim,
-                                req->format().empty() ? "csv" : req->format());
+                                req->format().empty() ? "csv" : req->format(), options);
   if (!r.ok()) return ToGrpcStatus(r.status());
   resp->set_serial(req->serial());
   resp->set_version(r->version);
   resp->set_data(r->exported.bytes);
-  resp->set_crc32(absl::StrFormat("%08x", r->exported.crc32));
-  resp->set_sha256(r->exported.sha256);
+  resp->set_crc32(absl::StrFormat("%08x", r->exported.payload_crc32));
+  resp->set_sha256(r->exported.payload_sha256);
   resp->set_clamped_cells(r->clamped_cells);
-  if (auto cal = store_->GetCalibration(req->serial(), r->version); cal.ok()) resp->set_verdict(cal->verdict);
-  if (auto rel = store_->IsReleased(req->serial(), r->version); rel.ok()) resp->set_released(*rel);
+  resp->set_verdict(r->verdict);
+  resp->set_released(r->released);
   if (!signing_key_pem_.empty()) {
     auto sig = tables::SignDetached(r->exported.bytes, signing_key_pem_);
     if (!sig.ok()) return ToGrpcStatus(sig.status());

@@ -13,6 +13,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
+#include "absl/strings/str_replace.h"
 #include "nlohmann/json.hpp"
 #include "tables/sha256.h"
 
@@ -234,12 +235,29 @@ absl::StatusOr<Table> BuildTable(const sim::MagneticModel& m, const MachineLimit
   if (!(lim.i_max_a > 0) || !(lim.udc_v > 0)) {
     return absl::InvalidArgumentError("limits: i_max_a and udc_v must be positive");
   }
+  const double meas = spec.measured_current_limit_a;
+  if (meas > 0 && !spec.allow_extrapolation && lim.i_max_a > meas * (1 + 1e-9)) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "flag --i-max-a: %.6g A exceeds the calibration's measured current limit %.6g A; the table would rest on "
+        "extrapolated magnetics (--allow-extrapolation computes it anyway, cells flagged 'extrapolated')",
+        lim.i_max_a, meas));
+  }
   Table t;
   t.kind = spec.kind;
   t.serial = spec.serial;
   t.calibration_version = spec.calibration_version;
   t.model = spec.model;
   t.created_utc = NowUtc();
+  t.fluxcal_version = FluxcalVersion();
+  t.verdict = spec.verdict.empty() ? kVerdictUnknown : spec.verdict;
+  t.release_state = spec.release_state.empty() ? kReleaseUnknown : spec.release_state;
+  t.limits = lim;
+  // The permanent-magnet flux linkage as the model gives it (psi_d at zero
+  // current), whatever the model family's parameterisation.
+  t.psi_pm_wb = m.Flux(0.0, 0.0, lim.temperature_c).psi_d_wb;
+  t.speed_max_rpm = spec.kind == "fw" ? spec.speed_max_rpm : 0.0;
+  t.measured_current_limit_a = meas > 0 ? meas : 0.0;
+  t.allow_extrapolation = spec.allow_extrapolation;
   const double tmax = MaxTorqueNm(m, lim, 0.0);
   if (spec.kind == "mtpa") {
     const auto tq = spec.include_generating ? Linspace(-tmax, tmax, spec.points) : Linspace(0, tmax, spec.points);
@@ -263,11 +281,10 @@ absl::StatusOr<Table> BuildTable(const sim::MagneticModel& m, const MachineLimit
       lmax = std::max(lmax, std::hypot(f.psi_d_wb, f.psi_q_wb));
     }
     lmin = std::max(lmin, 0.05 * lmax);
-    const auto lam = Linspace(lmin, lmax, spec.points);
-    Output id{"id_a", {}}, iq{"iq_a", {}}, tq{"torque_nm", {}};
-    for (double l : lam) {
-      // For each id, the iq >= 0 with |psi(id, iq)| = l (|psi| grows with
-      // iq); maximise torque over id.
+    // For each id, the iq >= 0 with |psi(id, iq)| = l (|psi| grows with
+    // iq); maximise torque over id.
+    struct MtpvPoint { double id = 0, iq = 0; bool ok = false; };
+    auto solve = [&](double l) {
       auto iq_of = [&](double d, double* q) {
         double lo = 0, hi = 4 * lim.i_max_a;
         auto mag = [&](double x) {
@@ -287,13 +304,61 @@ absl::StatusOr<Table> BuildTable(const sim::MagneticModel& m, const MachineLimit
         if (!iq_of(d, &q)) return 1e30;
         return -TorqueNm(m, lim.pole_pairs, d, q, lim.temperature_c);
       };
-      const double d = MinimiseScalar(neg_t, -2 * lim.i_max_a, 0.0);
-      double q = 0;
-      const bool ok = iq_of(d, &q);
-      id.values.push_back(d);
-      iq.values.push_back(q);
-      tq.values.push_back(ok ? TorqueNm(m, lim.pole_pairs, d, q, lim.temperature_c) : 0.0);
-      t.clamped.push_back(!ok || std::hypot(d, q) > lim.i_max_a);
+      MtpvPoint p;
+      p.id = MinimiseScalar(neg_t, -2 * lim.i_max_a, 0.0);
+      p.ok = iq_of(p.id, &p.iq);
+      return p;
+    };
+    auto inside = [&](const MtpvPoint& p) { return p.ok && std::hypot(p.id, p.iq) <= lim.i_max_a * (1 + 1e-9); };
+    if (!spec.allow_extrapolation) {
+      // Restrict the flux axis to the fluxes whose MTPV point lies inside the
+      // current limit (by default the measured one): beyond it the curve is
+      // the model's extrapolation, not the measured machine. The longest run
+      // of inside points on a 64-step scan, its ends refined by bisection.
+      constexpr int kScan = 64;
+      std::vector<bool> in(kScan + 1);
+      const auto scan = Linspace(lmin, lmax, kScan + 1);
+      for (int k = 0; k <= kScan; ++k) in[k] = inside(solve(scan[k]));
+      int best_a = -1, best_b = -1;
+      for (int k = 0; k <= kScan;) {
+        if (!in[k]) { ++k; continue; }
+        int e = k;
+        while (e + 1 <= kScan && in[e + 1]) ++e;
+        if (e - k > best_b - best_a) { best_a = k; best_b = e; }
+        k = e + 1;
+      }
+      if (best_a < 0) {
+        return absl::FailedPreconditionError(absl::StrFormat(
+            "table mtpv: at every flux in [%.6g, %.6g] Wb the MTPV point lies beyond the current limit %.6g A, "
+            "i.e. in extrapolated magnetics; --allow-extrapolation exports it anyway (cells flagged)",
+            lmin, lmax, lim.i_max_a));
+      }
+      auto refine = [&](double good, double bad) {
+        for (int k = 0; k < 24; ++k) {
+          const double mid = 0.5 * (good + bad);
+          (inside(solve(mid)) ? good : bad) = mid;
+        }
+        return good;
+      };
+      double a = scan[best_a], b = scan[best_b];
+      if (best_a > 0) a = refine(a, scan[best_a - 1]);
+      if (best_b < kScan) b = refine(b, scan[best_b + 1]);
+      if (!(b > a)) {
+        return absl::FailedPreconditionError(absl::StrFormat(
+            "table mtpv: the MTPV curve touches the current limit %.6g A only at %.6g Wb; "
+            "--allow-extrapolation exports the extrapolated curve (cells flagged)", lim.i_max_a, a));
+      }
+      lmin = a;
+      lmax = b;
+    }
+    const auto lam = Linspace(lmin, lmax, spec.points);
+    Output id{"id_a", {}}, iq{"iq_a", {}}, tq{"torque_nm", {}};
+    for (double l : lam) {
+      const auto p = solve(l);
+      id.values.push_back(p.id);
+      iq.values.push_back(p.iq);
+      tq.values.push_back(p.ok ? TorqueNm(m, lim.pole_pairs, p.id, p.iq, lim.temperature_c) : 0.0);
+      t.clamped.push_back(!inside(p));
     }
     t.axes = {{"psi_wb", lam}};
     t.outputs = {id, iq, tq};
@@ -327,9 +392,19 @@ absl::StatusOr<Table> BuildTable(const sim::MagneticModel& m, const MachineLimit
   } else {
     return absl::InvalidArgumentError(absl::StrCat("flag --table: expected mtpa, mtpv or fw, got '", spec.kind, "'"));
   }
+  // Extrapolated: the operating point of the cell lies beyond the measured
+  // current limit (the disc the identified points cover).
+  const auto& idv = t.outputs[0].values;
+  const auto& iqv = t.outputs[1].values;
+  t.extrapolated.assign(idv.size(), 0);
+  if (meas > 0) {
+    for (size_t k = 0; k < idv.size(); ++k) t.extrapolated[k] = std::hypot(idv[k], iqv[k]) > meas * (1 + 1e-9);
+  }
   Seal(&t);
   return t;
 }
+
+const char* FluxcalVersion() { return FLUXCAL_VERSION; }
 
 std::string PayloadBytes(const Table& t) {
   std::string out;
@@ -367,10 +442,17 @@ namespace {
 std::string Num(double v) { return absl::StrFormat("%.17g", v); }
 
 std::string UnitOf(const std::string& name) {
-  if (name.size() > 3 && name.substr(name.size() - 3) == "_nm") return "Nm";
-  if (name.size() > 4 && name.substr(name.size() - 4) == "_rpm") return "rpm";
-  if (name.size() > 3 && name.substr(name.size() - 3) == "_wb") return "Wb";
-  if (name.size() > 2 && name.substr(name.size() - 2) == "_a") return "A";
+  auto ends = [&](const char* suf) {
+    const size_t n = std::strlen(suf);
+    return name.size() > n && name.compare(name.size() - n, n, suf) == 0;
+  };
+  if (ends("_nm")) return "Nm";
+  if (ends("_rpm")) return "rpm";
+  if (ends("_wb")) return "Wb";
+  if (ends("_ohm")) return "Ohm";
+  if (ends("_v")) return "V";
+  if (ends("_c")) return "degC";
+  if (ends("_a")) return "A";
   return "-";
 }
 
@@ -378,14 +460,48 @@ std::string Ident(const Table& t, const std::string& name) {
   return absl::AsciiStrToUpper(absl::StrCat("FLUXCAL_", t.kind, "_", name));
 }
 
+// One sentence on the axis order, the same in every format (docs/tables.md).
+std::string AxisOrder(const Table& t) {
+  if (t.axes.size() == 1) return absl::StrCat("X = ", t.axes[0].name, " (one axis)");
+  return absl::StrCat("X = ", t.axes[0].name, " (first axis), Y = ", t.axes[1].name,
+                      " (second axis); flat arrays index [ix * ", t.axes[1].values.size(), " + iy], X slowest");
+}
+
+// Text that goes into a comment: one line, no comment terminators.
+std::string OneLine(std::string s) {
+  for (auto& c : s) if (c == '\n' || c == '\r') c = ' ';
+  return absl::StrReplaceAll(s, {{"*/", "* /"}, {"--", "- -"}});
+}
+
+std::string XmlEscape(const std::string& s) {
+  return absl::StrReplaceAll(s, {{"&", "&amp;"}, {"<", "&lt;"}, {">", "&gt;"}, {"\"", "&quot;"}});
+}
+
+std::string CString(const std::string& s) {
+  return absl::StrCat("\"", absl::StrReplaceAll(OneLine(s), {{"\\", "\\\\"}, {"\"", "\\\""}}), "\"");
+}
+
+std::string Crc(const Table& t) { return absl::StrFormat("%08x", t.crc32); }
+
+// The flag arrays as doubles, for the writers that treat them as tables.
+std::vector<double> AsDoubles(const std::vector<uint8_t>& v) { return std::vector<double>(v.begin(), v.end()); }
+
 std::string Csv(const Table& t) {
-  std::string s = absl::StrFormat("# fluxcal %s table, serial %s, calibration version %d, model %s, created %s\n"
-                                  "# crc32 %08x sha256 %s (payload: docs/tables.md)\n",
-                                  t.kind, t.serial, t.calibration_version, t.model, t.created_utc, t.crc32, t.sha256);
+  // Comment header: "# key: value" lines, then one row per cell (X slowest).
+  std::string s = absl::StrFormat("# fluxcal %s table\n", t.kind);
+  for (const auto& [k, v] : TextFields(t)) s += absl::StrCat("# ", k, ": ", OneLine(v), "\n");
+  s += absl::StrCat("# calibration_version: ", t.calibration_version, "\n");
+  for (const auto& sc : Scalars(t)) {
+    if (sc.name == "calibration_version") continue;
+    s += absl::StrCat("# ", sc.name, ": ", Num(sc.value), " ", sc.unit, " (", sc.description, ")\n");
+  }
+  s += absl::StrCat("# axis_order: ", AxisOrder(t), "\n");
+  s += absl::StrCat("# payload_crc32: ", Crc(t), " (over the values, docs/tables.md; not a file checksum)\n");
+  s += absl::StrCat("# payload_sha256: ", t.sha256, " (over the values, docs/tables.md; not a file checksum)\n");
   std::vector<std::string> head;
   for (const auto& a : t.axes) head.push_back(a.name);
   for (const auto& o : t.outputs) head.push_back(o.name);
-  head.push_back("clamped");
+  for (const auto& [name, v] : Flags(t)) head.push_back(name);
   s += absl::StrJoin(head, ",") + "\n";
   const size_t n0 = t.axes[0].values.size();
   const size_t n1 = t.axes.size() > 1 ? t.axes[1].values.size() : 1;
@@ -394,7 +510,7 @@ std::string Csv(const Table& t) {
       std::vector<std::string> row = {Num(t.axes[0].values[i])};
       if (t.axes.size() > 1) row.push_back(Num(t.axes[1].values[j]));
       for (const auto& o : t.outputs) row.push_back(Num(o.values[i * n1 + j]));
-      row.push_back(t.clamped[i * n1 + j] ? "1" : "0");
+      for (const auto& [name, v] : Flags(t)) row.push_back((*v)[i * n1 + j] ? "1" : "0");
       s += absl::StrJoin(row, ",") + "\n";
     }
   }
@@ -403,125 +519,276 @@ std::string Csv(const Table& t) {
 
 std::string Json(const Table& t) {
   nlohmann::json j;
-  j["format"] = "fluxcal.table.v1";
+  // v2: the checksums are named payload_crc32 / payload_sha256 (v1 called
+  // them crc32 / sha256, read as file checksums), and limits, verdict,
+  // release state and flags travel in the file.
+  j["format"] = "fluxcal.table.v2";
   j["kind"] = t.kind;
-  j["serial"] = t.serial;
+  for (const auto& [k, v] : TextFields(t)) j[k] = v;
   j["calibration_version"] = t.calibration_version;
-  j["model"] = t.model;
-  j["created_utc"] = t.created_utc;
-  j["crc32"] = absl::StrFormat("%08x", t.crc32);
-  j["sha256"] = t.sha256;
+  nlohmann::json sc = nlohmann::json::object();
+  for (const auto& x : Scalars(t)) {
+    if (x.name == "calibration_version") continue;
+    sc[x.name] = {{"value", x.value}, {"unit", x.unit}, {"description", x.description}};
+  }
+  j["scalars"] = sc;
+  j["axis_order"] = AxisOrder(t);
+  j["payload_crc32"] = Crc(t);
+  j["payload_sha256"] = t.sha256;
   for (const auto& a : t.axes) j["axes"].push_back({{"name", a.name}, {"unit", UnitOf(a.name)}, {"values", a.values}});
   for (const auto& o : t.outputs) j["outputs"].push_back({{"name", o.name}, {"unit", UnitOf(o.name)}, {"values", o.values}});
-  j["clamped"] = t.clamped;
+  for (const auto& [name, v] : Flags(t)) j[name] = *v;
   return j.dump(1) + "\n";
 }
 
-std::string CHeader(const Table& t) {
+// A C literal of the element type: always with a '.' or exponent, and the
+// 'f' suffix for float (a bare "0f" is not C). Float keeps 9 significant
+// digits, enough to round-trip a binary32 (IEEE 754-2008, 5.12.2).
+std::string CNum(double v, CType ct) {
+  std::string s = ct == CType::kFloat ? absl::StrFormat("%.9g", static_cast<float>(v)) : Num(v);
+  if (s.find_first_of(".eE") == std::string::npos) s += ".0";
+  if (ct == CType::kFloat) s += "f";
+  return s;
+}
+
+std::string CHeader(const Table& t, CType ct) {
   const std::string g = Ident(t, "TABLE_H_");
-  std::string s = absl::StrFormat(
-      "/* fluxcal %s table for serial %s, calibration version %d, model %s, created %s.\n"
-      " * Units: SI (A, N m, rpm, Wb). Row-major over the axes, first axis slowest.\n"
-      " * CRC-32 and SHA-256 over the payload defined in fluxcal docs/tables.md. */\n"
-      "#ifndef %s\n#define %s\n\n#include <stdint.h>\n\n",
-      t.kind, t.serial, t.calibration_version, t.model, t.created_utc, g, g);
-  auto arr = [&](const std::string& name, const std::vector<double>& v) {
+  const char* type = ct == CType::kFloat ? "float" : "double";
+  std::string s = absl::StrFormat("/* fluxcal %s table. Units: SI (A, N m, rpm, Wb, V, Ohm, degC).\n", t.kind);
+  for (const auto& [k, v] : TextFields(t)) s += absl::StrCat(" * ", k, ": ", OneLine(v), "\n");
+  s += absl::StrCat(" * calibration_version: ", t.calibration_version, "\n");
+  for (const auto& sc : Scalars(t)) {
+    if (sc.name == "calibration_version") continue;
+    s += absl::StrCat(" * ", sc.name, ": ", Num(sc.value), " ", sc.unit, " (", OneLine(sc.description), ")\n");
+  }
+  s += absl::StrCat(" * axis order: ", AxisOrder(t), ".\n");
+  s += absl::StrCat(" * Value arrays are ", type, "; ", Ident(t, "clamped"), " / ", Ident(t, "extrapolated"),
+                    " are 0/1 per cell.\n");
+  s += " * payload_crc32 / payload_sha256: over the values as IEEE-754 binary64 (fluxcal docs/tables.md),\n"
+       " * not over this file";
+  if (ct == CType::kFloat) s += "; the float arrays hold those values rounded to binary32";
+  s += ". */\n";
+  s += absl::StrFormat("#ifndef %s\n#define %s\n\n#include <stdint.h>\n\n", g, g);
+  for (const auto& sc : Scalars(t)) {
+    s += absl::StrFormat("#define %s %s\n", Ident(t, sc.name),
+                         sc.integer ? absl::StrCat(static_cast<long long>(sc.value)) : CNum(sc.value, ct));
+  }
+  s += "\n";
+  for (const auto& [k, v] : TextFields(t)) {
+    s += absl::StrFormat("static const char %s[] = %s;\n", absl::AsciiStrToLower(Ident(t, k)), CString(v));
+  }
+  s += "\n";
+  auto arr = [&](const std::string& name, const std::vector<double>& v, const char* ty, bool flag) {
     s += absl::StrFormat("#define %s_LEN %d\n", Ident(t, name), v.size());
-    s += absl::StrFormat("static const double %s[%d] = {\n", absl::AsciiStrToLower(Ident(t, name)), v.size());
-    for (size_t k = 0; k < v.size(); ++k) s += absl::StrCat("  ", Num(v[k]), k + 1 < v.size() ? ",\n" : "\n");
+    s += absl::StrFormat("static const %s %s[%d] = {\n", ty, absl::AsciiStrToLower(Ident(t, name)), v.size());
+    for (size_t k = 0; k < v.size(); ++k) {
+      s += absl::StrCat("  ", flag ? (v[k] != 0 ? "1" : "0") : CNum(v[k], ct), k + 1 < v.size() ? ",\n" : "\n");
+    }
     s += "};\n\n";
   };
-  for (const auto& a : t.axes) arr(a.name, a.values);
-  for (const auto& o : t.outputs) arr(o.name, o.values);
-  s += absl::StrFormat("static const uint32_t %s = 0x%08xu;\n", absl::AsciiStrToLower(Ident(t, "crc32")), t.crc32);
-  s += absl::StrFormat("static const char %s[] = \"%s\";\n\n#endif\n", absl::AsciiStrToLower(Ident(t, "sha256")), t.sha256);
+  for (const auto& a : t.axes) arr(a.name, a.values, type, false);
+  for (const auto& o : t.outputs) arr(o.name, o.values, type, false);
+  for (const auto& [name, v] : Flags(t)) arr(name, AsDoubles(*v), "uint8_t", true);
+  s += absl::StrFormat("static const uint32_t %s = 0x%08xu;\n", absl::AsciiStrToLower(Ident(t, "payload_crc32")), t.crc32);
+  s += absl::StrFormat("static const char %s[] = \"%s\";\n\n#endif\n",
+                       absl::AsciiStrToLower(Ident(t, "payload_sha256")), t.sha256);
   return s;
 }
 
 std::string Cdfx(const Table& t) {
-  // ASAM CDF 2.0: one SW-INSTANCE per output, CURVE (1 axis) or MAP (2 axes).
+  // ASAM CDF 2.0 (MSRSW): MSRSW > SW-SYSTEMS > SW-SYSTEM > SW-INSTANCE-SPEC >
+  // SW-INSTANCE-TREE > SW-INSTANCE. Scalars are category VALUE (V), text
+  // ASCII (VT), outputs and flags CURVE (1 axis) or MAP (2 axes) with
+  // STD_AXIS containers in axis order X, Y; a MAP holds one VG per X value
+  // with the values over Y. The subset emitted is described by
+  // tests/tables/cdf_subset.dtd.
   std::string s =
       "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n"
-      "<!DOCTYPE MSRSW PUBLIC \"-//ASAM//DTD CALIBRATION DATA FORMAT:V2.0.0:LAI:IAI:XML:CDF200.XSD//EN\" \"cdf_v2.0.0.sl.dtd\">\n"
-      "<MSRSW>\n  <SHORT-NAME>fluxcal</SHORT-NAME>\n  <CATEGORY>CDF20</CATEGORY>\n  <SW-SYSTEMS>\n    <SW-SYSTEM>\n";
-  s += absl::StrFormat("      <SHORT-NAME>%s</SHORT-NAME>\n", t.serial.empty() ? "fluxcal" : t.serial);
-  s += absl::StrFormat("      <DESC>fluxcal %s table, calibration version %d, model %s, created %s, crc32 %08x, sha256 %s</DESC>\n",
-                       t.kind, t.calibration_version, t.model, t.created_utc, t.crc32, t.sha256);
-  s += "      <SW-INSTANCE-TREE>\n        <SHORT-NAME>fluxcal</SHORT-NAME>\n        <CATEGORY>NO_VCD</CATEGORY>\n";
+      "<!DOCTYPE MSRSW PUBLIC \"-//ASAM//DTD CALIBRATION DATA FORMAT:V2.0.0:LAI:IAI:XML:CDF200.XSD//EN\" \"cdf_v2.0.0.sl.dtd\">\n";
+  s += absl::StrCat("<!-- fluxcal ", t.kind, " table; axis order: ", OneLine(AxisOrder(t)), ". payload_crc32 ", Crc(t),
+                    ", payload_sha256 ", t.sha256, ": over the values (fluxcal docs/tables.md), not over this file. -->\n");
+  s += "<MSRSW>\n  <SHORT-NAME>fluxcal</SHORT-NAME>\n  <CATEGORY>CDF20</CATEGORY>\n  <SW-SYSTEMS>\n    <SW-SYSTEM>\n";
+  s += absl::StrFormat("      <SHORT-NAME>%s</SHORT-NAME>\n", XmlEscape(t.serial.empty() ? "fluxcal" : t.serial));
+  s += "      <SW-INSTANCE-SPEC>\n        <SW-INSTANCE-TREE>\n          <SHORT-NAME>fluxcal</SHORT-NAME>\n"
+       "          <CATEGORY>NO_VCD</CATEGORY>\n";
+  const std::string in = "          ";
+  auto head = [&](const std::string& name, const std::string& long_name, const char* cat) {
+    s += absl::StrCat(in, "<SW-INSTANCE>\n", in, "  <SHORT-NAME>", Ident(t, name), "</SHORT-NAME>\n", in,
+                      "  <LONG-NAME>", XmlEscape(OneLine(long_name)), "</LONG-NAME>\n", in, "  <CATEGORY>", cat,
+                      "</CATEGORY>\n");
+  };
+  for (const auto& sc : Scalars(t)) {
+    head(sc.name, sc.description, "VALUE");
+    s += absl::StrCat(in, "  <SW-VALUE-CONT>\n", in, "    <UNIT-DISPLAY-NAME>", sc.unit, "</UNIT-DISPLAY-NAME>\n", in,
+                      "    <SW-VALUES-PHYS><V>", Num(sc.value), "</V></SW-VALUES-PHYS>\n", in, "  </SW-VALUE-CONT>\n", in,
+                      "</SW-INSTANCE>\n");
+  }
+  for (const auto& [k, v] : TextFields(t)) {
+    head(k, k, "ASCII");
+    s += absl::StrCat(in, "  <SW-VALUE-CONT>\n", in, "    <SW-VALUES-PHYS><VT>", XmlEscape(OneLine(v)),
+                      "</VT></SW-VALUES-PHYS>\n", in, "  </SW-VALUE-CONT>\n", in, "</SW-INSTANCE>\n");
+  }
   const bool map = t.axes.size() > 1;
   const size_t n0 = t.axes[0].values.size(), n1 = map ? t.axes[1].values.size() : 1;
-  for (const auto& o : t.outputs) {
-    s += absl::StrFormat("        <SW-INSTANCE>\n          <SHORT-NAME>%s</SHORT-NAME>\n          <CATEGORY>%s</CATEGORY>\n",
-                         Ident(t, o.name), map ? "MAP" : "CURVE");
-    s += absl::StrFormat("          <SW-VALUE-CONT>\n            <UNIT-DISPLAY-NAME>%s</UNIT-DISPLAY-NAME>\n            <SW-VALUES-PHYS>\n",
-                         UnitOf(o.name));
+  auto table = [&](const std::string& name, const std::string& unit, const std::vector<double>& vals,
+                   const std::string& what) {
+    head(name, what, map ? "MAP" : "CURVE");
+    s += absl::StrCat(in, "  <SW-VALUE-CONT>\n", in, "    <UNIT-DISPLAY-NAME>", unit, "</UNIT-DISPLAY-NAME>\n", in,
+                      "    <SW-VALUES-PHYS>\n");
     for (size_t i = 0; i < n0; ++i) {
-      if (map) s += "              <VG>\n";
-      for (size_t j = 0; j < n1; ++j) s += absl::StrCat(map ? "                " : "              ", "<V>", Num(o.values[i * n1 + j]), "</V>\n");
-      if (map) s += "              </VG>\n";
+      if (map) s += absl::StrCat(in, "      <VG>\n");
+      for (size_t j = 0; j < n1; ++j) {
+        s += absl::StrCat(in, map ? "        " : "      ", "<V>", Num(vals[i * n1 + j]), "</V>\n");
+      }
+      if (map) s += absl::StrCat(in, "      </VG>\n");
     }
-    s += "            </SW-VALUES-PHYS>\n          </SW-VALUE-CONT>\n          <SW-AXIS-CONTS>\n";
+    s += absl::StrCat(in, "    </SW-VALUES-PHYS>\n", in, "  </SW-VALUE-CONT>\n", in, "  <SW-AXIS-CONTS>\n");
     for (const auto& a : t.axes) {
-      s += absl::StrFormat("            <SW-AXIS-CONT>\n              <CATEGORY>STD_AXIS</CATEGORY>\n              <UNIT-DISPLAY-NAME>%s</UNIT-DISPLAY-NAME>\n              <SW-VALUES-PHYS>\n", UnitOf(a.name));
-      for (double v : a.values) s += absl::StrCat("                <V>", Num(v), "</V>\n");
-      s += "              </SW-VALUES-PHYS>\n            </SW-AXIS-CONT>\n";
+      s += absl::StrCat(in, "    <SW-AXIS-CONT>\n", in, "      <CATEGORY>STD_AXIS</CATEGORY>\n", in,
+                        "      <UNIT-DISPLAY-NAME>", UnitOf(a.name), "</UNIT-DISPLAY-NAME>\n", in,
+                        "      <SW-VALUES-PHYS>\n");
+      for (double v : a.values) s += absl::StrCat(in, "        <V>", Num(v), "</V>\n");
+      s += absl::StrCat(in, "      </SW-VALUES-PHYS>\n", in, "    </SW-AXIS-CONT>\n");
     }
-    s += "          </SW-AXIS-CONTS>\n        </SW-INSTANCE>\n";
+    s += absl::StrCat(in, "  </SW-AXIS-CONTS>\n", in, "</SW-INSTANCE>\n");
+  };
+  std::vector<std::string> axis_names;
+  for (const auto& a : t.axes) axis_names.push_back(a.name);
+  const std::string over = absl::StrJoin(axis_names, " x ");
+  for (const auto& o : t.outputs) table(o.name, UnitOf(o.name), o.values, absl::StrCat(o.name, " over ", over));
+  for (const auto& [name, v] : Flags(t)) {
+    table(name, "-", AsDoubles(*v), absl::StrCat(name, " (0/1 per cell) over ", over));
   }
-  s += "      </SW-INSTANCE-TREE>\n    </SW-SYSTEM>\n  </SW-SYSTEMS>\n</MSRSW>\n";
+  s += "        </SW-INSTANCE-TREE>\n      </SW-INSTANCE-SPEC>\n    </SW-SYSTEM>\n  </SW-SYSTEMS>\n</MSRSW>\n";
   return s;
 }
 
 std::string Dcm(const Table& t) {
-  // DAMOS DCM 2.0: KENNLINIE (curve) / KENNFELD (map) blocks, 6 values a line.
-  std::string s = absl::StrFormat("* fluxcal %s table, serial %s, calibration version %d, model %s\n"
-                                  "* created %s, crc32 %08x, sha256 %s\n\nKONSERVIERUNG_FORMAT 2.0\n\n",
-                                  t.kind, t.serial, t.calibration_version, t.model, t.created_utc, t.crc32, t.sha256);
-  auto line = [&](const std::string& key, const std::vector<double>& v, size_t from, size_t n) {
-    for (size_t k = 0; k < n; k += 6) {
+  // DAMOS DCM 2.0 (KONSERVIERUNG_FORMAT 2.0): FESTWERT (scalar), KENNLINIE
+  // (curve) and KENNFELD (map) blocks, 6 values a line; text metadata as
+  // '*' comments (DCM has no text scalar every tool accepts).
+  std::string s = absl::StrFormat("* fluxcal %s table\n", t.kind);
+  for (const auto& [k, v] : TextFields(t)) s += absl::StrCat("* ", k, ": ", OneLine(v), "\n");
+  s += absl::StrCat("* axis_order: ", AxisOrder(t), "\n");
+  s += absl::StrCat("* payload_crc32: ", Crc(t), ", payload_sha256: ", t.sha256,
+                    " (over the values, fluxcal docs/tables.md; not over this file)\n\nKONSERVIERUNG_FORMAT 2.0\n\n");
+  auto line = [&](const std::string& key, const std::vector<double>& v) {
+    for (size_t k = 0; k < v.size(); k += 6) {
       s += absl::StrCat("   ", key);
-      for (size_t m = k; m < std::min(n, k + 6); ++m) s += absl::StrCat(" ", Num(v[from + m]));
+      for (size_t m = k; m < std::min(v.size(), k + 6); ++m) s += absl::StrCat(" ", Num(v[m]));
       s += "\n";
     }
   };
+  for (const auto& sc : Scalars(t)) {
+    s += absl::StrFormat("FESTWERT %s\n   LANGNAME \"%s\"\n   EINHEIT_W \"%s\"\n   WERT %s\nEND\n\n", Ident(t, sc.name),
+                         absl::StrReplaceAll(OneLine(sc.description), {{"\"", "'"}}), sc.unit, Num(sc.value));
+  }
   const bool map = t.axes.size() > 1;
   const size_t n0 = t.axes[0].values.size(), n1 = map ? t.axes[1].values.size() : 1;
-  for (const auto& o : t.outputs) {
+  auto block = [&](const std::string& name, const std::string& unit, const std::vector<double>& vals) {
     if (!map) {
       s += absl::StrFormat("KENNLINIE %s %d\n   LANGNAME \"%s over %s\"\n   EINHEIT_X \"%s\"\n   EINHEIT_W \"%s\"\n",
-                           Ident(t, o.name), n0, o.name, t.axes[0].name, UnitOf(t.axes[0].name), UnitOf(o.name));
-      line("ST/X", t.axes[0].values, 0, n0);
-      line("WERT", o.values, 0, n0);
+                           Ident(t, name), n0, name, t.axes[0].name, UnitOf(t.axes[0].name), unit);
+      line("ST/X", t.axes[0].values);
+      line("WERT", vals);
     } else {
-      // X = second axis (speed), Y = first axis (torque): one WERT row per Y.
+      // KENNFELD name nx ny: ST/X the X axis (first axis), then per Y value
+      // (second axis) one ST/Y line and the WERT values over X.
       s += absl::StrFormat("KENNFELD %s %d %d\n   LANGNAME \"%s over %s x %s\"\n   EINHEIT_X \"%s\"\n   EINHEIT_Y \"%s\"\n   EINHEIT_W \"%s\"\n",
-                           Ident(t, o.name), n1, n0, o.name, t.axes[0].name, t.axes[1].name,
-                           UnitOf(t.axes[1].name), UnitOf(t.axes[0].name), UnitOf(o.name));
-      line("ST/X", t.axes[1].values, 0, n1);
-      for (size_t i = 0; i < n0; ++i) {
-        s += absl::StrCat("   ST/Y ", Num(t.axes[0].values[i]), "\n");
-        line("WERT", o.values, i * n1, n1);
+                           Ident(t, name), n0, n1, name, t.axes[0].name, t.axes[1].name, UnitOf(t.axes[0].name),
+                           UnitOf(t.axes[1].name), unit);
+      line("ST/X", t.axes[0].values);
+      for (size_t j = 0; j < n1; ++j) {
+        s += absl::StrCat("   ST/Y ", Num(t.axes[1].values[j]), "\n");
+        std::vector<double> row(n0);
+        for (size_t i = 0; i < n0; ++i) row[i] = vals[i * n1 + j];
+        line("WERT", row);
       }
     }
     s += "END\n\n";
-  }
+  };
+  for (const auto& o : t.outputs) block(o.name, UnitOf(o.name), o.values);
+  for (const auto& [name, v] : Flags(t)) block(name, "-", AsDoubles(*v));
   return s;
 }
 
 }  // namespace
 
-absl::StatusOr<Exported> Export(const Table& t, Format f) {
-  if (t.axes.empty() || t.outputs.empty()) return absl::InvalidArgumentError("empty table");
+std::vector<Scalar> Scalars(const Table& t) {
+  const auto& l = t.limits;
+  std::vector<Scalar> s = {
+      {"pole_pairs", static_cast<double>(l.pole_pairs), "-", "pole pairs p of the calibration", true},
+      {"rs_ohm", l.rs_ohm, "Ohm", "phase resistance Rs used for the steady-state voltage", false},
+      {"psi_pm_wb", t.psi_pm_wb, "Wb", "permanent-magnet flux linkage psi_d(0, 0) of the fitted model", false},
+      {"i_max_a", l.i_max_a, "A", "current limit the table was computed for (peak, amplitude-invariant)", false},
+      {"udc_v", l.udc_v, "V", "DC-link voltage the table was computed for", false},
+      {"modulation_limit", l.modulation_limit, "-", "fraction of the linear SVPWM range used", false},
+      {"u_max_v", l.UMaxV(), "V", "voltage limit m Udc / sqrt(3) (peak phase, amplitude-invariant)", false},
+      {"temperature_c", l.temperature_c, "degC", "temperature the flux model was evaluated at", false},
+  };
+  if (t.measured_current_limit_a > 0) {
+    s.push_back({"measured_current_limit_a", t.measured_current_limit_a, "A",
+                 "current limit the identified points cover; beyond it cells are flagged extrapolated", false});
+  }
+  if (t.kind == "fw") {
+    s.push_back({"speed_max_rpm", t.speed_max_rpm, "rpm", "top of the speed axis (axis from 0 rpm)", false});
+  }
+  s.push_back({"allow_extrapolation", t.allow_extrapolation ? 1.0 : 0.0, "-",
+               "1: computed beyond the measured region on request (allow-extrapolation flag)", true});
+  s.push_back({"calibration_version", static_cast<double>(t.calibration_version), "-",
+               "stored version of the calibration", true});
+  return s;
+}
+
+std::vector<std::pair<std::string, std::string>> TextFields(const Table& t) {
+  return {{"serial", t.serial},           {"model", t.model},     {"created_utc", t.created_utc},
+          {"fluxcal_version", t.fluxcal_version}, {"verdict", t.verdict}, {"release_state", t.release_state}};
+}
+
+std::vector<std::pair<std::string, const std::vector<uint8_t>*>> Flags(const Table& t) {
+  return {{"clamped", &t.clamped}, {"extrapolated", &t.extrapolated}};
+}
+
+absl::StatusOr<CType> ParseCType(const std::string& name) {
+  if (name == "double") return CType::kDouble;
+  if (name == "float") return CType::kFloat;
+  return absl::InvalidArgumentError(absl::StrCat("flag --ctype: expected float or double, got '", name, "'"));
+}
+
+absl::StatusOr<Exported> Export(const Table& t, Format f, const ExportOptions& opt) {
+  if (t.axes.empty() || t.outputs.empty()) return absl::InvalidArgumentError("table: no axes or no outputs");
+  size_t cells = 1;
+  for (const auto& a : t.axes) {
+    cells *= a.values.size();
+    for (double v : a.values) {
+      if (!std::isfinite(v)) return absl::InvalidArgumentError(absl::StrCat("table axis '", a.name, "': non-finite value"));
+    }
+  }
+  for (const auto& o : t.outputs) {
+    if (o.values.size() != cells) {
+      return absl::InvalidArgumentError(absl::StrCat("table output '", o.name, "': ", o.values.size(),
+                                                     " values for ", cells, " cells"));
+    }
+    for (double v : o.values) {
+      if (!std::isfinite(v)) return absl::InvalidArgumentError(absl::StrCat("table output '", o.name, "': non-finite value"));
+    }
+  }
+  for (const auto& [name, v] : Flags(t)) {
+    if (v->size() != cells) {
+      return absl::InvalidArgumentError(absl::StrCat("table flags '", name, "': ", v->size(), " for ", cells, " cells"));
+    }
+  }
   Exported e;
   switch (f) {
     case Format::kCsv: e.bytes = Csv(t); break;
     case Format::kJson: e.bytes = Json(t); break;
-    case Format::kCHeader: e.bytes = CHeader(t); break;
+    case Format::kCHeader: e.bytes = CHeader(t, opt.ctype); break;
     case Format::kCdfx: e.bytes = Cdfx(t); break;
     case Format::kDcm: e.bytes = Dcm(t); break;
   }
-  e.crc32 = t.crc32;
-  e.sha256 = t.sha256;
+  e.payload_crc32 = t.crc32;
+  e.payload_sha256 = t.sha256;
+  e.file_sha256 = Sha256Hex(e.bytes);
   return e;
 }
 

@@ -38,19 +38,61 @@ struct Output {
   std::vector<double> values;   // row-major over the axes (first axis slowest)
 };
 
+// Release state of the exported calibration version, as written into every
+// export: the release store knows it for exports through the service; a
+// local export from a calibration file cannot know it.
+inline constexpr char kReleased[] = "released";
+inline constexpr char kNotReleased[] = "not released";
+inline constexpr char kReleaseUnknown[] = "unknown (local export, release store not consulted)";
+inline constexpr char kVerdictUnknown[] = "unknown";
+
 struct Table {
   std::string kind;    // "mtpa", "mtpv", "fw"
+  // Provenance: written into every export format (docs/tables.md).
   std::string serial;
   int calibration_version = 0;
   std::string model;
   std::string created_utc;
+  std::string fluxcal_version;                    // FluxcalVersion() of the build that computed it
+  std::string verdict = kVerdictUnknown;          // the calibration's verdict ("pass", ...)
+  std::string release_state = kReleaseUnknown;    // kReleased, kNotReleased or kReleaseUnknown
+  // What the table was computed for: the limits the solver used, the machine
+  // constants, and the measured region of the calibration.
+  MachineLimits limits;
+  double psi_pm_wb = 0.0;               // psi_d at id = iq = 0 and limits.temperature_c
+  double speed_max_rpm = 0.0;           // fw: top of the speed axis [0, max]; 0 for mtpa/mtpv
+  double measured_current_limit_a = 0;  // 0: not known (no measured region was given)
+  bool allow_extrapolation = false;
   std::vector<Axis> axes;
   std::vector<Output> outputs;
-  std::vector<uint8_t> clamped;   // per cell: 1 where the request exceeded the limits
-  // Over the canonical payload (PayloadBytes): CRC-32 (zlib) and SHA-256.
+  std::vector<uint8_t> clamped;        // per cell: 1 where the request exceeded the limits
+  std::vector<uint8_t> extrapolated;   // per cell: 1 where |i| lies beyond the measured current limit
+  // Over the canonical payload (PayloadBytes), NOT over a file: CRC-32 (zlib)
+  // and SHA-256 of the values. Exports name them payload_crc32 / payload_sha256.
   uint32_t crc32 = 0;
   std::string sha256;
 };
+
+// Version of fluxcal (CMake project version) written into exports.
+const char* FluxcalVersion();
+
+// A scalar written beside the table in every format (DCM FESTWERT, CDFX
+// VALUE, C #define, CSV comment, JSON field): name with unit suffix, value,
+// unit as displayed, and what it means.
+struct Scalar {
+  std::string name;
+  double value = 0;
+  std::string unit;
+  std::string description;
+  bool integer = false;
+};
+std::vector<Scalar> Scalars(const Table& t);
+// Text metadata (serial, model, created_utc, fluxcal_version, verdict,
+// release_state): written as text where the format has text, else comments.
+std::vector<std::pair<std::string, std::string>> TextFields(const Table& t);
+// Per-cell flag arrays exported beside the outputs: {"clamped", ...},
+// {"extrapolated", ...}, both 0/1 with the outputs' shape.
+std::vector<std::pair<std::string, const std::vector<uint8_t>*>> Flags(const Table& t);
 
 struct TableSpec {
   std::string kind = "mtpa";        // mtpa | mtpv | fw
@@ -61,6 +103,17 @@ struct TableSpec {
   std::string serial;
   int calibration_version = 0;
   std::string model;
+  std::string verdict = kVerdictUnknown;
+  std::string release_state = kReleaseUnknown;
+  // The calibration's measured current limit (fit::Calibration::
+  // MeasuredCurrentLimitA); 0: not known, then no cell is marked extrapolated
+  // and no extrapolation check is made.
+  double measured_current_limit_a = 0;
+  // false (default): a current limit above the measured one is refused
+  // (InvalidArgument), and the MTPV flux axis is restricted to the fluxes
+  // whose MTPV point lies inside the current limit (FailedPrecondition when
+  // there is none). true: computed anyway, cells flagged `extrapolated`.
+  bool allow_extrapolation = false;
 };
 
 double TorqueNm(const sim::MagneticModel& m, int pole_pairs, double id_a, double iq_a,
@@ -82,6 +135,9 @@ OperatingPoint SolveLeastCurrent(const sim::MagneticModel& m, const MachineLimit
 double MaxTorqueNm(const sim::MagneticModel& m, const MachineLimits& lim, double we_rad_s,
                    double sign = 1.0);
 
+// Errors: InvalidArgument (points, limits, kind; a current limit above the
+// measured one without allow_extrapolation), FailedPrecondition (mtpv: no
+// MTPV point inside the current limit and allow_extrapolation not set).
 absl::StatusOr<Table> BuildTable(const sim::MagneticModel& m, const MachineLimits& lim,
                                  const TableSpec& spec);
 
@@ -92,12 +148,20 @@ void Seal(Table* t);   // fills crc32 and sha256
 
 enum class Format { kCsv, kJson, kCHeader, kCdfx, kDcm };
 absl::StatusOr<Format> ParseFormat(const std::string& name);
+enum class CType { kDouble, kFloat };
+// "double" | "float"; InvalidArgument naming --ctype otherwise.
+absl::StatusOr<CType> ParseCType(const std::string& name);
+struct ExportOptions {
+  CType ctype = CType::kDouble;   // C header element type of the value arrays and scalars
+};
 struct Exported {
   std::string bytes;
-  uint32_t crc32 = 0;
-  std::string sha256;
+  uint32_t payload_crc32 = 0;    // over the values (PayloadBytes), as written inside the file
+  std::string payload_sha256;    // over the values (PayloadBytes), as written inside the file
+  std::string file_sha256;       // over `bytes`: equals `sha256sum FILE` of the written file
 };
-absl::StatusOr<Exported> Export(const Table& t, Format f);
+// Errors: InvalidArgument (empty table, a non-finite value: named by field).
+absl::StatusOr<Exported> Export(const Table& t, Format f, const ExportOptions& opt = {});
 
 // SVG plots: MTPA/MTPV over torque contours in the (id, iq) plane; the
 // field-weakening table as a heat map.

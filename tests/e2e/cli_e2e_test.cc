@@ -3,8 +3,10 @@
 // error path of bad input.
 #include <array>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <string>
 
 #include "gtest/gtest.h"
@@ -66,11 +68,38 @@ TEST(Cli, EndToEnd) {
   const auto grid = Fluxcal("query " + cal + " --grid -100:0:3,0:100:3");
   EXPECT_EQ(std::count(grid.out.begin(), grid.out.end(), '\n'), 10);
 
+  // The printed sha256 is the file's (what sha256sum says); the checksums
+  // over the values are printed as payload_crc32 / payload_sha256.
+  const bool have_sha256sum = std::system("sha256sum --version > /dev/null 2>&1") == 0;
   for (const char* fmt : {"csv", "json", "h", "cdfx", "dcm"}) {
     const std::string out = (dir / (std::string("mtpa.") + fmt)).string();
     auto e = Json(Fluxcal("export " + cal + " --table mtpa --format " + fmt + " --points 8 --out " + out + " --json"));
     EXPECT_EQ(e["sha256"].get<std::string>().size(), 64u) << fmt;
+    EXPECT_EQ(e["payload_sha256"].get<std::string>().size(), 64u) << fmt;
+    EXPECT_NE(e["sha256"], e["payload_sha256"]) << fmt;
+    EXPECT_EQ(e["release_state"], "unknown (local export, release store not consulted)") << fmt;
     EXPECT_TRUE(fs::file_size(out) > 100) << fmt;
+    if (have_sha256sum) {
+      FILE* p = popen(("sha256sum " + out).c_str(), "r");
+      char sum[65] = {};
+      ASSERT_EQ(fread(sum, 1, 64, p), 64u);
+      pclose(p);
+      EXPECT_EQ(e["sha256"].get<std::string>(), std::string(sum)) << fmt;
+    }
+  }
+  {
+    // --ctype float; an unknown ctype and a current limit beyond the
+    // measured one are refused unless --allow-extrapolation.
+    const std::string out = (dir / "mtpa_float.h").string();
+    Json(Fluxcal("export " + cal + " --table mtpa --format h --ctype float --points 8 --out " + out + " --json"));
+    std::ifstream in(out);
+    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    EXPECT_NE(text.find("static const float fluxcal_mtpa_id_a[8]"), std::string::npos);
+    EXPECT_EQ(Fluxcal("export " + cal + " --table mtpa --format h --ctype half --out " + out).code, 2);
+    EXPECT_EQ(Fluxcal("export " + cal + " --table mtpa --format csv --i-max-a 1000 --out " + out).code, 2);
+    auto x = Json(Fluxcal("export " + cal + " --table mtpa --format csv --points 8 --i-max-a 1000 --allow-extrapolation --out " +
+                          out + " --json"));
+    EXPECT_GT(x["extrapolated_cells"].get<int>(), 0);
   }
 
   // Signed export: keygen, export --sign-key, verify; a changed byte or

@@ -94,7 +94,12 @@ TEST(Pipeline, FitJudgeQueryExport) {
   auto e = ExportTable(**store, "IPM-F", 0, spec, lim, "csv");
   ASSERT_TRUE(e.ok()) << e.status();
   EXPECT_EQ(e->version, 2);
-  EXPECT_EQ(e->exported.sha256.size(), 64u);
+  EXPECT_EQ(e->exported.payload_sha256.size(), 64u);
+  // Verdict and release state of the stored version travel inside the file.
+  EXPECT_FALSE(e->verdict.empty());
+  EXPECT_NE(e->exported.bytes.find("# verdict: " + e->verdict + "\n"), std::string::npos) << e->exported.bytes.substr(0, 800);
+  EXPECT_NE(e->exported.bytes.find("# release_state: not released\n"), std::string::npos);
+  EXPECT_NE(e->exported.bytes.find("# serial: IPM-F\n"), std::string::npos);
   EXPECT_EQ(QueryFlux(**store, "NOPE", 0, {{0, 0}}).status().code(), absl::StatusCode::kNotFound);
 }
 

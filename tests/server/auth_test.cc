@@ -344,6 +344,10 @@ TEST(Roles, OnlyAReleasedPassingCalibrationIsFlashed) {
   EXPECT_EQ(e.version(), 1);
   EXPECT_TRUE(e.released());
   EXPECT_EQ(e.verdict(), "pass");
+  // The file itself says so (a flashing tool may see only the file).
+  EXPECT_NE(e.data().find("# verdict: pass\n"), std::string::npos);
+  EXPECT_NE(e.data().find("# release_state: released\n"), std::string::npos);
+  EXPECT_NE(e.data().find("# calibration_version: 1\n"), std::string::npos);
   EXPECT_EQ(flash(2, &e).error_code(), grpc::StatusCode::FAILED_PRECONDITION);
   // An engineer may export any version and sees its state.
   grpc::ClientContext c;
@@ -355,6 +359,8 @@ TEST(Roles, OnlyAReleasedPassingCalibrationIsFlashed) {
   EXPECT_EQ(er.version(), 2);
   EXPECT_FALSE(er.released());
   EXPECT_NE(er.verdict(), "pass");
+  EXPECT_NE(er.data().find("# verdict: " + er.verdict() + "\n"), std::string::npos);
+  EXPECT_NE(er.data().find("# release_state: not released\n"), std::string::npos);
   // The audit trail names who did each write, with the client's request id
   // where it sent one; a flasher may not read it.
   grpc::ClientContext ac;

@@ -293,6 +293,15 @@ TEST_P(ServiceTest, EightConcurrentStationsThenFitExportQuery) {
   EXPECT_EQ(er.version(), 2);
   EXPECT_EQ(er.sha256().size(), 64u);
   EXPECT_NE(er.data().find("KENNLINIE FLUXCAL_MTPA_ID_A 16"), std::string::npos);
+  // Verdict, release state, provenance and limits are inside the file, not
+  // only in the reply.
+  EXPECT_FALSE(er.verdict().empty());
+  EXPECT_NE(er.data().find("* verdict: " + er.verdict() + "\n"), std::string::npos) << er.data().substr(0, 600);
+  EXPECT_NE(er.data().find(std::string("* release_state: ") + (er.released() ? "released" : "not released") + "\n"),
+            std::string::npos);
+  EXPECT_NE(er.data().find("* serial: IPM-C-3\n"), std::string::npos);
+  EXPECT_NE(er.data().find("FESTWERT FLUXCAL_MTPA_I_MAX_A\n"), std::string::npos);
+  EXPECT_NE(er.data().find("FESTWERT FLUXCAL_MTPA_U_MAX_V\n"), std::string::npos);
   EXPECT_TRUE(er.signature().empty());
   // With a signing key every reply carries a detached signature of its data.
   auto kp = tables::GenerateEd25519();

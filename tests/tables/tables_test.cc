@@ -266,7 +266,7 @@ TEST(Export, JsonRoundTrip) {
   ASSERT_TRUE(e.ok());
   const auto j = nlohmann::json::parse(e->bytes);
   EXPECT_EQ(j["outputs"][0]["values"].get<std::vector<double>>(), t.outputs[0].values);
-  EXPECT_EQ(j["sha256"], t.sha256);
+  EXPECT_EQ(j["payload_sha256"], t.sha256);
   // The checksum a flashing station recomputes from the parsed values.
   Table back = t;
   back.outputs[0].values = j["outputs"][0]["values"].get<std::vector<double>>();
@@ -307,7 +307,7 @@ TEST(Export, CHeaderCompilesAsC99AndCarriesTheValues) {
   };
   for (const auto& a : t.axes) print(a.name, a.values);
   for (const auto& o : t.outputs) print(o.name, o.values);
-  prog += "  printf(\"%08lx %s\\n\", (unsigned long)fluxcal_fw_crc32, fluxcal_fw_sha256);\n  return 0;\n}\n";
+  prog += "  printf(\"%08lx %s\\n\", (unsigned long)fluxcal_fw_payload_crc32, fluxcal_fw_payload_sha256);\n  return 0;\n}\n";
   { std::ofstream(dir + "/main.c") << prog; }
   const std::string cmd = "cd " + dir + " && cc -std=c99 -pedantic -Wall -Wextra -Werror main.c -o main "
                           "> build.log 2>&1 && ./main > out.txt";
@@ -407,10 +407,13 @@ TEST(Export, CdfxRoundTripThroughXmlParser) {
   tinyxml2::XMLDocument doc;
   ASSERT_EQ(doc.Parse(e->bytes.c_str()), tinyxml2::XML_SUCCESS);
   auto* tree = doc.FirstChildElement("MSRSW")->FirstChildElement("SW-SYSTEMS")->FirstChildElement("SW-SYSTEM")
-                   ->FirstChildElement("SW-INSTANCE-TREE");
+                   ->FirstChildElement("SW-INSTANCE-SPEC")->FirstChildElement("SW-INSTANCE-TREE");
   ASSERT_NE(tree, nullptr);
   auto* inst = tree->FirstChildElement("SW-INSTANCE");
-  EXPECT_STREQ(inst->FirstChildElement("SHORT-NAME")->GetText(), "FLUXCAL_FW_ID_A");
+  while (inst && std::string(inst->FirstChildElement("SHORT-NAME")->GetText()) != "FLUXCAL_FW_ID_A") {
+    inst = inst->NextSiblingElement("SW-INSTANCE");
+  }
+  ASSERT_NE(inst, nullptr);
   EXPECT_STREQ(inst->FirstChildElement("CATEGORY")->GetText(), "MAP");
   std::vector<double> vals;
   for (auto* vg = inst->FirstChildElement("SW-VALUE-CONT")->FirstChildElement("SW-VALUES-PHYS")->FirstChildElement("VG");
@@ -438,8 +441,14 @@ TEST(Export, DcmRoundTrip) {
       else if (key == "ST/X") { double x; while (ls >> x) stx[name].push_back(x); }
     }
     const std::string id = std::string("FLUXCAL_") + (std::string(kind) == "fw" ? "FW" : "MTPA") + "_ID_A";
-    EXPECT_EQ(wert[id], t.outputs[0].values) << kind;
-    EXPECT_EQ(stx[id], t.axes.back().values) << kind;
+    // X = the first axis (torque) in every format; a KENNFELD lists, per Y
+    // (speed) value, the WERT values over X.
+    const size_t n0 = t.axes[0].values.size(), n1 = t.axes.size() > 1 ? t.axes[1].values.size() : 1;
+    std::vector<double> want;
+    for (size_t j = 0; j < n1; ++j)
+      for (size_t i = 0; i < n0; ++i) want.push_back(t.outputs[0].values[i * n1 + j]);
+    EXPECT_EQ(wert[id], want) << kind;
+    EXPECT_EQ(stx[id], t.axes.front().values) << kind;
   }
 }
 
