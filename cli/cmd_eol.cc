@@ -1,13 +1,15 @@
 // fluxcal eol <recording-set> --server ADDR [--station ID] [--model M]
-//             [--tables-dir DIR] [--json]
+//             [--tables-dir DIR] [--upload-recording] [--json]
 // The EOL station flow: identify every point locally, stream the results
-// for the serial, ask for a fit and its verdict, fetch the ECU tables.
+// for the serial, (with --upload-recording) upload the raw set, ask for a
+// fit and its verdict, fetch the ECU tables.
 #include <chrono>
 #include <thread>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <optional>
 
 #include <grpcpp/grpcpp.h>
 
@@ -23,11 +25,50 @@
 namespace fluxcal::cli {
 namespace {
 
+// The files of a set as IngestRecording wants them: manifest.json and
+// every file the manifest names (the service refuses any other), under
+// normalised relative names, with the bytes as on disk.
+absl::StatusOr<io::RecordingFiles> SetFiles(const std::string& dir, const io::Manifest& m) {
+  auto norm = [](const std::string& f) { return std::filesystem::path(f).lexically_normal().generic_string(); };
+  std::vector<std::string> names = {"manifest.json"};
+  for (const auto& p : m.points) names.push_back(norm(p.file));
+  if (m.steady_state) names.push_back(norm(*m.steady_state));
+  if (m.hf_results) names.push_back(norm(*m.hf_results));
+  io::RecordingFiles files;
+  for (const auto& name : names) {
+    if (files.count(name)) continue;
+    auto data = io::ReadFileToString((std::filesystem::path(dir) / name).string());
+    if (!data.ok()) return data.status();
+    files.emplace(name, std::move(*data));
+  }
+  return files;
+}
+
+// UNAVAILABLE and DEADLINE_EXCEEDED may hide a reply that was lost after
+// the server stored the run: `attempt` is repeated (3 tries in all) with
+// the same idempotency key, so the retry stores nothing twice.
+template <class F>
+grpc::Status WithRetries(const std::string& serial, const char* what, F attempt) {
+  grpc::Status s;
+  for (int k = 0; k < 3; ++k) {
+    if (k > 0) {
+      std::fprintf(stderr, "eol %s: %s: %s; retrying the same %s\n", serial.c_str(), what, s.error_message().c_str(),
+                   what);
+      std::this_thread::sleep_for(std::chrono::milliseconds(500 << k));
+    }
+    s = attempt();
+    if (s.error_code() != grpc::StatusCode::UNAVAILABLE && s.error_code() != grpc::StatusCode::DEADLINE_EXCEEDED) {
+      break;
+    }
+  }
+  return s;
+}
+
 int RunEol(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, {"server", "station", "model", "tables-dir"}, {"json"});
+  auto args = ParseArgs(argv, {"server", "station", "model", "tables-dir"}, {"json", "upload-recording"});
   if (!args.ok() || args->positional.size() != 1 || !args->Get("server")) {
     std::fprintf(stderr, "usage: fluxcal eol <recording-set> --server ADDR [--station ID] [--model M] "
-                         "[--tables-dir DIR] [--json]\n");
+                         "[--tables-dir DIR] [--upload-recording] [--json]\n");
     return 2;
   }
   auto set = io::ReadRecordingSet(args->positional[0]);
@@ -68,12 +109,7 @@ int RunEol(const std::vector<std::string>& argv) {
     // The run's idempotency key is its content: a retry after a lost reply
     // (UNAVAILABLE, DEADLINE_EXCEEDED) stores nothing twice.
     first.set_idempotency_key("eol-" + tables::Sha256Hex(content).substr(0, 40));
-    grpc::Status s;
-    for (int attempt = 0; attempt < 3; ++attempt) {
-      if (attempt > 0) {
-        std::fprintf(stderr, "eol %s: %s; retrying the same run\n", serial.c_str(), s.error_message().c_str());
-        std::this_thread::sleep_for(std::chrono::milliseconds(500 << attempt));
-      }
+    const grpc::Status s = WithRetries(serial, "run", [&] {
       grpc::ClientContext ctx;
       ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
       auto writer = stub->IngestHfResults(&ctx, &ing);
@@ -82,15 +118,63 @@ int RunEol(const std::vector<std::string>& argv) {
         if (!writer->Write(m)) break;
       }
       writer->WritesDone();
-      s = writer->Finish();
-      if (s.error_code() != grpc::StatusCode::UNAVAILABLE && s.error_code() != grpc::StatusCode::DEADLINE_EXCEEDED) {
-        break;
-      }
-    }
+      return writer->Finish();
+    });
     if (!s.ok()) return ReportRpcError("eol", s);
   }
-  std::fprintf(stderr, "eol %s: %d points stored (run %lld, %d rejected); fitting\n", serial.c_str(), ing.accepted(),
+  std::fprintf(stderr, "eol %s: %d points stored (run %lld, %d rejected)\n", serial.c_str(), ing.accepted(),
                static_cast<long long>(ing.run_id()), ing.rejects_size());
+  // The raw set, so that the service can diagnose this serial (Diagnose
+  // reads the latest stored recording) and fit it from everything the set
+  // holds, as `fluxcal fit SET` does. Uploaded before the fit: a failed
+  // upload leaves no calibration version behind, and rerunning the command
+  // replays both ingests by their keys instead of storing them twice.
+  std::optional<v1::IngestRecordingResponse> rec;
+  if (args->Has("upload-recording")) {
+    auto files = SetFiles(args->positional[0], set->manifest);
+    if (!files.ok()) {
+      std::fprintf(stderr, "fluxcal eol: %s\n", std::string(files.status().message()).c_str());
+      return 1;
+    }
+    std::string content;
+    for (const auto& [name, data] : *files) content += name + '\n' + std::to_string(data.size()) + '\n' + data;
+    const std::string key = "eolrec-" + tables::Sha256Hex(content).substr(0, 40);
+    std::fprintf(stderr, "eol %s: uploading the recording (%zu files, %zu bytes)\n", serial.c_str(), files->size(),
+                 content.size());
+    rec.emplace();
+    const grpc::Status s = WithRetries(serial, "recording upload", [&] {
+      grpc::ClientContext ctx;
+      ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(300));
+      auto writer = stub->IngestRecording(&ctx, &*rec);
+      // Chunks well under the service's message limit; the first names the
+      // serial, the station and the key.
+      constexpr size_t kChunk = 1 << 20;
+      bool first = true, open = true;
+      for (auto it = files->begin(); open && it != files->end(); ++it) {
+        const auto& [name, data] = *it;
+        // An empty file still goes out as one chunk, so the set is complete.
+        for (size_t off = 0; open && (off == 0 || off < data.size()); off += kChunk) {
+          v1::RecordingChunk c;
+          if (first) {
+            c.set_serial(serial);
+            c.set_station_id(args->Get("station").value_or("eol"));
+            c.set_idempotency_key(key);
+            first = false;
+          }
+          c.set_path(name);
+          c.set_data(data.substr(off, kChunk));
+          open = writer->Write(c);   // false: the stream broke; Finish says why
+        }
+      }
+      writer->WritesDone();
+      return writer->Finish();
+    });
+    if (!s.ok()) return ReportRpcError("eol", s);
+    std::fprintf(stderr, "eol %s: recording %s stored (run %lld, %d points%s)\n", serial.c_str(),
+                 rec->recording_sha256().substr(0, 16).c_str(), static_cast<long long>(rec->run_id()), rec->points(),
+                 rec->replayed() ? ", replayed" : "");
+  }
+  std::fprintf(stderr, "eol %s: fitting\n", serial.c_str());
   v1::FitRequest fr;
   fr.set_serial(serial);
   fr.set_model(args->Get("model").value_or("auto"));
@@ -106,6 +190,10 @@ int RunEol(const std::vector<std::string>& argv) {
                         {"model", fit.calibration().model()}, {"verdict", fit.calibration().verdict()},
                         {"pass", fit.pass()}, {"psi_pm_wb", fit.calibration().psi_pm_wb()},
                         {"rms_relative", fit.calibration().rms_relative()}, {"tables", nlohmann::json::array()}};
+  if (rec) {
+    out["recording"] = {{"run_id", rec->run_id()}, {"points", rec->points()}, {"sha256", rec->recording_sha256()},
+                        {"bytes", rec->recording_bytes()}, {"replayed", rec->replayed()}};
+  }
   if (auto dir = args->Get("tables-dir"); dir && fit.pass()) {
     std::filesystem::create_directories(*dir);
     for (auto [table, format] : {std::pair<const char*, const char*>{"mtpa", "cdfx"}, {"fw", "dcm"}}) {

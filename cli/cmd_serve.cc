@@ -114,9 +114,10 @@ int RunServe(const std::vector<std::string>& argv) {
   }
   opt.authorizer = auth.get();
   opt.log_requests = !args->Has("quiet");
-  // Reflection describes the API only; with identities on, it stays off so
-  // that nothing but health answers an anonymous caller.
-  opt.reflection = auth == nullptr;
+  // Reflection (v1 and v1alpha) describes the API only; with identities on
+  // it answers authenticated callers of any role, so nothing but health
+  // answers an anonymous one (server/reflection.h).
+  opt.reflection = true;
   int port = 0;
   auto srv = server::StartServer(&service, listen, &port, opt);
   if (!srv || port == 0) {

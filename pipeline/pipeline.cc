@@ -70,6 +70,16 @@ absl::StatusOr<IdentifiedSet> IdentifySet(const io::RecordingSet& set, const ide
   return out;
 }
 
+fit::FitData FitDataFromPoints(const storage::MotorRow& motor, const std::vector<IdentifiedPoint>& points) {
+  fit::FitData d;
+  d.serial = motor.serial;
+  d.pole_pairs = motor.pole_pairs;
+  d.rs_ohm = motor.rs_ohm;
+  if (motor.psi_pm_wb > 0) d.psi_pm_prior_wb = motor.psi_pm_wb;
+  for (const auto& p : points) d.inductances.push_back(ToObservation(p));
+  return d;
+}
+
 absl::StatusOr<fit::FitData> FitDataFromSet(const io::RecordingSet& set, const ident::IdentifyOptions& options) {
   auto ids = ident::IdentifySet(set, options);
   if (!ids.ok()) return ids.status();
@@ -168,16 +178,31 @@ absl::StatusOr<storage::CalibrationRow> FitSerial(storage::Store& store, const s
   int64_t run_id = 0;
   auto pts = store.LatestRunPoints(serial, &run_id);
   if (!pts.ok()) return pts.status();
-  fit::FitData d;
-  d.serial = serial;
-  d.pole_pairs = motor->pole_pairs;
-  d.rs_ohm = motor->rs_ohm;
-  if (motor->psi_pm_wb > 0) d.psi_pm_prior_wb = motor->psi_pm_wb;
   size_t unreliable = 0;
-  for (const auto& p : *pts) {
-    if (!p.reliable) ++unreliable;
-    d.inductances.push_back(ToObservation(p));
+  for (const auto& p : *pts) unreliable += p.reliable ? 0 : 1;
+  // A run that carries its raw recording is fitted from the set, through
+  // FitDataFromSet as `fluxcal fit SET` does: the steady-state rows and the
+  // drive data then constrain the surfaces here as they do locally. From
+  // the stored points alone psi_d is pinned only by the magnet-flux prior,
+  // and its standard error came out an order of magnitude larger than the
+  // local fit's for the same set.
+  std::string recording_sha;
+  auto history = store.History(serial);
+  if (!history.ok()) return history.status();
+  for (const auto& h : *history) {
+    if (h.run_id == run_id && h.kind == "recording" && !h.detail.empty()) recording_sha = h.detail;
   }
+  fit::FitData d;
+  if (!recording_sha.empty()) {
+    auto set = LoadStoredRecording(store, recording_sha);
+    if (!set.ok()) return set.status();
+    auto fd = FitDataFromSet(*set);
+    if (!fd.ok()) return fd.status();
+    d = std::move(*fd);
+  } else {
+    d = FitDataFromPoints(*motor, *pts);
+  }
+  d.serial = serial;
   fit::FitOptions fo;
   fo.model = model.empty() ? "auto" : model;
   auto cal = fit::Fit(d, fo);
@@ -306,17 +331,21 @@ absl::StatusOr<std::vector<FleetPoint>> FleetStatistics(storage::Store& store,
   return out;
 }
 
-absl::StatusOr<diag::DiagnosisReport> DiagnoseStored(storage::Store& store, const std::string& serial) {
-  auto sha = store.LatestRecordingSha(serial);
-  if (!sha.ok()) return sha.status();
-  auto blob = store.GetRecording(*sha);
+absl::StatusOr<io::RecordingSet> LoadStoredRecording(storage::Store& store, const std::string& sha256) {
+  auto blob = store.GetRecording(sha256);
   if (!blob.ok()) return blob.status();
   // Unpacked in memory only (names re-checked), never onto the filesystem.
   auto archive = Inflate(*blob, kMaxStoredRecordingBytes);
   if (!archive.ok()) return archive.status();
   auto files = DecodeRecordingArchive(*archive);
   if (!files.ok()) return files.status();
-  auto set = io::ReadRecordingSetFromFiles(*files, "");
+  return io::ReadRecordingSetFromFiles(*files, "");
+}
+
+absl::StatusOr<diag::DiagnosisReport> DiagnoseStored(storage::Store& store, const std::string& serial) {
+  auto sha = store.LatestRecordingSha(serial);
+  if (!sha.ok()) return sha.status();
+  auto set = LoadStoredRecording(store, *sha);
   if (!set.ok()) return set.status();
   return diag::Diagnose(*set);
 }

@@ -55,7 +55,12 @@ struct FitTolerances {
 // "pass" or "fail: <reason>" for a fitted calibration.
 std::string Verdict(const fit::Calibration& cal, double nominal_psi_pm_wb, size_t points, size_t unreliable,
                     const FitTolerances& tol);
-// Fits the latest run of `serial` and stores calibration version n+1.
+// Fits the latest run of `serial` and stores calibration version n+1. A
+// run ingested with its raw recording (IngestRecording) is fitted from the
+// stored set through FitDataFromSet, the function `fluxcal fit SET` uses,
+// so both give the same calibration (and standard errors) for the same
+// set; a run of HF results only is fitted from its points
+// (FitDataFromPoints).
 absl::StatusOr<storage::CalibrationRow> FitSerial(storage::Store& store, const std::string& serial,
                                                   const std::string& model, const FitTolerances& tol);
 
@@ -96,6 +101,8 @@ absl::StatusOr<std::vector<FleetPoint>> FleetStatistics(storage::Store& store,
                                                         const std::vector<std::pair<double, double>>& points,
                                                         double outlier_sigma);
 
+// A stored raw recording (by SHA-256), unpacked and read in memory.
+absl::StatusOr<io::RecordingSet> LoadStoredRecording(storage::Store& store, const std::string& sha256);
 // Diagnosis of the serial's latest stored raw recording, unpacked in memory.
 absl::StatusOr<diag::DiagnosisReport> DiagnoseStored(storage::Store& store, const std::string& serial);
 

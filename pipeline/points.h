@@ -37,6 +37,11 @@ struct IdentifiedSet {
 };
 absl::StatusOr<IdentifiedSet> IdentifySet(const io::RecordingSet& set, const ident::IdentifyOptions& options = {});
 
+// Fit input from stored HF points: the motor's nominal data (pole pairs,
+// Rs, magnet flux as the prior when > 0) and one inductance observation per
+// point.
+fit::FitData FitDataFromPoints(const storage::MotorRow& motor, const std::vector<IdentifiedPoint>& points);
+
 // The identify-then-fit glue (the only place): every data kind a local set
 // carries (identified inductances, steady-state rows, hf_results) as fit
 // input.

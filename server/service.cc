@@ -2,7 +2,6 @@
 
 #include <cmath>
 
-#include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/health_check_service_interface.h>
 #include <grpcpp/grpcpp.h>
 #include <grpcpp/support/server_interceptor.h>
@@ -16,6 +15,7 @@
 #include "io/recording_set.h"
 #include "nlohmann/json.hpp"
 #include "pipeline/pipeline.h"
+#include "server/reflection.h"
 #include "server/validation.h"
 #include "tables/signature.h"
 
@@ -557,7 +557,6 @@ bool IsLoopbackAddress(const std::string& address) {
 std::unique_ptr<grpc::Server> StartServer(CalibrationServiceImpl* service, const std::string& address,
                                           int* bound_port, const ServerOptions& options) {
   grpc::EnableDefaultHealthCheckService(true);
-  if (options.reflection) grpc::reflection::InitProtoReflectionServerBuilderPlugin();
   grpc::ServerBuilder b;
   std::shared_ptr<grpc::ServerCredentials> creds = grpc::InsecureServerCredentials();
   if (!options.tls_cert_pem.empty()) {
@@ -571,6 +570,14 @@ std::unique_ptr<grpc::Server> StartServer(CalibrationServiceImpl* service, const
   }
   b.AddListeningPort(address, creds, bound_port);
   b.RegisterService(service);
+  if (options.reflection) {
+    auto refl = MakeReflectionServices(service->authorizer(),
+                                       {v1::CalibrationService::service_full_name(), "grpc.health.v1.Health"});
+    for (auto& r : refl) {
+      b.RegisterService(r.get());
+      service->KeepAlive(std::move(r));
+    }
+  }
   b.SetMaxReceiveMessageSize(64 << 20);
   if (options.log_requests) {
     static const Authorizer kOpen;

@@ -10,6 +10,7 @@
 #include <memory>
 #include <mutex>
 #include <string>
+#include <vector>
 
 #include "absl/status/status.h"
 #include "fluxcal/v1/calibration.grpc.pb.h"
@@ -18,6 +19,7 @@
 
 namespace grpc {
 class Server;
+class Service;
 }
 
 namespace fluxcal::server {
@@ -31,6 +33,10 @@ class CalibrationServiceImpl final : public fluxcal::v1::CalibrationService::Ser
   void set_authorizer(const Authorizer* auth) { auth_ = auth != nullptr ? auth : &open_; }
   // Ed25519 private key (PEM) that signs every ExportTable reply.
   void set_signing_key(std::string private_pem) { signing_key_pem_ = std::move(private_pem); }
+  const Authorizer* authorizer() const { return auth_; }
+  // Keeps a service registered beside this one (reflection) alive as long
+  // as this one.
+  void KeepAlive(std::unique_ptr<grpc::Service> s) { reflection_.push_back(std::move(s)); }
 
   grpc::Status IngestHfResults(grpc::ServerContext* ctx, grpc::ServerReader<v1::IngestHfResultsRequest>* reader,
                                v1::IngestHfResultsResponse* response) override;
@@ -62,6 +68,9 @@ class CalibrationServiceImpl final : public fluxcal::v1::CalibrationService::Ser
   Authorizer open_;
   const Authorizer* auth_ = &open_;
   std::string signing_key_pem_;
+  // Services registered beside this one by StartServer (this service
+  // outlives its server, so they do too).
+  std::vector<std::unique_ptr<grpc::Service>> reflection_;
 };
 
 struct ServerOptions {
@@ -73,6 +82,8 @@ struct ServerOptions {
   // (else a certificate is verified when presented and a token may stand
   // in for it).
   bool require_client_cert = false;
+  // Server reflection v1 and v1alpha (server/reflection.h): for any
+  // authenticated identity, every caller in open mode.
   bool reflection = true;
   // One log line per request on stderr: method, identity, peer, status,
   // latency.

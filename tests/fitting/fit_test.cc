@@ -234,5 +234,48 @@ TEST(Fit, GriddedMapMotorWithinHalfPercent) {
   EXPECT_LT(e_psi, 0.005) << cal->family().Name();
 }
 
+// HF results alone (no steady-state rows, no flux nodes), as the service
+// fits a run streamed by `fluxcal eol`: inductances are flux derivatives,
+// so nothing observes psi_q's level, and auto must not pick a family that
+// leaves it free. On this grid (Ldd constant, Lqq saturating with iq, no
+// Ldq: clients/python/example.py's points) smooth-asym won with
+// psi_q(0, 0) = -18 mWb, and torque at (-20, 40) A came out 1.48 N m
+// instead of 3.64. The symmetric families put psi_q(id, 0) = 0.
+TEST(Fit, HfResultsAloneKeepPsiQLevelAndTorque) {
+  const double psi_pm_wb = 0.0114, ld_h = 0.18e-3, lq0_h = 0.372e-3, iq_sat_a = 280.0;
+  // psi_q = integral of Lqq over iq: lq0 iq / sqrt(1 + (iq / iq_sat)^2).
+  auto psi_q = [&](double iq) { return lq0_h * iq / std::sqrt(1 + std::pow(iq / iq_sat_a, 2)); };
+  FitData d;
+  d.serial = "HF-ONLY";
+  d.pole_pairs = 4;
+  d.psi_pm_prior_wb = psi_pm_wb;
+  for (int a = 0; a < 6; ++a) {
+    for (int b = 0; b < 6; ++b) {
+      const double id = -100.0 + 20 * a, iq = 20.0 * b;
+      InductanceObservation o;
+      o.id_a = id;
+      o.iq_a = iq;
+      o.ldd_h = ld_h;
+      o.lqq_h = lq0_h / std::pow(1 + std::pow(iq / iq_sat_a, 2), 1.5);
+      o.ldd_h_std = o.lqq_h_std = 1e-7;
+      d.inductances.push_back(o);
+    }
+  }
+  auto cal = Fit(d, {});
+  ASSERT_TRUE(cal.ok()) << cal.status();
+  EXPECT_NE(cal->family().Name(), "smooth-asym");
+  double worst = 0;
+  for (double id : {-100.0, -60.0, -20.0, 0.0}) {
+    for (double iq : {0.0, 40.0, 100.0}) {
+      const auto p = cal->Predict(id, iq);
+      const double td = psi_pm_wb + ld_h * id, tq = psi_q(iq);
+      worst = std::max(worst, std::hypot(p.psi_d_wb - td, p.psi_q_wb - tq) / std::max(std::hypot(td, tq), psi_pm_wb));
+    }
+  }
+  EXPECT_LT(worst, 0.02) << cal->family().Name();
+  const double torque = 1.5 * 4 * ((psi_pm_wb + ld_h * -20) * 40 - psi_q(40) * -20);
+  EXPECT_NEAR(cal->Predict(-20, 40).torque_nm / torque, 1.0, 0.02) << cal->family().Name();
+}
+
 }  // namespace
 }  // namespace fluxcal::fit

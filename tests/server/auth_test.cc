@@ -9,12 +9,17 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <algorithm>
 #include <map>
+
+#include <google/protobuf/descriptor.pb.h>
 
 #include <grpcpp/generic/generic_stub.h>
 #include <grpcpp/grpcpp.h>
 #include <grpcpp/support/client_interceptor.h>
 
+#include "grpc/reflection/v1/reflection.grpc.pb.h"
+#include "grpc/reflection/v1alpha/reflection.grpc.pb.h"
 #include "gtest/gtest.h"
 #include "io/csv.h"
 #include "server/auth.h"
@@ -168,7 +173,6 @@ struct Fixture {
     service->set_authorizer(auth.get());
     ServerOptions opt = base;
     opt.authorizer = auth.get();
-    opt.reflection = false;
     server = StartServer(service.get(), "127.0.0.1:0", &port, opt);
   }
   ~Fixture() {
@@ -224,6 +228,74 @@ TEST(Roles, WithoutAValidCredentialOnlyHealthAnswers) {
   auto motors = f.store->ListMotors("", false, 0, 10);
   ASSERT_TRUE(motors.ok());
   EXPECT_TRUE(motors->empty());
+}
+
+// list_services and file_containing_symbol over one reflection stream.
+template <class Svc, class Req, class Resp>
+grpc::Status Reflect(const std::shared_ptr<grpc::Channel>& ch, std::vector<std::string>* services,
+                     std::string* file) {
+  auto stub = Svc::NewStub(ch);
+  grpc::ClientContext c;
+  c.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(20));
+  auto stream = stub->ServerReflectionInfo(&c);
+  Req list, sym;
+  list.set_list_services("");
+  sym.set_file_containing_symbol("fluxcal.v1.CalibrationService");
+  stream->Write(list);
+  stream->Write(sym);
+  stream->WritesDone();
+  Resp r;
+  while (stream->Read(&r)) {
+    for (const auto& s : r.list_services_response().service()) services->push_back(s.name());
+    if (r.has_file_descriptor_response()) {
+      google::protobuf::FileDescriptorProto fd;
+      fd.ParseFromString(r.file_descriptor_response().file_descriptor_proto(0));
+      *file = fd.name();
+    }
+  }
+  return stream->Finish();
+}
+
+// Reflection v1 and v1alpha answer any authenticated identity, whatever its
+// role (the API description is the same for all and holds no stored data),
+// and nobody without a valid credential.
+TEST(Reflection, AnyRoleOverV1AndV1alphaNotAnonymous) {
+  namespace r1 = grpc::reflection::v1;
+  namespace ra = grpc::reflection::v1alpha;
+  Fixture f("reflection");
+  for (const auto& [role, token] : f.tokens) {
+    auto ch = Channel(f.addr(), grpc::InsecureChannelCredentials(), token);
+    for (bool alpha : {false, true}) {
+      std::vector<std::string> services;
+      std::string file;
+      const grpc::Status s =
+          alpha ? Reflect<ra::ServerReflection, ra::ServerReflectionRequest, ra::ServerReflectionResponse>(ch, &services, &file)
+                : Reflect<r1::ServerReflection, r1::ServerReflectionRequest, r1::ServerReflectionResponse>(ch, &services, &file);
+      const std::string what = std::string(RoleName(role)) + (alpha ? " v1alpha" : " v1");
+      ASSERT_TRUE(s.ok()) << what << ": " << s.error_message();
+      EXPECT_NE(std::find(services.begin(), services.end(), "fluxcal.v1.CalibrationService"), services.end()) << what;
+      EXPECT_NE(std::find(services.begin(), services.end(), "grpc.reflection.v1.ServerReflection"), services.end())
+          << what;
+      EXPECT_NE(std::find(services.begin(), services.end(), "grpc.reflection.v1alpha.ServerReflection"),
+                services.end())
+          << what;
+      EXPECT_EQ(file, "fluxcal/v1/calibration.proto") << what;
+    }
+  }
+  for (const std::string token : {std::string(), std::string("not-a-token")}) {
+    auto ch = Channel(f.addr(), grpc::InsecureChannelCredentials(), token);
+    std::vector<std::string> services;
+    std::string file;
+    EXPECT_EQ((Reflect<r1::ServerReflection, r1::ServerReflectionRequest, r1::ServerReflectionResponse>(ch, &services,
+                                                                                                        &file)
+                   .error_code()),
+              grpc::StatusCode::UNAUTHENTICATED);
+    EXPECT_EQ((Reflect<ra::ServerReflection, ra::ServerReflectionRequest, ra::ServerReflectionResponse>(
+                   ch, &services, &file)
+                   .error_code()),
+              grpc::StatusCode::UNAUTHENTICATED);
+    EXPECT_TRUE(services.empty());
+  }
 }
 
 TEST(Roles, AStationIngestsAsItselfAndCannotLoosenTheVerdict) {

@@ -4,6 +4,9 @@
 // ingest and diagnosis; and kill -9 of a real `fluxcal serve` mid-stream.
 #include <signal.h>
 #include <sqlite3.h>
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -16,6 +19,7 @@
 #include <grpcpp/grpcpp.h>
 
 #include "gtest/gtest.h"
+#include "nlohmann/json.hpp"
 #include "server/service.h"
 #include "io/recording_set.h"
 #include "simulation/twin.h"
@@ -436,6 +440,129 @@ TEST(KillNine, AcknowledgedStreamsSurvive) {
   EXPECT_EQ(scalar("SELECT COUNT(*) FROM motors WHERE serial = 'IPM-K-OPEN'"), "0");
   sqlite3_close(h);
   for (auto sfx : {"", "-wal", "-shm"}) fs::remove(db + sfx);
+}
+
+// Runs the binary; stdout captured, stderr to the test's log.
+std::pair<int, std::string> Fluxcal(const std::string& args) {
+  const std::string cmd = std::string(FLUXCAL_BINARY) + " " + args;
+  std::string out;
+  FILE* p = popen(cmd.c_str(), "r");
+  char buf[4096];
+  size_t n;
+  while ((n = fread(buf, 1, sizeof buf, p)) > 0) out.append(buf, n);
+  const int st = pclose(p);
+  return {WIFEXITED(st) ? WEXITSTATUS(st) : -1, out};
+}
+
+nlohmann::json JsonOf(const std::pair<int, std::string>& r) {
+  EXPECT_EQ(r.first, 0) << r.second;
+  return nlohmann::json::parse(r.second);   // throws unless exactly one document
+}
+
+// `fluxcal eol` exits 0 on a passing fit and 3 on a failing verdict (the
+// twin's recording sits near the 2 % residual limit); both are a completed
+// flow, and the document says which.
+nlohmann::json EolJsonOf(const std::pair<int, std::string>& r) {
+  EXPECT_TRUE(r.first == 0 || r.first == 3) << r.second;
+  auto j = nlohmann::json::parse(r.second);
+  EXPECT_EQ(j["pass"].get<bool>(), r.first == 0);
+  return j;
+}
+
+// The documented EOL flow with --upload-recording against a real `fluxcal
+// serve`: Diagnose answers for the serial (NOT_FOUND before); the service
+// fits the uploaded set as `fluxcal fit SET` does locally, so both give the
+// same psi_d and psi_d std at a point; a rerun replays both ingests.
+TEST(EolFlow, UploadRecordingThenDiagnoseAndTheLocalFitAgrees) {
+  const std::string dir = TempPath("eolflow");
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const std::string set = dir + "/set", db = dir + "/eol.db";
+  JsonOf(Fluxcal("simulate --out " + set + " --seed 11 --serial IPM-EOL-1 --effects dead_time_s=2e-6 --json"));
+  int port = 0;
+  {
+    // A free loopback port: bound, read, released for the server.
+    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    socklen_t len = sizeof a;
+    ASSERT_EQ(::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a), 0);
+    ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len);
+    port = ntohs(a.sin_port);
+    ::close(fd);
+  }
+  const std::string addr = "127.0.0.1:" + std::to_string(port);
+  const pid_t child = fork();
+  if (child == 0) {
+    execl(FLUXCAL_BINARY, FLUXCAL_BINARY, "serve", "--db", db.c_str(), "--listen", addr.c_str(), "--quiet", nullptr);
+    _exit(127);
+  }
+  auto stub = v1::CalibrationService::NewStub(grpc::CreateChannel(addr, grpc::InsecureChannelCredentials()));
+  auto diagnose = [&] {
+    grpc::ClientContext c;
+    c.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(120));
+    v1::DiagnoseRequest dr;
+    dr.set_serial("IPM-EOL-1");
+    v1::DiagnoseResponse d;
+    return std::make_pair(stub->Diagnose(&c, dr, &d), d);
+  };
+  bool up = false;
+  for (int k = 0; k < 100 && !up; ++k) {
+    grpc::ClientContext c;
+    c.set_deadline(std::chrono::system_clock::now() + std::chrono::milliseconds(200));
+    v1::ListMotorsResponse lr;
+    up = stub->ListMotors(&c, v1::ListMotorsRequest(), &lr).ok();
+    if (!up) std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  ASSERT_TRUE(up) << "fluxcal serve did not come up on " << addr;
+  EXPECT_EQ(diagnose().first.error_code(), grpc::StatusCode::NOT_FOUND);
+
+  auto eol = EolJsonOf(Fluxcal("eol " + set + " --server " + addr + " --upload-recording --json"));
+  EXPECT_EQ(eol["serial"], "IPM-EOL-1");
+  EXPECT_EQ(eol["version"], 1);
+  ASSERT_TRUE(eol.contains("recording")) << eol.dump();
+  EXPECT_EQ(eol["recording"]["points"], eol["accepted"]);
+  EXPECT_EQ(eol["recording"]["sha256"].get<std::string>().size(), 64u);
+  EXPECT_FALSE(eol["recording"]["replayed"].get<bool>());
+  auto [st, d] = diagnose();
+  ASSERT_TRUE(st.ok()) << st.error_message();
+  EXPECT_EQ(d.serial(), "IPM-EOL-1");
+  ASSERT_GE(d.effects_size(), 1);
+  EXPECT_EQ(d.effects(0), "dead_time");
+
+  // Local and server fits of the same set: one pipeline function
+  // (FitDataFromSet) builds both fits' input.
+  const std::string cal = dir + "/cal.json";
+  JsonOf(Fluxcal("fit " + set + " --out " + cal + " --json"));
+  auto local = JsonOf(Fluxcal("query " + cal + " --id-a -20 --iq-a 40 --json"));
+  auto remote = JsonOf(Fluxcal("query IPM-EOL-1 --server " + addr + " --id-a -20 --iq-a 40 --json"));
+  // (`query SERIAL --server` prints psi_d with its std and psi_q.)
+  for (const char* f : {"psi_d_wb", "psi_d_wb_std", "psi_q_wb"}) {
+    const double l = local[f].get<double>(), r = remote[f].get<double>();
+    EXPECT_GT(std::abs(l), 0.0) << f;
+    EXPECT_NEAR(r / l, 1.0, 1e-6) << f << ": local " << l << ", server " << r;
+  }
+
+  // The station reruns the whole command (e.g. after a lost reply): both
+  // ingests are replayed by their keys, nothing is stored twice.
+  auto again = EolJsonOf(Fluxcal("eol " + set + " --server " + addr + " --upload-recording --json"));
+  EXPECT_TRUE(again["recording"]["replayed"].get<bool>());
+  EXPECT_EQ(again["recording"]["run_id"], eol["recording"]["run_id"]);
+  EXPECT_EQ(again["run_id"], eol["run_id"]);
+  grpc::ClientContext hc;
+  v1::HistoryRequest hr;
+  hr.set_serial("IPM-EOL-1");
+  v1::HistoryResponse h;
+  ASSERT_TRUE(stub->History(&hc, hr, &h).ok());
+  int runs = 0;
+  for (const auto& e : h.events()) runs += e.kind() == "calibration" ? 0 : 1;
+  EXPECT_EQ(runs, 2) << "one HF run and one recording run";
+
+  kill(child, SIGTERM);
+  int status = 0;
+  waitpid(child, &status, 0);
+  fs::remove_all(dir);
 }
 
 }  // namespace

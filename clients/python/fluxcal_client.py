@@ -1,0 +1,213 @@
+"""A small Python client for the fluxcal calibration service (fluxcal.v1).
+
+Stubs are generated from proto/fluxcal/v1/calibration.proto when first
+needed (`generate_stubs`), never committed: the proto is the contract, and
+generated code would drift from it. Generation uses Debian's protoc
+(protobuf-compiler, 3.21) with grpc_python_plugin (protobuf-compiler-grpc):
+the protoc inside Debian 12's python3-grpc-tools (1.14) predates proto3
+`optional`, which HfPoint.ldq_h uses, and refuses the file.
+
+Connection rules are the C++ client's (cli/support_remote.h): TLS when a CA
+or a client certificate is given, or when the address is not loopback
+(unless insecure=True); a bearer token goes in the `authorization` metadata
+of every call. Units are in field names (`id_a`, `ld_h`, `psi_d_wb`), as in
+the proto.
+
+    from fluxcal_client import Client
+    c = Client("127.0.0.1:50051")
+    c.ingest_hf_results("IPM-1", points, motor={"pole_pairs": 4, "psi_pm_wb": 0.0114})
+    cal = c.fit("IPM-1")
+    print(c.query_flux("IPM-1", [(-20.0, 40.0)])[0].psi_d_wb)
+"""
+import hashlib
+import importlib
+import os
+import struct
+import subprocess
+import sys
+import tempfile
+import zlib
+
+import grpc
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+# clients/python -> the repository's proto/ directory.
+DEFAULT_PROTO_DIR = os.path.normpath(os.path.join(HERE, "..", "..", "proto"))
+GRPC_PYTHON_PLUGIN = "/usr/bin/grpc_python_plugin"
+
+
+class FluxcalError(Exception):
+    """An RPC failed: `code` is the grpc.StatusCode, the message names the
+    RPC, the serial and the server's field-level reason."""
+
+    def __init__(self, rpc, serial, code, details):
+        self.rpc, self.serial, self.code, self.details = rpc, serial, code, details
+        super().__init__(f"{rpc} {serial}: {code.name}: {details}")
+
+
+def generate_stubs(out_dir, proto_dir=DEFAULT_PROTO_DIR):
+    """Writes fluxcal/v1/calibration_pb2{,_grpc}.py under out_dir.
+
+    Raises RuntimeError naming the missing tool or protoc's complaint."""
+    proto = os.path.join(proto_dir, "fluxcal", "v1", "calibration.proto")
+    if not os.path.isfile(proto):
+        raise RuntimeError(f"{proto}: not found (pass proto_dir, the repository's proto/ directory)")
+    if not os.path.exists(GRPC_PYTHON_PLUGIN):
+        raise RuntimeError(f"{GRPC_PYTHON_PLUGIN}: not found (apt install protobuf-compiler-grpc)")
+    os.makedirs(out_dir, exist_ok=True)
+    try:
+        r = subprocess.run(["protoc", f"-I{proto_dir}", f"--python_out={out_dir}", f"--grpc_python_out={out_dir}",
+                            f"--plugin=protoc-gen-grpc_python={GRPC_PYTHON_PLUGIN}", proto],
+                           capture_output=True, text=True)
+    except FileNotFoundError:
+        raise RuntimeError("protoc: not found (apt install protobuf-compiler)") from None
+    if r.returncode != 0:
+        raise RuntimeError(f"protoc {proto}: {r.stderr.strip()}")
+
+
+def load_stubs(gen_dir=None, proto_dir=DEFAULT_PROTO_DIR):
+    """Imports (pb2, pb2_grpc), generating them first into gen_dir (default:
+    $FLUXCAL_PY_GEN, else a fresh temporary directory) when absent."""
+    gen_dir = gen_dir or os.environ.get("FLUXCAL_PY_GEN") or tempfile.mkdtemp(prefix="fluxcal_py_gen_")
+    if not os.path.isfile(os.path.join(gen_dir, "fluxcal", "v1", "calibration_pb2_grpc.py")):
+        generate_stubs(gen_dir, proto_dir)
+    if gen_dir not in sys.path:
+        sys.path.insert(0, gen_dir)
+    pb = importlib.import_module("fluxcal.v1.calibration_pb2")
+    rpc = importlib.import_module("fluxcal.v1.calibration_pb2_grpc")
+    return pb, rpc
+
+
+def is_loopback(address):
+    """127.0.0.0/8, localhost, [::1] and unix: addresses (as the C++ client)."""
+    host = address
+    for scheme in ("dns:///", "ipv4:", "ipv6:"):
+        if host.startswith(scheme):
+            host = host[len(scheme):]
+    if host.startswith("unix:"):
+        return True
+    host = host.rsplit(":", 1)[0]
+    return host in ("localhost", "[::1]") or host.startswith("127.")
+
+
+def _read(path, flag):
+    try:
+        with open(path, "rb") as f:
+            return f.read()
+    except OSError as e:
+        raise RuntimeError(f"{flag} {path}: cannot read ({e.strerror})") from None
+
+
+def verify_table_json(data):
+    """Recomputes CRC-32 and SHA-256 of a `fluxcal.table.v1` JSON export from
+    its parsed values (docs/tables.md, "Payload": every axis, then every
+    output, as little-endian binary64) and compares them with the file's.
+    Returns (crc32_hex, sha256_hex); raises ValueError naming the field that
+    disagrees."""
+    import json
+    doc = json.loads(data)
+    payload = b"".join(struct.pack("<%dd" % len(a["values"]), *a["values"])
+                       for a in doc["axes"] + doc["outputs"])
+    crc = "%08x" % (zlib.crc32(payload) & 0xffffffff)
+    sha = hashlib.sha256(payload).hexdigest()
+    if crc != doc["crc32"]:
+        raise ValueError(f"crc32: file says {doc['crc32']}, values give {crc}")
+    if sha != doc["sha256"]:
+        raise ValueError(f"sha256: file says {doc['sha256']}, values give {sha}")
+    return crc, sha
+
+
+class Client:
+    """One channel to `fluxcal serve` and the calls an engineer's script or a
+    station needs. Every method raises FluxcalError on a failed RPC."""
+
+    def __init__(self, address, ca=None, cert=None, key=None, token=None, token_file=None, insecure=False,
+                 gen_dir=None, proto_dir=DEFAULT_PROTO_DIR, timeout_s=120.0):
+        self.pb, rpc = load_stubs(gen_dir, proto_dir)
+        self.timeout_s = timeout_s
+        if (cert is None) != (key is None):
+            raise RuntimeError("cert and key go together (mutual TLS)")
+        options = [("grpc.max_receive_message_length", 64 << 20)]
+        if ca or cert or (not insecure and not is_loopback(address)):
+            creds = grpc.ssl_channel_credentials(
+                root_certificates=_read(ca, "ca") if ca else None,
+                private_key=_read(key, "key") if key else None,
+                certificate_chain=_read(cert, "cert") if cert else None)
+            self.channel = grpc.secure_channel(address, creds, options=options)
+        else:
+            self.channel = grpc.insecure_channel(address, options=options)
+        if token_file:
+            # The first line, as the C++ client reads --token-file.
+            token = _read(token_file, "token_file").decode("utf-8").splitlines()[0].strip()
+        # Per-call metadata rather than call credentials: grpcio attaches
+        # call credentials only to TLS channels, and a loopback server with
+        # --auth takes tokens over plaintext too.
+        self._metadata = (("authorization", f"Bearer {token}"),) if token else ()
+        self.stub = rpc.CalibrationServiceStub(self.channel)
+
+    def close(self):
+        self.channel.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def wait_ready(self, timeout_s=20.0):
+        """Blocks until the channel connects (a server just started)."""
+        grpc.channel_ready_future(self.channel).result(timeout=timeout_s)
+
+    def _call(self, name, serial, method, request):
+        try:
+            return method(request, timeout=self.timeout_s, metadata=self._metadata)
+        except grpc.RpcError as e:
+            raise FluxcalError(name, serial, e.code(), e.details()) from None
+
+    def ingest_hf_results(self, serial, points, motor=None, station_id="", idempotency_key=""):
+        """Streams one run of identified HF points for `serial`, one message
+        per point. `points`: dicts with HfPoint's fields (point_id, id_a,
+        iq_a, ld_h, lq_h, optional ldq_h, *_std, temperature_c, reliable).
+        `motor` ({pole_pairs, rs_ohm, psi_pm_wb}) is required for a serial the
+        store does not know yet. Returns IngestHfResultsResponse (accepted,
+        rejects with index and field, run_id, replayed)."""
+        pb = self.pb
+        first = pb.IngestHfResultsRequest(serial=serial, station_id=station_id, idempotency_key=idempotency_key)
+        if motor is not None:
+            first.motor.CopyFrom(pb.MotorInfo(**motor))
+
+        def messages():
+            yield first
+            for p in points:
+                yield pb.IngestHfResultsRequest(points=[pb.HfPoint(**p)])
+
+        return self._call("IngestHfResults", serial, self.stub.IngestHfResults, messages())
+
+    def fit(self, serial, model="auto"):
+        """Fits the serial's latest run; returns FitResponse (calibration, pass)."""
+        return self._call("Fit", serial, self.stub.Fit, self.pb.FitRequest(serial=serial, model=model))
+
+    def get_calibration(self, serial, version=0):
+        """CalibrationRecord of `version` (0: the latest); calibration_json is
+        the fluxcal.calibration.v1 document `fluxcal query` reads."""
+        return self._call("GetCalibration", serial, self.stub.GetCalibration,
+                          self.pb.GetCalibrationRequest(serial=serial, version=version))
+
+    def query_flux(self, serial, points, version=0):
+        """FluxValue per (id_a, iq_a): psi_d_wb, psi_q_wb, Ldd/Lqq/Ldq, apparent
+        inductances, torque_nm, with standard deviations."""
+        req = self.pb.QueryFluxRequest(serial=serial, version=version,
+                                       points=[self.pb.OperatingPoint(id_a=i, iq_a=q) for i, q in points])
+        return list(self._call("QueryFlux", serial, self.stub.QueryFlux, req).values)
+
+    def export_table(self, serial, table="mtpa", fmt="csv", points=0, version=0, **limits):
+        """ExportTableResponse: data (the file's bytes), crc32, sha256, version,
+        verdict. `limits`: speed_points, speed_max_rpm, i_max_a, udc_v (0 or
+        absent: the server's defaults)."""
+        req = self.pb.ExportTableRequest(serial=serial, version=version, table=table, format=fmt, points=points,
+                                         **limits)
+        return self._call("ExportTable", serial, self.stub.ExportTable, req)
+
+    def diagnose(self, serial):
+        """DiagnoseResponse of the serial's latest stored raw recording."""
+        return self._call("Diagnose", serial, self.stub.Diagnose, self.pb.DiagnoseRequest(serial=serial))
