@@ -26,6 +26,7 @@ if [ -z "$CHROME" ]; then
   echo "report_browser_test: FAIL: no chromium on PATH (scripts/install-deps.sh installs it; FLUXCAL_NO_BROWSER=1 skips)" >&2
   exit 1
 fi
+HERE=$(cd "$(dirname "$0")" && pwd)
 rm -rf "$A"
 mkdir -p "$A"
 W=$(mktemp -d)
@@ -59,82 +60,24 @@ for name in baldor sim; do
     --hide-scrollbars --window-size=1400,5200 --screenshot="$A/$name.png" "file://$html" \
     >/dev/null 2>> "$W/$name.console"
   cp "$W/$name.console" "$A/$name.console.log"
-  python3 - "$html" "$W/$name.dom" "$W/$name.console" "$W/${name}_report.json" "$A/$name.png" <<'EOF'
-import json, re, sys, os
-from html.parser import HTMLParser
-html_path, dom_path, console_path, report_json, png = sys.argv[1:]
-fail = []
-console = open(console_path, errors="replace").read()
-for line in console.splitlines():
-    # Console messages from the page: "CONSOLE(...)" / ":CONSOLE" lines.
-    if "CONSOLE" in line and ("ERROR" in line or "error" in line.lower()):
-        fail.append("console error: " + line)
-    if "Failed to load" in line or "net::ERR_" in line:
-        fail.append("load error: " + line)
-rep = json.load(open(report_json))
-
-class Svgs(HTMLParser):
-    def __init__(self):
-        super().__init__()
-        self.svgs = []       # (id, width, height, [texts])
-        self.cur = None
-        self.text_attrs = None
-        self.figures = 0
-    def handle_starttag(self, tag, attrs):
-        a = dict(attrs)
-        if tag == "figure":
-            self.figures += 1
-        if tag == "svg":
-            self.cur = [a.get("id", "?"), a.get("width"), a.get("height"), []]
-            self.svgs.append(self.cur)
-        elif tag == "text" and self.cur is not None:
-            self.text_attrs = a
-    def handle_data(self, data):
-        if self.text_attrs is not None and self.cur is not None:
-            self.cur[3].append((self.text_attrs, data))
-            self.text_attrs = None
-    def handle_endtag(self, tag):
-        if tag == "svg":
-            self.cur = None
-        if tag == "text":
-            self.text_attrs = None
-
-p = Svgs()
-dom = open(dom_path, errors="replace").read()
-if "<body" not in dom:
-    fail.append("the browser returned no DOM")
-p.feed(dom)
-if p.figures != rep["figures"] or len(p.svgs) != rep["figures"]:
-    fail.append("rendered %d <figure> and %d <svg>, the command reported %d figures"
-                % (p.figures, len(p.svgs), rep["figures"]))
-for sid, w, h, texts in p.svgs:
-    try:
-        wf, hf = float(w), float(h)
-    except (TypeError, ValueError):
-        fail.append("%s: width/height missing (%r, %r)" % (sid, w, h)); continue
-    if not (wf > 0 and hf > 0):
-        fail.append("%s: zero size %r x %r" % (sid, w, h))
-    # Nothing cut at the frame: every unrotated label inside the figure,
-    # at the same conservative glyph width the plot module lays out with.
-    for a, t in texts:
-        if "transform" in a:
-            continue
-        fs = float(a.get("font-size", 11))
-        tw = 0.62 * fs * len(t)
-        x, y = float(a.get("x", 0)), float(a.get("y", 0))
-        anchor = a.get("text-anchor", "start")
-        x0 = x - tw / 2 if anchor == "middle" else x - tw if anchor == "end" else x
-        if x0 < -0.5 or x0 + tw > wf + 0.5 or y - fs < -0.5 or y > hf + 0.5:
-            fail.append("%s: label %r at (%g, %g) runs past the %gx%g figure" % (sid, t, x, y, wf, hf))
-if not os.path.exists(png) or os.path.getsize(png) < 20000:
-    fail.append("screenshot %s missing or nearly empty" % png)
-if fail:
-    print("\n".join(["FAIL " + html_path] + fail[:40]))
-    sys.exit(1)
-print("ok %s: %d figures rendered, all with non-zero size; screenshot %s (%d bytes)"
-      % (html_path, len(p.svgs), png, os.path.getsize(png)))
-EOF
+  python3 "$HERE/check_page.py" "$html" "$W/$name.dom" "$W/$name.console" "$W/${name}_report.json" "$A/$name.png"
 done
+# The checker must catch what it is for: a page with a console error, an
+# external image, a zero-size figure and a label past the edge.
+cat > "$W/bad.html" <<'HTML'
+<!DOCTYPE html><html><body><figure><svg id="z" width="100" height="0"><text x="90" y="10">far too long</text></svg></figure>
+<img src="elsewhere.png"><script>console.error("boom")</script></body></html>
+HTML
+echo '{"figures": 1}' > "$W/bad_report.json"
+timeout 60 "$CHROME" --headless --no-sandbox --disable-gpu --user-data-dir="$W/profile-bad" \
+  --enable-logging=stderr --v=0 --dump-dom "file://$W/bad.html" > "$W/bad.dom" 2> "$W/bad.console"
+if python3 "$HERE/check_page.py" "$W/bad.html" "$W/bad.dom" "$W/bad.console" "$W/bad_report.json" "$W/none.png" > "$W/bad.check"; then
+  echo "FAIL: the page checker passed a broken page" >&2; exit 1
+fi
+for what in "console message" "external reference" "zero size" "runs past" "<script>"; do
+  grep -q "$what" "$W/bad.check" || { echo "FAIL: the page checker missed: $what" >&2; cat "$W/bad.check" >&2; exit 1; }
+done
+
 grep -q '"verdict"' "$W/sim_report.json"
 grep -q "Diagnosis" "$A/sim.html" || { echo "FAIL: diagnosis section missing from sim.html" >&2; exit 1; }
 echo "report_browser_test: ok (artefacts in $A)"
