@@ -285,11 +285,12 @@ std::string Figure::Svg() const {
   // ~60 px up), before the exact plot area is known.
   auto target = [](double px, double per) { return std::clamp(static_cast<int>(std::lround(px / per)), 3, 10); };
   const int tx = target(0.65 * width_px_, 90), ty = target(0.8 * height_px_, 60);
-  std::vector<double> xt = NiceTicks(xl, xh, tx), yt = NiceTicks(yl, yh, ty);
-  if (!heat_ && !tight_) {
-    xl = xt.front(), xh = xt.back();
-    yl = yt.front(), yh = yt.back();
-  }
+  // A frame that hugs its range shows only the ticks inside it: ask for
+  // two more so that as many remain.
+  const bool hug_x = heat_.has_value() || tight_x_, hug_y = heat_.has_value() || tight_y_;
+  std::vector<double> xt = NiceTicks(xl, xh, tx + (hug_x ? 2 : 0)), yt = NiceTicks(yl, yh, ty + (hug_y ? 2 : 0));
+  if (!heat_ && !tight_x_) xl = xt.front(), xh = xt.back();
+  if (!heat_ && !tight_y_) yl = yt.front(), yh = yt.back();
   // Margins from what has to fit: tick labels, axis labels, title, legend.
   double ylab_w = 0;
   for (double v : yt) ylab_w = std::max(ylab_w, TextWidthPx(FormatTick(v, Step(yt))));
@@ -317,8 +318,8 @@ std::string Figure::Svg() const {
       if (std::abs(*hi) >= std::abs(*lo)) *hi += extra; else *lo -= extra;
     };
     if (sx > sy) widen(&yl, &yh, sx * ph); else widen(&xl, &xh, sy * pw);
-    xt = NiceTicks(xl, xh, target(pw, 80));
-    yt = NiceTicks(yl, yh, target(ph, 60));
+    xt = NiceTicks(xl, xh, target(pw, 80) + (hug_x ? 2 : 0));
+    yt = NiceTicks(yl, yh, target(ph, 60) + (hug_y ? 2 : 0));
   }
   auto X = [&](double x) { return left + (x - xl) / (xh - xl) * pw; };
   auto Y = [&](double y) { return top + ph - (y - yl) / (yh - yl) * ph; };

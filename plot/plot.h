@@ -70,7 +70,7 @@ class Figure {
   // Frame exactly at the data (or fixed) range instead of out to whole
   // ticks: for views whose range is chosen by the caller, where a tick
   // step of 50 would otherwise add a band with nothing in it.
-  void SetTight(bool on) { tight_ = on; }
+  void SetTight(bool x_on, bool y_on) { tight_x_ = x_on, tight_y_ = y_on; }
 
   void Line(const std::vector<double>& x, const std::vector<double>& y, const Style& s, std::string label);
   // Dots; y_err (optional, same length) draws +-y_err bars.
@@ -113,7 +113,7 @@ class Figure {
   double width_px_, height_px_;
   std::optional<std::pair<double, double>> xrange_, yrange_;
   bool equal_aspect_ = false;
-  bool tight_ = false;
+  bool tight_x_ = false, tight_y_ = false;
   double dx_lo_ = 0, dx_hi_ = 0, dy_lo_ = 0, dy_hi_ = 0;
   bool have_data_ = false;
   std::vector<Mark> marks_;

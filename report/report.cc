@@ -45,11 +45,17 @@ std::vector<double> Linspace(double a, double b, int n) {
   return v;
 }
 
-// A JSON scalar as text (strings unquoted), "" when absent.
+// A JSON value as text: strings unquoted, numbers to four significant
+// digits (a residual of 0.340434522398985 reads as 0.3404), "" when absent.
+std::string ValueText(const nlohmann::json& v) {
+  if (v.is_null()) return "";
+  if (v.is_string()) return v.get<std::string>();
+  if (v.is_number_float()) return absl::StrFormat("%.4g", v.get<double>());
+  return v.dump();
+}
 std::string JsonText(const nlohmann::json& j, const char* key) {
-  if (!j.is_object() || !j.contains(key) || j[key].is_null()) return "";
-  if (j[key].is_string()) return j[key].get<std::string>();
-  return j[key].dump();
+  if (!j.is_object() || !j.contains(key)) return "";
+  return ValueText(j[key]);
 }
 
 std::string Row(const std::string& k, const std::string& v) {
@@ -75,7 +81,8 @@ std::vector<double> Family(const fit::Calibration& cal, const fit::FitData* data
       if (k == raw.size() || raw[k] - raw[k - 1] > tol) {
         double sum = 0;
         for (size_t m = start; m < k; ++m) sum += raw[m];
-        v.push_back(std::round(sum / (k - start)));
+        const double c = std::round(sum / (k - start));
+        v.push_back(c == 0 ? 0.0 : c);   // no "-0 A" in a legend
         start = k;
       }
     }
@@ -142,6 +149,9 @@ void QuantityFigure(Page* page, const fit::Calibration& cal, const fit::FitData*
   f.SetXLabel(over_id ? "id [A]" : "iq [A]");
   f.SetYLabel(sp.ylabel);
   f.SetXRange(x_lo, x_hi);
+  // The frame ends where the surface's region ends (e.g. id 0.16 A): a
+  // whole-tick end would leave a band with nothing in it.
+  f.SetTight(true, false);
   auto value = [&](const fit::FluxPrediction& p) {
     switch (q) {
       case Quantity::kLdd: return p.ldd_h;
@@ -292,7 +302,7 @@ absl::StatusOr<Report> BuildReport(const ReportInputs& in) {
   b += Row("serial", H(cal.serial()));
   b += Row("calibration version", absl::StrCat(cal.version, cal.version == 0 ? " (not stored yet: versions are assigned by the store)" : ""));
   b += Row("model family", H(cal.family().Name()));
-  b += Row("calibration file", H(in.calibration_path));
+  b += Row("calibration from", H(in.calibration_path));
   const std::string created = JsonText(cj, "created_utc");
   b += Row("calibration created", created.empty() ? "not recorded in the file; file modified " + H(in.calibration_file_mtime_utc)
                                                   : H(created));
@@ -362,7 +372,7 @@ absl::StatusOr<Report> BuildReport(const ReportInputs& in) {
     f.SetXRange(view_x_lo, 0.1 * im);
     f.SetYRange(0, 1.2 * im);
     f.SetEqualAspect(true);
-    f.SetTight(true);
+    f.SetTight(true, true);
     // The fields are sampled well beyond the view (equal scaling widens
     // one axis); the figure clips the lines at its frame.
     const auto xs = Linspace(-2.5 * im, 0.6 * im, 156), ys = Linspace(-0.2 * im, 2.5 * im, 136);
@@ -524,7 +534,7 @@ absl::StatusOr<Report> BuildReport(const ReportInputs& in) {
       b += "<table class=\"list\"><tr><th>signal</th><th>where</th><th>points</th><th>significance</th></tr>\n";
       for (const auto& m : mism) {
         std::vector<std::string> pts;
-        for (const auto& p : m.value("points", nlohmann::json::array())) pts.push_back(p.is_string() ? p.get<std::string>() : p.dump());
+        for (const auto& p : m.value("points", nlohmann::json::array())) pts.push_back(ValueText(p));
         b += "<tr><td>" + H(JsonText(m, "signal")) + "</td><td>" + H(JsonText(m, "where")) + "</td><td>" +
              H(absl::StrJoin(pts, " ")) + "</td><td>" + H(JsonText(m, "significance_sigma")) + " sigma</td></tr>\n";
       }
@@ -540,8 +550,8 @@ absl::StatusOr<Report> BuildReport(const ReportInputs& in) {
         const auto pars = fd.value("parameters", nlohmann::json::object());
         const auto stds = fd.value("parameter_std", nlohmann::json::object());
         for (auto it = pars.begin(); it != pars.end(); ++it) {
-          std::string p = it.key() + " = " + it.value().dump();
-          if (stds.contains(it.key())) p += " +- " + stds[it.key()].dump();
+          std::string p = it.key() + " = " + ValueText(it.value());
+          if (stds.contains(it.key())) p += " +- " + ValueText(stds[it.key()]);
           ps.push_back(p);
         }
         b += "<tr><td>" + H(JsonText(fd, "effect")) + "</td><td>" + H(JsonText(fd, "explanation")) + "</td><td>" +

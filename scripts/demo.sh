@@ -71,7 +71,9 @@ step "local tools: identify, fit, query grid and plots on $first"
   --svg "$OUT/plots/${first}_fw_id.svg" >&2
 
 last=$(printf 'IPM-DEMO-%04d' "$SERIALS")
-if "$F" help 2>&1 | grep -q diagnose; then
+# grep reads all of the help text: with -q it would stop at the first match,
+# `fluxcal help` would die of SIGPIPE, and pipefail would skip this step.
+if "$F" help 2>&1 | grep diagnose >/dev/null; then
   step "diagnosis of $last (the twin concealed a dead time in it)"
   "$F" diagnose "$OUT/sets/$last" --plots "$OUT/plots/diagnosis_$last" > "$OUT/diagnosis_$last.txt" || true
   "$F" diagnose "$OUT/sets/$last" --json > "$OUT/diagnosis_$last.json" || true
