@@ -43,6 +43,27 @@ trap 'rm -rf "$W"' EXIT
 "$F" diagnose "$W/sim" --json > "$W/diag.json" 2>/dev/null || true
 "$F" report "$W/sim.json" --set "$W/sim" --diagnosis "$W/diag.json" --out "$A/sim.html" --json > "$W/sim_report.json"
 
+# From the service: the stored calibration with the store's provenance
+# (version, creation time, stored verdict, release state). Port from this
+# process's id, so parallel runs do not meet.
+PORT=$((20000 + $$ % 20000))
+"$F" serve --db "$W/store.db" --listen "127.0.0.1:$PORT" --quiet 2> "$W/serve.log" &
+SERVER=$!
+trap 'kill $SERVER 2>/dev/null || true; wait $SERVER 2>/dev/null || true; rm -rf "$W"' EXIT
+for _ in $(seq 50); do
+  "$F" list --server "127.0.0.1:$PORT" >/dev/null 2>&1 && break
+  sleep 0.2
+done
+# eol exits 1 on a failing verdict (this set's dead time fails the fit);
+# what matters here is that it stored version 1.
+"$F" eol "$W/sim" --server "127.0.0.1:$PORT" --json > "$W/eol.json" 2>/dev/null || true
+grep -q '"version": 1' "$W/eol.json" || { echo "FAIL: eol stored no calibration:" >&2; cat "$W/eol.json" >&2; exit 1; }
+"$F" report IPM-REPORT-TEST --server "127.0.0.1:$PORT" --out "$A/service.html" --json > "$W/service_report.json"
+for want in "calibration version</th><td>1</td>" "release state</th><td>not released" "calibration created</th><td>20" "from the service at"; do
+  grep -qF "$want" "$A/service.html" || { echo "FAIL: service.html lacks '$want'" >&2; exit 1; }
+done
+kill $SERVER; wait $SERVER 2>/dev/null || true
+
 # Bad input names the file and field.
 echo '{"format": "something else"}' > "$W/bad_diag.json"
 if "$F" report "$W/sim.json" --diagnosis "$W/bad_diag.json" --out "$W/x.html" 2> "$W/bad.err"; then
