@@ -320,6 +320,17 @@ std::string Figure::Svg() const {
     if (sx > sy) widen(&yl, &yh, sx * ph); else widen(&xl, &xh, sy * pw);
     xt = NiceTicks(xl, xh, target(pw, 80) + (hug_x ? 2 : 0));
     yt = NiceTicks(yl, yh, target(ph, 60) + (hug_y ? 2 : 0));
+    // Same scale, same step: the finer of the two on both axes.
+    const double step = std::min(Step(xt), Step(yt));
+    auto with_step = [step](double lo, double hi) {
+      std::vector<double> t;
+      for (double v = std::floor(lo / step + 1e-9) * step; v <= hi + 1e-9 * step && t.size() < 200; v += step) {
+        t.push_back(std::abs(v) < 1e-9 * step ? 0.0 : v);
+      }
+      return t;
+    };
+    xt = with_step(xl, xh);
+    yt = with_step(yl, yh);
   }
   auto X = [&](double x) { return left + (x - xl) / (xh - xl) * pw; };
   auto Y = [&](double y) { return top + ph - (y - yl) / (yh - yl) * ph; };
