@@ -3,7 +3,8 @@
 # default (SQLite). Installs dependencies, builds, starts the service on a
 # SQLite file, simulates EOL runs of several serials with production spread,
 # streams them, fits, exports tables in every format, runs engineer queries,
-# diagnoses a run, prints where every output is, stops the service.
+# diagnoses a run, writes one report page per serial and an index linking
+# them (out/demo/index.html), prints where every output is, stops the service.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=${OUT:-out/demo}
@@ -70,12 +71,47 @@ step "local tools: identify, fit, query grid and plots on $first"
   --svg "$OUT/plots/${first}_fw_id.svg" >&2
 
 last=$(printf 'IPM-DEMO-%04d' "$SERIALS")
-if "$F" help 2>&1 | grep -q diagnose; then
+# grep reads all of the help text: with -q it would stop at the first match,
+# `fluxcal help` would die of SIGPIPE, and pipefail would skip this step.
+if "$F" help 2>&1 | grep diagnose >/dev/null; then
   step "diagnosis of $last (the twin concealed a dead time in it)"
   "$F" diagnose "$OUT/sets/$last" --plots "$OUT/plots/diagnosis_$last" > "$OUT/diagnosis_$last.txt" || true
   "$F" diagnose "$OUT/sets/$last" --json > "$OUT/diagnosis_$last.json" || true
   cat "$OUT/diagnosis_$last.txt" >&2
 fi
+
+step "one report page per serial (identity, fit, surfaces, limits, tables; diagnosis for $last)"
+mkdir -p "$OUT/reports"
+for set in "$OUT"/sets/*/; do
+  set=${set%/}
+  serial=$(basename "$set")
+  diag=()
+  [ -s "$OUT/diagnosis_$serial.json" ] && diag=(--diagnosis "$OUT/diagnosis_$serial.json")
+  "$F" report "$serial" --server "127.0.0.1:$PORT" --set "$set" "${diag[@]}" \
+    --out "$OUT/reports/$serial.html" --json > "$OUT/queries/report_$serial.json" 2>/dev/null
+done
+# The index: one row per serial from the reports' own --json summaries.
+python3 - "$OUT" <<'PY' >&2
+import html, json, os, sys
+out = sys.argv[1]
+rows = []
+for name in sorted(os.listdir(os.path.join(out, "queries"))):
+    if not (name.startswith("report_") and name.endswith(".json")):
+        continue
+    r = json.load(open(os.path.join(out, "queries", name)))
+    link = os.path.relpath(r["out"], out)
+    cls = "pass" if r["verdict"] == "pass" else "fail"
+    rows.append('<tr><td><a href="%s">%s</a></td><td>%d</td><td class="%s">%s</td><td>%d</td></tr>'
+                % (html.escape(link), html.escape(r["serial"]), r["version"], cls, html.escape(r["verdict"]), r["figures"]))
+page = ('<!DOCTYPE html><html lang="en"><head><meta charset="utf-8"><title>fluxcal demo reports</title>\n'
+        '<style>body{font-family:sans-serif;margin:24px} td,th{padding:4px 10px;text-align:left;'
+        'border-bottom:1px solid #ddd} .pass{color:#2a7d2a;font-weight:bold} .fail{color:#b02a2a;font-weight:bold}'
+        '</style></head><body>\n<h1>fluxcal demo: one calibration report per serial</h1>\n'
+        '<table><tr><th>serial</th><th>version</th><th>verdict</th><th>figures</th></tr>\n'
+        + "\n".join(rows) + '\n</table></body></html>\n')
+open(os.path.join(out, "index.html"), "w").write(page)
+print("  index: %s (%d reports)" % (os.path.join(out, "index.html"), len(rows)))
+PY
 
 step "summary"
 cat >&2 <<SUMMARY
@@ -86,5 +122,6 @@ cat >&2 <<SUMMARY
   queries:        $OUT/queries/ (list, history, query, fleet, identify, grid)
   calibration:    $OUT/calibration_$first.json
   plots:          $OUT/plots/
-  report:         $OUT/diagnosis_$last.txt / .json (if diagnosis is built)
+  diagnosis:      $OUT/diagnosis_$last.txt / .json (if diagnosis is built)
+  report pages:   $OUT/index.html -> $OUT/reports/<serial>.html
 SUMMARY

@@ -13,6 +13,7 @@ PKGS=(
   python3 python3-grpcio python3-protobuf
   openssl libssl-dev
   clang libclang-rt-14-dev
+  chromium
 )
 missing=()
 for p in "${PKGS[@]}"; do

@@ -99,7 +99,7 @@ def _read(path, flag):
 
 
 def verify_table_json(data):
-    """Recomputes CRC-32 and SHA-256 of a `fluxcal.table.v1` JSON export from
+    """Recomputes CRC-32 and SHA-256 of a `fluxcal.table.v2` (or v1) JSON export from
     its parsed values (docs/tables.md, "Payload": every axis, then every
     output, as little-endian binary64) and compares them with the file's.
     Returns (crc32_hex, sha256_hex); raises ValueError naming the field that
@@ -110,10 +110,14 @@ def verify_table_json(data):
                        for a in doc["axes"] + doc["outputs"])
     crc = "%08x" % (zlib.crc32(payload) & 0xffffffff)
     sha = hashlib.sha256(payload).hexdigest()
-    if crc != doc["crc32"]:
-        raise ValueError(f"crc32: file says {doc['crc32']}, values give {crc}")
-    if sha != doc["sha256"]:
-        raise ValueError(f"sha256: file says {doc['sha256']}, values give {sha}")
+    # fluxcal.table.v2 names them payload_crc32 / payload_sha256 (v1: crc32
+    # / sha256); either way they are over the values, not the file.
+    key_crc = "payload_crc32" if "payload_crc32" in doc else "crc32"
+    key_sha = "payload_sha256" if "payload_sha256" in doc else "sha256"
+    if crc != doc[key_crc]:
+        raise ValueError(f"{key_crc}: file says {doc[key_crc]}, values give {crc}")
+    if sha != doc[key_sha]:
+        raise ValueError(f"{key_sha}: file says {doc[key_sha]}, values give {sha}")
     return crc, sha
 
 
