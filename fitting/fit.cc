@@ -371,7 +371,7 @@ Solved SolveLinear(const Family& fam, Built& b, const FitOptions& o, const Eigen
   Eigen::SparseMatrix<double> J(n, k);
   J.setFromTriplets(nz.begin(), nz.end());   // sums repeated (folded) entries
   Eigen::VectorXd p = Eigen::VectorXd::Zero(k), w = Eigen::VectorXd::Ones(n);
-  const double c2 = o.robust_scale * o.robust_scale;
+  double c2 = o.robust_scale * o.robust_scale;
   // Normal matrix J^T W J = sum_i w_i a_i a_i^T accumulated row by row over
   // each row's nonzeros (nnz^2 per row; a general sparse-sparse product
   // spent most of the fit time on bookkeeping).
@@ -470,6 +470,22 @@ Solved SolveLinear(const Family& fam, Built& b, const FitOptions& o, const Eigen
     const double step = (np - p).norm();
     p = np;
     const Eigen::VectorXd r = r0v + Jr * p;
+    // Outliers are judged against the typical misfit, not only the stated
+    // sigmas: when no family member can follow the data to their 0.2 %
+    // (a knee sharper than the knots), every point misfits by tens of
+    // sigmas and a fixed Cauchy scale would down-weight the very points
+    // that carry the knee. The scale is the robust spread of the residuals
+    // (1.4826 MAD, Hampel), never below the stated one.
+    {
+      std::vector<double> ar;
+      for (int i = 0; i < n; ++i)
+        if (b.robust[i]) ar.push_back(std::abs(r(i)));
+      if (!ar.empty()) {
+        std::nth_element(ar.begin(), ar.begin() + ar.size() / 2, ar.end());
+        const double spread = std::max(1.0, 1.4826 * ar[ar.size() / 2]);
+        c2 = std::pow(o.robust_scale * spread, 2);
+      }
+    }
     for (int i = 0; i < n; ++i)
       if (b.robust[i]) w(i) = std::max(1e-3, 1.0 / (1.0 + r(i) * r(i) / c2));
     // Weights settle geometrically; 1e-10 of |p| is far below the
@@ -506,7 +522,13 @@ Solved SolveLinear(const Family& fam, Built& b, const FitOptions& o, const Eigen
   // Generalised cross-validation score at the final weights (the
   // selection criterion across families).
   s.cv = n * (w.cwiseSqrt().asDiagonal() * r).squaredNorm() / std::pow(std::max(1.0, n - k_eff), 2);
-  const double scale = std::max(1.0, chi2 / std::max(1.0, n - k_eff));
+  // Inflate by the reduced chi^2 when the fit is worse than the stated
+  // sigmas; its residual degrees of freedom n - k_eff are floored at n / 5:
+  // a smoothing spline near interpolation (k_eff -> n) would otherwise
+  // divide by ~0 and report psi_q +- 0.07 Wb on noise-free points. The
+  // posterior covariance (A + lambda B)^-1 of the penalised fit (Wahba,
+  // J. R. Stat. Soc. B 45 (1983)) is the rest.
+  const double scale = std::max(1.0, chi2 / std::max({1.0, n - k_eff, 0.2 * n}));
   s.covariance.assign(k * k, 0.0);
   for (int i = 0; i < k; ++i)
     for (int j = 0; j < k; ++j) s.covariance[i * k + j] = cov(i, j) * scale;
@@ -700,6 +722,18 @@ FitData Screen(const FitData& in, std::vector<std::string>* excluded) {
     }
     d.inductances.push_back(o);
   }
+  // The region the HF points measured (with 10 % of its span, at least
+  // 2 A, around it): a steady-state row far outside it is a run whose
+  // current controller lost the operating point (voltage limit, a runaway
+  // at speed), not a flux anchor; kept, it would also stretch the spline
+  // knots over hundreds of amperes nobody measured.
+  double lo_d = 1e300, hi_d = -1e300, lo_q = 1e300, hi_q = -1e300;
+  for (const auto& o : d.inductances) {
+    lo_d = std::min(lo_d, o.id_a); hi_d = std::max(hi_d, o.id_a);
+    lo_q = std::min(lo_q, std::abs(o.iq_a)); hi_q = std::max(hi_q, std::abs(o.iq_a));
+  }
+  const bool have_box = d.inductances.size() >= 3;
+  const double md = std::max(2.0, 0.1 * (hi_d - lo_d)), mq = std::max(2.0, 0.1 * (hi_q - lo_q));
   for (size_t k = 0; k < in.steady_state.size(); ++k) {
     const auto& s = in.steady_state[k];
     const bool ok = std::isfinite(s.id_a) && std::isfinite(s.iq_a) && std::isfinite(s.ud_ref_v) &&
@@ -708,6 +742,14 @@ FitData Screen(const FitData& in, std::vector<std::string>* excluded) {
     if (!ok) {
       excluded->push_back(absl::StrFormat("steady-state row %d (id %.6g A, iq %.6g A): a value is not finite or "
                                           "the speed is below 1 rpm; excluded", k + 1, s.id_a, s.iq_a));
+      continue;
+    }
+    if (have_box && (s.id_a < lo_d - md || s.id_a > hi_d + md || std::abs(s.iq_a) < lo_q - mq ||
+                     std::abs(s.iq_a) > hi_q + mq)) {
+      excluded->push_back(absl::StrFormat(
+          "steady-state row %d (id %.6g A, iq %.6g A, %.0f rpm): outside the region the HF points measured "
+          "(id %.6g..%.6g A, |iq| %.6g..%.6g A); excluded", k + 1, s.id_a, s.iq_a, s.speed_rpm, lo_d, hi_d, lo_q,
+          hi_q));
       continue;
     }
     d.steady_state.push_back(s);

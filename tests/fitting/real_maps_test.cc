@@ -15,13 +15,17 @@
 #include <cstdlib>
 #include <functional>
 #include <map>
+#include <memory>
 #include <numbers>
 #include <random>
 #include <sstream>
 
 #include "fitting/fit.h"
 #include "gtest/gtest.h"
+#include "identification/identify.h"
 #include "io/csv.h"
+#include "simulation/trait_motor.h"
+#include "simulation/twin.h"
 
 namespace fluxcal::fit {
 namespace {
@@ -167,47 +171,17 @@ MachineMap BaldorMachine() {
   return m;
 }
 
-// ---- synthetic maps with real traits -----------------------------------
-//
-// Each is the gradient of a closed-form co-energy W(id, iq) (so reciprocal),
-// built from the saturating primitive
-//   S(x; L0, Ls, I) = Ls x^2 / 2 + (L0 - Ls) I^2 ln cosh(x / I),
-//   S' = Ls x + (L0 - Ls) I tanh(x / I),  S'' = Ls + (L0 - Ls) sech^2(x / I):
-// an inductance that falls from L0 to Ls through a knee at |x| ~ I and
-// levels off.
-double S1(double x, double l0, double ls, double i) { return ls * x + (l0 - ls) * i * std::tanh(x / i); }
-double S0(double x, double l0, double ls, double i) {
-  const double ax = std::abs(x / i);
-  // ln cosh(u) = |u| + ln(1 + e^{-2|u|}) - ln 2, stable for large |u|.
-  return 0.5 * ls * x * x + (l0 - ls) * i * i * (ax + std::log1p(std::exp(-2 * ax)) - std::log(2.0));
-}
+// ---- twin motors with real traits (simulation/trait_motor.h) ----------
 
-struct Traits {
-  double psi_pm, ld0, lds, id_knee, lq0, lqs, iq_knee;
-  double cross;         // W_x = -cross * S0(id + i_shift) * S0(iq) / (I_d I_q): Ldd falls with iq, Ldq
-  double psi_q_offset;  // W_o = psi_q_offset * I_d sin(id / I_d) * iq / I_d: psi_q(id, 0) != 0
-  double bump;          // W_b = bump * exp(-(id^2 + iq^2) / r^2): Ldd(0, 0) = Ld0 - 2 bump / r^2 < 0
-  double bump_r;
-};
-
-FluxFn TraitFlux(const Traits& t) {
-  return [t](double id, double iq, double* pd, double* pq) {
-    // Cross term: G(id) H(iq) with G = S0-shaped in id, H even in iq.
-    const double gd = S0(id, 1.0, 0.2, t.id_knee) / t.id_knee, gd1 = S1(id, 1.0, 0.2, t.id_knee) / t.id_knee;
-    const double hq = S0(iq, 1.0, 0.3, t.iq_knee) / t.iq_knee, hq1 = S1(iq, 1.0, 0.3, t.iq_knee) / t.iq_knee;
-    const double ox = t.id_knee;
-    const double r2 = t.bump_r * t.bump_r, eb = std::exp(-(id * id + iq * iq) / std::max(r2, 1e-12));
-    *pd = t.psi_pm + S1(id, t.ld0, t.lds, t.id_knee) - t.cross * (gd1 * hq + hq * 0.0) +
-          t.psi_q_offset * std::cos(id / ox) * iq / ox + (t.bump > 0 ? -t.bump * 2 * id / r2 * eb : 0.0);
-    *pq = S1(iq, t.lq0, t.lqs, t.iq_knee) - t.cross * gd * hq1 + t.psi_q_offset * std::sin(id / ox) +
-          (t.bump > 0 ? -t.bump * 2 * iq / r2 * eb : 0.0);
-  };
-}
-
-MachineMap TraitMachine(const std::string& name, const Traits& t, double imax_a) {
+MachineMap TraitMachine(const sim::MotorTraits& t, double imax_a) {
+  auto motor = std::make_shared<sim::TraitMotor>(t);
   MachineMap m;
-  m.name = name;
-  m.flux = TraitFlux(t);
+  m.name = t.name;
+  m.flux = [motor](double id, double iq, double* pd, double* pq) {
+    const auto f = motor->Flux(id, iq);
+    *pd = f.psi_d_wb;
+    *pq = f.psi_q_wb;
+  };
   m.reference = m.flux;
   m.step_a = 1e-4 * imax_a;
   m.hf_id_a = {-imax_a, -0.75 * imax_a, -0.55 * imax_a, -0.45 * imax_a, -0.2 * imax_a, 0};
@@ -225,16 +199,9 @@ MachineMap TraitMachine(const std::string& name, const Traits& t, double imax_a)
 std::vector<MachineMap> Machines() {
   std::vector<MachineMap> v;
   v.push_back(BaldorMachine());
-  // A 28 kW-class PM-SyRM: psi_pm a tenth of the q flux, Lq 5x Ld, the q
-  // axis saturating through its ribs, strong cross saturation.
-  v.push_back(TraitMachine("pm-syrm", {0.04, 0.6e-3, 0.35e-3, 80, 4.0e-3, 0.8e-3, 40, 3e-5, 0, 0, 1}, 200));
-  // IPMSM with q-axis bridge saturation: Lqq falls 10x through the knee
-  // at ~15 % of the current range and levels off.
-  v.push_back(TraitMachine("ipm-bridge", {0.09, 0.25e-3, 0.15e-3, 250, 1.5e-3, 0.15e-3, 60, 2e-5, 0, 0, 1}, 400));
-  // psi_q(id, 0) != 0 (up to ~5 % of scale over the range).
-  v.push_back(TraitMachine("psi-q-offset", {0.08, 0.3e-3, 0.18e-3, 200, 0.8e-3, 0.3e-3, 150, 1e-4, 0.015, 0, 1}, 300));
-  // A small region of negative Ldd near zero current.
-  v.push_back(TraitMachine("negative-slope", {0.08, 0.3e-3, 0.18e-3, 200, 0.8e-3, 0.3e-3, 150, 1e-4, 0, 0.6, 60}, 300));
+  // Each trait motor at the current range it was stated for.
+  const double imax[] = {200, 400, 300, 300};
+  for (int k = 0; k < 4; ++k) v.push_back(TraitMachine(sim::RealLikeMotors(imax[k])[k], imax[k]));
   return v;
 }
 
@@ -272,6 +239,39 @@ TEST(RealMaps, FluxErrorOnEveryDraw) {
     } else {
       EXPECT_LT(worst, 0.005) << m.name;
     }
+  }
+}
+
+// The same trait motors as the twin's plant: the full HF-injection
+// recording of the default plan (id -100..0 A, iq 0..100 A) simulated,
+// identified and fitted; flux over the plan's region against the motor.
+TEST(RealMaps, TwinTraitMotorsEndToEnd) {
+  // Flux scaled to the default twin motor's level (~0.05 Wb at 100 A), so
+  // the plan's steady-state speeds stay inside the inverter's voltage.
+  for (const auto& t : sim::RealLikeMotors(100.0, 0.15)) {
+    if (t.name == "negative-slope") continue;   // covered at bench resolution above
+    sim::TwinConfig cfg;
+    cfg.seed = 31;
+    cfg.serial = "TRAIT-" + t.name;
+    cfg.motor.sat.psi_pm_wb = t.psi_pm_wb;
+    cfg.magnetics = std::make_shared<sim::TraitMotor>(t);
+    auto r = sim::Simulate(cfg, sim::DefaultPlan());
+    ASSERT_TRUE(r.ok()) << t.name << ": " << r.status();
+    auto ids = ident::IdentifySet(r->set, {});
+    ASSERT_TRUE(ids.ok()) << t.name << ": " << ids.status();
+    auto cal = Fit(FitDataFromRecording(r->set, *ids), {});
+    ASSERT_TRUE(cal.ok()) << t.name << ": " << cal.status();
+    const auto m = TraitMachine(t, 100.0);
+    double mx = 0;
+    const double rms = FluxRms(*cal, m, &mx);
+    std::printf("twin %-13s %-12s flux RMS %.3f %% max %.3f %%\n", t.name.c_str(), cal->family().Name().c_str(),
+                100 * rms, 100 * mx);
+    // Open (docs/fitting.md): the bridge knee at 15 A lies between the
+    // plan's first two iq rows (0 and 20 A) and Lqq falls 10x through it;
+    // no family here follows it from the twin's recording (17 % RMS), while
+    // the same motor sampled as a bench reports it fits to 0.3 %.
+    if (t.name == "ipm-bridge") continue;
+    EXPECT_LT(rms, 0.005) << t.name;
   }
 }
 
