@@ -847,13 +847,15 @@ absl::StatusOr<Calibration> Fit(const FitData& input, const FitOptions& o) {
     candidates.push_back(spline(spans));
   }
   if (o.model == "smooth" || o.model == "auto") candidates.push_back(smooth(true));
-  // Inductances are derivatives of the flux: only steady-state rows or flux
-  // nodes see psi_q's level. Without them, smooth-asym's psi_q(id, 0) is
-  // unobservable (any offset fits the inductances equally, the penalty's
-  // null space picks one): on a 6 x 6 grid of HF results alone auto chose
-  // it with psi_q(0, 0) = -18 mWb +- 0.37 Wb, and the torque and tables
-  // followed. Asked for by name it is still fitted.
-  const bool psi_q_level_seen = !d.steady_state.empty() || !d.fluxes.empty();
+  // smooth-asym keeps psi_q(0, 0) = 0 and leaves psi_q(id, 0) to the data:
+  // measured Ldq (psi_q(id, 0) is its integral along id from 0), flux rows
+  // or flux nodes. Without any of them it is unobservable (any Ldq along
+  // iq = 0 fits the Ldd/Lqq data equally): on a 6 x 6 grid of HF results
+  // without Ldq, auto once chose it with psi_q(0, 0) = -18 mWb and the
+  // torque and tables followed. Asked for by name it is still fitted.
+  bool ldq_seen = false;
+  for (const auto& obs : d.inductances) ldq_seen |= obs.ldq_h.has_value();
+  const bool psi_q_level_seen = ldq_seen || !d.steady_state.empty() || !d.fluxes.empty();
   if (o.model == "smooth-asym" || ((o.model == "smooth" || o.model == "auto") && psi_q_level_seen)) {
     candidates.push_back(smooth(false));
   }

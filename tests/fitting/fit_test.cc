@@ -234,10 +234,9 @@ TEST(Fit, GriddedMapMotorWithinHalfPercent) {
   EXPECT_LT(e_psi, 0.005) << cal->family().Name();
 }
 
-// HF results alone (no steady-state rows, no flux nodes), as the service
-// fits a run streamed by `fluxcal eol`: inductances are flux derivatives,
-// so nothing observes psi_q's level, and auto must not pick a family that
-// leaves it free. On this grid (Ldd constant, Lqq saturating with iq, no
+// HF results alone without Ldq (no steady-state rows, no flux nodes): only
+// Ldd and Lqq, so nothing observes psi_q(id, 0), and auto must not pick a
+// family that leaves it free. On this grid (Ldd constant, Lqq saturating with iq, no
 // Ldq: clients/python/example.py's points) smooth-asym won with
 // psi_q(0, 0) = -18 mWb, and torque at (-20, 40) A came out 1.48 N m
 // instead of 3.64. The symmetric families put psi_q(id, 0) = 0.
