@@ -427,7 +427,7 @@ Solved SolveLinear(const Family& fam, Built& b, const FitOptions& o, const Eigen
         // (not the largest eigenvalue: the penalty's null space makes that
         // one huge).
         const double unit = A.trace() / std::max(B.trace(), 1e-300);
-        struct Trial { double gcv, lam, tr; Eigen::VectorXd p; };
+        struct Trial { double gcv, lam, tr; Eigen::VectorXd p; int rank = 2; };
         std::vector<Trial> trials;
         for (int e = 0; e <= 56; ++e) {
           const double lam = unit * std::pow(10.0, -10.0 + 0.25 * e);
@@ -435,21 +435,33 @@ Solved SolveLinear(const Family& fam, Built& b, const FitOptions& o, const Eigen
           const Eigen::VectorXd y = z.cwiseProduct(sv);
           const double tr = (dvals.array() * sv.array()).sum();
           const double rss = (rw + JM * y).squaredNorm();
-          trials.push_back({n * rss / std::pow(std::max(1.0, n - tr), 2), lam, tr, M * y});
+          trials.push_back({n * rss / std::pow(std::max(1.0, n - tr), 2), lam, tr, M * y, 2});
         }
-        // The smoothest lambda whose GCV is within kGcvTolerance of the
-        // minimum goes first (the GCV curve is flat there, and its exact
-        // minimum now and then sits at near-interpolation, which turns the
-        // bench's 0.3 % noise into wiggles of the inductance between the
-        // measured id columns); then the rest in GCV order.
+        // Order of preference: (1) the smoothest lambda whose GCV is within
+        // kGcvTolerance of the minimum (the curve is flat there, and its
+        // exact minimum now and then sits at near-interpolation, which
+        // turns the bench's 0.3 % noise into wiggles of the inductance
+        // between the measured id columns); (2) the other local minima of
+        // the GCV curve, lowest first: when the surface at (1) is rejected
+        // (not positive definite where measured, the mark of that
+        // noise-following regime), the next candidate is another basin of
+        // the curve, not the neighbour of the rejected minimum on its own
+        // slope; (3) the rest in GCV order.
         const double best_gcv =
             std::min_element(trials.begin(), trials.end(), [](const Trial& a, const Trial& c) { return a.gcv < c.gcv; })
                 ->gcv;
         const double tol = (1.0 + kGcvTolerance) * best_gcv;
+        std::vector<int> rank(trials.size(), 2);   // trials are in lambda order here
+        for (size_t i = 0; i < trials.size(); ++i) {
+          const bool left = i == 0 || trials[i].gcv <= trials[i - 1].gcv;
+          const bool right = i + 1 == trials.size() || trials[i].gcv <= trials[i + 1].gcv;
+          if (left && right) rank[i] = 1;
+          if (trials[i].gcv <= tol) rank[i] = 0;
+        }
+        for (size_t i = 0; i < trials.size(); ++i) trials[i].rank = rank[i];
         std::sort(trials.begin(), trials.end(), [&](const Trial& a, const Trial& c) {
-          const bool ia = a.gcv <= tol, ic = c.gcv <= tol;
-          if (ia != ic) return ia;
-          return ia ? a.lam > c.lam : a.gcv < c.gcv;
+          if (a.rank != c.rank) return a.rank < c.rank;
+          return a.rank == 0 ? a.lam > c.lam : a.gcv < c.gcv;
         });
         const Trial* pick = &trials.front();
         if (acceptable != nullptr) {
