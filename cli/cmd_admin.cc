@@ -48,11 +48,14 @@ int Migrate(const ParsedArgs& a) {
   auto r = pipeline::Migrate(**src, **dst);
   if (!r.ok()) return Fail(std::string(r.status().message()));
   Print({{"motors", r->motors}, {"runs", r->runs}, {"points", r->points}, {"recordings", r->recordings},
-         {"calibrations", r->calibrations}, {"content_sha256", r->content_sha256}, {"verified", true}},
+         {"calibrations", r->calibrations}, {"releases", r->releases}, {"audit_rows", r->audit_rows},
+         {"chain_links", r->chain_links}, {"content_sha256", r->content_sha256}, {"verified", true}},
         a.Has("json"),
         "migrated " + std::to_string(r->motors) + " motors, " + std::to_string(r->runs) + " runs, " +
             std::to_string(r->points) + " points, " + std::to_string(r->recordings) + " recordings, " +
-            std::to_string(r->calibrations) + " calibrations; content sha256 " + r->content_sha256 +
+            std::to_string(r->calibrations) + " calibrations, " + std::to_string(r->releases) + " releases, " +
+            std::to_string(r->audit_rows) + " audit rows, " + std::to_string(r->chain_links) +
+            " chain links; content sha256 " + r->content_sha256 +
             " equal on both sides");
   return 0;
 }

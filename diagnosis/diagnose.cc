@@ -87,6 +87,9 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
     const auto z_current = Residuals(m, current.p);
     std::vector<RejectedCandidate> round_rejected;
     for (size_t c = 0; c < cands.size(); ++c) {
+      if (opt.cancelled && opt.cancelled()) {
+        return absl::CancelledError("diagnosis: stopped between candidate refits (cancelled by the caller)");
+      }
       if (used[c]) continue;
       if (std::find(free.begin(), free.end(), cands[c].block) != free.end()) continue;
       if (cands[c].block == kHarm) m.harm_order = cands[c].order;

@@ -5,6 +5,7 @@
 #ifndef FLUXCAL_DIAGNOSIS_DIAGNOSE_H_
 #define FLUXCAL_DIAGNOSIS_DIAGNOSE_H_
 
+#include <functional>
 #include <map>
 #include <set>
 #include <string>
@@ -104,6 +105,9 @@ struct DiagnoseOptions {
   // Catalogue rows left out of the candidates (probes of physics outside
   // the vocabulary: conceal an effect, exclude its row).
   std::set<std::string> excluded_effects;
+  // Polled before each candidate refit: true stops the diagnosis with
+  // Cancelled (a server's client deadline passed).
+  std::function<bool()> cancelled;
 };
 
 absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const DiagnoseOptions& options = {});

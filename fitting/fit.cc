@@ -878,6 +878,9 @@ absl::StatusOr<Calibration> Fit(const FitData& input, const FitOptions& o) {
   std::vector<Solved> solved;
   const int n_data = static_cast<int>(3 * d.inductances.size() + 3 * d.steady_state.size() + 2 * d.fluxes.size());
   for (const auto& f : candidates) {
+    if (o.cancelled && o.cancelled()) {
+      return absl::CancelledError("fit: stopped between candidate models (cancelled by the caller)");
+    }
     if (f.kind == Family::kSpline && f.spline.smoothing) {
       // May have more coefficients than observations: the penalty decides.
       const Eigen::MatrixXd P = SmoothingPenalty(f);

@@ -11,6 +11,7 @@
 #ifndef FLUXCAL_FITTING_FIT_H_
 #define FLUXCAL_FITTING_FIT_H_
 
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -69,6 +70,9 @@ struct FitOptions {
   // Treat the differential inductance as apparent (psi = psi_pm + L i):
   // only for demonstrating the error (tests); never in production.
   bool differential_as_apparent = false;
+  // Polled before each candidate family: true stops the fit with Cancelled
+  // (a server's client deadline passed).
+  std::function<bool()> cancelled;
 };
 
 // Observations from identification results / a set's hf_results rows.

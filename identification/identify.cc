@@ -177,6 +177,10 @@ absl::StatusOr<std::vector<HfPointResult>> IdentifySet(const io::RecordingSet& s
   out.reserve(set.waveforms.size());
   for (size_t k = 0; k < set.waveforms.size(); ++k) {
     if (options.progress) options.progress(k, set.waveforms.size());
+    if (options.cancelled && options.cancelled()) {
+      return absl::CancelledError(absl::StrCat("identification: stopped before point ", k, " of ",
+                                               set.waveforms.size(), " (cancelled by the caller)"));
+    }
     auto r = IdentifyPoint(set, k, options);
     if (r.ok()) {
       out.push_back(std::move(*r));

@@ -49,6 +49,9 @@ struct IdentifyOptions {
   bool compensate_delay_filters = true;
   // Progress callback (point index, count), e.g. for stderr output.
   std::function<void(size_t, size_t)> progress;
+  // Polled before each point: true stops the set with Cancelled (a
+  // server's client deadline passed; plain callback, no RPC types here).
+  std::function<bool()> cancelled;
 };
 
 absl::StatusOr<HfPointResult> IdentifyPoint(const io::RecordingSet& set, size_t point,

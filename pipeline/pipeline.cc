@@ -91,7 +91,8 @@ absl::StatusOr<fit::FitData> FitDataFromSet(const io::RecordingSet& set, const i
 absl::StatusOr<int64_t> IngestHfRun(storage::Store& store, const std::string& serial, const std::string& station,
                                     const std::optional<MotorNominal>& motor,
                                     const std::vector<IdentifiedPoint>& points, int rejected,
-                                    const std::string& idempotency_key, bool* replayed) {
+                                    const std::string& idempotency_key, bool* replayed,
+                                    const storage::AuditContext* audit) {
   storage::MotorRow m{serial, 4, 0.0, 0.0, ""};
   if (motor) {
     m.pole_pairs = motor->pole_pairs; m.rs_ohm = motor->rs_ohm; m.psi_pm_wb = motor->psi_pm_wb;
@@ -106,12 +107,14 @@ absl::StatusOr<int64_t> IngestHfRun(storage::Store& store, const std::string& se
   if (points.empty()) {
     return absl::InvalidArgumentError(absl::StrCat("points: no valid point in the stream (", rejected, " rejected)"));
   }
-  return store.IngestHfRun(m, station, "hf_run", points, "", {}, 0, idempotency_key, replayed);
+  return store.IngestHfRun(m, station, "hf_run", points, "", {}, 0, idempotency_key, replayed, audit);
 }
 
 absl::StatusOr<IngestRecordingResult> IngestRecording(storage::Store& store, const std::string& serial,
                                                       const std::string& station, const io::RecordingFiles& files,
-                                                      const std::string& idempotency_key) {
+                                                      const std::string& idempotency_key,
+                                                      const storage::AuditContext* audit,
+                                                      const CancelledFn& cancelled, std::string* sha256_before_store) {
   auto set = io::ReadRecordingSetFromFiles(files, "");
   if (!set.ok()) return absl::InvalidArgumentError(std::string(set.status().message()));
   // Files the manifest does not name are junk: refuse rather than store them.
@@ -131,17 +134,22 @@ absl::StatusOr<IngestRecordingResult> IngestRecording(storage::Store& store, con
     return absl::InvalidArgumentError(
         absl::StrCat("serial: stream serial '", serial, "' differs from the manifest's '", set->manifest.serial, "'"));
   }
-  auto ids = IdentifySet(*set);
+  ident::IdentifyOptions idopt;
+  idopt.cancelled = cancelled;
+  auto ids = pipeline::IdentifySet(*set, idopt);
+  if (ids.status().code() == absl::StatusCode::kCancelled) return ids.status();
   if (!ids.ok()) return absl::InvalidArgumentError(std::string(ids.status().message()));
   const std::string archive = EncodeRecordingArchive(files);
   auto z = Deflate(archive);
   if (!z.ok()) return z.status();
   IngestRecordingResult out;
   out.sha256 = tables::Sha256Hex(archive);
+  if (sha256_before_store != nullptr) *sha256_before_store = out.sha256;
+  if (cancelled && cancelled()) return absl::CancelledError("ingest: cancelled by the caller before storing");
   const auto& mm = set->manifest.motor;
   storage::MotorRow motor{serial, mm.pole_pairs, mm.rs_ohm.value_or(0.0), mm.psi_pm_wb.value_or(0.0), ""};
   auto run = store.IngestHfRun(motor, station, "recording", ids->points, out.sha256, *z,
-                               static_cast<int64_t>(archive.size()), idempotency_key, &out.replayed);
+                               static_cast<int64_t>(archive.size()), idempotency_key, &out.replayed, audit);
   if (!run.ok()) return run.status();
   out.run_id = *run;
   out.points = static_cast<int>(ids->points.size());
@@ -172,7 +180,8 @@ std::string Verdict(const fit::Calibration& cal, double nominal_psi_pm_wb, size_
 }
 
 absl::StatusOr<storage::CalibrationRow> FitSerial(storage::Store& store, const std::string& serial,
-                                                  const std::string& model, const FitTolerances& tol) {
+                                                  const std::string& model, const FitTolerances& tol,
+                                                  const storage::AuditContext* audit, const CancelledFn& cancelled) {
   auto motor = store.GetMotor(serial);
   if (!motor.ok()) return motor.status();
   int64_t run_id = 0;
@@ -196,7 +205,9 @@ absl::StatusOr<storage::CalibrationRow> FitSerial(storage::Store& store, const s
   if (!recording_sha.empty()) {
     auto set = LoadStoredRecording(store, recording_sha);
     if (!set.ok()) return set.status();
-    auto fd = FitDataFromSet(*set);
+    ident::IdentifyOptions idopt;
+    idopt.cancelled = cancelled;
+    auto fd = FitDataFromSet(*set, idopt);
     if (!fd.ok()) return fd.status();
     d = std::move(*fd);
   } else {
@@ -205,8 +216,11 @@ absl::StatusOr<storage::CalibrationRow> FitSerial(storage::Store& store, const s
   d.serial = serial;
   fit::FitOptions fo;
   fo.model = model.empty() ? "auto" : model;
+  fo.cancelled = cancelled;
   auto cal = fit::Fit(d, fo);
   if (!cal.ok()) return cal.status();
+  // The last chance to stop: after this the version is stored whole.
+  if (cancelled && cancelled()) return absl::CancelledError("fit: cancelled by the caller before storing");
   storage::CalibrationRow row;
   row.serial = serial;
   row.run_id = run_id;
@@ -215,7 +229,17 @@ absl::StatusOr<storage::CalibrationRow> FitSerial(storage::Store& store, const s
   row.rms_relative = cal->summary.rms_relative;
   row.verdict = Verdict(*cal, motor->psi_pm_wb, pts->size(), unreliable, tol);
   row.calibration_json = cal->ToJson().dump();
-  auto version = store.AddCalibration(row);
+  // An audit row without its own detail says what was stored.
+  storage::AuditContext fit_audit;
+  if (audit != nullptr) {
+    fit_audit = *audit;
+    if (!fit_audit.detail) {
+      fit_audit.detail = [model = row.model, verdict = row.verdict](int64_t version, bool) {
+        return absl::StrCat("version ", version, " (", model, "): ", verdict);
+      };
+    }
+  }
+  auto version = store.AddCalibration(row, audit != nullptr ? &fit_audit : nullptr);
   if (!version.ok()) return version.status();
   return store.GetCalibration(serial, *version);
 }
@@ -342,12 +366,15 @@ absl::StatusOr<io::RecordingSet> LoadStoredRecording(storage::Store& store, cons
   return io::ReadRecordingSetFromFiles(*files, "");
 }
 
-absl::StatusOr<diag::DiagnosisReport> DiagnoseStored(storage::Store& store, const std::string& serial) {
+absl::StatusOr<diag::DiagnosisReport> DiagnoseStored(storage::Store& store, const std::string& serial,
+                                                     const CancelledFn& cancelled) {
   auto sha = store.LatestRecordingSha(serial);
   if (!sha.ok()) return sha.status();
   auto set = LoadStoredRecording(store, *sha);
   if (!set.ok()) return set.status();
-  return diag::Diagnose(*set);
+  diag::DiagnoseOptions o;
+  o.cancelled = cancelled;
+  return diag::Diagnose(*set, o);
 }
 
 // ---------------------------------------------------------------- admin
@@ -366,7 +393,7 @@ absl::StatusOr<std::string> ContentHash(storage::Store& store) {
   if (!runs.ok()) return runs.status();
   for (const auto& r : *runs) {
     absl::StrAppend(&dump, "run\t", r.run_id, "\t", r.serial, "\t", r.station, "\t", r.kind, "\t", r.recording_sha256,
-                    "\t", r.created_utc, "\n");
+                    "\t", r.created_utc, "\t", r.idempotency_key, "\n");
     if (!r.recording_sha256.empty()) {
       auto rec = store.GetRecordingRow(r.recording_sha256);
       if (!rec.ok()) return rec.status();
@@ -390,6 +417,29 @@ absl::StatusOr<std::string> ContentHash(storage::Store& store) {
                     c.model, "\t");
     d(c.psi_pm_wb); d(c.rms_relative);
     absl::StrAppend(&dump, c.verdict, "\t", tables::Sha256Hex(c.calibration_json), "\n");
+  }
+  // Text fields are length-prefixed: free text (audit detail) may hold tabs.
+  auto t = [&](const std::string& v) { absl::StrAppend(&dump, v.size(), ":", v, "\t"); };
+  auto releases = store.AllReleases();
+  if (!releases.ok()) return releases.status();
+  for (const auto& r : *releases) {
+    dump += "release\t";
+    t(r.serial); absl::StrAppend(&dump, r.version, "\t"); t(r.released_by); t(r.released_utc);
+    dump += "\n";
+  }
+  auto audit = store.AllAudit();
+  if (!audit.ok()) return audit.status();
+  for (const auto& a : *audit) {
+    absl::StrAppend(&dump, "audit\t", a.id, "\t");
+    for (const auto* v : {&a.utc, &a.identity, &a.role, &a.peer, &a.request_id, &a.rpc, &a.serial, &a.detail}) t(*v);
+    dump += "\n";
+  }
+  auto chain = store.AllChainRows();
+  if (!chain.ok()) return chain.status();
+  for (const auto& l : *chain) {
+    dump += "link\t";
+    t(l.serial); absl::StrAppend(&dump, l.version, "\t"); t(l.prev_sha256); t(l.row_sha256);
+    dump += "\n";
   }
   return tables::Sha256Hex(dump);
 }
@@ -430,6 +480,18 @@ absl::StatusOr<MigrateResult> Migrate(storage::Store& from, storage::Store& to) 
     if (auto s = to.ImportCalibration(c); !s.ok()) return s;
     ++out.calibrations;
   }
+  // Releases, the audit trail and the chain links as stored (ids, times and
+  // hashes kept): the copy verifies as the source did.
+  auto releases = from.AllReleases();
+  if (!releases.ok()) return releases.status();
+  auto audit = from.AllAudit();
+  if (!audit.ok()) return audit.status();
+  auto chain = from.AllChainRows();
+  if (!chain.ok()) return chain.status();
+  if (auto s = to.ImportTrail(*releases, *audit, *chain); !s.ok()) return s;
+  out.releases = static_cast<int>(releases->size());
+  out.audit_rows = static_cast<int>(audit->size());
+  out.chain_links = static_cast<int>(chain->size());
   auto a = ContentHash(from);
   if (!a.ok()) return a.status();
   auto b = ContentHash(to);

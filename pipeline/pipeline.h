@@ -5,6 +5,7 @@
 #ifndef FLUXCAL_PIPELINE_PIPELINE_H_
 #define FLUXCAL_PIPELINE_PIPELINE_H_
 
+#include <functional>
 #include <optional>
 #include <string>
 #include <utility>
@@ -20,6 +21,15 @@
 
 namespace fluxcal::pipeline {
 
+// Polled by the long use cases (identification per point, fitting per
+// candidate model, diagnosis per refit): true stops the work with
+// Cancelled and nothing is stored. A server passes its client's deadline
+// and cancellation here as a plain callback; the libraries stay free of RPC.
+using CancelledFn = std::function<bool()>;
+
+// Audited writes take a `storage::AuditContext`: the store inserts the
+// audit row in the same transaction as the write (storage/store.h).
+
 // --- Ingest.
 struct MotorNominal {
   int pole_pairs = 4;
@@ -30,7 +40,8 @@ struct MotorNominal {
 absl::StatusOr<int64_t> IngestHfRun(storage::Store& store, const std::string& serial, const std::string& station,
                                     const std::optional<MotorNominal>& motor,
                                     const std::vector<IdentifiedPoint>& points, int rejected = 0,
-                                    const std::string& idempotency_key = "", bool* replayed = nullptr);
+                                    const std::string& idempotency_key = "", bool* replayed = nullptr,
+                                    const storage::AuditContext* audit = nullptr);
 
 struct IngestRecordingResult {
   int64_t run_id = 0;
@@ -43,9 +54,14 @@ struct IngestRecordingResult {
 // the same reader as `fluxcal`, every file named by the manifest, serial
 // equal to `serial`; identified (lsq); points stored with the archived,
 // compressed set keyed by its SHA-256. Bad input is InvalidArgument.
+// `sha256_before_store` is set before the store write, so that the audit
+// detail (formed inside the write's transaction) can name the recording.
 absl::StatusOr<IngestRecordingResult> IngestRecording(storage::Store& store, const std::string& serial,
                                                       const std::string& station, const io::RecordingFiles& files,
-                                                      const std::string& idempotency_key = "");
+                                                      const std::string& idempotency_key = "",
+                                                      const storage::AuditContext* audit = nullptr,
+                                                      const CancelledFn& cancelled = {},
+                                                      std::string* sha256_before_store = nullptr);
 
 // --- Fit and judge.
 struct FitTolerances {
@@ -60,9 +76,13 @@ std::string Verdict(const fit::Calibration& cal, double nominal_psi_pm_wb, size_
 // stored set through FitDataFromSet, the function `fluxcal fit SET` uses,
 // so both give the same calibration (and standard errors) for the same
 // set; a run of HF results only is fitted from its points
-// (FitDataFromPoints).
+// (FitDataFromPoints). `audit` is inserted with the version (its detail,
+// when unset, "version N (model): verdict"); `cancelled` stops the fit
+// before anything is stored.
 absl::StatusOr<storage::CalibrationRow> FitSerial(storage::Store& store, const std::string& serial,
-                                                  const std::string& model, const FitTolerances& tol);
+                                                  const std::string& model, const FitTolerances& tol,
+                                                  const storage::AuditContext* audit = nullptr,
+                                                  const CancelledFn& cancelled = {});
 
 // --- Read.
 absl::StatusOr<fit::Calibration> LoadCalibration(storage::Store& store, const std::string& serial, int version);
@@ -104,15 +124,18 @@ absl::StatusOr<std::vector<FleetPoint>> FleetStatistics(storage::Store& store,
 // A stored raw recording (by SHA-256), unpacked and read in memory.
 absl::StatusOr<io::RecordingSet> LoadStoredRecording(storage::Store& store, const std::string& sha256);
 // Diagnosis of the serial's latest stored raw recording, unpacked in memory.
-absl::StatusOr<diag::DiagnosisReport> DiagnoseStored(storage::Store& store, const std::string& serial);
+absl::StatusOr<diag::DiagnosisReport> DiagnoseStored(storage::Store& store, const std::string& serial,
+                                                     const CancelledFn& cancelled = {});
 
 // --- Whole stores (fluxcal admin).
-// SHA-256 over a canonical dump of everything stored (motors, runs, points,
-// recordings, calibrations; ids, versions and timestamps included): equal
-// hashes mean equal content, whatever the backend.
+// SHA-256 over a canonical dump of everything stored (motors, runs with
+// their idempotency keys, points, recordings, calibrations, releases, the
+// audit trail, the calibration chain; ids, versions, timestamps and hashes
+// included): equal hashes mean equal content, whatever the backend.
 absl::StatusOr<std::string> ContentHash(storage::Store& store);
 struct MigrateResult {
   int motors = 0, runs = 0, points = 0, recordings = 0, calibrations = 0;
+  int releases = 0, audit_rows = 0, chain_links = 0;
   std::string content_sha256;   // equal on both sides
 };
 // Copies `from` into the empty store `to` and verifies both content hashes.

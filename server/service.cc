@@ -21,6 +21,26 @@
 
 namespace fluxcal::server {
 
+namespace {
+
+// The client's deadline and cancellation as a plain callback for the
+// pipeline's long loops (the libraries know nothing of gRPC).
+pipeline::CancelledFn CancelledBy(grpc::ServerContext* ctx) {
+  return [ctx] { return ctx->IsCancelled() || std::chrono::system_clock::now() >= ctx->deadline(); };
+}
+
+// Work stopped by CancelledBy: DEADLINE_EXCEEDED when the client's deadline
+// passed, CANCELLED when the client went away; other errors as they are.
+grpc::Status StoppedOr(grpc::ServerContext* ctx, const absl::Status& s) {
+  if (s.code() == absl::StatusCode::kCancelled && std::chrono::system_clock::now() >= ctx->deadline()) {
+    return grpc::Status(grpc::StatusCode::DEADLINE_EXCEEDED,
+                        absl::StrCat("the client's deadline passed; nothing was stored (", s.message(), ")"));
+  }
+  return ToGrpcStatus(s);
+}
+
+}  // namespace
+
 grpc::Status ToGrpcStatus(const absl::Status& s) {
   if (s.ok()) return grpc::Status::OK;
   grpc::StatusCode c = grpc::StatusCode::INTERNAL;
@@ -145,14 +165,16 @@ grpc::Status CalibrationServiceImpl::IngestHfResults(grpc::ServerContext* ctx,
   std::optional<pipeline::MotorNominal> m;
   if (have_motor) m = pipeline::MotorNominal{motor.pole_pairs(), motor.rs_ohm(), motor.psi_pm_wb()};
   bool replayed = false;
-  auto run = pipeline::IngestHfRun(*store_, serial, station, m, rows, response->rejects_size(), key, &replayed);
+  const size_t n = rows.size();
+  const auto audit = AuditFor(ctx, *who, Rpc::kIngestHfResults, serial, [n, station](int64_t run, bool again) {
+    return absl::StrCat(again ? "replayed run " : "run ", run, ", ", n, " points, station ", station);
+  });
+  auto run = pipeline::IngestHfRun(*store_, serial, station, m, rows, response->rejects_size(), key, &replayed, &audit);
   if (!run.ok()) return ToGrpcStatus(run.status());
   response->set_serial(serial);
   response->set_run_id(*run);
   response->set_accepted(static_cast<int>(rows.size()));
   response->set_replayed(replayed);
-  RecordAudit(ctx, *who, Rpc::kIngestHfResults, serial,
-              absl::StrCat(replayed ? "replayed run " : "run ", *run, ", ", rows.size(), " points, station ", station));
   return grpc::Status::OK;
 }
 
@@ -204,8 +226,14 @@ grpc::Status CalibrationServiceImpl::IngestRecording(grpc::ServerContext* ctx,
   }
   if (serial.empty()) return ToGrpcStatus(absl::InvalidArgumentError("serial: the stream carried no chunk"));
   if (ctx->IsCancelled()) return grpc::Status(grpc::StatusCode::CANCELLED, "client cancelled the stream");
-  auto run = pipeline::IngestRecording(*store_, serial, station, files, key);
-  if (!run.ok()) return ToGrpcStatus(run.status());
+  // The detail names the recording, known only after identification: the
+  // store calls this inside the transaction, by then `sha` is set.
+  std::string sha;
+  const auto audit = AuditFor(ctx, *who, Rpc::kIngestRecording, serial, [&sha, station](int64_t run, bool again) {
+    return absl::StrCat(again ? "replayed run " : "run ", run, ", recording ", sha.substr(0, 16), ", station ", station);
+  });
+  auto run = pipeline::IngestRecording(*store_, serial, station, files, key, &audit, CancelledBy(ctx), &sha);
+  if (!run.ok()) return StoppedOr(ctx, run.status());
   response->set_serial(serial);
   response->set_run_id(run->run_id);
   response->set_points(run->points);
@@ -213,9 +241,6 @@ grpc::Status CalibrationServiceImpl::IngestRecording(grpc::ServerContext* ctx,
   response->set_recording_bytes(run->recording_bytes);
   response->set_stored_bytes(run->stored_bytes);
   response->set_replayed(run->replayed);
-  RecordAudit(ctx, *who, Rpc::kIngestRecording, serial,
-              absl::StrCat(run->replayed ? "replayed run " : "run ", run->run_id, ", recording ",
-                           run->sha256.substr(0, 16), ", station ", station));
   return grpc::Status::OK;
 }
 
@@ -237,12 +262,13 @@ grpc::Status CalibrationServiceImpl::Fit(grpc::ServerContext* ctx, const v1::Fit
   }
   if (req->max_rms_relative() > 0) tol.max_rms_relative = req->max_rms_relative();
   if (req->psi_pm_tolerance_relative() > 0) tol.psi_pm_tolerance_relative = req->psi_pm_tolerance_relative();
-  auto row = pipeline::FitSerial(*store_, req->serial(), req->model(), tol);
-  if (!row.ok()) return ToGrpcStatus(row.status());
+  // Model and verdict are known before the store call, the version only
+  // inside it: the detail is formed there from the row the pipeline stores.
+  const auto audit = AuditFor(ctx, *who, Rpc::kFit, req->serial(), nullptr);
+  auto row = pipeline::FitSerial(*store_, req->serial(), req->model(), tol, &audit, CancelledBy(ctx));
+  if (!row.ok()) return StoppedOr(ctx, row.status());
   ToProto(*row, resp->mutable_calibration());
   resp->set_pass(row->verdict == "pass");
-  RecordAudit(ctx, *who, Rpc::kFit, req->serial(),
-              absl::StrCat("version ", row->version, " (", row->model, "): ", row->verdict));
   return grpc::Status::OK;
 }
 
@@ -440,8 +466,8 @@ grpc::Status CalibrationServiceImpl::Diagnose(grpc::ServerContext* ctx, const v1
   auto who = auth_->Authorize(*ctx, Rpc::kDiagnose);
   if (!who.ok()) return ToGrpcStatus(who.status());
   if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
-  auto rep = pipeline::DiagnoseStored(*store_, req->serial());
-  if (!rep.ok()) return ToGrpcStatus(rep.status());
+  auto rep = pipeline::DiagnoseStored(*store_, req->serial(), CancelledBy(ctx));
+  if (!rep.ok()) return StoppedOr(ctx, rep.status());
   resp->set_serial(req->serial());
   resp->set_verdict(rep->verdict);
   resp->set_report_json(diag::ToJson(*rep).dump(-1, ' ', false, nlohmann::json::error_handler_t::replace));
@@ -457,17 +483,21 @@ grpc::Status CalibrationServiceImpl::Release(grpc::ServerContext* ctx, const v1:
   if (req->version() <= 0) {
     return ToGrpcStatus(absl::InvalidArgumentError("version: a release names the version it approves (> 0)"));
   }
-  if (auto s = store_->Release(req->serial(), req->version(), who->name); !s.ok()) return ToGrpcStatus(s);
+  const auto audit = AuditFor(ctx, *who, Rpc::kRelease, req->serial(),
+                              [](int64_t version, bool) { return absl::StrCat("released version ", version); });
+  if (auto s = store_->Release(req->serial(), req->version(), who->name, &audit); !s.ok()) return ToGrpcStatus(s);
   resp->set_serial(req->serial());
   resp->set_version(req->version());
   resp->set_released_by(who->name);
-  RecordAudit(ctx, *who, Rpc::kRelease, req->serial(), absl::StrCat("released version ", req->version()));
   return grpc::Status::OK;
 }
 
-void CalibrationServiceImpl::RecordAudit(grpc::ServerContext* ctx, const Identity& who, Rpc rpc,
-                                         const std::string& serial, const std::string& detail) {
-  storage::AuditRow a;
+storage::AuditContext CalibrationServiceImpl::AuditFor(grpc::ServerContext* ctx, const Identity& who, Rpc rpc,
+                                                      const std::string& serial,
+                                                      std::function<std::string(int64_t, bool)> detail) {
+  storage::AuditContext out;
+  out.detail = std::move(detail);
+  storage::AuditRow& a = out.row;
   a.identity = who.name;
   a.role = std::string(RoleName(who.role));
   a.peer = ctx->peer().substr(0, 128);
@@ -479,11 +509,7 @@ void CalibrationServiceImpl::RecordAudit(grpc::ServerContext* ctx, const Identit
   if (a.request_id.empty()) a.request_id = NewToken().value_or("none").substr(0, 16);
   a.rpc = std::string(RpcName(rpc));
   a.serial = serial;
-  a.detail = detail;
-  if (auto s = store_->AppendAudit(a); !s.ok()) {
-    std::fprintf(stderr, "fluxcal serve: audit row for %s %s not written: %s\n", a.rpc.c_str(), serial.c_str(),
-                 std::string(s.message()).c_str());
-  }
+  return out;
 }
 
 grpc::Status CalibrationServiceImpl::Audit(grpc::ServerContext* ctx, const v1::AuditRequest* req,

@@ -59,10 +59,11 @@ class CalibrationServiceImpl final : public fluxcal::v1::CalibrationService::Ser
   grpc::Status Audit(grpc::ServerContext* ctx, const v1::AuditRequest* req, v1::AuditResponse* resp) override;
 
  private:
-  // Appends one audit row for a write that succeeded (after its commit: a
-  // crash in between loses the row, never the write).
-  void RecordAudit(grpc::ServerContext* ctx, const Identity& who, Rpc rpc, const std::string& serial,
-                   const std::string& detail);
+  // The audit row of a write, handed to the store, which inserts it in the
+  // write's own transaction (both commit or neither); `detail` forms the
+  // text from the run id or version written.
+  storage::AuditContext AuditFor(grpc::ServerContext* ctx, const Identity& who, Rpc rpc, const std::string& serial,
+                                 std::function<std::string(int64_t, bool)> detail);
 
   storage::Store* store_;
   Authorizer open_;

@@ -264,6 +264,18 @@ constexpr char kPointsOfRun[] =
     "SELECT point_id, id_a, iq_a, speed_rpm, ld_h, lq_h, ldq_h, ld_h_std, lq_h_std, ldq_h_std, temperature_c, "
     "reliable FROM hf_points WHERE run_id = $1 ORDER BY idx";
 
+// Inserts `audit` (if any) inside the caller's transaction on `c`.
+absl::Status InsertAudit(PGconn* c, const AuditContext* audit, int64_t written_id, bool replayed) {
+  if (audit == nullptr) return absl::OkStatus();
+  const AuditRow& a = audit->row;
+  return Exec(c,
+              "INSERT INTO audit (utc, identity, role, peer, request_id, rpc, serial, detail) "
+              "VALUES ($1,$2,$3,$4,$5,$6,$7,$8)",
+              {T(NowUtc()), T(a.identity), T(a.role), T(a.peer), T(a.request_id), T(a.rpc), T(a.serial),
+               T(audit->detail ? audit->detail(written_id, replayed) : a.detail)})
+      .status();
+}
+
 }  // namespace
 
 const std::vector<std::string>& PostgresMigrations() { return kPostgresMigrations; }
@@ -377,7 +389,8 @@ absl::StatusOr<int> PostgresStore::SchemaVersion() {
 absl::StatusOr<int64_t> PostgresStore::IngestHfRun(const MotorRow& m, const std::string& station,
                                                    const std::string& kind, const std::vector<HfPointRow>& points,
                                                    const std::string& sha, const std::vector<uint8_t>& blob,
-                                                   int64_t recording_bytes, const std::string& key, bool* replayed) {
+                                                   int64_t recording_bytes, const std::string& key, bool* replayed,
+                                                   const AuditContext* audit) {
   int64_t run_id = 0;
   if (replayed != nullptr) *replayed = false;
   auto st = WithTransaction([&](PGconn* c) -> absl::Status {
@@ -398,7 +411,7 @@ absl::StatusOr<int64_t> PostgresStore::IngestHfRun(const MotorRow& m, const std:
       if (PQntuples(q->get()) > 0) {
         run_id = Int(q->get(), 0, 0);
         if (replayed != nullptr) *replayed = true;
-        return absl::OkStatus();
+        return InsertAudit(c, audit, run_id, true);
       }
     }
     if (!sha.empty()) {
@@ -417,13 +430,15 @@ absl::StatusOr<int64_t> PostgresStore::IngestHfRun(const MotorRow& m, const std:
                      key.empty() ? Null() : T(key)});
     if (!run.ok()) return run.status();
     run_id = Int(run->get(), 0, 0);
-    return CopyPoints(c, run_id, points);
+    if (auto st = CopyPoints(c, run_id, points); !st.ok()) return st;
+    return InsertAudit(c, audit, run_id, false);
   });
   if (!st.ok()) return st;
   return run_id;
 }
 
-absl::Status PostgresStore::Release(const std::string& serial, int version, const std::string& by) {
+absl::Status PostgresStore::Release(const std::string& serial, int version, const std::string& by,
+                                    const AuditContext* audit) {
   return WithTransaction([&](PGconn* c) -> absl::Status {
     // FOR SHARE: the calibration row cannot change anyway (immutable), but
     // the lock orders concurrent releases of one version.
@@ -446,7 +461,7 @@ absl::Status PostgresStore::Release(const std::string& serial, int version, cons
     if (PQntuples(ins->get()) == 0) {
       return absl::AlreadyExistsError(absl::StrCat("version ", version, " of '", serial, "' is released already"));
     }
-    return absl::OkStatus();
+    return InsertAudit(c, audit, version, false);
   });
 }
 
@@ -549,7 +564,7 @@ absl::StatusOr<std::vector<HfPointRow>> PostgresStore::LatestRunPoints(const std
   return out;
 }
 
-absl::StatusOr<int> PostgresStore::AddCalibration(const CalibrationRow& cr) {
+absl::StatusOr<int> PostgresStore::AddCalibration(const CalibrationRow& cr, const AuditContext* audit) {
   int version = 0;
   auto st = WithTransaction([&](PGconn* c) -> absl::Status {
     // The motor row lock serialises version assignment for this serial
@@ -575,7 +590,8 @@ absl::StatusOr<int> PostgresStore::AddCalibration(const CalibrationRow& cr) {
     const std::string prev_sha = PQntuples(prev->get()) > 0 ? Text(prev->get(), 0, 0) : std::string();
     auto link = Exec(c, "INSERT INTO calibration_chain (serial, version, prev_sha256, row_sha256) VALUES ($1,$2,$3,$4)",
                      {T(cr.serial), I(version), T(prev_sha), T(CalibrationRowSha256(prev_sha, row))});
-    return link.status();
+    if (!link.ok()) return link.status();
+    return InsertAudit(c, audit, version, false);
   });
   if (!st.ok()) return st;
   return version;
@@ -718,12 +734,13 @@ absl::StatusOr<std::vector<MotorRow>> PostgresStore::AllMotors() {
 absl::StatusOr<std::vector<RunRow>> PostgresStore::AllRuns() {
   std::vector<RunRow> out;
   auto st = WithConn([&](PGconn* c) -> absl::Status {
-    auto q = Exec(c, "SELECT run_id, serial, station, kind, COALESCE(recording_sha256, ''), created_utc FROM runs "
-                     "ORDER BY run_id");
+    auto q = Exec(c, "SELECT run_id, serial, station, kind, COALESCE(recording_sha256, ''), created_utc, "
+                     "COALESCE(idempotency_key, '') FROM runs ORDER BY run_id");
     if (!q.ok()) return q.status();
     const PGresult* r = q->get();
     for (int i = 0; i < PQntuples(r); ++i) {
-      out.push_back({Int(r, i, 0), Text(r, i, 1), Text(r, i, 2), Text(r, i, 3), Text(r, i, 4), Text(r, i, 5)});
+      out.push_back({Int(r, i, 0), Text(r, i, 1), Text(r, i, 2), Text(r, i, 3), Text(r, i, 4), Text(r, i, 5),
+                     Text(r, i, 6)});
     }
     return absl::OkStatus();
   });
@@ -777,10 +794,11 @@ absl::Status PostgresStore::ImportRun(const RunRow& run, const std::vector<HfPoi
       }
     }
     if (auto r = Exec(c,
-                      "INSERT INTO runs (run_id, serial, station, kind, recording_sha256, created_utc) "
-                      "VALUES ($1,$2,$3,$4,$5,$6)",
+                      "INSERT INTO runs (run_id, serial, station, kind, recording_sha256, created_utc, idempotency_key) "
+                      "VALUES ($1,$2,$3,$4,$5,$6,$7)",
                       {I(run.run_id), T(run.serial), T(run.station), T(run.kind),
-                       run.recording_sha256.empty() ? Null() : T(run.recording_sha256), T(run.created_utc)});
+                       run.recording_sha256.empty() ? Null() : T(run.recording_sha256), T(run.created_utc),
+                       run.idempotency_key.empty() ? Null() : T(run.idempotency_key)});
         !r.ok()) {
       return r.status();
     }
@@ -798,6 +816,78 @@ absl::Status PostgresStore::ImportCalibration(const CalibrationRow& cr) {
                 {T(cr.serial), I(cr.version), cr.run_id ? I(cr.run_id) : Null(), T(cr.created_utc), T(cr.model),
                  D(cr.psi_pm_wb), D(cr.rms_relative), T(cr.verdict), T(cr.calibration_json)})
         .status();
+  });
+}
+
+absl::StatusOr<std::vector<ReleaseRow>> PostgresStore::AllReleases() {
+  std::vector<ReleaseRow> out;
+  auto st = WithConn([&](PGconn* c) -> absl::Status {
+    auto q = Exec(c, "SELECT serial, version, released_by, released_utc FROM releases "
+                     "ORDER BY serial COLLATE \"C\", version");
+    if (!q.ok()) return q.status();
+    const PGresult* r = q->get();
+    for (int i = 0; i < PQntuples(r); ++i) {
+      out.push_back({Text(r, i, 0), static_cast<int>(Int(r, i, 1)), Text(r, i, 2), Text(r, i, 3)});
+    }
+    return absl::OkStatus();
+  });
+  if (!st.ok()) return st;
+  return out;
+}
+
+absl::StatusOr<std::vector<AuditRow>> PostgresStore::AllAudit() {
+  std::vector<AuditRow> out;
+  auto st = WithConn([&](PGconn* c) -> absl::Status {
+    auto q = Exec(c, "SELECT id, utc, identity, role, peer, request_id, rpc, serial, detail FROM audit ORDER BY id");
+    if (!q.ok()) return q.status();
+    const PGresult* r = q->get();
+    for (int i = 0; i < PQntuples(r); ++i) {
+      out.push_back({Int(r, i, 0), Text(r, i, 1), Text(r, i, 2), Text(r, i, 3), Text(r, i, 4), Text(r, i, 5),
+                     Text(r, i, 6), Text(r, i, 7), Text(r, i, 8)});
+    }
+    return absl::OkStatus();
+  });
+  if (!st.ok()) return st;
+  return out;
+}
+
+absl::Status PostgresStore::ImportTrail(const std::vector<ReleaseRow>& releases, const std::vector<AuditRow>& audit,
+                                        const std::vector<ChainRow>& chain) {
+  return WithTransaction([&](PGconn* c) -> absl::Status {
+    for (const auto& r : releases) {
+      if (auto x = Exec(c, "INSERT INTO releases (serial, version, released_by, released_utc) VALUES ($1,$2,$3,$4)",
+                        {T(r.serial), I(r.version), T(r.released_by), T(r.released_utc)});
+          !x.ok()) {
+        return x.status();
+      }
+    }
+    for (const auto& a : audit) {
+      if (auto x = Exec(c,
+                        "INSERT INTO audit (id, utc, identity, role, peer, request_id, rpc, serial, detail) "
+                        "VALUES ($1,$2,$3,$4,$5,$6,$7,$8,$9)",
+                        {I(a.id), T(a.utc), T(a.identity), T(a.role), T(a.peer), T(a.request_id), T(a.rpc),
+                         T(a.serial), T(a.detail)});
+          !x.ok()) {
+        return x.status();
+      }
+    }
+    if (!audit.empty()) {
+      // Later audit rows continue after the imported ids.
+      if (auto x = Exec(c, "SELECT setval(pg_get_serial_sequence('audit', 'id'), (SELECT MAX(id) FROM audit))");
+          !x.ok()) {
+        return x.status();
+      }
+    }
+    for (const auto& l : chain) {
+      if (auto x = Exec(c,
+                        "INSERT INTO calibration_chain (serial, version, prev_sha256, row_sha256) "
+                        "VALUES ($1,$2,$3,$4)",
+                        {T(l.serial), I(l.version), T(l.prev_sha256), T(l.row_sha256)});
+          !x.ok()) {
+        return x.status();
+      }
+    }
+    return absl::OkStatus();
   });
 }
 

@@ -38,16 +38,17 @@ class PostgresStore final : public Store {
                                       const std::vector<HfPointRow>& points, const std::string& recording_sha256,
                                       const std::vector<uint8_t>& recording_compressed,
                                       int64_t recording_bytes, const std::string& idempotency_key = "",
-                                      bool* replayed = nullptr) override;
+                                      bool* replayed = nullptr, const AuditContext* audit = nullptr) override;
   absl::StatusOr<MotorRow> GetMotor(const std::string& serial) override;
-  absl::Status Release(const std::string& serial, int version, const std::string& released_by) override;
+  absl::Status Release(const std::string& serial, int version, const std::string& released_by,
+                       const AuditContext* audit = nullptr) override;
   absl::StatusOr<int> LatestReleasedVersion(const std::string& serial) override;
   absl::StatusOr<bool> IsReleased(const std::string& serial, int version) override;
   absl::Status AppendAudit(const AuditRow& row) override;
   absl::StatusOr<std::vector<AuditRow>> AuditOf(const std::string& serial) override;
   absl::StatusOr<std::vector<ChainRow>> AllChainRows() override;
   absl::StatusOr<std::vector<HfPointRow>> LatestRunPoints(const std::string& serial, int64_t* run_id) override;
-  absl::StatusOr<int> AddCalibration(const CalibrationRow& row) override;
+  absl::StatusOr<int> AddCalibration(const CalibrationRow& row, const AuditContext* audit = nullptr) override;
   absl::StatusOr<CalibrationRow> GetCalibration(const std::string& serial, int version) override;
   absl::StatusOr<std::vector<CalibrationRow>> LatestCalibrations() override;
   absl::StatusOr<std::vector<MotorSummaryRow>> ListMotors(const std::string& prefix, bool only_failed, int offset,
@@ -61,10 +62,14 @@ class PostgresStore final : public Store {
   absl::StatusOr<std::vector<HfPointRow>> RunPoints(int64_t run_id) override;
   absl::StatusOr<RecordingRow> GetRecordingRow(const std::string& sha256) override;
   absl::StatusOr<std::vector<CalibrationRow>> AllCalibrations() override;
+  absl::StatusOr<std::vector<ReleaseRow>> AllReleases() override;
+  absl::StatusOr<std::vector<AuditRow>> AllAudit() override;
   absl::Status ImportMotor(const MotorRow& motor) override;
   absl::Status ImportRun(const RunRow& run, const std::vector<HfPointRow>& points,
                          const RecordingRow* recording) override;
   absl::Status ImportCalibration(const CalibrationRow& row) override;
+  absl::Status ImportTrail(const std::vector<ReleaseRow>& releases, const std::vector<AuditRow>& audit,
+                           const std::vector<ChainRow>& chain) override;
 
  private:
   PostgresStore(std::string url, int max_connections) : url_(std::move(url)), max_(max_connections) {}

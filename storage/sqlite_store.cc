@@ -160,7 +160,7 @@ absl::StatusOr<int> SqliteStore::SchemaVersion() {
 absl::StatusOr<int64_t> SqliteStore::IngestHfRun(const MotorRow& m, const std::string& station, const std::string& kind,
                                            const std::vector<HfPointRow>& points, const std::string& sha,
                                            const std::vector<uint8_t>& blob, int64_t recording_bytes,
-                                           const std::string& key, bool* replayed) {
+                                           const std::string& key, bool* replayed, const AuditContext* audit) {
   std::lock_guard<std::mutex> lock(write_mu_);
   int64_t run_id = 0;
   if (replayed != nullptr) *replayed = false;
@@ -174,7 +174,7 @@ absl::StatusOr<int64_t> SqliteStore::IngestHfRun(const MotorRow& m, const std::s
       if (*r) {
         run_id = q->Int(0);
         if (replayed != nullptr) *replayed = true;
-        return absl::OkStatus();
+        return InsertAuditLocked(audit, run_id, true);
       }
     }
     auto up = writer_->Prepare(
@@ -200,13 +200,15 @@ absl::StatusOr<int64_t> SqliteStore::IngestHfRun(const MotorRow& m, const std::s
     }
     if (auto r = run->Step(); !r.ok()) return r.status();
     run_id = writer_->LastInsertRowId();
-    return InsertPointsLocked(run_id, points);
+    if (auto s = InsertPointsLocked(run_id, points); !s.ok()) return s;
+    return InsertAuditLocked(audit, run_id, false);
   });
   if (!st.ok()) return st;
   return run_id;
 }
 
-absl::Status SqliteStore::Release(const std::string& serial, int version, const std::string& by) {
+absl::Status SqliteStore::Release(const std::string& serial, int version, const std::string& by,
+                                  const AuditContext* audit) {
   std::lock_guard<std::mutex> lock(write_mu_);
   return writer_->Transaction([&]() -> absl::Status {
     auto q = writer_->Prepare("SELECT verdict FROM calibrations WHERE serial = ? AND version = ?");
@@ -229,8 +231,8 @@ absl::Status SqliteStore::Release(const std::string& serial, int version, const 
     auto ins = writer_->Prepare("INSERT INTO releases (serial, version, released_by, released_utc) VALUES (?,?,?,?)");
     if (!ins.ok()) return ins.status();
     if (auto s = ins->BindAll({serial, int64_t{version}, by, NowUtc()}); !s.ok()) return s;
-    auto ir = ins->Step();
-    return ir.ok() ? absl::OkStatus() : ir.status();
+    if (auto ir = ins->Step(); !ir.ok()) return ir.status();
+    return InsertAuditLocked(audit, version, false);
   });
 }
 
@@ -252,6 +254,20 @@ absl::StatusOr<bool> SqliteStore::IsReleased(const std::string& serial, int vers
   auto r = q->Step();
   if (!r.ok()) return r.status();
   return q->Int(0) > 0;
+}
+
+absl::Status SqliteStore::InsertAuditLocked(const AuditContext* audit, int64_t written_id, bool replayed) {
+  if (audit == nullptr) return absl::OkStatus();
+  const AuditRow& a = audit->row;
+  const std::string detail = audit->detail ? audit->detail(written_id, replayed) : a.detail;
+  auto q = writer_->Prepare(
+      "INSERT INTO audit (utc, identity, role, peer, request_id, rpc, serial, detail) VALUES (?,?,?,?,?,?,?,?)");
+  if (!q.ok()) return q.status();
+  if (auto s = q->BindAll({NowUtc(), a.identity, a.role, a.peer, a.request_id, a.rpc, a.serial, detail}); !s.ok()) {
+    return s;
+  }
+  auto r = q->Step();
+  return r.ok() ? absl::OkStatus() : r.status();
 }
 
 absl::Status SqliteStore::AppendAudit(const AuditRow& a) {
@@ -320,7 +336,7 @@ absl::StatusOr<std::vector<HfPointRow>> SqliteStore::LatestRunPoints(const std::
   return PointsLocked(*run_id);
 }
 
-absl::StatusOr<int> SqliteStore::AddCalibration(const CalibrationRow& c) {
+absl::StatusOr<int> SqliteStore::AddCalibration(const CalibrationRow& c, const AuditContext* audit) {
   std::lock_guard<std::mutex> lock(write_mu_);
   int version = 0;
   auto st = writer_->Transaction([&]() -> absl::Status {
@@ -354,8 +370,8 @@ absl::StatusOr<int> SqliteStore::AddCalibration(const CalibrationRow& c) {
     if (auto s = link->BindAll({c.serial, int64_t{version}, prev_sha, CalibrationRowSha256(prev_sha, row)}); !s.ok()) {
       return s;
     }
-    auto r = link->Step();
-    return r.ok() ? absl::OkStatus() : r.status();
+    if (auto r = link->Step(); !r.ok()) return r.status();
+    return InsertAuditLocked(audit, version, false);
   });
   if (!st.ok()) return st;
   return version;
@@ -530,14 +546,15 @@ absl::StatusOr<std::vector<MotorRow>> SqliteStore::AllMotors() {
 absl::StatusOr<std::vector<RunRow>> SqliteStore::AllRuns() {
   std::lock_guard<std::mutex> lock(write_mu_);
   auto q = writer_->Prepare(
-      "SELECT run_id, serial, station, kind, COALESCE(recording_sha256, ''), created_utc FROM runs ORDER BY run_id");
+      "SELECT run_id, serial, station, kind, COALESCE(recording_sha256, ''), created_utc, COALESCE(idempotency_key, '') "
+      "FROM runs ORDER BY run_id");
   if (!q.ok()) return q.status();
   std::vector<RunRow> out;
   while (true) {
     auto r = q->Step();
     if (!r.ok()) return r.status();
     if (!*r) break;
-    out.push_back({q->Int(0), q->Text(1), q->Text(2), q->Text(3), q->Text(4), q->Text(5)});
+    out.push_back({q->Int(0), q->Text(1), q->Text(2), q->Text(3), q->Text(4), q->Text(5), q->Text(6)});
   }
   return out;
 }
@@ -595,11 +612,13 @@ absl::Status SqliteStore::ImportRun(const RunRow& run, const std::vector<HfPoint
       if (auto r = q->Step(); !r.ok()) return r.status();
     }
     auto q = writer_->Prepare(
-        "INSERT INTO runs (run_id, serial, station, kind, recording_sha256, created_utc) VALUES (?,?,?,?,?,?)");
+        "INSERT INTO runs (run_id, serial, station, kind, recording_sha256, created_utc, idempotency_key) "
+        "VALUES (?,?,?,?,?,?,?)");
     if (!q.ok()) return q.status();
     if (auto s = q->BindAll({run.run_id, run.serial, run.station, run.kind,
                              run.recording_sha256.empty() ? SqlValue(nullptr) : SqlValue(run.recording_sha256),
-                             run.created_utc});
+                             run.created_utc,
+                             run.idempotency_key.empty() ? SqlValue(nullptr) : SqlValue(run.idempotency_key)});
         !s.ok()) {
       return s;
     }
@@ -622,6 +641,71 @@ absl::Status SqliteStore::ImportCalibration(const CalibrationRow& c) {
     }
     auto r = ins->Step();
     return r.ok() ? absl::OkStatus() : r.status();
+  });
+}
+
+absl::StatusOr<std::vector<ReleaseRow>> SqliteStore::AllReleases() {
+  std::lock_guard<std::mutex> lock(write_mu_);
+  auto q = writer_->Prepare(
+      "SELECT serial, version, released_by, released_utc FROM releases ORDER BY serial, version");
+  if (!q.ok()) return q.status();
+  std::vector<ReleaseRow> out;
+  while (true) {
+    auto r = q->Step();
+    if (!r.ok()) return r.status();
+    if (!*r) break;
+    out.push_back({q->Text(0), static_cast<int>(q->Int(1)), q->Text(2), q->Text(3)});
+  }
+  return out;
+}
+
+absl::StatusOr<std::vector<AuditRow>> SqliteStore::AllAudit() {
+  std::lock_guard<std::mutex> lock(write_mu_);
+  auto q = writer_->Prepare(
+      "SELECT id, utc, identity, role, peer, request_id, rpc, serial, detail FROM audit ORDER BY id");
+  if (!q.ok()) return q.status();
+  std::vector<AuditRow> out;
+  while (true) {
+    auto r = q->Step();
+    if (!r.ok()) return r.status();
+    if (!*r) break;
+    out.push_back({q->Int(0), q->Text(1), q->Text(2), q->Text(3), q->Text(4), q->Text(5), q->Text(6), q->Text(7),
+                   q->Text(8)});
+  }
+  return out;
+}
+
+absl::Status SqliteStore::ImportTrail(const std::vector<ReleaseRow>& releases, const std::vector<AuditRow>& audit,
+                                      const std::vector<ChainRow>& chain) {
+  std::lock_guard<std::mutex> lock(write_mu_);
+  return writer_->Transaction([&]() -> absl::Status {
+    auto rel = writer_->Prepare("INSERT INTO releases (serial, version, released_by, released_utc) VALUES (?,?,?,?)");
+    if (!rel.ok()) return rel.status();
+    for (const auto& r : releases) {
+      if (auto s = rel->BindAll({r.serial, int64_t{r.version}, r.released_by, r.released_utc}); !s.ok()) return s;
+      if (auto x = rel->Step(); !x.ok()) return x.status();
+      (void)rel->Reset();
+    }
+    auto au = writer_->Prepare(
+        "INSERT INTO audit (id, utc, identity, role, peer, request_id, rpc, serial, detail) VALUES (?,?,?,?,?,?,?,?,?)");
+    if (!au.ok()) return au.status();
+    for (const auto& a : audit) {
+      if (auto s = au->BindAll({a.id, a.utc, a.identity, a.role, a.peer, a.request_id, a.rpc, a.serial, a.detail});
+          !s.ok()) {
+        return s;
+      }
+      if (auto x = au->Step(); !x.ok()) return x.status();
+      (void)au->Reset();
+    }
+    auto ch = writer_->Prepare(
+        "INSERT INTO calibration_chain (serial, version, prev_sha256, row_sha256) VALUES (?,?,?,?)");
+    if (!ch.ok()) return ch.status();
+    for (const auto& l : chain) {
+      if (auto s = ch->BindAll({l.serial, int64_t{l.version}, l.prev_sha256, l.row_sha256}); !s.ok()) return s;
+      if (auto x = ch->Step(); !x.ok()) return x.status();
+      (void)ch->Reset();
+    }
+    return absl::OkStatus();
   });
 }
 

@@ -26,16 +26,17 @@ class SqliteStore final : public Store {
                                       const std::vector<HfPointRow>& points, const std::string& recording_sha256,
                                       const std::vector<uint8_t>& recording_compressed,
                                       int64_t recording_bytes, const std::string& idempotency_key = "",
-                                      bool* replayed = nullptr) override;
+                                      bool* replayed = nullptr, const AuditContext* audit = nullptr) override;
   absl::StatusOr<MotorRow> GetMotor(const std::string& serial) override;
-  absl::Status Release(const std::string& serial, int version, const std::string& released_by) override;
+  absl::Status Release(const std::string& serial, int version, const std::string& released_by,
+                       const AuditContext* audit = nullptr) override;
   absl::StatusOr<int> LatestReleasedVersion(const std::string& serial) override;
   absl::StatusOr<bool> IsReleased(const std::string& serial, int version) override;
   absl::Status AppendAudit(const AuditRow& row) override;
   absl::StatusOr<std::vector<AuditRow>> AuditOf(const std::string& serial) override;
   absl::StatusOr<std::vector<ChainRow>> AllChainRows() override;
   absl::StatusOr<std::vector<HfPointRow>> LatestRunPoints(const std::string& serial, int64_t* run_id) override;
-  absl::StatusOr<int> AddCalibration(const CalibrationRow& row) override;
+  absl::StatusOr<int> AddCalibration(const CalibrationRow& row, const AuditContext* audit = nullptr) override;
   absl::StatusOr<CalibrationRow> GetCalibration(const std::string& serial, int version) override;
   absl::StatusOr<std::vector<CalibrationRow>> LatestCalibrations() override;
   absl::StatusOr<std::vector<MotorSummaryRow>> ListMotors(const std::string& prefix, bool only_failed, int offset,
@@ -49,10 +50,14 @@ class SqliteStore final : public Store {
   absl::StatusOr<std::vector<HfPointRow>> RunPoints(int64_t run_id) override;
   absl::StatusOr<RecordingRow> GetRecordingRow(const std::string& sha256) override;
   absl::StatusOr<std::vector<CalibrationRow>> AllCalibrations() override;
+  absl::StatusOr<std::vector<ReleaseRow>> AllReleases() override;
+  absl::StatusOr<std::vector<AuditRow>> AllAudit() override;
   absl::Status ImportMotor(const MotorRow& motor) override;
   absl::Status ImportRun(const RunRow& run, const std::vector<HfPointRow>& points,
                          const RecordingRow* recording) override;
   absl::Status ImportCalibration(const CalibrationRow& row) override;
+  absl::Status ImportTrail(const std::vector<ReleaseRow>& releases, const std::vector<AuditRow>& audit,
+                           const std::vector<ChainRow>& chain) override;
 
   // Online backup (sqlite3_backup_*) into a new file at `dest_path`: a
   // consistent copy while the store keeps serving.
@@ -63,6 +68,8 @@ class SqliteStore final : public Store {
   absl::Status Migrate();
   absl::StatusOr<std::vector<HfPointRow>> PointsLocked(int64_t run_id);
   absl::Status InsertPointsLocked(int64_t run_id, const std::vector<HfPointRow>& points);
+  // Inserts `audit` (if any) inside the caller's transaction.
+  absl::Status InsertAuditLocked(const AuditContext* audit, int64_t written_id, bool replayed);
 
   std::string path_;
   std::mutex write_mu_;

@@ -19,6 +19,7 @@
 #define FLUXCAL_STORAGE_STORE_H_
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -51,6 +52,7 @@ struct HfPointRow {
 struct RunRow {
   int64_t run_id = 0;
   std::string serial, station, kind, recording_sha256 /* "" = none */, created_utc;
+  std::string idempotency_key;   // "" = none
 };
 
 struct RecordingRow {
@@ -76,6 +78,23 @@ struct MotorSummaryRow {
 struct AuditRow {
   int64_t id = 0;
   std::string utc, identity, role, peer, request_id, rpc, serial, detail;
+};
+
+// The audit row of one write, inserted by the store inside the write's own
+// transaction: the write and its row commit together or not at all (a
+// failing audit insert rolls the write back).
+struct AuditContext {
+  AuditRow row;   // identity, role, peer, request_id, rpc, serial; utc is set by the store
+  // The detail from what was written, called inside the transaction: the
+  // run id (replayed: the run the idempotency key found) or the calibration
+  // version. Unset: row.detail as given.
+  std::function<std::string(int64_t written_id, bool replayed)> detail;
+};
+
+struct ReleaseRow {
+  std::string serial;
+  int version = 0;
+  std::string released_by, released_utc;
 };
 
 // One link of the per-serial hash chain over calibration versions.
@@ -106,35 +125,41 @@ class Store {
   // One transaction: upserts the motor, stores the recording (if any, by
   // content hash), creates a run, inserts all points. With a non-empty
   // idempotency key a run already stored for (serial, key) is returned as
-  // is (*replayed = true) and nothing is written: a client's retry after a
-  // lost reply creates no duplicate.
+  // is (*replayed = true) and nothing but the audit row is written: a
+  // client's retry after a lost reply creates no duplicate. With `audit`
+  // its row is inserted in the same transaction.
   virtual absl::StatusOr<int64_t> IngestHfRun(const MotorRow& motor, const std::string& station,
                                               const std::string& kind, const std::vector<HfPointRow>& points,
                                               const std::string& recording_sha256 = "",
                                               const std::vector<uint8_t>& recording_compressed = {},
                                               int64_t recording_bytes = 0, const std::string& idempotency_key = "",
-                                              bool* replayed = nullptr) = 0;
+                                              bool* replayed = nullptr,
+                                              const AuditContext* audit = nullptr) = 0;
 
   virtual absl::StatusOr<MotorRow> GetMotor(const std::string& serial) = 0;
   // Points of the serial's latest run (and its id).
   virtual absl::StatusOr<std::vector<HfPointRow>> LatestRunPoints(const std::string& serial, int64_t* run_id) = 0;
 
-  // Appends version n+1 for the serial (immutable; never overwrites).
-  virtual absl::StatusOr<int> AddCalibration(const CalibrationRow& row) = 0;
+  // Appends version n+1 for the serial (immutable; never overwrites), its
+  // chain link and, with `audit`, its audit row: one transaction.
+  virtual absl::StatusOr<int> AddCalibration(const CalibrationRow& row, const AuditContext* audit = nullptr) = 0;
   virtual absl::StatusOr<CalibrationRow> GetCalibration(const std::string& serial, int version /*0 latest*/) = 0;
   virtual absl::StatusOr<std::vector<CalibrationRow>> LatestCalibrations() = 0;
 
   // Releases (immutable rows): a calibration version approved for
   // flashing. Release: NotFound (no such version), FailedPrecondition (its
   // verdict is not "pass"), AlreadyExists (released before). The verdict is
-  // checked inside the same transaction as the insert.
-  virtual absl::Status Release(const std::string& serial, int version, const std::string& released_by) = 0;
+  // checked inside the same transaction as the insert, and so is the audit
+  // row when `audit` is given.
+  virtual absl::Status Release(const std::string& serial, int version, const std::string& released_by,
+                               const AuditContext* audit = nullptr) = 0;
   // The newest released version, 0 when none.
   virtual absl::StatusOr<int> LatestReleasedVersion(const std::string& serial) = 0;
   virtual absl::StatusOr<bool> IsReleased(const std::string& serial, int version) = 0;
 
-  // Audit trail (append-only): Append sets utc; AuditOf lists a serial's
-  // rows oldest first.
+  // Audit trail (append-only): Append sets utc and writes a row on its own
+  // (a write passes its row as AuditContext instead, into its transaction);
+  // AuditOf lists a serial's rows oldest first.
   virtual absl::Status AppendAudit(const AuditRow& row) = 0;
   virtual absl::StatusOr<std::vector<AuditRow>> AuditOf(const std::string& serial) = 0;
   // Every chain link, by serial and version.
@@ -153,12 +178,19 @@ class Store {
   virtual absl::StatusOr<std::vector<HfPointRow>> RunPoints(int64_t run_id) = 0;
   virtual absl::StatusOr<RecordingRow> GetRecordingRow(const std::string& sha256) = 0;
   virtual absl::StatusOr<std::vector<CalibrationRow>> AllCalibrations() = 0;  // by serial, version
+  virtual absl::StatusOr<std::vector<ReleaseRow>> AllReleases() = 0;         // by serial, version
+  virtual absl::StatusOr<std::vector<AuditRow>> AllAudit() = 0;              // by id
   // Copies keeping ids, versions and timestamps (into an empty store). Each
   // call is one transaction.
   virtual absl::Status ImportMotor(const MotorRow& motor) = 0;
   virtual absl::Status ImportRun(const RunRow& run, const std::vector<HfPointRow>& points,
                                  const RecordingRow* recording) = 0;
   virtual absl::Status ImportCalibration(const CalibrationRow& row) = 0;
+  // Releases, audit rows (ids and times kept) and chain links (hashes kept,
+  // so verify-db checks the copy as it checked the source): one transaction,
+  // after the calibrations they name.
+  virtual absl::Status ImportTrail(const std::vector<ReleaseRow>& releases, const std::vector<AuditRow>& audit,
+                                   const std::vector<ChainRow>& chain) = 0;
 };
 
 std::string NowUtc();

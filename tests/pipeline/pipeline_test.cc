@@ -64,6 +64,30 @@ TEST(Pipeline, IngestRules) {
   EXPECT_EQ((*store)->GetMotor("IPM-N")->psi_pm_wb, 0.0114);
 }
 
+// A cancellation callback (a server passes its client's deadline) stops the
+// fit inside its loop over candidate models, and nothing is stored.
+TEST(Pipeline, CancelledFitStoresNothing) {
+  auto store = storage::Store::Open(":memory:");
+  ASSERT_TRUE(store.ok());
+  ASSERT_TRUE(IngestHfRun(**store, "IPM-C", "st", kMotor, Grid(1.0)).ok());
+  int polls = 0;
+  auto row = FitSerial(**store, "IPM-C", "auto", {}, nullptr, [&polls] { return ++polls > 2; });
+  EXPECT_EQ(row.status().code(), absl::StatusCode::kCancelled) << row.status();
+  EXPECT_EQ(polls, 3) << "polled per candidate model, stopped at the third";
+  EXPECT_EQ((*store)->GetCalibration("IPM-C", 0).status().code(), absl::StatusCode::kNotFound);
+  storage::AuditContext audit;
+  audit.row.rpc = "Fit";
+  audit.row.serial = "IPM-C";
+  row = FitSerial(**store, "IPM-C", "analytic", {}, &audit, [] { return true; });
+  EXPECT_EQ(row.status().code(), absl::StatusCode::kCancelled);
+  EXPECT_TRUE((*store)->AuditOf("IPM-C")->empty()) << "no audit row for a write that did not happen";
+  row = FitSerial(**store, "IPM-C", "analytic", {}, &audit, [] { return false; });
+  ASSERT_TRUE(row.ok()) << row.status();
+  EXPECT_EQ(row->version, 1);
+  ASSERT_EQ((*store)->AuditOf("IPM-C")->size(), 1u);
+  EXPECT_EQ((*store)->AuditOf("IPM-C")->at(0).detail, "version 1 (analytic): pass");
+}
+
 TEST(Pipeline, FitJudgeQueryExport) {
   auto store = storage::Store::Open(":memory:");
   ASSERT_TRUE(store.ok());
@@ -164,23 +188,59 @@ TEST(Admin, MigrateSqliteToPostgresKeepsEverything) {
   auto from = storage::Store::Open("sqlite:" + src);
   ASSERT_TRUE(from.ok());
   Populate(**from);
+  // An idempotency key, audited writes, a release and chain links go along.
+  storage::AuditContext audit;
+  audit.row.identity = "station-9"; audit.row.role = "station"; audit.row.peer = "ipv4:127.0.0.1:9";
+  audit.row.request_id = "req-9"; audit.row.rpc = "IngestHfResults"; audit.row.serial = "IPM-M-3";
+  audit.detail = [](int64_t run, bool) { return "run " + std::to_string(run); };
+  ASSERT_TRUE(IngestHfRun(**from, "IPM-M-3", "st9", kMotor, Grid(1.0), 0, "key-9", nullptr, &audit).ok());
+  audit.row.rpc = "Fit";
+  audit.detail = nullptr;
+  auto fitted = FitSerial(**from, "IPM-M-3", "analytic", {}, &audit);
+  ASSERT_TRUE(fitted.ok()) << fitted.status();
+  ASSERT_EQ(fitted->verdict, "pass");
+  audit.row.rpc = "Release";
+  audit.row.detail = "released version 1";
+  ASSERT_TRUE((*from)->Release("IPM-M-3", 1, "rel-1", &audit).ok());
   ASSERT_TRUE(pg->CreateDatabase("migrated"));
   auto to = storage::Store::Open(pg->Url("migrated"));
   ASSERT_TRUE(to.ok()) << to.status();
   auto r = Migrate(**from, **to);
   ASSERT_TRUE(r.ok()) << r.status();
-  EXPECT_EQ(r->motors, 2);
-  EXPECT_EQ(r->runs, 3);
-  EXPECT_EQ(r->points, 108);
+  EXPECT_EQ(r->motors, 3);
+  EXPECT_EQ(r->runs, 4);
+  EXPECT_EQ(r->points, 144);
   EXPECT_EQ(r->recordings, 1);
-  EXPECT_EQ(r->calibrations, 2);
+  EXPECT_EQ(r->calibrations, 3);
+  EXPECT_EQ(r->releases, 1);
+  EXPECT_EQ(r->audit_rows, 3);
+  EXPECT_EQ(r->chain_links, 3);
   EXPECT_EQ(*ContentHash(**to), *ContentHash(**from));
+  EXPECT_TRUE(*(*to)->IsReleased("IPM-M-3", 1));
+  auto trail_from = (*from)->AuditOf("IPM-M-3"), trail_to = (*to)->AuditOf("IPM-M-3");
+  ASSERT_EQ(trail_to->size(), 3u);
+  for (size_t k = 0; k < 3; ++k) {
+    EXPECT_EQ(trail_to->at(k).id, trail_from->at(k).id);
+    EXPECT_EQ(trail_to->at(k).utc, trail_from->at(k).utc);
+    EXPECT_EQ(trail_to->at(k).detail, trail_from->at(k).detail);
+  }
+  auto chain = storage::VerifyCalibrationChain(**to);
+  ASSERT_TRUE(chain.ok()) << chain.status();
+  EXPECT_EQ(chain->chained, 3);
+  EXPECT_EQ(chain->unchained, 0);
+  EXPECT_TRUE(chain->problems.empty());
+  bool replayed = false;
+  auto again = IngestHfRun(**to, "IPM-M-3", "st9", kMotor, Grid(1.0), 0, "key-9", &replayed);
+  ASSERT_TRUE(again.ok());
+  EXPECT_TRUE(replayed) << "an idempotency key must survive the migration";
   // The migrated store serves: the same calibration, and version 3 next.
   EXPECT_EQ((*to)->GetCalibration("IPM-M-1", 2)->calibration_json, (*from)->GetCalibration("IPM-M-1", 2)->calibration_json);
   auto v3 = FitSerial(**to, "IPM-M-1", "analytic", {});
   ASSERT_TRUE(v3.ok());
   EXPECT_EQ(v3->version, 3);
   // A change anywhere changes the hash; a second migrate into it is refused.
+  EXPECT_TRUE(storage::VerifyCalibrationChain(**to)->problems.empty());
+  EXPECT_EQ(storage::VerifyCalibrationChain(**to)->chained, 4);
   EXPECT_NE(*ContentHash(**to), *ContentHash(**from));
   EXPECT_EQ(Migrate(**from, **to).status().code(), absl::StatusCode::kFailedPrecondition);
   // The same through the command an operator runs, checked by `admin hash`.
@@ -197,7 +257,11 @@ TEST(Admin, MigrateSqliteToPostgresKeepsEverything) {
   auto [rc, out] = run(bin + " admin migrate --from sqlite:" + src + " --to " + pg->Url("migrated_cli") + " --json");
   ASSERT_EQ(rc, 0) << out;
   EXPECT_NE(out.find("\"verified\": true"), std::string::npos) << out;
-  EXPECT_NE(out.find("\"points\": 108"), std::string::npos) << out;
+  EXPECT_NE(out.find("\"points\": 144"), std::string::npos) << out;
+  EXPECT_NE(out.find("\"audit_rows\": 3"), std::string::npos) << out;
+  EXPECT_NE(out.find("\"releases\": 1"), std::string::npos) << out;
+  auto [vrc, vout] = run(bin + " admin verify-db --db " + pg->Url("migrated_cli"));
+  EXPECT_EQ(vrc, 0) << vout;
   auto [rc1, h1] = run(bin + " admin hash --db sqlite:" + src);
   auto [rc2, h2] = run(bin + " admin hash --db " + pg->Url("migrated_cli"));
   ASSERT_EQ(rc1, 0);

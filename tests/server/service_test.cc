@@ -372,6 +372,88 @@ TEST_P(ServiceTest, IngestRecordingThenDiagnose) {
   ExpectStatus(w2->Finish(), grpc::StatusCode::INVALID_ARGUMENT, "path");
 }
 
+// The client's deadline reaches the library loops: Fit and Diagnose of a
+// stored recording with a deadline far shorter than the work return
+// DEADLINE_EXCEEDED soon after it, and the abandoned Fit stores no version
+// and no audit row (a later Fit is version 1). Timings are loose (seconds).
+TEST_P(ServiceTest, ClientDeadlineStopsTheWorkAndStoresNothing) {
+  sim::TwinConfig cfg;
+  cfg.serial = "IPM-DL-1";
+  sim::Plan plan = sim::DefaultPlan();
+  // Long records: identifying the set takes far longer than the deadline.
+  plan.record_s = 0.6;
+  auto r = sim::Simulate(cfg, plan);
+  ASSERT_TRUE(r.ok());
+  const std::string dir = TempPath("dlset");
+  fs::remove_all(dir);
+  ASSERT_TRUE(io::WriteRecordingSet(dir, r->set).ok());
+  {
+    grpc::ClientContext ctx;
+    v1::IngestRecordingResponse resp;
+    auto w = stub_->IngestRecording(&ctx, &resp);
+    bool first = true;
+    for (const auto& e : fs::recursive_directory_iterator(dir)) {
+      if (!e.is_regular_file()) continue;
+      std::ifstream f(e.path(), std::ios::binary);
+      v1::RecordingChunk c;
+      if (first) { c.set_serial("IPM-DL-1"); first = false; }
+      c.set_path(fs::relative(e.path(), dir).string());
+      c.set_data(std::string((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>()));
+      w->Write(c);
+    }
+    w->WritesDone();
+    ASSERT_TRUE(w->Finish().ok());
+  }
+  fs::remove_all(dir);
+  using Clock = std::chrono::steady_clock;
+  auto seconds = [](Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); };
+  // The whole work, once, for scale.
+  auto t0 = Clock::now();
+  {
+    grpc::ClientContext c;
+    v1::DiagnoseRequest dr;
+    dr.set_serial("IPM-DL-1");
+    v1::DiagnoseResponse d;
+    ASSERT_TRUE(stub_->Diagnose(&c, dr, &d).ok());
+  }
+  const double full_diagnose_s = seconds(t0);
+  t0 = Clock::now();
+  {
+    grpc::ClientContext c;
+    c.set_deadline(std::chrono::system_clock::now() + std::chrono::milliseconds(50));
+    v1::DiagnoseRequest dr;
+    dr.set_serial("IPM-DL-1");
+    v1::DiagnoseResponse d;
+    EXPECT_EQ(stub_->Diagnose(&c, dr, &d).error_code(), grpc::StatusCode::DEADLINE_EXCEEDED);
+  }
+  EXPECT_LT(seconds(t0), 1.0) << "full diagnosis took " << full_diagnose_s << " s";
+  EXPECT_LT(seconds(t0), 0.5 * full_diagnose_s);
+  t0 = Clock::now();
+  {
+    grpc::ClientContext c;
+    c.set_deadline(std::chrono::system_clock::now() + std::chrono::milliseconds(50));
+    v1::FitRequest fr;
+    fr.set_serial("IPM-DL-1");
+    v1::FitResponse resp;
+    EXPECT_EQ(stub_->Fit(&c, fr, &resp).error_code(), grpc::StatusCode::DEADLINE_EXCEEDED);
+  }
+  EXPECT_LT(seconds(t0), 1.0);
+  // Had the abandoned Fit run on, it would have finished first and taken
+  // version 1; it stopped, so the next Fit is version 1 and the only one.
+  grpc::ClientContext c;
+  v1::FitRequest fr;
+  fr.set_serial("IPM-DL-1");
+  v1::FitResponse resp;
+  ASSERT_TRUE(stub_->Fit(&c, fr, &resp).ok());
+  EXPECT_EQ(resp.calibration().version(), 1);
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  EXPECT_EQ(store_->GetCalibration("IPM-DL-1", 0)->version, 1);
+  auto trail = store_->AuditOf("IPM-DL-1");
+  ASSERT_TRUE(trail.ok());
+  ASSERT_EQ(trail->size(), 2u) << "ingest and the one stored Fit";
+  EXPECT_EQ(trail->at(1).rpc, "Fit");
+}
+
 INSTANTIATE_TEST_SUITE_P(Backends, ServiceTest, ::testing::Bool(),
                          [](const ::testing::TestParamInfo<bool>& i) { return i.param ? "PostgreSQL" : "Sqlite"; });
 

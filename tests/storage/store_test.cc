@@ -211,6 +211,68 @@ TEST_P(StoreTest, ReleasesAuditAndIdempotency) {
   }
 }
 
+// Each audited write inserts its audit row in its own transaction: both
+// appear together, a refused write leaves no row, and a refused audit
+// insert (a trigger added behind the store's back) rolls the write back.
+TEST_P(StoreTest, AuditRowCommitsWithItsWrite) {
+  AuditContext audit;
+  audit.row.identity = "station-7"; audit.row.role = "station"; audit.row.peer = "ipv4:127.0.0.1:1";
+  audit.row.request_id = "r1"; audit.row.rpc = "IngestHfResults"; audit.row.serial = "IPM-A";
+  audit.detail = [](int64_t id, bool replayed) { return (replayed ? "replayed run " : "run ") + std::to_string(id); };
+  auto run = store_->IngestHfRun({"IPM-A", 4, 0.011, 0.0114, ""}, "st", "hf_run", Points(3), "", {}, 0, "k1", nullptr,
+                                 &audit);
+  ASSERT_TRUE(run.ok()) << run.status();
+  bool replayed = false;
+  ASSERT_TRUE(store_->IngestHfRun({"IPM-A", 4, 0.011, 0.0114, ""}, "st", "hf_run", Points(3), "", {}, 0, "k1",
+                                  &replayed, &audit)
+                  .ok());
+  EXPECT_TRUE(replayed);
+  CalibrationRow c;
+  c.serial = "IPM-A"; c.model = "analytic"; c.verdict = "pass"; c.calibration_json = "{}";
+  audit.row.rpc = "Fit";
+  audit.detail = [](int64_t v, bool) { return "version " + std::to_string(v); };
+  ASSERT_EQ(*store_->AddCalibration(c, &audit), 1);
+  audit.row.rpc = "Release";
+  audit.detail = nullptr;
+  audit.row.detail = "released";
+  ASSERT_TRUE(store_->Release("IPM-A", 1, "rel", &audit).ok());
+  auto rows = store_->AuditOf("IPM-A");
+  ASSERT_TRUE(rows.ok()) << rows.status();
+  ASSERT_EQ(rows->size(), 4u);
+  EXPECT_EQ((*rows)[0].detail, "run " + std::to_string(*run));
+  EXPECT_EQ((*rows)[1].detail, "replayed run " + std::to_string(*run));
+  EXPECT_EQ((*rows)[2].detail, "version 1");
+  EXPECT_EQ((*rows)[3].detail, "released");
+  EXPECT_EQ((*rows)[3].identity, "station-7");
+  EXPECT_FALSE((*rows)[3].utc.empty());
+  // Refused writes: no audit row.
+  EXPECT_EQ(store_->Release("IPM-A", 1, "rel", &audit).code(), absl::StatusCode::kAlreadyExists);
+  EXPECT_EQ(store_->Release("IPM-A", 9, "rel", &audit).code(), absl::StatusCode::kNotFound);
+  c.verdict = "fail: residual";
+  ASSERT_EQ(*store_->AddCalibration(c), 2);   // no audit context: no row
+  EXPECT_EQ(store_->Release("IPM-A", 2, "rel", &audit).code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_EQ(store_->AuditOf("IPM-A")->size(), 4u);
+  if (!SeparateConnections()) return;
+  const bool pg = GetParam() == Backend::kPostgres;
+  ASSERT_TRUE(RawSql(pg ? "CREATE FUNCTION refuse_audit() RETURNS trigger LANGUAGE plpgsql AS "
+                          "$$BEGIN RAISE EXCEPTION 'audit insert refused'; END$$; "
+                          "CREATE TRIGGER audit_refuse BEFORE INSERT ON audit FOR EACH ROW EXECUTE FUNCTION refuse_audit()"
+                        : "CREATE TRIGGER audit_refuse BEFORE INSERT ON audit "
+                          "BEGIN SELECT RAISE(ABORT, 'audit insert refused'); END"));
+  c.verdict = "pass";
+  EXPECT_FALSE(store_->AddCalibration(c, &audit).ok());
+  EXPECT_EQ(store_->GetCalibration("IPM-A", 0)->version, 2) << "the version must roll back with its audit row";
+  EXPECT_EQ(store_->AllChainRows()->size(), 2u);
+  EXPECT_FALSE(store_->IngestHfRun({"IPM-A", 4, 0.011, 0.0114, ""}, "st", "hf_run", Points(4), "", {}, 0, "k2",
+                                   nullptr, &audit)
+                   .ok());
+  EXPECT_EQ(store_->AllRuns()->size(), 1u) << "the run must roll back with its audit row";
+  ASSERT_TRUE(store_->AddCalibration(c).ok());   // v3, without audit: unaffected by the trigger
+  EXPECT_FALSE(store_->Release("IPM-A", 3, "rel", &audit).ok());
+  EXPECT_FALSE(*store_->IsReleased("IPM-A", 3)) << "the release must roll back with its audit row";
+  EXPECT_EQ(store_->AuditOf("IPM-A")->size(), 4u);
+}
+
 // The hash chain over calibration versions: intact after normal use; a
 // verdict edited behind the store's back (triggers dropped) is found with
 // serial and version, and so is a removed version.
@@ -335,6 +397,38 @@ TEST_P(StoreTest, WholeStoreExportAndImport) {
   ASSERT_TRUE(next.ok()) << next.status();
   EXPECT_GT(*next, 41);
   EXPECT_EQ(*store_->AddCalibration(ic), 8);
+  // Idempotency keys, releases, audit rows and chain links keep their
+  // values; a retry with an imported key replays, later audit rows continue
+  // after the imported ids.
+  RunRow keyed{60, "W-2", "old", "hf_run", "", "2020-01-02T03:04:06Z", "key-60"};
+  ASSERT_TRUE(store_->ImportRun(keyed, Points(2), nullptr).ok());
+  EXPECT_EQ(store_->AllRuns()->back().idempotency_key, "key-60");
+  bool replayed = false;
+  EXPECT_EQ(*store_->IngestHfRun({"W-2", 3, 0.5, 0.25, ""}, "st", "hf_run", Points(2), "", {}, 0, "key-60", &replayed),
+            60);
+  EXPECT_TRUE(replayed);
+  ASSERT_TRUE(store_
+                  ->ImportTrail({{"W-2", 7, "rel", "2020-01-04T00:00:00Z"}},
+                                {{90, "2020-01-04T00:00:01Z", "rel", "release", "peer", "req", "Release", "W-2",
+                                  "released version 7"}},
+                                {{"W-2", 7, "", "abc"}})
+                  .ok());
+  EXPECT_TRUE(*store_->IsReleased("W-2", 7));
+  ASSERT_EQ(store_->AllReleases()->size(), 1u);
+  EXPECT_EQ(store_->AllReleases()->at(0).released_utc, "2020-01-04T00:00:00Z");
+  AuditRow later;
+  later.identity = "x"; later.role = "admin"; later.rpc = "Fit"; later.serial = "W-2";
+  ASSERT_TRUE(store_->AppendAudit(later).ok());
+  auto trail = store_->AllAudit();
+  ASSERT_EQ(trail->size(), 2u);
+  EXPECT_EQ(trail->at(0).id, 90);
+  EXPECT_EQ(trail->at(0).utc, "2020-01-04T00:00:01Z");
+  EXPECT_GT(trail->at(1).id, 90);
+  bool found = false;
+  const auto links = store_->AllChainRows();
+  ASSERT_TRUE(links.ok());
+  for (const auto& l : *links) found |= l.serial == "W-2" && l.version == 7 && l.row_sha256 == "abc";
+  EXPECT_TRUE(found);
 }
 
 INSTANTIATE_TEST_SUITE_P(Backends, StoreTest,
