@@ -1,10 +1,13 @@
 #include "cli/args.h"
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 
 #include "absl/strings/str_cat.h"
+#include "io/csv.h"
 
 namespace fluxcal::cli {
 
@@ -65,6 +68,69 @@ absl::StatusOr<ParsedArgs> ParseArgs(const std::vector<std::string>& args,
     }
   }
   return out;
+}
+
+absl::StatusOr<ParsedArgs> ParseArgs(const std::vector<std::string>& args, const FlagSpecs& flags) {
+  std::set<std::string> value_flags, switch_flags;
+  for (const auto& f : flags) (f.value.empty() ? switch_flags : value_flags).insert(f.name);
+  return ParseArgs(args, value_flags, switch_flags);
+}
+
+FlagSpecs WithoutFlags(const FlagSpecs& flags, const std::set<std::string>& names) {
+  FlagSpecs out;
+  for (const auto& f : flags) {
+    if (!names.count(f.name)) out.push_back(f);
+  }
+  return out;
+}
+
+bool WantsHelp(const std::vector<std::string>& args, const FlagSpecs& flags) {
+  for (size_t i = 0; i < args.size(); ++i) {
+    const std::string& a = args[i];
+    if (a == "--help" || a == "-h") return true;
+    if (a.size() > 2 && a.rfind("--", 0) == 0 && a.find('=') == std::string::npos) {
+      for (const auto& f : flags) {
+        if (!f.value.empty() && a.substr(2) == f.name) {
+          ++i;   // its value, whatever it looks like
+          break;
+        }
+      }
+    }
+  }
+  return false;
+}
+
+std::string ServerTarget(const std::string& server) {
+  for (const char* scheme : {"unix:", "unix-abstract:", "dns:", "ipv4:", "ipv6:", "vsock:"}) {
+    if (server.rfind(scheme, 0) == 0) return server;
+  }
+  const std::string port = absl::StrCat(":", kDefaultPort);
+  if (server.empty()) return server;
+  if (server[0] == '[') {
+    const auto close = server.find(']');
+    if (close != std::string::npos && close + 1 == server.size()) return server + port;
+    return server;   // [v6]:PORT (or malformed: gRPC says so)
+  }
+  const auto colons = std::count(server.begin(), server.end(), ':');
+  if (colons == 0) return server + port;
+  if (colons > 1) return "[" + server + "]" + port;   // a bare IPv6 address
+  return server;
+}
+
+std::string CheckOutToStdout(const ParsedArgs& args, const std::string& out_flag) {
+  if (args.Get(out_flag).value_or("") == "-" && args.Has("json")) {
+    return absl::StrCat("--", out_flag, " - and --json both want stdout: give --", out_flag,
+                        " FILE with --json, or drop --json");
+  }
+  return "";
+}
+
+absl::Status WriteOutput(const std::string& path, std::string_view data) {
+  if (path != "-") return io::WriteFileAtomically(path, data);
+  if (std::fwrite(data.data(), 1, data.size(), stdout) != data.size() || std::fflush(stdout) != 0) {
+    return absl::DataLossError("cannot write to stdout");
+  }
+  return absl::OkStatus();
 }
 
 }  // namespace fluxcal::cli

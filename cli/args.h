@@ -8,6 +8,7 @@
 #include <optional>
 #include <set>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "absl/status/statusor.h"
@@ -31,6 +32,35 @@ struct ParsedArgs {
 absl::StatusOr<ParsedArgs> ParseArgs(const std::vector<std::string>& args,
                                      const std::set<std::string>& value_flags,
                                      const std::set<std::string>& switch_flags);
+
+// One flag of a command, declared once: the parser accepts exactly these and
+// `fluxcal COMMAND --help` lists them. help is one line and says the unit
+// and the default ("default 50051", "A", ...).
+struct FlagSpec {
+  std::string name;        // without "--"
+  std::string value;       // placeholder of the value ("FILE", "A"); empty: a switch
+  std::string help;
+};
+using FlagSpecs = std::vector<FlagSpec>;
+absl::StatusOr<ParsedArgs> ParseArgs(const std::vector<std::string>& args, const FlagSpecs& flags);
+// flags without the named ones (a mode of a command that takes fewer).
+FlagSpecs WithoutFlags(const FlagSpecs& flags, const std::set<std::string>& names);
+
+// True if args ask for help (--help or -h where a flag may stand, i.e. not as
+// the value of a flag that takes one).
+bool WantsHelp(const std::vector<std::string>& args, const FlagSpecs& flags);
+
+// The gRPC target for --server: HOST (port 50051), HOST:PORT, [V6]:PORT,
+// [V6] or a bare IPv6 address (port 50051); "unix:", "dns:", "ipv4:" and
+// "ipv6:" targets unchanged.
+inline constexpr int kDefaultPort = 50051;
+std::string ServerTarget(const std::string& server);
+
+// "--out -": the output goes to stdout. Refuses (usage message naming both
+// flags) "--out -" together with --json; "" if fine.
+std::string CheckOutToStdout(const ParsedArgs& args, const std::string& out_flag = "out");
+// Writes data to path, or to stdout for "-".
+absl::Status WriteOutput(const std::string& path, std::string_view data);
 
 }  // namespace fluxcal::cli
 

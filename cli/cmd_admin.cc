@@ -95,11 +95,19 @@ int Hash(const ParsedArgs& a) {
   return 0;
 }
 
+const FlagSpecs kAdminFlags = {
+    {"from", "URL", "migrate: source store, sqlite:PATH"},
+    {"to", "URL", "migrate: target store, postgresql://USER@HOST:PORT/DB"},
+    {"db", "URL", "backup, hash: the store (SQLite PATH; hash also postgresql://...)"},
+    {"out", "FILE", "backup: the SQLite backup file to write"},
+    {"json", "", "print the result as one JSON document"},
+};
+
 int RunAdmin(const std::vector<std::string>& argv) {
   if (argv.empty()) {
     return Fail("usage: fluxcal admin migrate|backup|hash|add-key|add-cert|revoke|list-keys|keygen ...", 2);
   }
-  auto a = ParseArgs(std::vector<std::string>(argv.begin() + 1, argv.end()), {"from", "to", "db", "out"}, {"json"});
+  auto a = ParseArgs(std::vector<std::string>(argv.begin() + 1, argv.end()), kAdminFlags);
   if (!a.ok()) return Fail(std::string(a.status().message()), 2);
   if (!a->positional.empty()) return Fail("unexpected argument '" + a->positional[0] + "'", 2);
   if (argv[0] == "migrate") return Migrate(*a);
@@ -111,6 +119,11 @@ int RunAdmin(const std::vector<std::string>& argv) {
 }  // namespace
 
 FLUXCAL_REGISTER_COMMAND("admin", "store administration: migrate SQLite to PostgreSQL, backup, content hash",
-                         RunAdmin);
+                         RunAdmin,
+                         "fluxcal admin migrate --from sqlite:PATH --to postgresql://... [--json]\n"
+                         "fluxcal admin backup --db PATH --out FILE [--json]\n"
+                         "fluxcal admin hash --db URL [--json]\n"
+                         "fluxcal admin keygen|add-key|add-cert|revoke|list-keys|verify-db ...  (fluxcal help admin add-key, ...)",
+                         kAdminFlags);
 
 }  // namespace fluxcal::cli

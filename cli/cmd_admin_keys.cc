@@ -30,9 +30,36 @@ int Fail(const char* cmd, const absl::Status& s) {
   return 1;
 }
 
+const FlagSpecs kAddKeyFlags = {
+    {"keys", "KEYS.json", "the keys file of `fluxcal serve --auth` (created if missing)"},
+    {"name", "NAME", "identity (unique in the keys file; logged in the audit trail)"},
+    {"role", "ROLE", "station|release|flasher|engineer|admin"},
+    {"json", "", "print the result as one JSON document"},
+};
+const FlagSpecs kAddCertFlags = {
+    {"keys", "KEYS.json", "the keys file of `fluxcal serve --auth` (created if missing)"},
+    {"name", "NAME", "identity (unique in the keys file; logged in the audit trail)"},
+    {"role", "ROLE", "station|release|flasher|engineer|admin"},
+    {"cn", "CN", "the client certificate's subject common name"},
+    {"json", "", "print the result as one JSON document"},
+};
+const FlagSpecs kRevokeFlags = {
+    {"keys", "KEYS.json", "the keys file of `fluxcal serve --auth`"},
+    {"name", "NAME", "identity to remove"},
+    {"json", "", "print the result as one JSON document"},
+};
+const FlagSpecs kListKeysFlags = {
+    {"keys", "KEYS.json", "the keys file of `fluxcal serve --auth`"},
+    {"json", "", "print the result as one JSON document"},
+};
+const FlagSpecs kKeygenFlags = {
+    {"out", "PREFIX", "writes PREFIX.key (private, for serve --signing-key / export --sign-key) and PREFIX.pub"},
+    {"json", "", "print the result as one JSON document"},
+};
+
 int AddEntry(const std::vector<std::string>& argv, bool cert) {
   const char* cmd = cert ? "add-cert" : "add-key";
-  auto args = ParseArgs(argv, {"keys", "name", "role", "cn"}, {"json"});
+  auto args = ParseArgs(argv, cert ? kAddCertFlags : kAddKeyFlags);
   if (!args.ok() || !args->Get("keys") || !args->Get("name") || !args->Get("role") || (cert && !args->Get("cn"))) {
     std::fprintf(stderr, "usage: fluxcal admin %s --keys KEYS.json --name NAME --role %s%s [--json]\n", cmd,
                  "station|release|flasher|engineer|admin", cert ? " --cn CERT_COMMON_NAME" : "");
@@ -82,7 +109,7 @@ int RunAddKey(const std::vector<std::string>& argv) { return AddEntry(argv, fals
 int RunAddCert(const std::vector<std::string>& argv) { return AddEntry(argv, true); }
 
 int RunRevoke(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, {"keys", "name"}, {"json"});
+  auto args = ParseArgs(argv, kRevokeFlags);
   if (!args.ok() || !args->Get("keys") || !args->Get("name")) {
     std::fprintf(stderr, "usage: fluxcal admin revoke --keys KEYS.json --name NAME [--json]\n");
     return 2;
@@ -104,7 +131,7 @@ int RunRevoke(const std::vector<std::string>& argv) {
 }
 
 int RunListKeys(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, {"keys"}, {"json"});
+  auto args = ParseArgs(argv, kListKeysFlags);
   if (!args.ok() || !args->Get("keys")) {
     std::fprintf(stderr, "usage: fluxcal admin list-keys --keys KEYS.json [--json]\n");
     return 2;
@@ -125,7 +152,7 @@ int RunListKeys(const std::vector<std::string>& argv) {
 }
 
 int RunKeygen(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, {"out"}, {"json"});
+  auto args = ParseArgs(argv, kKeygenFlags);
   if (!args.ok() || !args->Get("out")) {
     std::fprintf(stderr, "usage: fluxcal admin keygen --out PREFIX [--json]   (writes PREFIX.key, PREFIX.pub)\n");
     return 2;
@@ -151,11 +178,21 @@ int RunKeygen(const std::vector<std::string>& argv) {
 
 }  // namespace
 
-FLUXCAL_REGISTER_COMMAND("admin keygen", "make an Ed25519 key pair for signing exports", RunKeygen);
+FLUXCAL_REGISTER_COMMAND("admin keygen", "make an Ed25519 key pair for signing exports", RunKeygen,
+                         "fluxcal admin keygen --out PREFIX [--json]",
+                         kKeygenFlags);
 FLUXCAL_REGISTER_COMMAND("admin add-key", "make a bearer token for an identity with a role (printed once)",
-                         RunAddKey);
-FLUXCAL_REGISTER_COMMAND("admin add-cert", "accept a client certificate common name with a role", RunAddCert);
-FLUXCAL_REGISTER_COMMAND("admin revoke", "remove an identity from a keys file", RunRevoke);
-FLUXCAL_REGISTER_COMMAND("admin list-keys", "list identities and roles of a keys file", RunListKeys);
+                         RunAddKey,
+                         "fluxcal admin add-key --keys KEYS.json --name NAME --role ROLE [--json]",
+                         kAddKeyFlags);
+FLUXCAL_REGISTER_COMMAND("admin add-cert", "accept a client certificate common name with a role", RunAddCert,
+                         "fluxcal admin add-cert --keys KEYS.json --name NAME --role ROLE --cn CERT_COMMON_NAME [--json]",
+                         kAddCertFlags);
+FLUXCAL_REGISTER_COMMAND("admin revoke", "remove an identity from a keys file", RunRevoke,
+                         "fluxcal admin revoke --keys KEYS.json --name NAME [--json]",
+                         kRevokeFlags);
+FLUXCAL_REGISTER_COMMAND("admin list-keys", "list identities and roles of a keys file", RunListKeys,
+                         "fluxcal admin list-keys --keys KEYS.json [--json]",
+                         kListKeysFlags);
 
 }  // namespace fluxcal::cli

@@ -14,8 +14,13 @@
 namespace fluxcal::cli {
 namespace {
 
+const FlagSpecs kVerifyDbFlags = {
+    {"db", "URL", "the store: SQLite PATH or postgresql://... (required)"},
+    {"json", "", "print the result as one JSON document"},
+};
+
 int RunVerifyDb(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, {"db"}, {"json"});
+  auto args = ParseArgs(argv, kVerifyDbFlags);
   if (!args.ok() || !args->Get("db") || !args->positional.empty()) {
     std::fprintf(stderr, "usage: fluxcal admin verify-db --db PATH|postgresql://... [--json]\n");
     return 2;
@@ -46,6 +51,8 @@ int RunVerifyDb(const std::vector<std::string>& argv) {
 
 }  // namespace
 
-FLUXCAL_REGISTER_COMMAND("admin verify-db", "check the hash chain over stored calibrations (tampering)", RunVerifyDb);
+FLUXCAL_REGISTER_COMMAND("admin verify-db", "check the hash chain over stored calibrations (tampering)", RunVerifyDb,
+                         "fluxcal admin verify-db --db PATH|postgresql://... [--json]",
+                         kVerifyDbFlags);
 
 }  // namespace fluxcal::cli

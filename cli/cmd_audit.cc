@@ -15,8 +15,13 @@
 namespace fluxcal::cli {
 namespace {
 
+const FlagSpecs kAuditFlags = {
+    {"server", "ADDR", "the service, HOST[:PORT] (default port 50051; required)"},
+    {"json", "", "print the result as one JSON document"},
+};
+
 int RunAudit(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, {"server"}, {"json"});
+  auto args = ParseArgs(argv, kAuditFlags);
   if (!args.ok() || args->positional.size() != 1 || !args->Get("server")) {
     std::fprintf(stderr, "usage: fluxcal audit SERIAL --server ADDR [--json]\n");
     return 2;
@@ -50,6 +55,8 @@ int RunAudit(const std::vector<std::string>& argv) {
 
 }  // namespace
 
-FLUXCAL_REGISTER_COMMAND("audit", "a serial's audit trail: who wrote what, from where, when", RunAudit);
+FLUXCAL_REGISTER_COMMAND("audit", "a serial's audit trail: who wrote what, from where, when", RunAudit,
+                         "fluxcal audit SERIAL --server ADDR [--json]",
+                         kAuditFlags);
 
 }  // namespace fluxcal::cli

@@ -41,8 +41,14 @@ bool ParseRegion(const std::string& s, tables::CurrentRegion* r) {
   return true;
 }
 
+const FlagSpecs kCompareFlags = {
+    {"region", "IDMIN:IDMAX,IQMIN:IQMAX", "current region compared, A (default the calibration's measured region)"},
+    {"sym", "", "compare against the map's symmetrised columns (psi_d_sym_*, psi_q_sym_*) instead of the raw ones"},
+    {"json", "", "print the result as one JSON document"},
+};
+
 int RunCompare(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, {"region"}, {"sym", "json"});
+  auto args = ParseArgs(argv, kCompareFlags);
   if (!args.ok()) return Fail(std::string(args.status().message()), 2);
   if (args->positional.size() != 2) {
     return Fail("usage: fluxcal compare calibration.json map.csv [--region IDMIN:IDMAX,IQMIN:IQMAX] [--sym] [--json]",
@@ -109,6 +115,8 @@ int RunCompare(const std::vector<std::string>& argv) {
 }  // namespace
 
 FLUXCAL_REGISTER_COMMAND("compare", "flux error of a calibration against a flux map (CSV grid) in a current region",
-                         RunCompare);
+                         RunCompare,
+                         "fluxcal compare calibration.json map.csv [--region IDMIN:IDMAX,IQMIN:IQMAX] [--sym] [--json]",
+                         kCompareFlags);
 
 }  // namespace fluxcal::cli

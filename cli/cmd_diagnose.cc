@@ -18,8 +18,16 @@
 namespace fluxcal::cli {
 namespace {
 
+const FlagSpecs kDiagnoseFlags = {
+    {"plots", "DIR", "write the diagnosis figures (SVG) there"},
+    {"exclude-effects", "A,B", "effects not to consider (names as in `fluxcal simulate --effects`)"},
+    {"calibration-out", "FILE", "write the diagnosed model as a calibration JSON (refitted without the findings)"},
+    {"table1", "CSV", "diagnose the paper's Table 1 instead of a recording set"},
+    {"json", "", "print the diagnosis report as one JSON document (docs/diagnosis-report.md)"},
+};
+
 int RunDiagnose(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, {"plots", "table1", "exclude-effects", "calibration-out"}, {"json"});
+  auto args = ParseArgs(argv, kDiagnoseFlags);
   if (!args.ok()) {
     std::fprintf(stderr, "fluxcal diagnose: %s\n", std::string(args.status().message()).c_str());
     return 2;
@@ -122,6 +130,9 @@ int RunDiagnose(const std::vector<std::string>& argv) {
 
 }  // namespace
 
-FLUXCAL_REGISTER_COMMAND("diagnose", "locate, explain and model what the nominal model misses", RunDiagnose);
+FLUXCAL_REGISTER_COMMAND("diagnose", "locate, explain and model what the nominal model misses", RunDiagnose,
+                         "fluxcal diagnose <recording-set> [--json] [--plots DIR] [--exclude-effects a,b] [--calibration-out cal.json]\n"
+                         "fluxcal diagnose --table1 data/paper_table1.csv [--json]",
+                         kDiagnoseFlags);
 
 }  // namespace fluxcal::cli

@@ -64,8 +64,17 @@ grpc::Status WithRetries(const std::string& serial, const char* what, F attempt)
   return s;
 }
 
+const FlagSpecs kEolFlags = {
+    {"server", "ADDR", "the service, HOST[:PORT] (default port 50051; required)"},
+    {"station", "ID", "station id recorded with the run (default eol)"},
+    {"model", "M", "model family the service fits, as `fluxcal fit --model` (default auto)"},
+    {"tables-dir", "DIR", "on a pass, fetch the MTPA (CDFX) and field-weakening (DCM) tables there"},
+    {"upload-recording", "", "also upload the raw waveforms (replayable on the service)"},
+    {"json", "", "print the result as one JSON document"},
+};
+
 int RunEol(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, {"server", "station", "model", "tables-dir"}, {"json", "upload-recording"});
+  auto args = ParseArgs(argv, kEolFlags);
   if (!args.ok() || args->positional.size() != 1 || !args->Get("server")) {
     std::fprintf(stderr, "usage: fluxcal eol <recording-set> --server ADDR [--station ID] [--model M] "
                          "[--tables-dir DIR] [--upload-recording] [--json]\n");
@@ -228,8 +237,16 @@ int RunEol(const std::vector<std::string>& argv) {
   return fit.pass() ? 0 : 3;
 }
 
+const FlagSpecs kListFlags = {
+    {"server", "ADDR", "the service, HOST[:PORT] (default port 50051; required)"},
+    {"prefix", "P", "only serials starting with P"},
+    {"failed", "", "only motors whose latest verdict is a fail"},
+    {"page-size", "N", "accepted for compatibility; has no effect (all pages are fetched)"},
+    {"json", "", "print the result as one JSON document"},
+};
+
 int RunList(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, {"server", "prefix", "page-size"}, {"json", "failed"});
+  auto args = ParseArgs(argv, kListFlags);
   if (!args.ok() || !args->Get("server")) {
     std::fprintf(stderr, "usage: fluxcal list --server ADDR [--prefix P] [--failed] [--json]\n");
     return 2;
@@ -267,8 +284,13 @@ int RunList(const std::vector<std::string>& argv) {
   return 0;
 }
 
+const FlagSpecs kHistoryFlags = {
+    {"server", "ADDR", "the service, HOST[:PORT] (default port 50051; required)"},
+    {"json", "", "print the result as one JSON document"},
+};
+
 int RunHistory(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, {"server"}, {"json"});
+  auto args = ParseArgs(argv, kHistoryFlags);
   if (!args.ok() || args->positional.size() != 1 || !args->Get("server")) {
     std::fprintf(stderr, "usage: fluxcal history SERIAL --server ADDR [--json]\n");
     return 2;
@@ -299,8 +321,13 @@ int RunHistory(const std::vector<std::string>& argv) {
   return 0;
 }
 
+const FlagSpecs kFleetFlags = {
+    {"server", "ADDR", "the service, HOST[:PORT] (default port 50051; required)"},
+    {"json", "", "print the result as one JSON document"},
+};
+
 int RunFleet(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, {"server"}, {"json"});
+  auto args = ParseArgs(argv, kFleetFlags);
   if (!args.ok() || !args->Get("server")) {
     std::fprintf(stderr, "usage: fluxcal fleet --server ADDR [--json]\n");
     return 2;
@@ -338,9 +365,17 @@ int RunFleet(const std::vector<std::string>& argv) {
 
 }  // namespace
 
-FLUXCAL_REGISTER_COMMAND("eol", "EOL station: identify, stream to the service, fit, verdict, fetch tables", RunEol);
-FLUXCAL_REGISTER_COMMAND("list", "list motors known to the service", RunList);
-FLUXCAL_REGISTER_COMMAND("history", "a serial's runs and calibration versions", RunHistory);
-FLUXCAL_REGISTER_COMMAND("fleet", "fleet statistics per operating point, outlier serials", RunFleet);
+FLUXCAL_REGISTER_COMMAND("eol", "EOL station: identify, stream to the service, fit, verdict, fetch tables", RunEol,
+                         "fluxcal eol <recording-set> --server ADDR [--station ID] [--model M] [--tables-dir DIR] [--upload-recording] [--json]",
+                         kEolFlags);
+FLUXCAL_REGISTER_COMMAND("list", "list motors known to the service", RunList,
+                         "fluxcal list --server ADDR [--prefix P] [--failed] [--json]",
+                         kListFlags);
+FLUXCAL_REGISTER_COMMAND("history", "a serial's runs and calibration versions", RunHistory,
+                         "fluxcal history SERIAL --server ADDR [--json]",
+                         kHistoryFlags);
+FLUXCAL_REGISTER_COMMAND("fleet", "fleet statistics per operating point, outlier serials", RunFleet,
+                         "fluxcal fleet --server ADDR [--json]",
+                         kFleetFlags);
 
 }  // namespace fluxcal::cli

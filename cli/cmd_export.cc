@@ -31,14 +31,37 @@ int Fail(const std::string& m, int code = 1) {
   return code;
 }
 
+// Local (calibration file) and remote (--server, serial) export share these;
+// --svg and --sign-key are local only, --server and --version remote only.
+const FlagSpecs kExportFlags = {
+    {"out", "FILE", "table file to write (required; - for stdout)"},
+    {"table", "T", "mtpa|mtpv|fw (default mtpa)"},
+    {"format", "F", "csv|json|h|cdfx|dcm (default csv)"},
+    {"points", "N", "rows of a curve / torque axis of the fw map (default 64)"},
+    {"speed-points", "N", "fw: points on the speed axis (default 32)"},
+    {"speed-max-rpm", "RPM", "fw: speed axis range 0..RPM, mechanical rpm (default 6000)"},
+    {"i-max-a", "A", "current limit, A peak (default the measured limit of the calibration)"},
+    {"udc-v", "V", "DC-link voltage, V (default 50)"},
+    {"ctype", "T", "C element type of --format h: double|float (default double)"},
+    {"allow-extrapolation", "", "compute beyond the measured current region (cells flagged extrapolated)"},
+    {"svg", "FILE", "local only: also plot the curves / map (SVG)"},
+    {"sign-key", "KEY", "local only: Ed25519 private key; writes OUT.sig (not with --out -)"},
+    {"server", "ADDR", "export a serial's stored calibration from the service, HOST[:PORT] (default port 50051)"},
+    {"version", "N", "with --server: calibration version (default the latest)"},
+    {"json", "", "print a summary (checksums, limits, verdict) as one JSON document"},
+};
+
 int RunExport(const std::vector<std::string>& argv) {
   for (const auto& a : argv) {
-    if (a == "--server" || a.rfind("--server=", 0) == 0) return RunRemoteExport(argv);
+    if (a == "--server" || a.rfind("--server=", 0) == 0) {
+      return RunRemoteExport(argv, WithoutFlags(kExportFlags, {"svg", "sign-key"}));
+    }
   }
-  auto args = ParseArgs(argv, {"table", "format", "points", "speed-points", "speed-max-rpm", "i-max-a",
-                               "udc-v", "out", "svg", "sign-key", "ctype"},
-                        {"json", "allow-extrapolation"});
+  auto args = ParseArgs(argv, WithoutFlags(kExportFlags, {"server", "version"}));
   if (!args.ok()) return Fail(std::string(args.status().message()), 2);
+  if (auto e = CheckOutToStdout(*args); !e.empty()) return Fail(e, 2);
+  const bool to_stdout = args->Get("out").value_or("") == "-";
+  if (to_stdout && args->Get("sign-key")) return Fail("--sign-key writes OUT.sig: give --out FILE, not --out -", 2);
   if (args->positional.size() != 1 || !args->Get("out")) {
     return Fail("usage: fluxcal export calibration.json --table mtpa|mtpv|fw --format "
                 "csv|json|h|cdfx|dcm [--points N] [--ctype double|float] [--allow-extrapolation] --out FILE", 2);
@@ -87,7 +110,7 @@ int RunExport(const std::vector<std::string>& argv) {
   options.ctype = *ctype;
   auto out = tables::Export(*table, *fmt, options);
   if (!out.ok()) return Fail(std::string(out.status().message()));
-  if (auto st = io::WriteFileAtomically(*args->Get("out"), out->bytes); !st.ok()) return Fail(std::string(st.message()));
+  if (auto st = WriteOutput(*args->Get("out"), out->bytes); !st.ok()) return Fail(std::string(st.message()));
   std::string sig_path;
   if (auto key_path = args->Get("sign-key")) {
     auto key = io::ReadFileToString(*key_path);
@@ -118,7 +141,7 @@ int RunExport(const std::vector<std::string>& argv) {
   std::snprintf(crc, sizeof crc, "%08x", out->payload_crc32);
   // The file checksum is recomputed from the bytes just written, so that
   // what is printed is what `sha256sum FILE` gives.
-  auto written = io::ReadFileToString(*args->Get("out"));
+  auto written = to_stdout ? absl::StatusOr<std::string>(out->bytes) : io::ReadFileToString(*args->Get("out"));
   if (!written.ok()) return Fail(std::string(written.status().message()));
   const std::string file_sha256 = tables::Sha256Hex(*written);
   if (args->Has("json")) {
@@ -133,7 +156,7 @@ int RunExport(const std::vector<std::string>& argv) {
                      .dump(2, ' ', false, nlohmann::json::error_handler_t::replace)
               << "\n";
   } else {
-    std::printf("%s: %s table, %zu cells (%zu clamped at limits, %zu extrapolated), i_max %.6g A, u_max %.6g V\n"
+    std::fprintf(to_stdout ? stderr : stdout, "%s: %s table, %zu cells (%zu clamped at limits, %zu extrapolated), i_max %.6g A, u_max %.6g V\n"
                 "  sha256 %s (file)\n  payload_crc32 %s payload_sha256 %s (values, docs/tables.md)\n",
                 args->Get("out")->c_str(), spec.kind.c_str(), table->clamped.size(), clamped, extrapolated,
                 lim.i_max_a, lim.UMaxV(), file_sha256.c_str(), crc, out->payload_sha256.c_str());
@@ -143,6 +166,9 @@ int RunExport(const std::vector<std::string>& argv) {
 
 }  // namespace
 
-FLUXCAL_REGISTER_COMMAND("export", "export MTPA / MTPV / field-weakening tables for ECU flashing", RunExport);
+FLUXCAL_REGISTER_COMMAND("export", "export MTPA / MTPV / field-weakening tables for ECU flashing", RunExport,
+                         "fluxcal export calibration.json --out FILE [--table mtpa|mtpv|fw] [--format csv|json|h|cdfx|dcm] [flags]\n"
+                         "fluxcal export SERIAL --server ADDR [--version N] --out FILE [--table T] [--format F] [flags]",
+                         kExportFlags);
 
 }  // namespace fluxcal::cli

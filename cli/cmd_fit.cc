@@ -30,13 +30,44 @@ int Fail(const std::string& m, int code = 1) {
   return code;
 }
 
+// The --model names fit::Fit accepts (fitting/fit.cc), checked before any
+// identification so that a typo costs nothing.
+bool KnownModel(const std::string& m) {
+  if (m == "auto" || m == "analytic" || m == "poly" || m == "spline" || m == "smooth" || m == "smooth-asym") {
+    return true;
+  }
+  int n = 0;
+  if (m.rfind("poly", 0) == 0 && absl::SimpleAtoi(m.substr(4), &n)) return n >= 2 && n <= 10;
+  if (m.rfind("spline", 0) == 0 && absl::SimpleAtoi(m.substr(6), &n)) return n >= 1 && n <= 8;
+  return false;
+}
+
+const FlagSpecs kFitFlags = {
+    {"out", "FILE", "calibration JSON to write (required; - for stdout)"},
+    {"model", "M", "auto|analytic|poly|polyN (N 2..10)|spline|splineN (N 1..8)|smooth|smooth-asym (default auto: best by BIC)"},
+    {"svg", "FILE", "also plot the fit against the identified inductances (SVG; not with --map)"},
+    {"map", "CSV", "fit a flux map psi(id, iq) instead of a recording set (no positional argument)"},
+    {"pole-pairs", "P", "with --map: pole pairs, integer 1..100 (required: a map does not say)"},
+    {"psi-std-wb", "S", "with --map: flux standard deviation per component, Wb (default 0.2 % of the largest |psi|)"},
+    {"rs-ohm", "R", "with --map: stator resistance, ohm (default 0)"},
+    {"serial", "S", "with --map: motor serial (default the map file's name)"},
+    {"json", "", "print the calibration and fit summary as one JSON document"},
+};
+
 int RunFit(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, {"model", "out", "serial", "pole-pairs", "svg", "map", "psi-std-wb", "rs-ohm"},
-                        {"json"});
+  auto args = ParseArgs(argv, kFitFlags);
   if (!args.ok()) return Fail(std::string(args.status().message()), 2);
+  if (auto e = CheckOutToStdout(*args); !e.empty()) return Fail(e, 2);
+  if (auto m = args->Get("model"); m && !KnownModel(*m)) {
+    return Fail("flag --model: expected auto, analytic, poly, polyN (N 2..10), spline, splineN (N 1..8), smooth or "
+                "smooth-asym, got '" + *m + "'", 2);
+  }
+  if (int pp = 0; args->Get("pole-pairs") && (!absl::SimpleAtoi(*args->Get("pole-pairs"), &pp) || pp < 1)) {
+    return Fail("flag --pole-pairs: expected a positive integer", 2);
+  }
   const bool from_map = args->Get("map").has_value();
   if (args->positional.size() != (from_map ? 0u : 1u) || !args->Get("out")) {
-    return Fail("usage: fluxcal fit <recording-set | hf_results.csv> [--model auto|analytic|spline|splineR|poly|polyN] "
+    return Fail("usage: fluxcal fit <recording-set | hf_results.csv> [--model M] "
                 "--out calibration.json [--svg PLOT.svg] [--json]\n"
                 "       fluxcal fit --map map.csv --pole-pairs P [--psi-std-wb S] [--rs-ohm R] [--serial S] "
                 "[--model M] --out calibration.json [--json]", 2);
@@ -109,7 +140,10 @@ int RunFit(const std::vector<std::string>& argv) {
                data.inductances.size(), data.steady_state.size(), data.fluxes.size(), fo.model.c_str());
   auto cal = fit::Fit(data, fo);
   if (!cal.ok()) return Fail(std::string(cal.status().message()));
-  if (auto st = fit::SaveCalibrationFile(*args->Get("out"), *cal); !st.ok()) return Fail(std::string(st.message()));
+  const bool to_stdout = *args->Get("out") == "-";
+  if (auto st = WriteOutput(*args->Get("out"), cal->ToJson().dump(2) + "\n"); !st.ok()) {
+    return Fail(std::string(st.message()));
+  }
   for (const auto& c : cal->summary.candidates) std::fprintf(stderr, "fit:   %s\n", c.c_str());
   for (const auto& e : cal->summary.excluded) std::fprintf(stderr, "fit: %s\n", e.c_str());
   if (auto svg = args->Get("svg")) {
@@ -136,12 +170,12 @@ int RunFit(const std::vector<std::string>& argv) {
     }
     std::cout << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
   } else if (vs_map) {
-    std::printf("serial %s: model %s, %d observations, flux error against the map RMS %.3f %% max %.3f %%, "
+    std::fprintf(to_stdout ? stderr : stdout, "serial %s: model %s, %d observations, flux error against the map RMS %.3f %% max %.3f %%, "
                 "psi_pm %.6g Wb -> %s\n",
                 cal->serial().c_str(), cal->family().Name().c_str(), cal->summary.observations,
                 100 * vs_map->rms_relative, 100 * vs_map->max_relative, cal->psi_pm_wb(), args->Get("out")->c_str());
   } else {
-    std::printf("serial %s: model %s, %d observations, rms %.3f %%, psi_pm %.6g Wb -> %s\n",
+    std::fprintf(to_stdout ? stderr : stdout, "serial %s: model %s, %d observations, rms %.3f %%, psi_pm %.6g Wb -> %s\n",
                 cal->serial().c_str(), cal->family().Name().c_str(), cal->summary.observations,
                 100 * cal->summary.rms_relative, cal->psi_pm_wb(), args->Get("out")->c_str());
   }
@@ -151,6 +185,9 @@ int RunFit(const std::vector<std::string>& argv) {
 }  // namespace
 
 FLUXCAL_REGISTER_COMMAND("fit", "fit flux-linkage surfaces (Ceres) to a recording set or hf_results.csv",
-                         RunFit);
+                         RunFit,
+                         "fluxcal fit <recording-set | hf_results.csv> --out calibration.json [--model M] [--svg PLOT.svg] [--json]\n"
+                         "fluxcal fit --map map.csv --pole-pairs P [--psi-std-wb S] [--rs-ohm R] [--serial S] [--model M] --out calibration.json [--json]",
+                         kFitFlags);
 
 }  // namespace fluxcal::cli

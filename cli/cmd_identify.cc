@@ -16,8 +16,15 @@
 namespace fluxcal::cli {
 namespace {
 
+const FlagSpecs kIdentifyFlags = {
+    {"method", "M", "paper|lsq: the paper's estimator or least squares over the record (default lsq)"},
+    {"no-compensation", "", "do not compensate the delay and filters of the measurement chain"},
+    {"csv", "", "print the points as CSV"},
+    {"json", "", "print the result as one JSON document"},
+};
+
 int RunIdentify(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, {"method"}, {"json", "csv", "no-compensation"});
+  auto args = ParseArgs(argv, kIdentifyFlags);
   if (!args.ok() || args->positional.size() != 1) {
     std::fprintf(stderr, "%s\nusage: fluxcal identify <recording-set> [--method paper|lsq] "
                          "[--json|--csv] [--no-compensation]\n",
@@ -90,6 +97,8 @@ int RunIdentify(const std::vector<std::string>& argv) {
 }  // namespace
 
 FLUXCAL_REGISTER_COMMAND("identify", "identify differential inductances per point (HF injection)",
-                         RunIdentify);
+                         RunIdentify,
+                         "fluxcal identify <recording-set> [--method paper|lsq] [--json|--csv] [--no-compensation]",
+                         kIdentifyFlags);
 
 }  // namespace fluxcal::cli

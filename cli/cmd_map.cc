@@ -49,18 +49,29 @@ bool ParseGrid(const std::string& s, tables::LinearAxis* a, tables::LinearAxis* 
 
 nlohmann::json AxisJson(const tables::LinearAxis& a) { return {{"min", a.min}, {"max", a.max}, {"n", a.n}}; }
 
+const FlagSpecs kMapExportFlags = {
+    {"out", "FILE", "flux map CSV to write (required; - for stdout)"},
+    {"grid", "IDMIN:IDMAX:N,IQMIN:IQMAX:M", "current grid of the forward map, A (default the measured region, 21 x 21)"},
+    {"inverse", "", "write the inverse map i(psi) instead of psi(id, iq)"},
+    {"psi-grid", "PDMIN:PDMAX:N,PQMIN:PQMAX:M", "with --inverse: flux grid, Wb (default the fluxes of the measured region)"},
+    {"force", "", "overwrite an existing --out file"},
+    {"json", "", "print a summary (nodes, sha256) as one JSON document"},
+};
+
 int RunMapExport(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, {"out", "grid", "psi-grid"}, {"inverse", "force", "json"});
+  auto args = ParseArgs(argv, kMapExportFlags);
   if (!args.ok()) return Fail(std::string(args.status().message()), 2);
   const char* usage =
       "usage: fluxcal map export calibration.json --out map.csv [--grid IDMIN:IDMAX:N,IQMIN:IQMAX:M] "
       "[--inverse [--psi-grid PDMIN:PDMAX:N,PQMIN:PQMAX:M]] [--force] [--json]";
   if (args->positional.size() != 1 || !args->Get("out")) return Fail(usage, 2);
+  if (auto e = CheckOutToStdout(*args); !e.empty()) return Fail(e, 2);
+  const bool to_stdout = *args->Get("out") == "-";
   const bool inverse = args->Has("inverse");
   if (inverse && args->Get("grid")) return Fail("--grid is the current grid of a forward map; with --inverse use --psi-grid", 2);
   if (!inverse && args->Get("psi-grid")) return Fail("--psi-grid needs --inverse", 2);
   const std::string out = *args->Get("out");
-  if (std::filesystem::exists(out) && !args->Has("force")) {
+  if (!to_stdout && std::filesystem::exists(out) && !args->Has("force")) {
     return Fail(out + ": exists; not overwritten (use --force)");
   }
   auto cal = fit::LoadCalibrationFile(args->positional[0]);
@@ -107,7 +118,7 @@ int RunMapExport(const std::vector<std::string>& argv) {
     summary["grid"] = {{"id_a", AxisJson(a)}, {"iq_a", AxisJson(b)}};
     summary["extrapolated"] = m->extrapolated;
   }
-  if (auto st = io::WriteFileAtomically(out, text); !st.ok()) return Fail(std::string(st.message()));
+  if (auto st = WriteOutput(out, text); !st.ok()) return Fail(std::string(st.message()));
   const std::string sha = tables::Sha256Hex(text);
   summary["rows"] = rows;
   summary["bytes"] = text.size();
@@ -115,10 +126,10 @@ int RunMapExport(const std::vector<std::string>& argv) {
   if (args->Has("json")) {
     std::cout << summary.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
   } else if (inverse) {
-    std::printf("%s: inverse flux map of %s, %zu nodes (%d valid), sha256 %s\n", out.c_str(), cal->serial().c_str(),
+    std::fprintf(to_stdout ? stderr : stdout, "%s: inverse flux map of %s, %zu nodes (%d valid), sha256 %s\n", out.c_str(), cal->serial().c_str(),
                 rows, summary["valid"].get<int>(), sha.c_str());
   } else {
-    std::printf("%s: flux map of %s, %zu nodes (%d extrapolated), sha256 %s\n", out.c_str(), cal->serial().c_str(),
+    std::fprintf(to_stdout ? stderr : stdout, "%s: flux map of %s, %zu nodes (%d extrapolated), sha256 %s\n", out.c_str(), cal->serial().c_str(),
                 rows, summary["extrapolated"].get<int>(), sha.c_str());
   }
   return 0;
@@ -127,6 +138,9 @@ int RunMapExport(const std::vector<std::string>& argv) {
 }  // namespace
 
 FLUXCAL_REGISTER_COMMAND("map export", "write a calibration as a flux map psi(id, iq) or its inverse i(psi) (CSV)",
-                         RunMapExport);
+                         RunMapExport,
+                         "fluxcal map export calibration.json --out map.csv [--grid IDMIN:IDMAX:N,IQMIN:IQMAX:M] [--force] [--json]\n"
+                         "fluxcal map export calibration.json --inverse --out imap.csv [--psi-grid PDMIN:PDMAX:N,PQMIN:PQMAX:M] [--force] [--json]",
+                         kMapExportFlags);
 
 }  // namespace fluxcal::cli

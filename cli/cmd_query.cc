@@ -50,8 +50,22 @@ bool ParseAxis(const std::string& s, double* lo, double* hi, int* n) {
 
 }  // namespace
 
+namespace {
+// Local (calibration file) and remote (--server, serial) query; --grid and
+// --csv are local only, --server and --version remote only.
+const FlagSpecs kQueryFlags = {
+    {"id-a", "A", "d-axis current, A (negative: field weakening)"},
+    {"iq-a", "A", "q-axis current, A"},
+    {"grid", "IDMIN:IDMAX:N,IQMIN:IQMAX:M", "local only: a grid of points instead of one (CSV on stdout), A"},
+    {"csv", "", "local only: one point as a CSV row with header"},
+    {"server", "ADDR", "ask the service about a serial's stored calibration, HOST[:PORT] (default port 50051)"},
+    {"version", "N", "with --server: calibration version (default the latest)"},
+    {"json", "", "print the result as one JSON document"},
+};
+}  // namespace
+
 int RunQueryLocal(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, {"id-a", "iq-a", "grid"}, {"json", "csv"});
+  auto args = ParseArgs(argv, WithoutFlags(kQueryFlags, {"server", "version"}));
   if (!args.ok()) return Fail(std::string(args.status().message()), 2);
   if (args->positional.size() != 1) {
     return Fail("usage: fluxcal query calibration.json (--id-a A --iq-a A | --grid "
@@ -108,12 +122,17 @@ int RunQuery(const std::vector<std::string>& argv) {
   // With --server the positional argument is a serial and the service
   // answers from its stored calibration; otherwise a calibration file.
   for (const auto& a : argv) {
-    if (a == "--server" || a.rfind("--server=", 0) == 0) return RunRemoteQuery(argv);
+    if (a == "--server" || a.rfind("--server=", 0) == 0) {
+      return RunRemoteQuery(argv, WithoutFlags(kQueryFlags, {"grid", "csv"}));
+    }
   }
   return RunQueryLocal(argv);
 }
 }  // namespace
 
-FLUXCAL_REGISTER_COMMAND("query", "flux linkage and inductance of a calibration at any (id, iq)", RunQuery);
+FLUXCAL_REGISTER_COMMAND("query", "flux linkage and inductance of a calibration at any (id, iq)", RunQuery,
+                         "fluxcal query calibration.json (--id-a A --iq-a A | --grid IDMIN:IDMAX:N,IQMIN:IQMAX:M) [--json|--csv]\n"
+                         "fluxcal query SERIAL --server ADDR --id-a A --iq-a A [--version N] [--json]",
+                         kQueryFlags);
 
 }  // namespace fluxcal::cli

@@ -16,8 +16,14 @@
 namespace fluxcal::cli {
 namespace {
 
+const FlagSpecs kReleaseFlags = {
+    {"server", "ADDR", "the service, HOST[:PORT] (default port 50051; required)"},
+    {"version", "N", "the calibration version to release (required)"},
+    {"json", "", "print the result as one JSON document"},
+};
+
 int RunRelease(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, {"server", "version"}, {"json"});
+  auto args = ParseArgs(argv, kReleaseFlags);
   int version = 0;
   if (!args.ok() || args->positional.size() != 1 || !args->Get("server") || !args->Get("version") ||
       !absl::SimpleAtoi(*args->Get("version"), &version) || version <= 0) {
@@ -48,6 +54,8 @@ int RunRelease(const std::vector<std::string>& argv) {
 
 }  // namespace
 
-FLUXCAL_REGISTER_COMMAND("release", "approve a passing calibration version for flashing (release role)", RunRelease);
+FLUXCAL_REGISTER_COMMAND("release", "approve a passing calibration version for flashing (release role)", RunRelease,
+                         "fluxcal release SERIAL --version N --server ADDR [--json]",
+                         kReleaseFlags);
 
 }  // namespace fluxcal::cli

@@ -26,10 +26,25 @@ int Fail(const std::string& m, int code = 1) {
   return code;
 }
 
+const FlagSpecs kReplayFlags = {
+    {"calibration", "FILE", "calibration JSON driving the twin (required)"},
+    {"closed-loop", "", "the manifest's references through the twin's controller (default open loop: the recorded commands)"},
+    {"bandwidth-hz", "F", "closed loop: current-controller bandwidth, Hz (default 80)"},
+    {"ld-nominal-h", "L", "closed loop: controller's nominal Ld, H (default 0.18e-3)"},
+    {"lq-nominal-h", "L", "closed loop: controller's nominal Lq, H (default 0.35e-3)"},
+    {"settle-s", "S", "closed loop: settling time before recording, s (default 0.03)"},
+    {"json", "", "print the result as one JSON document"},
+};
+
 int RunReplay(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, {"calibration", "bandwidth-hz", "ld-nominal-h", "lq-nominal-h", "settle-s"},
-                        {"closed-loop", "json"});
+  auto args = ParseArgs(argv, kReplayFlags);
   if (!args.ok()) return Fail(std::string(args.status().message()), 2);
+  // Flag values checked before the set is read and replayed.
+  for (const char* flag : {"bandwidth-hz", "ld-nominal-h", "lq-nominal-h", "settle-s"}) {
+    auto v = args->GetDouble(flag);
+    if (!v.ok()) return Fail(std::string(v.status().message()), 2);
+    if (*v && !(**v > 0)) return Fail(absl::StrFormat("flag --%s: must be positive", flag), 2);
+  }
   if (args->positional.size() != 1 || !args->Get("calibration")) {
     return Fail("usage: fluxcal replay <recording-set> --calibration cal.json [--closed-loop] "
                 "[--bandwidth-hz F] [--ld-nominal-h L] [--lq-nominal-h L] [--settle-s S] [--json]", 2);
@@ -104,6 +119,8 @@ int RunReplay(const std::vector<std::string>& argv) {
 }  // namespace
 
 FLUXCAL_REGISTER_COMMAND("replay", "replay recorded tests through the twin with a calibration (open/closed loop)",
-                         RunReplay);
+                         RunReplay,
+                         "fluxcal replay <recording-set> --calibration cal.json [--closed-loop] [--bandwidth-hz F] [--ld-nominal-h L] [--lq-nominal-h L] [--settle-s S] [--json]",
+                         kReplayFlags);
 
 }  // namespace fluxcal::cli

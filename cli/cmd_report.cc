@@ -72,7 +72,10 @@ absl::StatusOr<nlohmann::json> FetchCalibration(const std::string& server, const
   grpc::ClientContext ctx;
   ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
   auto s = stub->GetCalibration(&ctx, req, &rec);
-  if (!s.ok()) return absl::UnavailableError("GetCalibration " + serial + ": " + s.error_message());
+  if (!s.ok()) {
+    ReportRpcError("report", s);   // the status, with a hint for setup mistakes
+    return absl::UnavailableError("GetCalibration " + serial + " failed");
+  }
   nlohmann::json j;
   try {
     j = nlohmann::json::parse(rec.calibration_json());
@@ -98,9 +101,21 @@ absl::StatusOr<nlohmann::json> FetchCalibration(const std::string& server, const
   return j;
 }
 
+const FlagSpecs kReportFlags = {
+    {"out", "FILE", "HTML page to write (required; - for stdout)"},
+    {"server", "ADDR", "the positional argument is a SERIAL stored there, HOST[:PORT] (default port 50051)"},
+    {"version", "N", "with --server: calibration version (default the latest)"},
+    {"set", "DIR", "recording set: draws the identified points, judges the verdict, gives the DC-link voltage"},
+    {"diagnosis", "FILE", "a `fluxcal diagnose --json` document to include"},
+    {"speed-rpm", "RPM", "speed of the voltage-limit curve, mechanical rpm (default 1.5 x base speed)"},
+    {"udc-v", "V", "DC-link voltage, V (default the set's manifest drive.udc_v, else 50 as export)"},
+    {"json", "", "print a summary (verdict, figures, bytes) as one JSON document"},
+};
+
 int RunReport(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, {"set", "diagnosis", "out", "speed-rpm", "udc-v", "server", "version"}, {"json"});
+  auto args = ParseArgs(argv, kReportFlags);
   if (!args.ok()) return Fail(std::string(args.status().message()), 2);
+  if (auto e = CheckOutToStdout(*args); !e.empty()) return Fail(e, 2);
   if (args->positional.size() != 1 || !args->Get("out")) {
     return Fail("usage: fluxcal report calibration.json|SERIAL --server ADDR [--version N] [--set RECORDING_SET_DIR] "
                 "[--diagnosis report.json] [--speed-rpm N] [--udc-v V] --out report.html [--json]", 2);
@@ -200,7 +215,7 @@ int RunReport(const std::vector<std::string>& argv) {
   auto rep = report::BuildReport(in);
   if (!rep.ok()) return Fail(std::string(rep.status().message()));
   const std::string out = *args->Get("out");
-  if (auto st = io::WriteFileAtomically(out, rep->html); !st.ok()) return Fail(std::string(st.message()));
+  if (auto st = WriteOutput(out, rep->html); !st.ok()) return Fail(std::string(st.message()));
   if (args->Has("json")) {
     std::cout << nlohmann::json{{"out", out}, {"serial", cal->serial()}, {"version", cal->version},
                                 {"verdict", in.verdict}, {"figures", rep->figures}, {"bytes", rep->html.size()},
@@ -208,7 +223,7 @@ int RunReport(const std::vector<std::string>& argv) {
                      .dump(2, ' ', false, nlohmann::json::error_handler_t::replace)
               << "\n";
   } else {
-    std::printf("%s: report for %s v%d (%s), %d figures, %zu bytes\n", out.c_str(), cal->serial().c_str(),
+    std::fprintf(out == "-" ? stderr : stdout, "%s: report for %s v%d (%s), %d figures, %zu bytes\n", out.c_str(), cal->serial().c_str(),
                 cal->version, in.verdict.c_str(), rep->figures, rep->html.size());
   }
   return 0;
@@ -216,6 +231,9 @@ int RunReport(const std::vector<std::string>& argv) {
 
 }  // namespace
 
-FLUXCAL_REGISTER_COMMAND("report", "one self-contained HTML report page for a calibration", RunReport);
+FLUXCAL_REGISTER_COMMAND("report", "one self-contained HTML report page for a calibration", RunReport,
+                         "fluxcal report calibration.json --out report.html [--set DIR] [--diagnosis FILE] [flags]\n"
+                         "fluxcal report SERIAL --server ADDR [--version N] --out report.html [--set DIR] [flags]",
+                         kReportFlags);
 
 }  // namespace fluxcal::cli

@@ -35,13 +35,32 @@ constexpr char kUsage[] =
     "                     [--require-client-cert] [--auth KEYS.json] [--signing-key ED25519.key] [--insecure]\n"
     "                     [--quiet]\n";
 
+const FlagSpecs kServeFlags = {
+    {"db", "URL", "the store (required): a SQLite file PATH or sqlite:PATH, or postgresql://USER@HOST:PORT/DB"},
+    {"listen", "HOST:PORT", "address to listen on (default 127.0.0.1:50051; port 0: any free port)"},
+    {"tls-cert", "PEM", "server certificate chain (TLS; with --tls-key)"},
+    {"tls-key", "PEM", "private key of --tls-cert"},
+    {"client-ca", "PEM", "CA of accepted client certificates (mutual TLS; needs --tls-cert)"},
+    {"require-client-cert", "", "refuse clients without a certificate signed by --client-ca"},
+    {"auth", "KEYS.json", "identities and roles (fluxcal admin add-key); required off loopback"},
+    {"signing-key", "ED25519.key", "sign exported tables (Ed25519 private key PEM)"},
+    {"insecure", "", "plaintext off loopback (test networks only)"},
+    {"quiet", "", "no per-request log lines on stderr"},
+};
+
 int RunServe(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, {"db", "listen", "tls-cert", "tls-key", "client-ca", "auth", "signing-key"}, {"insecure", "quiet", "require-client-cert"});
+  auto args = ParseArgs(argv, kServeFlags);
   if (!args.ok() || !args->positional.empty()) {
+    if (!args.ok()) std::fprintf(stderr, "fluxcal serve: %s\n", std::string(args.status().message()).c_str());
     std::fprintf(stderr, "%s", kUsage);
     return 2;
   }
-  const std::string db = args->Get("db").value_or("fluxcal.db");
+  if (!args->Get("db")) {
+    // No silent ./fluxcal.db: a service writes where it is told.
+    std::fprintf(stderr, "fluxcal serve: --db is required (a SQLite file PATH or postgresql://...)\n%s", kUsage);
+    return 2;
+  }
+  const std::string db = *args->Get("db");
   const std::string listen = args->Get("listen").value_or("127.0.0.1:50051");
   server::ServerOptions opt;
   auto pem = [&](const char* flag, std::string* out) {
@@ -143,6 +162,10 @@ int RunServe(const std::vector<std::string>& argv) {
 
 }  // namespace
 
-FLUXCAL_REGISTER_COMMAND("serve", "run the gRPC calibration service (SQLite file or PostgreSQL)", RunServe);
+FLUXCAL_REGISTER_COMMAND("serve", "run the gRPC calibration service (SQLite file or PostgreSQL)", RunServe,
+                         "fluxcal serve --db PATH|postgresql://USER@HOST:PORT/DB [--listen HOST:PORT]\n"
+                         "  [--tls-cert PEM --tls-key PEM [--client-ca PEM [--require-client-cert]]]\n"
+                         "  [--auth KEYS.json] [--signing-key ED25519.key] [--insecure] [--quiet]",
+                         kServeFlags);
 
 }  // namespace fluxcal::cli

@@ -24,9 +24,20 @@ int Fail(const std::string& msg, int code = 1) {
   return code;
 }
 
+const FlagSpecs kSimulateFlags = {
+    {"out", "DIR", "recording set directory to write (required)"},
+    {"motor", "FILE", "motor JSON (default the built-in twin motor)"},
+    {"plan", "FILE", "test plan JSON: operating points, steady-state rows (default the built-in plan)"},
+    {"effects", "K=V,...", "non-ideal effects and noise_a=A (current noise, A per phase; default 0.05)"},
+    {"seed", "N", "random seed, integer (default 1)"},
+    {"serial", "S", "motor serial written to the manifest"},
+    {"spread", "", "perturb the motor as production spread (from --seed)"},
+    {"noise-a", "A", "accepted for compatibility; has no effect (use --effects noise_a=A)"},
+    {"json", "", "print the result as one JSON document"},
+};
+
 int RunSimulate(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, {"motor", "plan", "effects", "seed", "out", "serial", "noise-a"},
-                        {"json", "spread"});
+  auto args = ParseArgs(argv, kSimulateFlags);
   if (!args.ok()) return Fail(std::string(args.status().message()), 2);
   auto out = args->Get("out");
   if (!out || !args->positional.empty()) {
@@ -83,6 +94,8 @@ int RunSimulate(const std::vector<std::string>& argv) {
 }  // namespace
 
 FLUXCAL_REGISTER_COMMAND("simulate", "simulate an EOL run with the digital twin, write a recording set",
-                         RunSimulate);
+                         RunSimulate,
+                         "fluxcal simulate [--motor motor.json] [--plan plan.json] [--effects k=v,...] [--seed N] [--serial S] [--spread] --out DIR [--json]",
+                         kSimulateFlags);
 
 }  // namespace fluxcal::cli

@@ -15,8 +15,12 @@
 namespace fluxcal::cli {
 namespace {
 
+const FlagSpecs kValidateFlags = {
+    {"json", "", "print the validation result as one JSON document"},
+};
+
 int RunValidate(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, {}, {"json"});
+  auto args = ParseArgs(argv, kValidateFlags);
   if (!args.ok() || args->positional.size() != 1) {
     std::fprintf(stderr, "fluxcal validate: usage: fluxcal validate <recording-set> [--json]\n");
     return 2;
@@ -65,6 +69,8 @@ int RunValidate(const std::vector<std::string>& argv) {
 }  // namespace
 
 FLUXCAL_REGISTER_COMMAND("validate", "strictly validate a recording set (file, line and field on error)",
-                         RunValidate);
+                         RunValidate,
+                         "fluxcal validate <recording-set> [--json]",
+                         kValidateFlags);
 
 }  // namespace fluxcal::cli

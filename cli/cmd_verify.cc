@@ -14,8 +14,14 @@
 namespace fluxcal::cli {
 namespace {
 
+const FlagSpecs kVerifyFlags = {
+    {"pubkey", "KEY.pub", "Ed25519 public key PEM (fluxcal admin keygen; required)"},
+    {"sig", "FILE", "detached signature (default FILE.sig)"},
+    {"json", "", "print the result as one JSON document"},
+};
+
 int RunVerify(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, {"pubkey", "sig"}, {"json"});
+  auto args = ParseArgs(argv, kVerifyFlags);
   if (!args.ok() || args->positional.size() != 1 || !args->Get("pubkey")) {
     std::fprintf(stderr, "usage: fluxcal verify FILE --pubkey KEY.pub [--sig FILE.sig] [--json]\n");
     return 2;
@@ -49,6 +55,8 @@ int RunVerify(const std::vector<std::string>& argv) {
 
 }  // namespace
 
-FLUXCAL_REGISTER_COMMAND("verify", "check an exported table against its Ed25519 signature", RunVerify);
+FLUXCAL_REGISTER_COMMAND("verify", "check an exported table against its Ed25519 signature", RunVerify,
+                         "fluxcal verify FILE --pubkey KEY.pub [--sig FILE.sig] [--json]",
+                         kVerifyFlags);
 
 }  // namespace fluxcal::cli

@@ -1,5 +1,6 @@
 #include "cli/support_remote.h"
 
+#include <cctype>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -98,6 +99,12 @@ bool IsLoopback(const std::string& address) {
   return host == "localhost" || host == "[::1]" || host.rfind("127.", 0) == 0;
 }
 
+// The target of the last MakeStub, for the error hints.
+std::string& LastTarget() {
+  static std::string target;
+  return target;
+}
+
 bool ReadPem(const std::string& path, const char* what, std::string* out) {
   if (path.empty()) return true;
   auto text = io::ReadFileToString(path);
@@ -111,7 +118,9 @@ bool ReadPem(const std::string& path, const char* what, std::string* out) {
 
 }  // namespace
 
-std::unique_ptr<v1::CalibrationService::Stub> MakeStub(const std::string& address) {
+std::unique_ptr<v1::CalibrationService::Stub> MakeStub(const std::string& server) {
+  const std::string address = ServerTarget(server);
+  LastTarget() = address;
   const ClientOptions& o = GlobalClientOptions();
   grpc::ChannelArguments args;
   args.SetMaxReceiveMessageSize(64 << 20);
@@ -147,15 +156,53 @@ int ReportRpcError(const char* cmd, const grpc::Status& s) {
                                  "FAILED_PRECONDITION", "ABORTED", "OUT_OF_RANGE", "UNIMPLEMENTED",
                                  "INTERNAL", "UNAVAILABLE", "DATA_LOSS", "UNAUTHENTICATED"};
   const int c = static_cast<int>(s.error_code());
-  std::fprintf(stderr, "fluxcal %s: %s: %s\n", cmd, c >= 0 && c <= 16 ? kNames[c] : "ERROR",
-               s.error_message().c_str());
-  if (s.error_code() == grpc::StatusCode::UNAVAILABLE) {
-    std::fprintf(stderr,
-                 "hint: is `fluxcal serve` running at that address? A TLS server needs --ca (its CA), one that "
-                 "requires client certificates --cert and --key; a plaintext server off loopback needs --insecure\n");
-  } else if (s.error_code() == grpc::StatusCode::UNAUTHENTICATED) {
-    std::fprintf(stderr, "hint: give --token-file FILE (fluxcal admin add-key) or a client certificate (--cert, --key)\n");
+  const std::string& target = LastTarget();
+  const std::string& msg = s.error_message();
+  auto contains = [&](const char* what) {
+    std::string lower = msg;
+    for (auto& ch : lower) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+    return lower.find(what) != std::string::npos;
+  };
+  switch (s.error_code()) {
+    case grpc::StatusCode::UNAVAILABLE: {
+      const char* why = contains("connection refused")   ? "connection refused"
+                        : contains("handshake") || contains("ssl") || contains("tls") ? "TLS handshake failed"
+                        : contains("dns") || contains("resolve") ? "name not resolved"
+                                                                  : "unavailable";
+      if (std::string(why) == "name not resolved") {
+        std::fprintf(stderr, "fluxcal %s: cannot reach %s (%s): check the host name given to --server\n", cmd,
+                     target.c_str(), why);
+        break;
+      }
+      std::fprintf(stderr,
+                   "fluxcal %s: cannot reach %s (%s): is `fluxcal serve` running there? TLS: pass --ca (its CA; "
+                   "--cert and --key if it requires client certificates), or --insecure for a plaintext test server "
+                   "off loopback\n",
+                   cmd, target.c_str(), why);
+      break;
+    }
+    case grpc::StatusCode::DEADLINE_EXCEEDED:
+      std::fprintf(stderr,
+                   "fluxcal %s: %s did not answer in time: is the address right (a firewall drops, not refuses)? "
+                   "a server under load or a long fit may need a retry\n",
+                   cmd, target.c_str());
+      break;
+    case grpc::StatusCode::UNAUTHENTICATED:
+      std::fprintf(stderr,
+                   "fluxcal %s: %s wants credentials: give --token-file FILE (made by `fluxcal admin add-key`) or a "
+                   "client certificate (--cert, --key) it accepts\n",
+                   cmd, target.c_str());
+      break;
+    case grpc::StatusCode::PERMISSION_DENIED:
+      std::fprintf(stderr,
+                   "fluxcal %s: the identity of your token/certificate lacks the role for this call on %s: "
+                   "see `fluxcal admin list-keys` on the server side\n",
+                   cmd, target.c_str());
+      break;
+    default:
+      break;
   }
+  std::fprintf(stderr, "fluxcal %s: %s: %s\n", cmd, c >= 0 && c <= 16 ? kNames[c] : "ERROR", msg.c_str());
   return 1;
 }
 
@@ -165,8 +212,9 @@ void Deadline(grpc::ClientContext* ctx, int seconds) {
 }
 }  // namespace
 
-int RunRemoteQuery(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, {"server", "id-a", "iq-a", "version"}, {"json"});
+int RunRemoteQuery(const std::vector<std::string>& argv, const FlagSpecs& flags) {
+  auto args = ParseArgs(argv, flags);
+  if (!args.ok()) std::fprintf(stderr, "fluxcal query: %s\n", std::string(args.status().message()).c_str());
   if (!args.ok() || args->positional.size() != 1) {
     std::fprintf(stderr, "usage: fluxcal query SERIAL --server ADDR --id-a A --iq-a A [--version N] [--json]\n");
     return 2;
@@ -213,16 +261,20 @@ int RunRemoteQuery(const std::vector<std::string>& argv) {
   return 0;
 }
 
-int RunRemoteExport(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, {"server", "table", "format", "points", "speed-points", "speed-max-rpm", "i-max-a",
-                               "udc-v", "out", "version", "ctype"},
-                        {"json", "allow-extrapolation"});
+int RunRemoteExport(const std::vector<std::string>& argv, const FlagSpecs& flags) {
+  auto args = ParseArgs(argv, flags);
+  if (!args.ok()) std::fprintf(stderr, "fluxcal export: %s\n", std::string(args.status().message()).c_str());
   if (!args.ok() || args->positional.size() != 1 || !args->Get("out")) {
     std::fprintf(stderr, "usage: fluxcal export SERIAL --server ADDR --table mtpa|mtpv|fw --format "
                          "csv|json|h|cdfx|dcm [--points N] [--version N] [--ctype double|float] [--allow-extrapolation] "
                          "--out FILE [--json]\n");
     return 2;
   }
+  if (auto e = CheckOutToStdout(*args); !e.empty()) {
+    std::fprintf(stderr, "fluxcal export: %s\n", e.c_str());
+    return 2;
+  }
+  const bool to_stdout = *args->Get("out") == "-";
   v1::ExportTableRequest req;
   req.set_serial(args->positional[0]);
   req.set_table(args->Get("table").value_or("mtpa"));
@@ -248,11 +300,13 @@ int RunRemoteExport(const std::vector<std::string>& argv) {
   Deadline(&ctx, 120);
   auto s = stub->ExportTable(&ctx, req, &resp);
   if (!s.ok()) return ReportRpcError("export", s);
-  if (auto st = io::WriteFileAtomically(*args->Get("out"), resp.data()); !st.ok()) {
+  if (auto st = WriteOutput(*args->Get("out"), resp.data()); !st.ok()) {
     std::fprintf(stderr, "fluxcal export: %s\n", std::string(st.message()).c_str());
     return 1;
   }
-  if (!resp.signature().empty()) {
+  if (!resp.signature().empty() && to_stdout) {
+    std::fprintf(stderr, "fluxcal export: the service signed the table; the signature is not written with --out -\n");
+  } else if (!resp.signature().empty()) {
     if (auto st = io::WriteFileAtomically(*args->Get("out") + ".sig", resp.signature()); !st.ok()) {
       std::fprintf(stderr, "fluxcal export: %s\n", std::string(st.message()).c_str());
       return 1;
@@ -270,7 +324,7 @@ int RunRemoteExport(const std::vector<std::string>& argv) {
                      .dump(2, ' ', false, nlohmann::json::error_handler_t::replace)
               << "\n";
   } else {
-    std::printf("%s: %s v%d %s table (%s), verdict %s, %s\n  sha256 %s (file)\n  payload_crc32 %s payload_sha256 %s (values)\n",
+    std::fprintf(to_stdout ? stderr : stdout, "%s: %s v%d %s table (%s), verdict %s, %s\n  sha256 %s (file)\n  payload_crc32 %s payload_sha256 %s (values)\n",
                 args->Get("out")->c_str(), resp.serial().c_str(), resp.version(), req.table().c_str(),
                 req.format().c_str(), resp.verdict().c_str(), resp.released() ? "released" : "not released",
                 file_sha256.c_str(), resp.crc32().c_str(), resp.sha256().c_str());

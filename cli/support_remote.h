@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "cli/args.h"
 #include "fluxcal/v1/calibration.grpc.pb.h"
 
 namespace fluxcal::cli {
@@ -29,14 +30,18 @@ ClientOptions& GlobalClientOptions();
 // returns a usage message on a flag without its value.
 std::string TakeClientFlags(std::vector<std::string>* args);
 
-// A stub for `address` with GlobalClientOptions(). On a bad option (an
-// unreadable file) prints the reason and returns nullptr.
+// A stub for `address` (--server: HOST means HOST:50051, see ServerTarget)
+// with GlobalClientOptions(). On a bad option (an unreadable file) prints the
+// reason and returns nullptr.
 std::unique_ptr<v1::CalibrationService::Stub> MakeStub(const std::string& address);
-// Prints "fluxcal <cmd>: <code>: <message>" to stderr and returns the exit code.
+// Prints "fluxcal <cmd>: <code>: <message>" to stderr, with a hint for the
+// codes a setup mistake gives (server unreachable, TLS, token, role), and
+// returns the exit code.
 int ReportRpcError(const char* cmd, const grpc::Status& s);
 
-int RunRemoteQuery(const std::vector<std::string>& argv);
-int RunRemoteExport(const std::vector<std::string>& argv);
+// `query` and `export` with --server; flags: what the mode accepts.
+int RunRemoteQuery(const std::vector<std::string>& argv, const FlagSpecs& flags);
+int RunRemoteExport(const std::vector<std::string>& argv, const FlagSpecs& flags);
 
 }  // namespace fluxcal::cli
 
