@@ -594,6 +594,10 @@ std::unique_ptr<grpc::Server> StartServer(CalibrationServiceImpl* service, const
     ssl.pem_key_cert_pairs.push_back({options.tls_key_pem, options.tls_cert_pem});
     creds = grpc::SslServerCredentials(ssl);
   }
+  // No SO_REUSEPORT (gRPC's default on Linux): a second `fluxcal serve` on
+  // a port already in use must fail to start, not silently take half of
+  // the connections to its own store.
+  b.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
   b.AddListeningPort(address, creds, bound_port);
   b.RegisterService(service);
   if (options.reflection) {

@@ -44,9 +44,10 @@ trap 'rm -rf "$W"' EXIT
 "$F" report "$W/sim.json" --set "$W/sim" --diagnosis "$W/diag.json" --out "$A/sim.html" --json > "$W/sim_report.json"
 
 # From the service: the stored calibration with the store's provenance
-# (version, creation time, stored verdict, release state). Port from this
-# process's id, so parallel runs do not meet.
-PORT=$((20000 + $$ % 20000))
+# (version, creation time, stored verdict, release state). A port the
+# kernel just handed out (bind to 0), not one derived from the process id:
+# two tests must not meet on one port.
+PORT=$(python3 -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1]); s.close()')
 "$F" serve --db "$W/store.db" --listen "127.0.0.1:$PORT" --quiet 2> "$W/serve.log" &
 SERVER=$!
 trap 'kill $SERVER 2>/dev/null || true; wait $SERVER 2>/dev/null || true; rm -rf "$W"' EXIT
