@@ -101,6 +101,30 @@ absl::StatusOr<nlohmann::json> FetchCalibration(const std::string& server, const
   return j;
 }
 
+// The service's fleet statistics at its default operating points.
+absl::StatusOr<std::vector<report::FleetPoint>> FetchFleet(const std::string& server) {
+  auto stub = MakeStub(server);
+  if (!stub) return absl::InvalidArgumentError("--server " + server + ": cannot set up the client");
+  v1::FleetStatisticsRequest req;
+  v1::FleetStatisticsResponse resp;
+  grpc::ClientContext ctx;
+  ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
+  auto s = stub->FleetStatistics(&ctx, req, &resp);
+  if (!s.ok()) return absl::UnavailableError("FleetStatistics: " + s.error_message());
+  std::vector<report::FleetPoint> out;
+  for (const auto& p : resp.points()) {
+    report::FleetPoint f;
+    f.id_a = p.id_a(); f.iq_a = p.iq_a(); f.serials = p.serials();
+    f.ldd_h_mean = p.ldd_h_mean(); f.ldd_h_std = p.ldd_h_std();
+    f.lqq_h_mean = p.lqq_h_mean(); f.lqq_h_std = p.lqq_h_std();
+    f.psi_d_wb_mean = p.psi_d_wb_mean(); f.psi_d_wb_std = p.psi_d_wb_std();
+    f.torque_nm_mean = p.torque_nm_mean(); f.torque_nm_std = p.torque_nm_std();
+    f.outliers.assign(p.outliers().begin(), p.outliers().end());
+    out.push_back(std::move(f));
+  }
+  return out;
+}
+
 const FlagSpecs kReportFlags = {
     {"out", "FILE", "HTML page to write (required; - for stdout)"},
     {"server", "ADDR", "the positional argument is a SERIAL stored there, HOST[:PORT] (default port 50051)"},
@@ -130,6 +154,12 @@ int RunReport(const std::vector<std::string>& argv) {
     }
     cal_json = FetchCalibration(*server, cal_path, version);
     in.calibration_path = cal_path + " from the service at " + *server;
+    if (auto fleet = FetchFleet(*server); fleet.ok()) {
+      in.fleet = std::move(*fleet);
+      in.fleet_source = "FleetStatistics of the service at " + *server + " (latest calibration of every serial)";
+    } else {
+      std::fprintf(stderr, "fluxcal report: no fleet comparison: %s\n", std::string(fleet.status().message()).c_str());
+    }
     in.calibration_file_mtime_utc = "unknown";
   } else {
     if (args->Get("version")) return Fail("flag --version needs --server", 2);

@@ -530,6 +530,37 @@ absl::StatusOr<Report> BuildReport(const ReportInputs& in) {
                     "<code>payload_crc32</code> / <code>payload_sha256</code>.", mtpv_note.empty() ? "" : " ",
                     H(mtpv_note), "</p></section>\n");
 
+  // ------------------------------------------------------------ fleet
+  if (!in.fleet.empty()) {
+    // z = (this motor - fleet mean) / fleet std at each point: where this
+    // serial sits in the distribution of the latest calibrations.
+    auto z = [](double v, double mean, double sd) {
+      return sd > 0 ? absl::StrFormat("%+.2f", (v - mean) / sd) : std::string("&ndash;");
+    };
+    b += absl::StrCat("<section><h2>Fleet</h2><p class=\"note\">", H(in.fleet_source),
+                      ". z: this motor's value minus the fleet mean, in fleet standard deviations.</p>"
+                      "<table class=\"list\"><tr><th>id, iq</th><th>serials</th><th>Ldd: this / fleet (z)</th>"
+                      "<th>Lqq: this / fleet (z)</th><th>psi_d: this / fleet (z)</th>"
+                      "<th>torque: this / fleet (z)</th><th>flagged outliers</th></tr>\n");
+    for (const auto& f : in.fleet) {
+      const auto p = cal.Predict(f.id_a, f.iq_a);
+      bool self = false;
+      for (const auto& o : f.outliers) self |= o == cal.serial();
+      b += absl::StrFormat(
+          "<tr><td>%.4g A, %.4g A</td><td>%d</td><td>%.4g / %.4g &plusmn; %.2g uH (%s)</td>"
+          "<td>%.4g / %.4g &plusmn; %.2g uH (%s)</td><td>%.5g / %.5g &plusmn; %.2g mWb (%s)</td>"
+          "<td>%.4g / %.4g &plusmn; %.2g N m (%s)</td><td>%s</td></tr>\n",
+          f.id_a, f.iq_a, f.serials, 1e6 * p.ldd_h, 1e6 * f.ldd_h_mean, 1e6 * f.ldd_h_std,
+          z(p.ldd_h, f.ldd_h_mean, f.ldd_h_std), 1e6 * p.lqq_h, 1e6 * f.lqq_h_mean, 1e6 * f.lqq_h_std,
+          z(p.lqq_h, f.lqq_h_mean, f.lqq_h_std), 1e3 * p.psi_d_wb, 1e3 * f.psi_d_wb_mean, 1e3 * f.psi_d_wb_std,
+          z(p.psi_d_wb, f.psi_d_wb_mean, f.psi_d_wb_std), p.torque_nm, f.torque_nm_mean, f.torque_nm_std,
+          z(p.torque_nm, f.torque_nm_mean, f.torque_nm_std),
+          f.outliers.empty() ? std::string("none")
+                             : H(absl::StrJoin(f.outliers, ", ")) + (self ? " <b>(this motor)</b>" : ""));
+    }
+    b += "</table></section>\n";
+  }
+
   // ------------------------------------------------------------ diagnosis
   if (in.diagnosis) {
     const auto& d = *in.diagnosis;

@@ -20,6 +20,16 @@
 
 namespace fluxcal::report {
 
+// Where the fleet stands at one operating point (the service's
+// FleetStatistics over the latest calibration of every serial).
+struct FleetPoint {
+  double id_a = 0, iq_a = 0;
+  int serials = 0;
+  double ldd_h_mean = 0, ldd_h_std = 0, lqq_h_mean = 0, lqq_h_std = 0;
+  double psi_d_wb_mean = 0, psi_d_wb_std = 0, torque_nm_mean = 0, torque_nm_std = 0;
+  std::vector<std::string> outliers;   // serials the service flags at this point
+};
+
 struct ReportInputs {
   // The calibration and the JSON it was read from (provenance fields the
   // calibration type does not keep: created_utc, software_version,
@@ -44,6 +54,9 @@ struct ReportInputs {
   // the MTPA point at the current limit reaches the voltage limit).
   double ellipse_speed_rpm = 0;
   std::string software_version;   // of the program writing the report
+  // With --server: the fleet this motor is compared with (empty: none).
+  std::vector<FleetPoint> fleet;
+  std::string fleet_source;
 };
 
 struct Report {

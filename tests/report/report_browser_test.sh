@@ -60,7 +60,7 @@ done
 "$F" eol "$W/sim" --server "127.0.0.1:$PORT" --json > "$W/eol.json" 2>/dev/null || true
 grep -q '"version": 1' "$W/eol.json" || { echo "FAIL: eol stored no calibration:" >&2; cat "$W/eol.json" >&2; exit 1; }
 "$F" report IPM-REPORT-TEST --server "127.0.0.1:$PORT" --out "$A/service.html" --json > "$W/service_report.json"
-for want in "calibration version</th><td>1</td>" "release state</th><td>not released" "calibration created</th><td>20" "from the service at"; do
+for want in "calibration version</th><td>1</td>" "release state</th><td>not released" "calibration created</th><td>20" "from the service at" "<h2>Fleet</h2>" "IPM-REPORT-TEST"; do
   grep -qF "$want" "$A/service.html" || { echo "FAIL: service.html lacks '$want'" >&2; exit 1; }
 done
 kill $SERVER; wait $SERVER 2>/dev/null || true
