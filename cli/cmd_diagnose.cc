@@ -113,10 +113,7 @@ int RunDiagnose(const std::vector<std::string>& argv) {
       std::fprintf(stderr, "fluxcal diagnose: %s\n", std::string(cal.status().message()).c_str());
       return 1;
     }
-    nlohmann::json j = cal->ToJson();
-    nlohmann::json marks = nlohmann::json::array();
-    for (const auto& f : rep->findings) marks.push_back({{"effect", f.effect}, {"parameters", f.parameters}});
-    j["diagnosis"] = {{"format", "fluxcal.diagnosis.v1"}, {"verdict", rep->verdict}, {"findings", marks}};
+    const nlohmann::json j = diag::MarkedCalibrationJson(*rep, *cal);
     if (auto st = io::WriteFileAtomically(*out, j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n"); !st.ok()) {
       std::fprintf(stderr, "fluxcal diagnose: %s\n", std::string(st.message()).c_str());
       return 1;

@@ -33,6 +33,7 @@ absl::StatusOr<fit::Calibration> DiagnosedCalibration(const DiagnosisReport& r, 
   return fit::Fit(r.corrected_data, options);
 }
 
+
 absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const DiagnoseOptions& opt) {
   const auto t0 = std::chrono::steady_clock::now();
   if (set.waveforms.empty()) {

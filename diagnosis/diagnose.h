@@ -117,6 +117,11 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
 absl::StatusOr<fit::Calibration> DiagnosedCalibration(const DiagnosisReport& r,
                                                       const fit::FitOptions& options = {});
 
+// `cal`'s calibration JSON marked with the diagnosis ("diagnosis": format,
+// verdict, findings with their parameters), as `diagnose --calibration-out`
+// writes it and the service stores it.
+nlohmann::json MarkedCalibrationJson(const DiagnosisReport& r, const fit::Calibration& cal);
+
 nlohmann::json ToJson(const DiagnosisReport& r);
 std::string ToText(const DiagnosisReport& r);
 // Residual maps over the current plane, before and after (SVG).

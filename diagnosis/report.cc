@@ -15,6 +15,14 @@
 
 namespace fluxcal::diag {
 
+nlohmann::json MarkedCalibrationJson(const DiagnosisReport& r, const fit::Calibration& cal) {
+  nlohmann::json j = cal.ToJson();
+  nlohmann::json marks = nlohmann::json::array();
+  for (const auto& f : r.findings) marks.push_back({{"effect", f.effect}, {"parameters", f.parameters}});
+  j["diagnosis"] = {{"format", "fluxcal.diagnosis.v1"}, {"verdict", r.verdict}, {"findings", marks}};
+  return j;
+}
+
 nlohmann::json ToJson(const DiagnosisReport& r) {
   using nlohmann::json;
   json j;

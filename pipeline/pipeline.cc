@@ -5,6 +5,7 @@
 #include <set>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_join.h"
 #include "absl/strings/str_format.h"
 #include "nlohmann/json.hpp"
 #include "pipeline/recording_archive.h"
@@ -364,6 +365,40 @@ absl::StatusOr<io::RecordingSet> LoadStoredRecording(storage::Store& store, cons
   auto files = DecodeRecordingArchive(*archive);
   if (!files.ok()) return files.status();
   return io::ReadRecordingSetFromFiles(*files, "");
+}
+
+absl::StatusOr<storage::CalibrationRow> StoreDiagnosedCalibration(storage::Store& store, const std::string& serial,
+                                                                  const diag::DiagnosisReport& report,
+                                                                  const FitTolerances& tol,
+                                                                  const storage::AuditContext* audit) {
+  auto motor = store.GetMotor(serial);
+  if (!motor.ok()) return motor.status();
+  int64_t run_id = 0;
+  auto pts = store.LatestRunPoints(serial, &run_id);
+  if (!pts.ok()) return pts.status();
+  auto cal = diag::DiagnosedCalibration(report);
+  if (!cal.ok()) return cal.status();
+  storage::CalibrationRow row;
+  row.serial = serial;
+  row.run_id = run_id;
+  row.model = cal->family().Name();
+  row.psi_pm_wb = cal->psi_pm_wb();
+  row.rms_relative = cal->summary.rms_relative;
+  row.verdict = Verdict(*cal, motor->psi_pm_wb, report.corrected_data.inductances.size(), 0, tol);
+  row.calibration_json = diag::MarkedCalibrationJson(report, *cal).dump();
+  storage::AuditContext a;
+  if (audit != nullptr) {
+    a = *audit;
+    std::vector<std::string> effects;
+    for (const auto& f : report.findings) effects.push_back(f.effect);
+    a.detail = [model = row.model, verdict = row.verdict, found = absl::StrJoin(effects, ", ")](int64_t version, bool) {
+      return absl::StrCat("version ", version, " (", model, ", diagnosed: ", found.empty() ? "no findings" : found,
+                          "): ", verdict);
+    };
+  }
+  auto version = store.AddCalibration(row, audit != nullptr ? &a : nullptr);
+  if (!version.ok()) return version.status();
+  return store.GetCalibration(serial, *version);
 }
 
 absl::StatusOr<diag::DiagnosisReport> DiagnoseStored(storage::Store& store, const std::string& serial,

@@ -124,6 +124,16 @@ absl::StatusOr<std::vector<FleetPoint>> FleetStatistics(storage::Store& store,
 // A stored raw recording (by SHA-256), unpacked and read in memory.
 absl::StatusOr<io::RecordingSet> LoadStoredRecording(storage::Store& store, const std::string& sha256);
 // Diagnosis of the serial's latest stored raw recording, unpacked in memory.
+// The diagnosed model of `report` (diag::DiagnosedCalibration) stored as a
+// new calibration version of `serial`: its JSON marked with the findings
+// (diag::MarkedCalibrationJson), judged by Verdict against the motor's
+// nominal psi_pm, linked to the latest run, audited with `audit` in the
+// same transaction. A version is stored whole or not at all.
+absl::StatusOr<storage::CalibrationRow> StoreDiagnosedCalibration(storage::Store& store, const std::string& serial,
+                                                                  const diag::DiagnosisReport& report,
+                                                                  const FitTolerances& tol,
+                                                                  const storage::AuditContext* audit);
+
 absl::StatusOr<diag::DiagnosisReport> DiagnoseStored(storage::Store& store, const std::string& serial,
                                                      const CancelledFn& cancelled = {});
 

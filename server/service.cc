@@ -472,6 +472,13 @@ grpc::Status CalibrationServiceImpl::Diagnose(grpc::ServerContext* ctx, const v1
   resp->set_verdict(rep->verdict);
   resp->set_report_json(diag::ToJson(*rep).dump(-1, ' ', false, nlohmann::json::error_handler_t::replace));
   for (const auto& f : rep->findings) resp->add_effects(f.effect);
+  if (req->store_calibration()) {
+    const auto audit = AuditFor(ctx, *who, Rpc::kDiagnose, req->serial(), nullptr);
+    auto row = pipeline::StoreDiagnosedCalibration(*store_, req->serial(), *rep, pipeline::FitTolerances{}, &audit);
+    if (!row.ok()) return StoppedOr(ctx, row.status());
+    resp->set_stored_version(row->version);
+    resp->set_stored_verdict(row->verdict);
+  }
   return grpc::Status::OK;
 }
 

@@ -359,6 +359,30 @@ TEST_P(ServiceTest, IngestRecordingThenDiagnose) {
   ASSERT_GE(d.effects_size(), 1);
   EXPECT_EQ(d.effects(0), "dead_time");
   EXPECT_NE(d.report_json().find("fluxcal.diagnosis.v1"), std::string::npos);
+  EXPECT_EQ(d.stored_version(), 0) << "nothing stored unless asked";
+  // Asked to: the diagnosed model becomes a new version, marked with the
+  // findings, judged like any other.
+  {
+    grpc::ClientContext sc;
+    v1::DiagnoseRequest sr;
+    sr.set_serial("IPM-REC-1");
+    sr.set_store_calibration(true);
+    v1::DiagnoseResponse sd;
+    ASSERT_TRUE(stub_->Diagnose(&sc, sr, &sd).ok());
+    ASSERT_GT(sd.stored_version(), 0);
+    EXPECT_FALSE(sd.stored_verdict().empty());
+    grpc::ClientContext gc;
+    v1::GetCalibrationRequest gr;
+    gr.set_serial("IPM-REC-1");
+    gr.set_version(sd.stored_version());
+    v1::CalibrationRecord rec;
+    ASSERT_TRUE(stub_->GetCalibration(&gc, gr, &rec).ok());
+    EXPECT_EQ(rec.version(), sd.stored_version());
+    EXPECT_EQ(rec.verdict(), sd.stored_verdict());
+    const auto j = nlohmann::json::parse(rec.calibration_json());
+    ASSERT_TRUE(j.contains("diagnosis"));
+    EXPECT_EQ(j["diagnosis"]["findings"][0]["effect"], "dead_time");
+  }
   fs::remove_all(dir);
   // A set whose manifest names another serial is refused.
   grpc::ClientContext c2;
