@@ -85,6 +85,8 @@ absl::StatusOr<storage::CalibrationRow> FitSerial(storage::Store& store, const s
                                                   const CancelledFn& cancelled = {});
 
 // --- Read.
+// A stored row's calibration JSON parsed (DataLoss when corrupt).
+absl::StatusOr<fit::Calibration> ParseStoredCalibration(const storage::CalibrationRow& row);
 absl::StatusOr<fit::Calibration> LoadCalibration(storage::Store& store, const std::string& serial, int version);
 
 struct QueryResult {

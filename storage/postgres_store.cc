@@ -534,6 +534,27 @@ absl::StatusOr<std::vector<ChainRow>> PostgresStore::AllChainRows() {
   return out;
 }
 
+absl::StatusOr<ChainRow> PostgresStore::ChainLink(const std::string& serial, int version) {
+  ChainRow out;
+  bool found = false;
+  auto st = WithConn([&](PGconn* c) -> absl::Status {
+    auto q = version > 0
+                 ? Exec(c, "SELECT serial, version, prev_sha256, row_sha256 FROM calibration_chain "
+                           "WHERE serial = $1 AND version = $2", {T(serial), I(version)})
+                 : Exec(c, "SELECT serial, version, prev_sha256, row_sha256 FROM calibration_chain "
+                           "WHERE serial = $1 ORDER BY version DESC LIMIT 1", {T(serial)});
+    if (!q.ok()) return q.status();
+    if (PQntuples(q->get()) > 0) {
+      found = true;
+      out = {Text(q->get(), 0, 0), static_cast<int>(Int(q->get(), 0, 1)), Text(q->get(), 0, 2), Text(q->get(), 0, 3)};
+    }
+    return absl::OkStatus();
+  });
+  if (!st.ok()) return st;
+  if (!found) return absl::NotFoundError(absl::StrCat("serial '", serial, "': no chain link"));
+  return out;
+}
+
 absl::StatusOr<MotorRow> PostgresStore::GetMotor(const std::string& serial) {
   MotorRow m;
   auto st = WithConn([&](PGconn* c) -> absl::Status {

@@ -314,6 +314,20 @@ absl::StatusOr<std::vector<ChainRow>> SqliteStore::AllChainRows() {
   return out;
 }
 
+absl::StatusOr<ChainRow> SqliteStore::ChainLink(const std::string& serial, int version) {
+  std::lock_guard<std::mutex> lock(write_mu_);
+  auto q = writer_->Prepare(absl::StrCat("SELECT serial, version, prev_sha256, row_sha256 FROM calibration_chain ",
+                                         version > 0 ? "WHERE serial = ? AND version = ?"
+                                                     : "WHERE serial = ? ORDER BY version DESC LIMIT 1"));
+  if (!q.ok()) return q.status();
+  (void)q->Bind(1, serial);
+  if (version > 0) (void)q->Bind(2, int64_t{version});
+  auto r = q->Step();
+  if (!r.ok()) return r.status();
+  if (!*r) return absl::NotFoundError(absl::StrCat("serial '", serial, "': no chain link"));
+  return ChainRow{q->Text(0), static_cast<int>(q->Int(1)), q->Text(2), q->Text(3)};
+}
+
 absl::StatusOr<MotorRow> SqliteStore::GetMotor(const std::string& serial) {
   std::lock_guard<std::mutex> lock(write_mu_);
   auto q = writer_->Prepare("SELECT pole_pairs, rs_ohm, psi_pm_wb, created_utc FROM motors WHERE serial = ?");

@@ -35,6 +35,7 @@ class SqliteStore final : public Store {
   absl::Status AppendAudit(const AuditRow& row) override;
   absl::StatusOr<std::vector<AuditRow>> AuditOf(const std::string& serial) override;
   absl::StatusOr<std::vector<ChainRow>> AllChainRows() override;
+  absl::StatusOr<ChainRow> ChainLink(const std::string& serial, int version) override;
   absl::StatusOr<std::vector<HfPointRow>> LatestRunPoints(const std::string& serial, int64_t* run_id) override;
   absl::StatusOr<int> AddCalibration(const CalibrationRow& row, const AuditContext* audit = nullptr) override;
   absl::StatusOr<CalibrationRow> GetCalibration(const std::string& serial, int version) override;

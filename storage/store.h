@@ -164,6 +164,9 @@ class Store {
   virtual absl::StatusOr<std::vector<AuditRow>> AuditOf(const std::string& serial) = 0;
   // Every chain link, by serial and version.
   virtual absl::StatusOr<std::vector<ChainRow>> AllChainRows() = 0;
+  // The chain link of one calibration version (0: the latest chained one);
+  // NotFound when it has none. A cheap stand-in for the row's content.
+  virtual absl::StatusOr<ChainRow> ChainLink(const std::string& serial, int version) = 0;
 
   virtual absl::StatusOr<std::vector<MotorSummaryRow>> ListMotors(const std::string& prefix, bool only_failed,
                                                                   int offset, int limit) = 0;
