@@ -88,6 +88,31 @@ TEST(Pipeline, CancelledFitStoresNothing) {
   EXPECT_EQ((*store)->AuditOf("IPM-C")->at(0).detail, "version 1 (analytic): pass");
 }
 
+// The parsed-calibration cache (LoadCalibration) never serves one store's
+// or one version's calibration for another: two stores with the same
+// serial but different data, and a new version, each read back their own.
+TEST(Pipeline, CachedCalibrationsAreTheStoredOnes) {
+  auto a = storage::Store::Open(":memory:");
+  auto b = storage::Store::Open(":memory:");
+  ASSERT_TRUE(a.ok() && b.ok());
+  ASSERT_TRUE(IngestHfRun(**a, "IPM-K", "st", kMotor, Grid(1.0)).ok());
+  ASSERT_TRUE(IngestHfRun(**b, "IPM-K", "st", kMotor, Grid(1.1)).ok());
+  ASSERT_TRUE(FitSerial(**a, "IPM-K", "analytic", {}).ok());
+  ASSERT_TRUE(FitSerial(**b, "IPM-K", "analytic", {}).ok());
+  for (int round = 0; round < 2; ++round) {   // second round: cache hits
+    auto ca = LoadCalibration(**a, "IPM-K", 0), cb = LoadCalibration(**b, "IPM-K", 0);
+    ASSERT_TRUE(ca.ok() && cb.ok());
+    EXPECT_NEAR(cb->Inductance(-20, 40).lqq_h / ca->Inductance(-20, 40).lqq_h, 1.1, 0.01) << round;
+  }
+  ASSERT_TRUE(IngestHfRun(**a, "IPM-K", "st", std::nullopt, Grid(1.2)).ok());
+  ASSERT_TRUE(FitSerial(**a, "IPM-K", "analytic", {}).ok());
+  auto latest = LoadCalibration(**a, "IPM-K", 0), first = LoadCalibration(**a, "IPM-K", 1);
+  ASSERT_TRUE(latest.ok() && first.ok());
+  EXPECT_EQ(latest->version, 2);
+  EXPECT_EQ(first->version, 1);
+  EXPECT_NEAR(latest->Inductance(-20, 40).lqq_h / first->Inductance(-20, 40).lqq_h, 1.2, 0.01);
+}
+
 TEST(Pipeline, FitJudgeQueryExport) {
   auto store = storage::Store::Open(":memory:");
   ASSERT_TRUE(store.ok());
