@@ -1,14 +1,17 @@
 // fluxcal diagnose <recording-set> [--json] [--plots DIR] [--exclude-effects a,b]
 //                  [--calibration-out cal.json]
 // fluxcal diagnose --table1 data/paper_table1.csv [--json]
+// fluxcal diagnose SERIAL --server ADDR [--store] [--json]
 // Locates where the nominal model and the recordings differ, names the
 // missing physics, refits, reports (docs/diagnosis-report.md).
+#include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
 
 #include "cli/args.h"
 #include "cli/command.h"
+#include "cli/support_remote.h"
 #include "diagnosis/diagnose.h"
 #include "absl/strings/str_split.h"
 #include "io/csv.h"
@@ -23,8 +26,54 @@ const FlagSpecs kDiagnoseFlags = {
     {"exclude-effects", "A,B", "effects not to consider (names as in `fluxcal simulate --effects`)"},
     {"calibration-out", "FILE", "write the diagnosed model as a calibration JSON (refitted without the findings)"},
     {"table1", "CSV", "diagnose the paper's Table 1 instead of a recording set"},
+    {"server", "ADDR", "diagnose a serial's stored raw recording at the service instead, HOST[:PORT] (default port 50051)"},
+    {"store", "", "with --server: store the diagnosed model as a new calibration version marked with the findings"},
     {"json", "", "print the diagnosis report as one JSON document (docs/diagnosis-report.md)"},
 };
+
+// fluxcal diagnose SERIAL --server ADDR [--store] [--json]: the service
+// diagnoses the serial's latest stored raw recording (`eol
+// --upload-recording` puts it there); with --store it keeps the diagnosed
+// model as a new calibration version.
+int RunRemoteDiagnose(const ParsedArgs& args, const std::string& server) {
+  for (const char* local : {"plots", "exclude-effects", "calibration-out", "table1"}) {
+    if (args.Has(local)) {
+      std::fprintf(stderr, "fluxcal diagnose: flag --%s is local only (not with --server)\n", local);
+      return 2;
+    }
+  }
+  if (args.positional.size() != 1) {
+    std::fprintf(stderr, "usage: fluxcal diagnose SERIAL --server ADDR [--store] [--json]\n");
+    return 2;
+  }
+  auto stub = MakeStub(server);
+  if (!stub) {
+    std::fprintf(stderr, "fluxcal diagnose: --server %s: cannot set up the client\n", server.c_str());
+    return 1;
+  }
+  v1::DiagnoseRequest req;
+  req.set_serial(args.positional[0]);
+  req.set_store_calibration(args.Has("store"));
+  v1::DiagnoseResponse resp;
+  grpc::ClientContext ctx;
+  ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::minutes(5));
+  auto st = stub->Diagnose(&ctx, req, &resp);
+  if (!st.ok()) return ReportRpcError("diagnose", st);
+  if (args.Has("json")) {
+    nlohmann::json j = nlohmann::json::parse(resp.report_json(), nullptr, false);
+    if (j.is_discarded()) j = nlohmann::json::object();
+    if (resp.stored_version() > 0) j["stored"] = {{"version", resp.stored_version()}, {"verdict", resp.stored_verdict()}};
+    std::cout << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
+  } else {
+    std::printf("%s: %s", resp.serial().c_str(), resp.verdict().c_str());
+    for (int k = 0; k < resp.effects_size(); ++k) std::printf("%s%s", k ? ", " : " (", resp.effects(k).c_str());
+    std::printf("%s\n", resp.effects_size() ? ")" : "");
+    if (resp.stored_version() > 0) {
+      std::printf("stored as version %d: %s\n", resp.stored_version(), resp.stored_verdict().c_str());
+    }
+  }
+  return 0;
+}
 
 int RunDiagnose(const std::vector<std::string>& argv) {
   auto args = ParseArgs(argv, kDiagnoseFlags);
@@ -69,6 +118,11 @@ int RunDiagnose(const std::vector<std::string>& argv) {
       }
     }
     return 0;
+  }
+  if (auto server = args->Get("server")) return RunRemoteDiagnose(*args, *server);
+  if (args->Has("store")) {
+    std::fprintf(stderr, "fluxcal diagnose: flag --store needs --server\n");
+    return 2;
   }
   if (args->positional.size() != 1) {
     std::fprintf(stderr, "usage: fluxcal diagnose <recording-set> [--json] [--plots DIR] [--exclude-effects a,b]\n"

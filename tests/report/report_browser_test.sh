@@ -63,6 +63,18 @@ grep -q '"version": 1' "$W/eol.json" || { echo "FAIL: eol stored no calibration:
 for want in "calibration version</th><td>1</td>" "release state</th><td>not released" "calibration created</th><td>20" "from the service at" "<h2>Fleet</h2>" "IPM-REPORT-TEST"; do
   grep -qF "$want" "$A/service.html" || { echo "FAIL: service.html lacks '$want'" >&2; exit 1; }
 done
+# The EOL flow with the raw recording uploaded, then the service's own
+# diagnosis stores the diagnosed model as a new version (the set's dead
+# time failed the plain fit; the diagnosed model is judged again).
+"$F" eol "$W/sim" --server "127.0.0.1:$PORT" --upload-recording --json > "$W/eol2.json" 2>/dev/null || true
+"$F" diagnose IPM-REPORT-TEST --server "127.0.0.1:$PORT" --store --json > "$W/rdiag.json"
+python3 - "$W/rdiag.json" <<'PY' || exit 1
+import json, sys
+d = json.load(open(sys.argv[1]))
+names = [f.get("effect") for f in d.get("findings", [])]
+if "dead_time" not in names or d.get("stored", {}).get("version", 0) < 2:
+    sys.exit(f"FAIL: remote diagnose --store: findings {names}, stored {d.get('stored')}")
+PY
 kill $SERVER; wait $SERVER 2>/dev/null || true
 
 # Bad input names the file and field.
