@@ -21,7 +21,7 @@
 #include "server/auth.h"
 #include "server/service.h"
 #include "storage/store.h"
-#include "tables/sha256.h"
+#include "io/sha256.h"
 #include "tests/support/pg_cluster.h"
 
 namespace {
@@ -70,7 +70,7 @@ struct Fixture {
       opt.tls_key_pem = *fluxcal::io::ReadFileToString(dir + "/s.key");
       token = *fluxcal::server::NewToken();
       fluxcal::server::Keys keys;
-      keys.entries.push_back({"station-bench", fluxcal::server::Role::kStation, fluxcal::tables::Sha256Hex(token), ""});
+      keys.entries.push_back({"station-bench", fluxcal::server::Role::kStation, fluxcal::io::Sha256Hex(token), ""});
       auth = std::make_unique<fluxcal::server::Authorizer>(keys);
       opt.authorizer = auth.get();
     }

@@ -14,7 +14,7 @@
 
 #include "server/auth.h"
 #include "tables/signature.h"
-#include "tables/sha256.h"
+#include "io/sha256.h"
 
 namespace fluxcal::cli {
 namespace {
@@ -86,7 +86,7 @@ int AddEntry(const std::vector<std::string>& argv, bool cert) {
     auto t = server::NewToken();
     if (!t.ok()) return Fail(cmd, t.status());
     token = *t;
-    e.token_sha256 = tables::Sha256Hex(token);
+    e.token_sha256 = io::Sha256Hex(token);
   }
   keys->entries.push_back(e);
   if (auto s = server::SaveKeys(*args->Get("keys"), *keys); !s.ok()) return Fail(cmd, s);

@@ -16,7 +16,7 @@
 #include "cli/args.h"
 #include "cli/command.h"
 #include "cli/support_remote.h"
-#include "tables/sha256.h"
+#include "io/sha256.h"
 #include "pipeline/points.h"
 #include "io/csv.h"
 #include "io/recording_set.h"
@@ -117,7 +117,7 @@ int RunEol(const std::vector<std::string>& argv) {
     mo->set_psi_pm_wb(set->manifest.motor.psi_pm_wb.value_or(0));
     // The run's idempotency key is its content: a retry after a lost reply
     // (UNAVAILABLE, DEADLINE_EXCEEDED) stores nothing twice.
-    first.set_idempotency_key("eol-" + tables::Sha256Hex(content).substr(0, 40));
+    first.set_idempotency_key("eol-" + io::Sha256Hex(content).substr(0, 40));
     const grpc::Status s = WithRetries(serial, "run", [&] {
       grpc::ClientContext ctx;
       ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
@@ -147,7 +147,7 @@ int RunEol(const std::vector<std::string>& argv) {
     }
     std::string content;
     for (const auto& [name, data] : *files) content += name + '\n' + std::to_string(data.size()) + '\n' + data;
-    const std::string key = "eolrec-" + tables::Sha256Hex(content).substr(0, 40);
+    const std::string key = "eolrec-" + io::Sha256Hex(content).substr(0, 40);
     std::fprintf(stderr, "eol %s: uploading the recording (%zu files, %zu bytes)\n", serial.c_str(), files->size(),
                  content.size());
     rec.emplace();
@@ -222,7 +222,7 @@ int RunEol(const std::vector<std::string>& argv) {
         return 1;
       }
       // sha256 of the file written (= sha256sum); crc32/sha256 of the reply are over the values.
-      out["tables"].push_back({{"path", path}, {"sha256", tables::Sha256Hex(resp.data())},
+      out["tables"].push_back({{"path", path}, {"sha256", io::Sha256Hex(resp.data())},
                                {"payload_crc32", resp.crc32()}, {"payload_sha256", resp.sha256()}});
     }
   }

@@ -19,7 +19,7 @@
 #include "fitting/calibration.h"
 #include "io/csv.h"
 #include "nlohmann/json.hpp"
-#include "tables/sha256.h"
+#include "io/sha256.h"
 #include "tables/signature.h"
 #include "tables/tables.h"
 
@@ -143,7 +143,7 @@ int RunExport(const std::vector<std::string>& argv) {
   // what is printed is what `sha256sum FILE` gives.
   auto written = to_stdout ? absl::StatusOr<std::string>(out->bytes) : io::ReadFileToString(*args->Get("out"));
   if (!written.ok()) return Fail(std::string(written.status().message()));
-  const std::string file_sha256 = tables::Sha256Hex(*written);
+  const std::string file_sha256 = io::Sha256Hex(*written);
   if (args->Has("json")) {
     std::cout << nlohmann::json{{"out", *args->Get("out")}, {"table", spec.kind}, {"format", args->Get("format").value_or("csv")},
                                 {"serial", spec.serial}, {"calibration_version", spec.calibration_version},

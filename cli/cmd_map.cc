@@ -22,7 +22,7 @@
 #include "io/flux_map.h"
 #include "nlohmann/json.hpp"
 #include "tables/flux_map_export.h"
-#include "tables/sha256.h"
+#include "io/sha256.h"
 
 namespace fluxcal::cli {
 namespace {
@@ -119,7 +119,7 @@ int RunMapExport(const std::vector<std::string>& argv) {
     summary["extrapolated"] = m->extrapolated;
   }
   if (auto st = WriteOutput(out, text); !st.ok()) return Fail(std::string(st.message()));
-  const std::string sha = tables::Sha256Hex(text);
+  const std::string sha = io::Sha256Hex(text);
   summary["rows"] = rows;
   summary["bytes"] = text.size();
   summary["sha256"] = sha;

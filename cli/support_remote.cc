@@ -14,7 +14,7 @@
 #include "cli/args.h"
 #include "io/csv.h"
 #include "nlohmann/json.hpp"
-#include "tables/sha256.h"
+#include "io/sha256.h"
 
 namespace fluxcal::cli {
 
@@ -314,7 +314,7 @@ int RunRemoteExport(const std::vector<std::string>& argv, const FlagSpecs& flags
   }
   // sha256: of the bytes written (= sha256sum FILE); the reply's crc32 and
   // sha256 are over the values (payload) and printed under those names.
-  const std::string file_sha256 = tables::Sha256Hex(resp.data());
+  const std::string file_sha256 = io::Sha256Hex(resp.data());
   if (args->Has("json")) {
     std::cout << nlohmann::json{{"out", *args->Get("out")}, {"serial", resp.serial()}, {"version", resp.version()},
                                 {"table", req.table()}, {"format", req.format()}, {"sha256", file_sha256},

@@ -13,7 +13,7 @@
 #include "absl/strings/str_format.h"
 #include "nlohmann/json.hpp"
 #include "pipeline/recording_archive.h"
-#include "tables/sha256.h"
+#include "io/sha256.h"
 
 namespace fluxcal::pipeline {
 
@@ -148,7 +148,7 @@ absl::StatusOr<IngestRecordingResult> IngestRecording(storage::Store& store, con
   auto z = Deflate(archive);
   if (!z.ok()) return z.status();
   IngestRecordingResult out;
-  out.sha256 = tables::Sha256Hex(archive);
+  out.sha256 = io::Sha256Hex(archive);
   if (sha256_before_store != nullptr) *sha256_before_store = out.sha256;
   if (cancelled && cancelled()) return absl::CancelledError("ingest: cancelled by the caller before storing");
   const auto& mm = set->manifest.motor;
@@ -505,7 +505,7 @@ absl::StatusOr<std::string> ContentHash(storage::Store& store) {
       auto rec = store.GetRecordingRow(r.recording_sha256);
       if (!rec.ok()) return rec.status();
       const std::string_view z(reinterpret_cast<const char*>(rec->zlib_data.data()), rec->zlib_data.size());
-      absl::StrAppend(&dump, "recording\t", rec->size_bytes, "\t", tables::Sha256Hex(z), "\n");
+      absl::StrAppend(&dump, "recording\t", rec->size_bytes, "\t", io::Sha256Hex(z), "\n");
     }
     auto pts = store.RunPoints(r.run_id);
     if (!pts.ok()) return pts.status();
@@ -523,7 +523,7 @@ absl::StatusOr<std::string> ContentHash(storage::Store& store) {
     absl::StrAppend(&dump, "calibration\t", c.serial, "\t", c.version, "\t", c.run_id, "\t", c.created_utc, "\t",
                     c.model, "\t");
     d(c.psi_pm_wb); d(c.rms_relative);
-    absl::StrAppend(&dump, c.verdict, "\t", tables::Sha256Hex(c.calibration_json), "\n");
+    absl::StrAppend(&dump, c.verdict, "\t", io::Sha256Hex(c.calibration_json), "\n");
   }
   // Text fields are length-prefixed: free text (audit detail) may hold tabs.
   auto t = [&](const std::string& v) { absl::StrAppend(&dump, v.size(), ":", v, "\t"); };
@@ -548,7 +548,7 @@ absl::StatusOr<std::string> ContentHash(storage::Store& store) {
     t(l.serial); absl::StrAppend(&dump, l.version, "\t"); t(l.prev_sha256); t(l.row_sha256);
     dump += "\n";
   }
-  return tables::Sha256Hex(dump);
+  return io::Sha256Hex(dump);
 }
 
 absl::StatusOr<MigrateResult> Migrate(storage::Store& from, storage::Store& to) {

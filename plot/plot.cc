@@ -18,6 +18,15 @@ std::string Fmt(const char* f, double v) {
 
 std::string Px(double v) { return Fmt("%.1f", v); }
 
+
+// Width of a label in px at font-size 11 sans-serif: a conservative average
+// glyph width, so that margins computed from it never cut text.
+double TextWidthPx(const std::string& s, double font_px = 11) { return 0.62 * font_px * s.size(); }
+
+double Step(const std::vector<double>& t) { return t.size() > 1 ? t[1] - t[0] : 1.0; }
+
+}  // namespace
+
 std::string Escape(const std::string& s) {
   std::string o;
   for (char c : s) {
@@ -31,14 +40,6 @@ std::string Escape(const std::string& s) {
   }
   return o;
 }
-
-// Width of a label in px at font-size 11 sans-serif: a conservative average
-// glyph width, so that margins computed from it never cut text.
-double TextWidthPx(const std::string& s, double font_px = 11) { return 0.62 * font_px * s.size(); }
-
-double Step(const std::vector<double>& t) { return t.size() > 1 ? t[1] - t[0] : 1.0; }
-
-}  // namespace
 
 std::vector<double> NiceTicks(double lo, double hi, int target) {
   if (!std::isfinite(lo) || !std::isfinite(hi)) lo = 0, hi = 1;

@@ -44,6 +44,8 @@ std::vector<Polyline> ContourLines(const std::vector<double>& xs, const std::vec
 std::string ColourMap(double u);
 // The i-th of a set of distinct line colours (cycled).
 std::string Palette(int i);
+// Text escaped for XML / HTML content and attribute values (& < > ").
+std::string Escape(const std::string& s);
 
 struct Style {
   std::string colour = "#1f77b4";

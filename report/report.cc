@@ -17,19 +17,7 @@ namespace {
 
 constexpr double kPi = 3.14159265358979323846;
 
-std::string H(const std::string& s) {   // HTML text escape
-  std::string o;
-  for (char c : s) {
-    switch (c) {
-      case '&': o += "&amp;"; break;
-      case '<': o += "&lt;"; break;
-      case '>': o += "&gt;"; break;
-      case '"': o += "&quot;"; break;
-      default: o += c;
-    }
-  }
-  return o;
-}
+std::string H(const std::string& s) { return plot::Escape(s); }   // HTML text escape
 
 std::string NowUtc() {
   std::time_t t = std::time(nullptr);

@@ -13,7 +13,7 @@
 #include "absl/strings/str_cat.h"
 #include "io/csv.h"
 #include "nlohmann/json.hpp"
-#include "tables/sha256.h"
+#include "io/sha256.h"
 
 namespace fluxcal::server {
 namespace {
@@ -159,7 +159,7 @@ absl::StatusOr<Identity> Authorizer::Authenticate(const grpc::ServerContext& ctx
     if (v.substr(0, kBearer.size()) != kBearer) {
       return absl::UnauthenticatedError("authorization: expected 'Bearer <token>'");
     }
-    const std::string h = tables::Sha256Hex(v.substr(kBearer.size()));
+    const std::string h = io::Sha256Hex(v.substr(kBearer.size()));
     for (const auto& e : keys_.entries) {
       if (e.token_sha256.size() == h.size() && CRYPTO_memcmp(e.token_sha256.data(), h.data(), h.size()) == 0) {
         return Identity{e.name, e.role, "token"};

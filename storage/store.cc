@@ -1,7 +1,5 @@
 #include "storage/store.h"
 
-#include <openssl/evp.h>
-
 #include <map>
 #include <set>
 
@@ -10,6 +8,7 @@
 #include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "io/sha256.h"
 #include "storage/postgres_store.h"
 #include "storage/sqlite_store.h"
 
@@ -49,16 +48,7 @@ std::string CalibrationRowSha256(const std::string& prev_sha256, const Calibrati
   put(absl::StrFormat("%.17g", r.rms_relative));
   put(r.verdict);
   put(r.calibration_json);
-  unsigned char md[EVP_MAX_MD_SIZE];
-  unsigned int n = 0;
-  EVP_Digest(buf.data(), buf.size(), md, &n, EVP_sha256(), nullptr);
-  static constexpr char kHex[] = "0123456789abcdef";
-  std::string out(2 * n, '0');
-  for (unsigned int k = 0; k < n; ++k) {
-    out[2 * k] = kHex[md[k] >> 4];
-    out[2 * k + 1] = kHex[md[k] & 15];
-  }
-  return out;
+  return io::Sha256Hex(buf);
 }
 
 absl::StatusOr<ChainReport> VerifyCalibrationChain(Store& store) {

@@ -11,7 +11,7 @@
 #include "absl/strings/escaping.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_split.h"
-#include "tables/sha256.h"
+#include "io/sha256.h"
 
 namespace fluxcal::tables {
 namespace {
@@ -72,7 +72,7 @@ absl::StatusOr<std::string> KeyId(const std::string& public_pem) {
   unsigned char* der = nullptr;
   const int n = i2d_PUBKEY(k->get(), &der);
   if (n <= 0) return absl::InternalError("OpenSSL: cannot encode public key");
-  std::string id = Sha256Hex(std::string_view(reinterpret_cast<const char*>(der), static_cast<size_t>(n)));
+  std::string id = io::Sha256Hex(std::string_view(reinterpret_cast<const char*>(der), static_cast<size_t>(n)));
   OPENSSL_free(der);
   return id.substr(0, 16);
 }
@@ -92,7 +92,7 @@ absl::StatusOr<std::string> SignDetached(std::string_view data, const std::strin
   if (!pub.ok()) return pub.status();
   auto id = KeyId(*pub);
   if (!id.ok()) return id.status();
-  return absl::StrCat("fluxcal-signature-v1 ed25519\nkey_id ", *id, "\nsha256 ", Sha256Hex(data), "\nsignature ",
+  return absl::StrCat("fluxcal-signature-v1 ed25519\nkey_id ", *id, "\nsha256 ", io::Sha256Hex(data), "\nsignature ",
                       absl::Base64Escape(absl::string_view(reinterpret_cast<const char*>(sig), len)), "\n");
 }
 
@@ -122,7 +122,7 @@ absl::Status VerifyDetached(std::string_view data, std::string_view sig_file, co
   if (key_id != *id) {
     return absl::PermissionDeniedError(absl::StrCat("signed by key ", key_id, ", not by this key (", *id, ")"));
   }
-  if (sha != Sha256Hex(data)) return absl::PermissionDeniedError("the file changed after signing (SHA-256 differs)");
+  if (sha != io::Sha256Hex(data)) return absl::PermissionDeniedError("the file changed after signing (SHA-256 differs)");
   std::unique_ptr<EVP_MD_CTX, CtxFree> ctx(EVP_MD_CTX_new());
   if (EVP_DigestVerifyInit(ctx.get(), nullptr, nullptr, nullptr, k->get()) != 1 ||
       EVP_DigestVerify(ctx.get(), reinterpret_cast<const unsigned char*>(sig.data()), sig.size(),

@@ -15,7 +15,7 @@
 #include "absl/strings/str_join.h"
 #include "absl/strings/str_replace.h"
 #include "nlohmann/json.hpp"
-#include "tables/sha256.h"
+#include "io/sha256.h"
 
 namespace fluxcal::tables {
 namespace {
@@ -424,7 +424,7 @@ void Seal(Table* t) {
   const std::string p = PayloadBytes(*t);
   t->crc32 = static_cast<uint32_t>(::crc32(0L, reinterpret_cast<const Bytef*>(p.data()),
                                            static_cast<uInt>(p.size())));
-  t->sha256 = Sha256Hex(p);
+  t->sha256 = io::Sha256Hex(p);
 }
 
 absl::StatusOr<Format> ParseFormat(const std::string& name) {
@@ -788,7 +788,7 @@ absl::StatusOr<Exported> Export(const Table& t, Format f, const ExportOptions& o
   }
   e.payload_crc32 = t.crc32;
   e.payload_sha256 = t.sha256;
-  e.file_sha256 = Sha256Hex(e.bytes);
+  e.file_sha256 = io::Sha256Hex(e.bytes);
   return e;
 }
 

@@ -23,7 +23,7 @@
 #include "gtest/gtest.h"
 #include "io/csv.h"
 #include "server/auth.h"
-#include "tables/sha256.h"
+#include "io/sha256.h"
 #include "server/service.h"
 #include "simulation/twin.h"
 #include "storage/store.h"
@@ -167,7 +167,7 @@ struct Fixture {
     Keys keys = std::move(extra);
     for (Role r : {Role::kStation, Role::kRelease, Role::kFlasher, Role::kEngineer, Role::kAdmin}) {
       tokens[r] = *NewToken();
-      keys.entries.push_back({std::string(RoleName(r)) + "-1", r, tables::Sha256Hex(tokens[r]), ""});
+      keys.entries.push_back({std::string(RoleName(r)) + "-1", r, io::Sha256Hex(tokens[r]), ""});
     }
     auth = std::make_unique<Authorizer>(keys);
     service->set_authorizer(auth.get());

@@ -16,7 +16,7 @@
 #include "server/validation.h"
 #include "simulation/twin.h"
 #include "storage/store.h"
-#include "tables/sha256.h"
+#include "io/sha256.h"
 #include "absl/strings/str_cat.h"
 
 namespace fluxcal::server {
@@ -206,7 +206,7 @@ TEST_F(HostileTest, LegacyArchiveWithHostileNameWritesNothing) {
   storage::MotorRow m{"IPM-HOST-5", 4, 0.01, 0.01, ""};
   storage::HfPointRow p;
   p.point_id = "p0"; p.id_a = -10; p.iq_a = 10; p.ld_h = 1e-4; p.lq_h = 2e-4; p.reliable = true;
-  ASSERT_TRUE(store_->IngestHfRun(m, "legacy", "recording", {p}, tables::Sha256Hex(legacy), *z,
+  ASSERT_TRUE(store_->IngestHfRun(m, "legacy", "recording", {p}, io::Sha256Hex(legacy), *z,
                                   static_cast<int64_t>(legacy.size())).ok());
   const size_t diag_dirs = CountTempDirs("fluxcal-diag-");
   const grpc::Status s = DiagnoseSerial("IPM-HOST-5");

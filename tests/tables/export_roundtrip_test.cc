@@ -23,7 +23,7 @@
 #include "gtest/gtest.h"
 #include "nlohmann/json.hpp"
 #include "simulation/twin.h"
-#include "tables/sha256.h"
+#include "io/sha256.h"
 #include "tables/tables.h"
 #include "tinyxml2.h"
 
@@ -377,7 +377,7 @@ TEST(ExportRoundTrip, FileChecksumIsSha256sumOfTheFile) {
   for (Format f : {Format::kCsv, Format::kJson, Format::kDcm, Format::kCdfx, Format::kCHeader}) {
     auto e = Export(t, f);
     ASSERT_TRUE(e.ok());
-    EXPECT_EQ(e->file_sha256, Sha256Hex(e->bytes));
+    EXPECT_EQ(e->file_sha256, io::Sha256Hex(e->bytes));
     EXPECT_NE(e->file_sha256, e->payload_sha256);
     if (!have_tool) continue;
     const std::string path = ::testing::TempDir() + "/fluxcal_sum_" + std::to_string(static_cast<int>(f));

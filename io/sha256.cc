@@ -1,8 +1,8 @@
-#include "tables/sha256.h"
+#include "io/sha256.h"
 
 #include <openssl/evp.h>
 
-namespace fluxcal::tables {
+namespace fluxcal::io {
 
 std::string Sha256Hex(std::string_view data) {
   unsigned char md[EVP_MAX_MD_SIZE];
@@ -17,4 +17,4 @@ std::string Sha256Hex(std::string_view data) {
   return out;
 }
 
-}  // namespace fluxcal::tables
+}  // namespace fluxcal::io
