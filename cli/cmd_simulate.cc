@@ -29,6 +29,8 @@ const FlagSpecs kSimulateFlags = {
     {"motor", "FILE", "motor JSON (default the built-in twin motor)"},
     {"plan", "FILE", "test plan JSON: operating points, steady-state rows (default the built-in plan)"},
     {"effects", "K=V,...", "non-ideal effects and noise_a=A (current noise, A per phase; default 0.05)"},
+    {"second-udc-v", "V", "repeat every third locked point at this DC-link voltage, V (separates dead time from "
+                          "the switches' threshold voltage)"},
     {"seed", "N", "random seed, integer (default 1)"},
     {"serial", "S", "motor serial written to the manifest"},
     {"spread", "", "perturb the motor as production spread (from --seed)"},
@@ -42,7 +44,7 @@ int RunSimulate(const std::vector<std::string>& argv) {
   auto out = args->Get("out");
   if (!out || !args->positional.empty()) {
     return Fail("usage: fluxcal simulate [--motor motor.json] [--plan plan.json] "
-                "[--effects k=v,...] [--seed N] [--serial S] [--spread] --out DIR [--json]", 2);
+                "[--effects k=v,...] [--second-udc-v V] [--seed N] [--serial S] [--spread] --out DIR [--json]", 2);
   }
   sim::TwinConfig cfg;
   if (auto m = args->Get("motor")) {
@@ -63,6 +65,12 @@ int RunSimulate(const std::vector<std::string>& argv) {
     auto pl = sim::LoadPlanJson(*p);
     if (!pl.ok()) return Fail(std::string(pl.status().message()));
     plan = *pl;
+  }
+  auto second_udc = args->GetDouble("second-udc-v");
+  if (!second_udc.ok()) return Fail(std::string(second_udc.status().message()), 2);
+  if (second_udc->has_value()) {
+    if (!(**second_udc > 0)) return Fail("flag --second-udc-v: must be positive", 2);
+    plan = sim::WithSecondUdc(std::move(plan), **second_udc);
   }
   const auto t0 = std::chrono::steady_clock::now();
   std::fprintf(stderr, "simulate: %zu points, %zu steady-state rows, effects: %s\n", plan.points.size(),
@@ -95,7 +103,7 @@ int RunSimulate(const std::vector<std::string>& argv) {
 
 FLUXCAL_REGISTER_COMMAND("simulate", "simulate an EOL run with the digital twin, write a recording set",
                          RunSimulate,
-                         "fluxcal simulate [--motor motor.json] [--plan plan.json] [--effects k=v,...] [--seed N] [--serial S] [--spread] --out DIR [--json]",
+                         "fluxcal simulate [--motor motor.json] [--plan plan.json] [--effects k=v,...] [--second-udc-v V] [--seed N] [--serial S] [--spread] --out DIR [--json]",
                          kSimulateFlags);
 
 }  // namespace fluxcal::cli

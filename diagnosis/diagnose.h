@@ -27,11 +27,21 @@ struct Mismatch {
   double significance_sigma = 0;
 };
 
+// An effect the data cannot tell apart from a finding (same signature in
+// every observable of the set), with the parameters it would have and why
+// the set does not separate them (docs/diagnosis.md).
+struct AlternativeExplanation {
+  std::string effect;
+  std::map<std::string, double> parameters;
+  std::string why;
+};
+
 struct Finding {
   std::string effect;
   std::string explanation;
   std::map<std::string, double> parameters, parameter_std;
   double residual_rms_before = 0, residual_rms_after = 0, delta_bic = 0;
+  std::vector<AlternativeExplanation> alternatives;
 };
 
 struct ModelSummary {

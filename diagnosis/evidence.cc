@@ -49,6 +49,7 @@ double ReplayResidual(const io::RecordingSet& set, const Model& m, const Params&
   opt.effects.order = ptr[kHarm][0] != 0.0 ? harm_order : 0;
   opt.effects.amplitude_h = m.Harm(ptr.data());
   opt.effects.udc_sense_gain = m.UdcGain(ptr.data());
+  opt.effects.threshold_v = m.Vth(ptr.data());
   for (int x = 0; x < 3; ++x) {
     double* dr[3] = {&opt.effects.dr_a_ohm, &opt.effects.dr_b_ohm, &opt.effects.dr_c_ohm};
     *dr[x] = 2 * std::real(m.RImb(ptr.data()) * std::polar(1.0, -2 * kPhasePhi[x]));

@@ -32,6 +32,10 @@ using sim::kSqrt3;
 constexpr double kL0 = 1e-4;    // inductance scale of the surface polynomials [H]
 constexpr double kI0 = 100.0;   // current scale [A]
 constexpr double kIth = 1.0;    // soft-sign current of the dead-time model [A]
+// Two DC-link voltages differing by more than 10 %: the dead time's error
+// (proportional to Udc) and a switch threshold (not) part by at least 10 %
+// of their size, several times the held voltages' noise at EOL currents.
+constexpr double kTwoUdcRatio = 1.1;
 
 inline double IPow(double x, int n) {
   double r = 1.0;
@@ -42,9 +46,9 @@ inline double IPow(double x, int n) {
 // ---- Parameter blocks (scaled to order one) -----------------------------
 enum Block {
   kBase, kCross, kDead, kRs, kRhf, kOffset, kGain, kPsi, kDelay, kHarm, kSensorOffset, kUdcGain, kRImb, kDrift,
-  kNumBlocks
+  kVth, kNumBlocks
 };
-constexpr int kBlockSize[kNumBlocks] = {10, 8, 1, 1, 1, 1, 3, 1, 1, 1, 2, 1, 2, 1};
+constexpr int kBlockSize[kNumBlocks] = {10, 8, 1, 1, 1, 1, 3, 1, 1, 1, 2, 1, 2, 1, 1};
 // Fit scales of the effect blocks, from the catalogue (simulation/effects.h):
 // value = neutral + scale x block value (psi_pm relative to its nominal).
 const double kScaleDead = sim::EffectParam("dead_time", "dead_time_s").fit_scale;
@@ -59,6 +63,7 @@ const double kScaleSensorOffset = sim::EffectParam("current_sensor_offset", "off
 const double kScaleUdcGain = sim::EffectParam("dc_link_sense_gain", "udc_sense_gain").fit_scale;
 const double kScaleRImb = sim::EffectParam("phase_resistance_imbalance", "dr_a_ohm").fit_scale;
 const double kScaleDrift = sim::EffectParam("stator_temperature_drift", "winding_temp_rise_k").fit_scale;
+const double kScaleVth = sim::EffectParam("inverter_voltage_drop", "threshold_v").fit_scale;
 // Cross terms x^a y^b of the co-energy (a >= 1, b >= 2 even): they vanish
 // with iq = 0 or id = 0 as the machine's symmetry requires.
 constexpr int kCrossTerms[8][2] = {{1, 2}, {2, 2}, {3, 2}, {1, 4}, {2, 4}, {4, 2}, {5, 2}, {3, 4}};
@@ -74,6 +79,7 @@ struct HfObs {
   std::string point;
   double id_a, iq_a, w_e, theta, speed_rpm;
   Complex i0, i1, v_eff, dead_hf, dead_neg;
+  Complex dead_hf_v, dead_neg_v;   // the same per volt of switch threshold (no Udc / Ts factor)
   Complex mean_e2;   // window mean of e^{-j 2 theta}: what a stationary-frame
                      // component at -w_i contributes to the I1 projection   // dead-time HF voltage error per second of Td, on the
                                             // positive- and negative-sequence bases
@@ -96,11 +102,14 @@ struct DcObs {
   double id_a, iq_a, theta;
   double progress = 0;
   Complex u, dead;                  // dead: command change per second of dead time
+  Complex dead_v;                   // the same per volt of switch threshold
+  double udc_v = 0;                 // mean recorded DC-link voltage of the point
+  bool second_udc = false;          // recorded at the set's second DC-link voltage
   double sigma;
 };
 struct SsObs {
   double id_a, iq_a, speed_rpm, w_e;
-  Complex u, dead;
+  Complex u, dead, dead_v;
   double sigma, scale;
   bool has_torque;
   double torque, torque_sigma;
@@ -117,6 +126,10 @@ struct Model {
   std::vector<SsObs> ss;
   int harm_order = 6;
   double dc_scale_v = 0.1, torque_scale_nm = 0.1;   // RelativeRms
+  // Highest over lowest mean DC-link voltage of the held (locked) points:
+  // above kTwoUdcRatio the dead time and a switch threshold are separable.
+  double udc_ratio = 1.0;
+  double udc_nom_v = 0.0;   // the manifest's drive.udc_v
 
   // Differential inductance of the surfaces: base self-axis polynomials
   // Ldd(id), Lqq(iq) plus the cross terms of W'_x = L0 I0^2 sum c x^a y^b.
@@ -155,6 +168,9 @@ struct Model {
   }
   double Rs(const double* const* p) const { return rs_nom + kScaleRs * p[kRs][0]; }
   double DeadTime(const double* const* p) const { return dead_nom_s + kScaleDead * p[kDead][0]; }
+  // inverter_voltage_drop: the switches' threshold V_th (its slope r_on is
+  // in series with Rs and lives in Rs(p); docs/diagnosis.md).
+  double Vth(const double* const* p) const { return kScaleVth * p[kVth][0]; }
   double Offset(const double* const* p) const { return kScaleOffset * p[kOffset][0]; }
   double Delay(const double* const* p) const { return kScaleDelay * p[kDelay][0]; }
   double RHf(const double* const* p) const { return kScaleRhf * p[kRhf][0]; }
@@ -225,8 +241,8 @@ struct Model {
     // Applied HF voltage: extra delay rotates it; an uncompensated dead time
     // subtracts its HF component (computed from the recorded currents).
     // A DC-link sense gain scales the applied injection by 1 / gain.
-    Complex v = o.v_eff * StaircaseDelay(w_i, Delay(p)) / UdcGain(p) - DeadTime(p) * o.dead_hf;
-    Complex vn = -DeadTime(p) * o.dead_neg;
+    Complex v = o.v_eff * StaircaseDelay(w_i, Delay(p)) / UdcGain(p) - DeadTime(p) * o.dead_hf - Vth(p) * o.dead_hf_v;
+    Complex vn = -DeadTime(p) * o.dead_neg - Vth(p) * o.dead_neg_v;
     const int hk = HarmIndex(harm_order);
     if (!o.locked && p[kHarm][0] != 0.0 && hk >= 0) {
       // At speed the angle-dependent flux h cos(n theta) i of the fundamental
@@ -273,7 +289,7 @@ struct Model {
     const Complex it = TrueCurrent(p, Complex(o.id_a, o.iq_a), o.theta);
     // Unequal phase resistances add r2 e^{-j 2 theta} conj(i) in dq.
     const Complex imb = RImb(p) * std::polar(1.0, -2 * o.theta) * std::conj(it);
-    return UdcGain(p) * (RsAt(p, o.progress) * it + imb + DeadTime(p) * o.dead);
+    return UdcGain(p) * (RsAt(p, o.progress) * it + imb + DeadTime(p) * o.dead + Vth(p) * o.dead_v);
   }
   Complex PredictSs(const double* const* p, const SsObs& o) const {
     const Complex rot = std::polar(1.0, Offset(p));
@@ -282,7 +298,8 @@ struct Model {
     Flux(p, it.real(), it.imag(), &pd, &pq);
     const double rs = RsAt(p, 1.0);   // recorded after the points: the winding is warm
     const Complex u_true(rs * it.real() - o.w_e * pq, rs * it.imag() + o.w_e * pd);
-    return UdcGain(p) * (std::conj(rot) * u_true * std::polar(1.0, o.w_e * Delay(p)) + DeadTime(p) * o.dead);
+    return UdcGain(p) * (std::conj(rot) * u_true * std::polar(1.0, o.w_e * Delay(p)) + DeadTime(p) * o.dead +
+                         Vth(p) * o.dead_v);
   }
   double PredictTorque(const double* const* p, const SsObs& o) const {
     const Complex it = std::polar(1.0, Offset(p)) * Complex(o.id_a, o.iq_a) / M1(p);
@@ -316,7 +333,10 @@ struct FitOut {
 
 // ---- refit.cc ---------------------------------------------------------------
 // Observation kinds, as the cost functors number them.
-enum Kind { kHfKind = 0, kDcKind = 1, kSsKind = 2, kTorqueKind = 3 };
+// kDcSecondUdcKind is a region of kDcKind, not a residual kind: the held DC
+// voltages of the points recorded at the second DC-link voltage, held out
+// as a whole (Solve) to test an explanation of the inverter's voltage error.
+enum Kind { kHfKind = 0, kDcKind = 1, kSsKind = 2, kTorqueKind = 3, kDcSecondUdcKind = 4 };
 const char* KindSignal(int kind);
 // Relative residual RMS over every observable / of one kind (dimensionless).
 double RelativeRms(const Model& m, const Params& p);

@@ -52,6 +52,7 @@ absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident:
   const double f_pwm = mf.drive.f_pwm_hz.value_or(fs);
   m.ts = 1.0 / f_pwm;
   const double udc_nom = mf.drive.udc_v.value_or(0.0);
+  m.udc_nom_v = udc_nom;
   if (mf.injection) m.w_i = 2 * kPi * mf.injection->frequency_hz;
   auto r = ident::IdentifySet(set, {});
   if (!r.ok()) return r.status();
@@ -87,15 +88,21 @@ absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident:
     o.scale = std::abs(o.i0);
     // Dead-time signatures from the recorded phase currents.
     const size_t n = lsq->samples_used;
-    Complex hf = 0, neg = 0, dc = 0;
+    Complex hf = 0, neg = 0, dc = 0, hf_v = 0, neg_v = 0, dc_v = 0;
+    double udc_sum = 0;
     std::vector<Complex> per_period;
     const size_t period = static_cast<size_t>(std::llround(fs / mf.injection->frequency_hz));
     Complex acc_u = 0;
     for (size_t s = 0; s < n; ++s) {
       const double udc = std::isnan(w.udc_v[s]) ? udc_nom : w.udc_v[s];
       const Complex e = DeadTimeInterval(w, s, udc, m.ts);
+      const Complex e_v = DeadTimeInterval(w, s, m.ts, m.ts);   // per volt of threshold
+      udc_sum += udc;
       const double t = static_cast<double>(s) / fs;
       hf += e * std::polar(1.0, -m.w_i * t);
+      hf_v += e_v * std::polar(1.0, -m.w_i * t);
+      neg_v += e_v * std::polar(1.0, m.w_i * t - 2 * w.theta_e_rad[s]);
+      dc_v += e_v * std::polar(1.0, -w.theta_e_rad[s]);
       o.mean_e2 += std::polar(1.0, -2 * w.theta_e_rad[s]);
       if (!o.locked) {
         for (int h = 0; h < 4; ++h) {
@@ -120,6 +127,8 @@ absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident:
     }
     o.dead_hf = ident::EffectiveVoltage(hf / static_cast<double>(n), m.w_i, f_pwm) * std::polar(1.0, m.w_i * m.ts);
     o.dead_neg = ident::EffectiveVoltage(neg / static_cast<double>(n), w2, f_pwm) * std::polar(1.0, w2 * m.ts);
+    o.dead_hf_v = ident::EffectiveVoltage(hf_v / static_cast<double>(n), m.w_i, f_pwm) * std::polar(1.0, m.w_i * m.ts);
+    o.dead_neg_v = ident::EffectiveVoltage(neg_v / static_cast<double>(n), w2, f_pwm) * std::polar(1.0, w2 * m.ts);
     m.hf.push_back(o);
     if (o.locked && per_period.size() >= 4) {
       DcObs d;
@@ -135,6 +144,8 @@ absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident:
       var /= static_cast<double>(per_period.size() - 1) * per_period.size();
       d.u = mean;
       d.dead = dc / static_cast<double>(n);
+      d.dead_v = dc_v / static_cast<double>(n);
+      d.udc_v = udc_sum / static_cast<double>(n);
       // Batch-means noise plus 5 mV: the command's resolution after the
       // bench's own (nominal) dead-time compensation and quantisation.
       d.sigma = std::sqrt(var + 0.005 * 0.005);
@@ -147,15 +158,17 @@ absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident:
     o.w_e = row.speed_rpm * m.pole_pairs * 2 * kPi / 60;
     o.u = sim::ZohGain(o.w_e, m.ts) * Complex(row.ud_ref_v, row.uq_ref_v);
     // Fundamental of the dead-time error over one electrical revolution.
-    Complex dead = 0;
+    Complex dead = 0, dead_v = 0;
     const double mag = std::hypot(o.id_a, o.iq_a), gam = std::atan2(o.iq_a, o.id_a);
     for (int s = 0; s < 360; ++s) {
       const double th = 2 * kPi * s / 360;
       const double ia = mag * std::cos(th + gam), ib = mag * std::cos(th + gam - 2 * kPi / 3),
                    ic = mag * std::cos(th + gam + 2 * kPi / 3);
       dead += DeadTimeUnit(ia, ib, ic, udc_nom, m.ts) * std::polar(1.0, -th);
+      dead_v += DeadTimeUnit(ia, ib, ic, m.ts, m.ts) * std::polar(1.0, -th);
     }
     o.dead = dead / 360.0;
+    o.dead_v = dead_v / 360.0;
     o.scale = std::abs(o.u);
     // 20 mV and 0.3 % of the voltage: averaged commands, nominal Rs and
     // the bench's delay compensation.
@@ -170,6 +183,22 @@ absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident:
   for (const auto& d : m.dc) dc2 += std::norm(d.u);
   for (const auto& o : m.ss) if (o.has_torque) { t2 += o.torque * o.torque; ++nt; }
   if (!m.dc.empty()) m.dc_scale_v = std::max(0.01, std::sqrt(dc2 / m.dc.size()));
+  double udc_lo = 0, udc_hi = 0;
+  for (const auto& d : m.dc) {
+    if (!(d.udc_v > 0)) continue;
+    udc_lo = udc_lo > 0 ? std::min(udc_lo, d.udc_v) : d.udc_v;
+    udc_hi = std::max(udc_hi, d.udc_v);
+  }
+  if (udc_lo > 0) m.udc_ratio = udc_hi / udc_lo;
+  if (m.udc_ratio > kTwoUdcRatio) {
+    // The set's main DC-link voltage is its median point's; points more than
+    // 5 % away were recorded at the second one.
+    std::vector<double> u;
+    for (const auto& d : m.dc) if (d.udc_v > 0) u.push_back(d.udc_v);
+    std::nth_element(u.begin(), u.begin() + u.size() / 2, u.end());
+    const double main_udc = u[u.size() / 2];
+    for (auto& d : m.dc) d.second_udc = d.udc_v > 0 && std::abs(d.udc_v - main_udc) > 0.05 * main_udc;
+  }
   if (nt) m.torque_scale_nm = std::max(0.1, std::sqrt(t2 / nt));
   return m;
 }

@@ -78,7 +78,8 @@ double RelativeRms(const Model& m, const Params& p) {
 // Observation kinds, as ObservationResidual numbers them.
 
 const char* KindSignal(int kind) {
-  static const char* names[4] = {"hf_current", "dc_voltage", "steady_state_voltage", "torque"};
+  static const char* names[5] = {"hf_current", "dc_voltage", "steady_state_voltage", "torque",
+                                 "dc_voltage_second_udc"};
   return names[kind];
 }
 
@@ -111,6 +112,7 @@ FitOut Solve(const Model& m, const Params& start, const std::vector<Block>& free
   for (auto& x : out.p.b) blocks.push_back(x.data());
   auto add = [&](int kind, int index) {
     if (kind == held_out) return;
+    if (held_out == kDcSecondUdcKind && kind == kDcKind && m.dc[index].second_udc) return;
     auto* c = new ceres::DynamicNumericDiffCostFunction<ObservationResidual>(new ObservationResidual(&m, kind, index));
     for (int k = 0; k < kNumBlocks; ++k) c->AddParameterBlock(kBlockSize[k]);
     c->SetNumResiduals(ObservationResidual::NumResiduals(kind));

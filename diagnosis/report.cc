@@ -37,11 +37,17 @@ nlohmann::json ToJson(const DiagnosisReport& r) {
   }
   j["findings"] = json::array();
   for (const auto& f : r.findings) {
+    json alternatives = json::array();
+    for (const auto& a : f.alternatives) {
+      alternatives.push_back({{"effect", a.effect},
+                              {"parameters", a.parameters.empty() ? json::object() : json(a.parameters)},
+                              {"why", a.why}});
+    }
     j["findings"].push_back({{"effect", f.effect}, {"explanation", f.explanation},
                              {"parameters", f.parameters.empty() ? json::object() : json(f.parameters)},
                              {"parameter_std", f.parameter_std.empty() ? json::object() : json(f.parameter_std)},
                              {"residual_rms_before", f.residual_rms_before}, {"residual_rms_after", f.residual_rms_after},
-                             {"delta_bic", f.delta_bic}});
+                             {"delta_bic", f.delta_bic}, {"alternatives", alternatives}});
   }
   j["final"] = {{"model", r.final_model.model}, {"residual_rms", r.final_model.residual_rms}, {"bic", r.final_model.bic}};
   // Compatible extensions (docs/diagnosis.md): what is still significant
@@ -101,6 +107,11 @@ std::string ToText(const DiagnosisReport& r) {
     s += absl::StrFormat("%zu. %s: %s. %s Residual %.3g %% -> %.3g %% (delta BIC %.1f).\n", k + 1, f.effect,
                          f.explanation, ps.empty() ? "" : absl::StrCat("Fitted ", absl::StrJoin(ps, ", "), "."),
                          100 * f.residual_rms_before, 100 * f.residual_rms_after, f.delta_bic);
+    for (const auto& a : f.alternatives) {
+      std::vector<std::string> as;
+      for (const auto& [name, v] : a.parameters) as.push_back(absl::StrFormat("%s = %.4g", name, v));
+      s += absl::StrFormat("   Equally: %s (%s): %s.\n", a.effect, absl::StrJoin(as, ", "), a.why);
+    }
   }
   if (!r.findings.empty()) {
     s += absl::StrFormat("With %s the residual is %.3g %% (%.1fx lower).\n", r.final_model.model,

@@ -32,10 +32,35 @@ Finding Describe(const Candidate& c, const Model& m, const FitOut& f) {
       // Effective dead time acting (declared uncompensated part included).
       out.parameters["dead_time_s"] = m.DeadTime(p);
       out.parameter_std["dead_time_s"] = kScaleDead * sd(kDead, 0);
+      if (m.udc_ratio <= kTwoUdcRatio && m.udc_nom_v > 0) {
+        // Per phase the error is (Td/Ts) Udc + V_th times the same soft
+        // sign: at one Udc the finding's extra Td is a threshold of
+        // (Td - Td_nominal) Udc / Ts just as well.
+        out.alternatives.push_back(
+            {"inverter_voltage_drop",
+             {{"threshold_v", (m.DeadTime(p) - m.dead_nom_s) * m.udc_nom_v / m.ts}},
+             "the held points share one DC-link voltage, and a switch threshold has the dead time's current-sign "
+             "pattern there; points repeated at a second Udc (fluxcal simulate --second-udc-v) separate them: the "
+             "dead time's error scales with Udc, the threshold does not"});
+      }
       break;
     case kRs:
       out.parameters["rs_ohm"] = m.Rs(p);
       out.parameter_std["rs_ohm"] = kScaleRs * sd(kRs, 0);
+      if (m.Rs(p) > m.rs_nom) {
+        // v_x = (Rs + r_on) i_x + ... in the DC, HF and steady-state
+        // responses alike: one device of each leg always carries the phase
+        // current.
+        out.alternatives.push_back(
+            {"inverter_voltage_drop",
+             {{"slope_ohm", m.Rs(p) - m.rs_nom}},
+             "the switches' on-state slope r_on is in series with the winding in every response seen through the "
+             "inverter's commands; a four-wire resistance measured at the motor terminals separates them"});
+      }
+      break;
+    case kVth:
+      out.parameters["threshold_v"] = m.Vth(p);
+      out.parameter_std["threshold_v"] = kScaleVth * sd(kVth, 0);
       break;
     case kRhf:
       out.parameters["r_hf_ohm"] = m.RHf(p);

@@ -226,6 +226,8 @@ PlantModel MakePlant(const TwinConfig& cfg, double temperature_c) {
   m.dr_a_ohm = cfg.effects.dr_a_ohm;
   m.dr_b_ohm = cfg.effects.dr_b_ohm;
   m.dr_c_ohm = cfg.effects.dr_c_ohm;
+  m.threshold_v = cfg.effects.threshold_v;
+  m.slope_ohm = cfg.effects.slope_ohm;
   return m;
 }
 
@@ -303,6 +305,22 @@ Plan DefaultPlan() {
   return plan;
 }
 
+Plan WithSecondUdc(Plan plan, double udc_v, int every) {
+  std::vector<PlanPoint> out;
+  int locked = 0;
+  for (const auto& p : plan.points) {
+    out.push_back(p);
+    if (p.speed_rpm != 0.0) continue;
+    if (locked++ % std::max(1, every) != 0) continue;
+    PlanPoint q = p;
+    q.id = p.id + "u";
+    q.udc_v = udc_v;
+    out.push_back(q);
+  }
+  plan.points = std::move(out);
+  return plan;
+}
+
 absl::StatusOr<SimulationResult> Simulate(const TwinConfig& cfg, const Plan& plan) {
   if (!io::IsValidSerial(cfg.serial)) {
     return absl::InvalidArgumentError(absl::StrCat("field 'serial': illegal serial '", cfg.serial, "'"));
@@ -324,6 +342,10 @@ absl::StatusOr<SimulationResult> Simulate(const TwinConfig& cfg, const Plan& pla
   for (size_t k = 0; k < plan.points.size(); ++k) {
     const auto& pt = plan.points[k];
     PlantModel m = MakePlant(cfg, pt.temperature_c);
+    if (pt.udc_v > 0) {
+      m.udc_v = pt.udc_v;
+      m.u_max_v = pt.udc_v / kSqrt3;
+    }
     // stator_temperature_drift: the winding warms linearly over the locked
     // and rotating points in plan order, then stays warm (steady state).
     m.rs_ohm *= 1.0 + kCopperAlphaPerK * cfg.effects.winding_temp_rise_k *

@@ -101,6 +101,24 @@ const std::vector<EffectRow>& EffectCatalogue() {
        "warmed during the test",
        {{"winding_temp_rise_k", "K", 0.0, 1.0, 5.0}},
        false},
+      // The switches' on-state voltage: a threshold V_th sign(i_x) (IGBT
+      // collector-emitter knee, diode forward voltage) plus a slope r_on i_x,
+      // per phase, opposing the current. With one DC-link voltage the
+      // threshold has exactly the dead time's current-sign pattern
+      // (Td = V_th Ts / Udc); the dead-time error scales with Udc and the
+      // threshold does not, so a plan that repeats locked points at a second
+      // Udc separates them. The slope is in series with Rs in every response
+      // seen through the inverter's commands (docs/diagnosis.md): diagnosis
+      // names it as an alternative of stator_resistance, never alone.
+      // 0.05 V: the dead time's own floor (0.1 us) at 50 V and 10 kHz.
+      {"inverter_voltage_drop",
+       "inverter on-state voltage drop: threshold V_th sign(i_x) plus slope r_on i_x per phase",
+       "the voltage that holds each standstill current departs from Rs i by a current-sign pattern that does not "
+       "scale with the DC-link voltage (the points repeated at a second Udc show the same step): the inverter's "
+       "switches drop a threshold voltage (IGBT knee / diode forward voltage), not a dead time",
+       {{"threshold_v", "V", 0.0, 0.1, 0.05, FloorKind::kAbsolute, 0.0},
+        {"slope_ohm", "ohm", 0.0, 1e-3, 1e-3, FloorKind::kAbsolute, 0.0}},
+       false},
   };
   return rows;
 }
@@ -137,7 +155,8 @@ std::map<std::string, double*> DoubleFields(Effects* e) {
           {"offset_a_a", &e->offset_a_a},     {"offset_b_a", &e->offset_b_a},
           {"offset_c_a", &e->offset_c_a},     {"udc_sense_gain", &e->udc_sense_gain},
           {"dr_a_ohm", &e->dr_a_ohm},         {"dr_b_ohm", &e->dr_b_ohm},
-          {"dr_c_ohm", &e->dr_c_ohm},         {"winding_temp_rise_k", &e->winding_temp_rise_k}};
+          {"dr_c_ohm", &e->dr_c_ohm},         {"winding_temp_rise_k", &e->winding_temp_rise_k},
+          {"threshold_v", &e->threshold_v},   {"slope_ohm", &e->slope_ohm}};
 }
 
 }  // namespace
@@ -191,6 +210,7 @@ std::map<std::string, double> EffectParameters(const Effects& e, std::string_vie
     return {{"dr_a_ohm", e.dr_a_ohm}, {"dr_b_ohm", e.dr_b_ohm}, {"dr_c_ohm", e.dr_c_ohm}};
   }
   if (effect == "stator_temperature_drift") return {{"winding_temp_rise_k", e.winding_temp_rise_k}};
+  if (effect == "inverter_voltage_drop") return {{"threshold_v", e.threshold_v}, {"slope_ohm", e.slope_ohm}};
   return {};
 }
 

@@ -74,6 +74,7 @@ struct Effects {
   double udc_sense_gain = 1.0;   // dc_link_sense_gain: measured Udc / true Udc
   double dr_a_ohm = 0.0, dr_b_ohm = 0.0, dr_c_ohm = 0.0;   // phase_resistance_imbalance
   double winding_temp_rise_k = 0.0;   // stator_temperature_drift: rise over the locked points
+  double threshold_v = 0.0, slope_ohm = 0.0;   // inverter_voltage_drop: V_th sign(i_x) + r_on i_x per phase
 };
 
 // Parses "dead_time_s=2e-6,offset_rad=0.05,..." (keys: Effects' fields plus

@@ -3,8 +3,8 @@
 namespace fluxcal::sim {
 
 void DeadTimeError(const PlantModel& m, double ia, double ib, double ic, double* ua, double* ub) {
-  if (m.dead_time_s == 0.0) { *ua = *ub = 0; return; }
-  const double k = -(m.dead_time_s / m.ts_s) * m.udc_v;
+  if (m.dead_time_s == 0.0 && m.threshold_v == 0.0) { *ua = *ub = 0; return; }
+  const double k = -((m.dead_time_s / m.ts_s) * m.udc_v + m.threshold_v);
   const double ea = k * std::tanh(ia / m.dead_time_i_th_a);
   const double eb = k * std::tanh(ib / m.dead_time_i_th_a);
   const double ec = k * std::tanh(ic / m.dead_time_i_th_a);
@@ -23,8 +23,10 @@ void Derivative(const PlantModel& m, const State& x, double th, double we, doubl
   const Phases ph = InverseClarke(ial, ibe);
   double eal, ebe;
   DeadTimeError(m, ph.a, ph.b, ph.c, &eal, &ebe);
-  // Per-phase extra resistance: its drop dr_x i_x, back in alpha-beta.
-  const AlphaBeta dr = Clarke(m.dr_a_ohm * ph.a, m.dr_b_ohm * ph.b, m.dr_c_ohm * ph.c);
+  // Per-phase extra resistance (a bad joint, the switches' slope r_on): its
+  // drop (dr_x + r_on) i_x, back in alpha-beta.
+  const AlphaBeta dr = Clarke((m.dr_a_ohm + m.slope_ohm) * ph.a, (m.dr_b_ohm + m.slope_ohm) * ph.b,
+                              (m.dr_c_ohm + m.slope_ohm) * ph.c);
   const double ua = m.voltage_gain * ual + eal - dr.alpha, ub = m.voltage_gain * ube + ebe - dr.beta;
   const double ud = c * ua + s * ub, uq = -s * ua + c * ub;
   *dpsd = ud - m.rs_ohm * i.d - m.r_hf_ohm * (i.d - x.lpd) + we * x.psq;

@@ -35,6 +35,10 @@ struct PlantModel {
   double voltage_gain = 1.0;
   // phase_resistance_imbalance: extra resistance per phase (a bad joint).
   double dr_a_ohm = 0, dr_b_ohm = 0, dr_c_ohm = 0;
+  // inverter_voltage_drop: the conducting switch's threshold V_th sign(i_x)
+  // (in DeadTimeError: the same soft sign as the dead time) and its slope
+  // r_on i_x (in Derivative: a series resistance in every phase).
+  double threshold_v = 0, slope_ohm = 0;
 
   // psi(i, theta) including the spatial-harmonic term amp cos(n theta) i.
   void Flux(double id, double iq, double th, double* pd, double* pq) const {
@@ -85,9 +89,11 @@ struct PlantModel {
   }
 };
 
-// Inverter voltage error of an uncompensated dead time, per phase
-// -(Td/Ts) Udc tanh(i_x / i_th), common mode removed, in alpha-beta
-// (amplitude-invariant Clarke). The paper's eq. (9) is its Fourier series.
+// Inverter voltage error of an uncompensated dead time and of the switches'
+// threshold voltage, per phase -((Td/Ts) Udc + V_th) tanh(i_x / i_th),
+// common mode removed, in alpha-beta (amplitude-invariant Clarke). The
+// paper's eq. (9) is its Fourier series. The dead time's part scales with
+// Udc, the threshold's does not: what separates them (docs/simulation.md).
 void DeadTimeError(const PlantModel& m, double ia, double ib, double ic, double* ua, double* ub);
 
 struct State {

@@ -35,7 +35,21 @@ PlantModel ReplayPlant(const MagneticModel& model, double temperature_c, double 
   m.dr_a_ohm = e.dr_a_ohm;
   m.dr_b_ohm = e.dr_b_ohm;
   m.dr_c_ohm = e.dr_c_ohm;
+  m.threshold_v = e.threshold_v;
+  m.slope_ohm = e.slope_ohm;
   return m;
+}
+
+// The true DC-link voltage of one recorded point: the mean of its udc_v
+// column (a plan may repeat points at a second Udc) undone by the sense gain
+// the replay assumes; the manifest's drive.udc_v where the column is empty.
+double PointUdc(const io::Waveform& w, double manifest_udc_v, const Effects& e) {
+  double sum = 0;
+  size_t n = 0;
+  for (double u : w.udc_v) {
+    if (std::isfinite(u)) { sum += u; ++n; }
+  }
+  return n > 0 ? sum / static_cast<double>(n) / e.udc_sense_gain : manifest_udc_v;
 }
 
 }  // namespace
@@ -57,7 +71,7 @@ absl::StatusOr<std::vector<ReplayPoint>> ReplayOpenLoop(const io::RecordingSet& 
     const size_t n = w.size();
     // The recorded commands are already limited: no modulator limit.
     const PlantModel m = ReplayPlant(model, mf.points[p].temperature_c.value_or(25.0), opt.rs_ohm, opt.effects,
-                                     mf.drive.udc_v.value_or(50.0), ts, 1e9);
+                                     PointUdc(w, mf.drive.udc_v.value_or(50.0), opt.effects), ts, 1e9);
     auto true_theta = [&](size_t k) { return w.theta_e_rad[k] - opt.effects.offset_rad; };
     // Unwrapped angle and its per-sample rate (the plant needs w_e).
     std::vector<double> th(n);
@@ -174,8 +188,9 @@ absl::StatusOr<std::vector<ReplayPoint>> ReplayClosedLoop(const io::RecordingSet
     const auto& pt = mf.points[p];
     const size_t n = w.size();
     if (n < 3) return absl::InvalidArgumentError("replay: too few samples");
-    const PlantModel m = ReplayPlant(model, pt.temperature_c.value_or(25.0), opt.rs_ohm, opt.effects,
-                                     cfg.drive.udc_v, ts, cfg.drive.udc_v / kSqrt3);
+    const double udc_v = PointUdc(w, cfg.drive.udc_v, opt.effects);
+    const PlantModel m = ReplayPlant(model, pt.temperature_c.value_or(25.0), opt.rs_ohm, opt.effects, udc_v, ts,
+                                     udc_v / kSqrt3);
     // Align the run's record window with the recording: the plant's angle
     // follows the recorded one less the offset effect, and the
     // injection has the recorded phase at its first sample.

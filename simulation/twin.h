@@ -75,6 +75,7 @@ struct PlanPoint {
   double id_ref_a = 0, iq_ref_a = 0, speed_rpm = 0;
   double theta_e_rad = 0.0;            // locked rotor angle (speed = 0) / start angle
   double temperature_c = 25.0;
+  double udc_v = 0.0;                  // DC-link voltage of this point; 0: the drive's
 };
 struct PlanSteadyState {
   double id_ref_a = 0, iq_ref_a = 0, speed_rpm = 1000, temperature_c = 25.0;
@@ -90,6 +91,14 @@ struct Plan {
 // points at spread angles), rotating points at 200..1000 rpm, and steady
 // state rows at 1000..2000 rpm.
 Plan DefaultPlan();
+
+// `plan` with every `every`-th locked point repeated right after itself at
+// DC-link voltage `udc_v` (ids suffixed "u"). The dead-time voltage error
+// scales with Udc and a switch's threshold voltage does not: the repeated
+// points are what separates dead_time from inverter_voltage_drop
+// (docs/diagnosis.md). Interleaved, not appended, so that a winding warming
+// over the test does not pass for a change with Udc.
+Plan WithSecondUdc(Plan plan, double udc_v, int every = 3);
 
 struct TwinConfig {
   std::string serial = "IPM-SIM-000001";

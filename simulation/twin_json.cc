@@ -157,8 +157,11 @@ absl::StatusOr<Plan> LoadPlanJson(const std::string& path) {
         auto st = ReadNumbers(path, absl::StrCat("points[", n, "]."), rest,
                               {{"id_ref_a", &p.id_ref_a}, {"iq_ref_a", &p.iq_ref_a},
                                {"speed_rpm", &p.speed_rpm}, {"theta_e_rad", &p.theta_e_rad},
-                               {"temperature_c", &p.temperature_c}});
+                               {"temperature_c", &p.temperature_c}, {"udc_v", &p.udc_v}});
         if (!st.ok()) return st;
+        if (p.udc_v < 0) {
+          return absl::InvalidArgumentError(absl::StrCat(path, ": field 'points[", n, "].udc_v': must be positive (0 or absent: the drive's)"));
+        }
         plan.points.push_back(p);
       }
     } else if (k == "steady_state") {

@@ -123,6 +123,38 @@ TEST(Plant, DeadTimeErrorAtLargeCurrents) {
   EXPECT_NEAR(ub, 0.0, 1e-9);
 }
 
+// A switch threshold adds V_th to each phase's error, independent of Udc:
+// at large currents alpha = -4 (k + V_th) / 3; halving Udc halves only k.
+TEST(Plant, ThresholdVoltageDoesNotScaleWithUdc) {
+  PlantModel m;
+  m.dead_time_s = 2e-6;
+  m.threshold_v = 0.8;
+  m.ts_s = 1e-4;
+  for (double udc : {50.0, 25.0}) {
+    m.udc_v = udc;
+    double ua, ub;
+    DeadTimeError(m, 50, -25, -25, &ua, &ub);
+    const double k = 2e-6 / 1e-4 * udc;
+    EXPECT_NEAR(ua, -4 * (k + 0.8) / 3, 1e-9) << udc;
+    EXPECT_NEAR(ub, 0.0, 1e-9);
+  }
+  // The slope is a series resistance in every phase: at steady state
+  // u = (Rs + r_on) i holds the current (derivative zero).
+  PlantModel r;
+  ToArray(SaturationParams{}, r.p);
+  r.rs_ohm = 0.01;
+  r.r_hf_ohm = 0;
+  r.slope_ohm = 0.004;
+  double pd, pq;
+  r.Flux(30, 40, 0.0, &pd, &pq);
+  State x{pd, pq, 30, 40, Vec2{30, 40}};
+  double dd, dq, dl1, dl2;
+  Vec2 i;
+  Derivative(r, x, 0.0, 0.0, 0.014 * 30, 0.014 * 40, &dd, &dq, &dl1, &dl2, &i);
+  EXPECT_NEAR(dd, 0.0, 1e-9);
+  EXPECT_NEAR(dq, 0.0, 1e-9);
+}
+
 TEST(Catalogue, RowsAreUniqueAndDocumented) {
   std::ifstream f(std::string(FLUXCAL_SOURCE_DIR) + "/docs/diagnosis-report.md");
   std::stringstream ss;

@@ -1,6 +1,7 @@
 // The digital twin against known truth: reciprocity, steady-state machine
 // equations, identify(simulate(motor)) round trip, the paper's findings, and
 // one focused test per effect.
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 
@@ -277,6 +278,33 @@ TEST(Effects, ParseRejectsUnknownKey) {
   const auto st = ParseEffects("dead_time=2e-6", &e, &noise);
   EXPECT_FALSE(st.ok());
   EXPECT_NE(std::string(st.message()).find("dead_time"), std::string::npos);
+}
+
+// The second-Udc plan repeats every third locked point right after itself
+// at the given voltage, and the recording's udc_v column says so.
+TEST(Twin, SecondUdcPlanRecordsBothVoltages) {
+  Plan plan = DefaultPlan();
+  const size_t locked = std::count_if(plan.points.begin(), plan.points.end(),
+                                      [](const PlanPoint& p) { return p.speed_rpm == 0.0; });
+  const Plan two = WithSecondUdc(plan, 35.0);
+  ASSERT_EQ(two.points.size(), plan.points.size() + (locked + 2) / 3);
+  EXPECT_EQ(two.points[1].id, two.points[0].id + "u");
+  EXPECT_EQ(two.points[1].udc_v, 35.0);
+  EXPECT_EQ(two.points[1].id_ref_a, two.points[0].id_ref_a);
+  EXPECT_EQ(two.points[0].udc_v, 0.0);
+  Plan small;
+  small.points = {two.points[0], two.points[1]};
+  small.record_s = 0.02;
+  TwinConfig cfg;
+  auto r = Simulate(cfg, small);
+  ASSERT_TRUE(r.ok());
+  auto mean = [](const std::vector<double>& v) {
+    double s = 0;
+    for (double x : v) s += x;
+    return s / v.size();
+  };
+  EXPECT_NEAR(mean(r->set.waveforms[0].udc_v), cfg.drive.udc_v, 0.05);
+  EXPECT_NEAR(mean(r->set.waveforms[1].udc_v), 35.0, 0.05);
 }
 
 TEST(Twin, Deterministic) {
