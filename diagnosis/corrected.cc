@@ -27,7 +27,7 @@ fit::FitData CorrectedFitData(const io::RecordingSet& set, const Model& m, const
   Model mc = m;
   mc.dead_nom_s = 0.0;   // no dead time acts in the clean model
   Params clean = final_p;
-  for (Block b : {kDead, kRhf, kOffset, kGain, kDelay, kHarm, kSensorOffset, kUdcGain, kRImb, kDrift, kVth}) {
+  for (Block b : {kDead, kRhf, kOffset, kGain, kDelay, kHarm, kSensorOffset, kUdcGain, kRImb, kDrift, kVth, kAngleHarm}) {
     std::fill(clean.b[b].begin(), clean.b[b].end(), 0.0);
   }
   const auto pf = final_p.Ptrs(), pc = clean.Ptrs();
@@ -45,11 +45,12 @@ fit::FitData CorrectedFitData(const io::RecordingSet& set, const Model& m, const
     Complex i0e, i1e, i0c, i1c;
     m.PredictHf(pf.data(), *o, &i0e, &i1e);
     HfObs oc = *o;
-    const Complex it = rot * (o->locked ? m.TrueCurrent(pf.data(), Complex(o->id_a, o->iq_a), o->theta)
+    const Complex rot_o = std::polar(1.0, m.AngleError(pf.data(), o->locked, o->theta));
+    const Complex it = rot_o * (o->locked ? m.TrueCurrent(pf.data(), Complex(o->id_a, o->iq_a), o->theta)
                                         : Complex(o->id_a, o->iq_a) / m.M1(pf.data()));
     oc.id_a = it.real();
     oc.iq_a = it.imag();
-    oc.theta = o->theta - m.Offset(pf.data());
+    oc.theta = o->theta - m.AngleError(pf.data(), o->locked, o->theta);
     mc.PredictHf(pc.data(), oc, &i0c, &i1c);
     auto le = ident::InductanceFromPhasors(i0e, i1e, o->v_eff, m.w_i, o->w_e);
     auto lc = ident::InductanceFromPhasors(i0c, i1c, o->v_eff, m.w_i, o->w_e);

@@ -50,6 +50,8 @@ double ReplayResidual(const io::RecordingSet& set, const Model& m, const Params&
   opt.effects.amplitude_h = m.Harm(ptr.data());
   opt.effects.udc_sense_gain = m.UdcGain(ptr.data());
   opt.effects.threshold_v = m.Vth(ptr.data());
+  opt.effects.harmonic_amplitude_rad = std::abs(m.AngleHarm(ptr.data()));
+  opt.effects.harmonic_phase_rad = std::arg(m.AngleHarm(ptr.data()));
   for (int x = 0; x < 3; ++x) {
     double* dr[3] = {&opt.effects.dr_a_ohm, &opt.effects.dr_b_ohm, &opt.effects.dr_c_ohm};
     *dr[x] = 2 * std::real(m.RImb(ptr.data()) * std::polar(1.0, -2 * kPhasePhi[x]));

@@ -46,9 +46,9 @@ inline double IPow(double x, int n) {
 // ---- Parameter blocks (scaled to order one) -----------------------------
 enum Block {
   kBase, kCross, kDead, kRs, kRhf, kOffset, kGain, kPsi, kDelay, kHarm, kSensorOffset, kUdcGain, kRImb, kDrift,
-  kVth, kNumBlocks
+  kVth, kAngleHarm, kNumBlocks
 };
-constexpr int kBlockSize[kNumBlocks] = {10, 8, 1, 1, 1, 1, 3, 1, 1, 1, 2, 1, 2, 1, 1};
+constexpr int kBlockSize[kNumBlocks] = {10, 8, 1, 1, 1, 1, 3, 1, 1, 1, 2, 1, 2, 1, 1, 2};
 // Fit scales of the effect blocks, from the catalogue (simulation/effects.h):
 // value = neutral + scale x block value (psi_pm relative to its nominal).
 const double kScaleDead = sim::EffectParam("dead_time", "dead_time_s").fit_scale;
@@ -64,6 +64,7 @@ const double kScaleUdcGain = sim::EffectParam("dc_link_sense_gain", "udc_sense_g
 const double kScaleRImb = sim::EffectParam("phase_resistance_imbalance", "dr_a_ohm").fit_scale;
 const double kScaleDrift = sim::EffectParam("stator_temperature_drift", "winding_temp_rise_k").fit_scale;
 const double kScaleVth = sim::EffectParam("inverter_voltage_drop", "threshold_v").fit_scale;
+const double kScaleAngleHarm = sim::EffectParam("position_sensor_harmonic", "harmonic_amplitude_rad").fit_scale;
 // Cross terms x^a y^b of the co-energy (a >= 1, b >= 2 even): they vanish
 // with iq = 0 or id = 0 as the machine's symmetry requires.
 constexpr int kCrossTerms[8][2] = {{1, 2}, {2, 2}, {3, 2}, {1, 4}, {2, 4}, {4, 2}, {5, 2}, {3, 4}};
@@ -171,6 +172,19 @@ struct Model {
   // inverter_voltage_drop: the switches' threshold V_th (its slope r_on is
   // in series with Rs and lives in Rs(p); docs/diagnosis.md).
   double Vth(const double* const* p) const { return kScaleVth * p[kVth][0]; }
+  // position_sensor_harmonic as c = amplitude e^{j phase}: the reading's
+  // error a sin(2 theta + phase) = Im(c e^{j 2 theta}), linear in the block.
+  Complex AngleHarm(const double* const* p) const {
+    return kScaleAngleHarm * Complex(p[kAngleHarm][0], p[kAngleHarm][1]);
+  }
+  // The angle sensor's error at a point: the offset, plus at standstill the
+  // harmonic at the locked angle (at speed it swings at 2 w_e and averages
+  // out of the demodulated phasors to first order). The true angle is the
+  // reading less the offset, to first order in the harmonic.
+  double AngleError(const double* const* p, bool locked, double theta_meas) const {
+    if (!locked) return Offset(p);
+    return Offset(p) + std::imag(AngleHarm(p) * std::polar(1.0, 2 * (theta_meas - Offset(p))));
+  }
   double Offset(const double* const* p) const { return kScaleOffset * p[kOffset][0]; }
   double Delay(const double* const* p) const { return kScaleDelay * p[kDelay][0]; }
   double RHf(const double* const* p) const { return kScaleRhf * p[kRhf][0]; }
@@ -228,7 +242,7 @@ struct Model {
     return std::polar(1.0, -w * n * ts) * ((1.0 - a) + a * std::polar(1.0, -w * ts));
   }
   void PredictHf(const double* const* p, const HfObs& o, Complex* i0, Complex* i1) const {
-    const Complex rot = std::polar(1.0, Offset(p));
+    const Complex rot = std::polar(1.0, AngleError(p, o.locked, o.theta));
     const Complex it = rot * Complex(o.id_a, o.iq_a);   // true-frame current
     double ldd, lqq, ldq;
     Inductance(p, it.real(), it.imag(), &ldd, &lqq, &ldq);

@@ -90,6 +90,14 @@ double RelativeRmsOf(const Model& m, const Params& p, int kind) {
   const auto ptr = p.Ptrs();
   double s = 0;
   int n = 0;
+  if (kind == kHfKind) {
+    for (const auto& o : m.hf) {
+      Complex i0, i1;
+      m.PredictHf(ptr.data(), o, &i0, &i1);
+      s += (std::norm(o.i0 - i0) + std::norm(o.i1 - i1)) / (o.scale * o.scale);
+      n += 2;
+    }
+  }
   if (kind == kDcKind) {
     for (const auto& o : m.dc) { s += std::norm(o.u - m.PredictDc(ptr.data(), o)) / (m.dc_scale_v * m.dc_scale_v); ++n; }
   }

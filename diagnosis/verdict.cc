@@ -58,6 +58,15 @@ Finding Describe(const Candidate& c, const Model& m, const FitOut& f) {
              "inverter's commands; a four-wire resistance measured at the motor terminals separates them"});
       }
       break;
+    case kAngleHarm: {
+      const Complex c = m.AngleHarm(p);
+      const double sa = kScaleAngleHarm * std::max(sd(kAngleHarm, 0), sd(kAngleHarm, 1));
+      out.parameters["harmonic_amplitude_rad"] = std::abs(c);
+      out.parameter_std["harmonic_amplitude_rad"] = sa;
+      out.parameters["harmonic_phase_rad"] = std::arg(c);
+      out.parameter_std["harmonic_phase_rad"] = std::abs(c) > 0 ? sa / std::abs(c) : kPi;
+      break;
+    }
     case kVth:
       out.parameters["threshold_v"] = m.Vth(p);
       out.parameter_std["threshold_v"] = kScaleVth * sd(kVth, 0);

@@ -82,7 +82,7 @@ PointRun RunPoint(const TwinConfig& cfg, const PlantModel& m, double id_ref, dou
     const double ma = sense(ia, cfg.effects.gain_a, cfg.effects.offset_a_a),
                  mb = sense(ib, cfg.effects.gain_b, cfg.effects.offset_b_a),
                  mc = sense(ic, cfg.effects.gain_c, cfg.effects.offset_c_a);
-    double th_meas = th + cfg.effects.offset_rad;
+    double th_meas = th + AngleSensorError(cfg.effects, th);
     // Encoder counts, read to the nearest count (an encoder whose zero is
     // aligned mid-count, as EOL benches calibrate it: no half-count bias).
     if (dtheta_enc > 0) th_meas = std::round(WrapAngle(th_meas) / dtheta_enc) * dtheta_enc;

@@ -3,6 +3,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <limits>
 
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
@@ -119,8 +120,28 @@ const std::vector<EffectRow>& EffectCatalogue() {
        {{"threshold_v", "V", 0.0, 0.1, 0.05, FloorKind::kAbsolute, 0.0},
         {"slope_ohm", "ohm", 0.0, 1e-3, 1e-3, FloorKind::kAbsolute, 0.0}},
        false},
+      // A production defect of the angle sensor an EOL station calibrates
+      // out: a resolver with unequal sine/cosine winding amplitudes (or an
+      // encoder disc mounted off-centre on a sensor with the motor's pole
+      // count) reads true + a sin(2 theta_e + phase). position_offset is its
+      // constant part only. 0.25 electrical degrees, as position_offset: the
+      // torque error it leaves is then below the tables' tolerance. The
+      // phase alone is never material (infinite floor): the amplitude is.
+      {"position_sensor_harmonic",
+       "angle sensor error at twice the electrical angle (resolver amplitude imbalance, eccentric encoder disc): "
+       "measured = true + amplitude sin(2 theta_e + phase)",
+       "the saliency's phase (negative-sequence current) at standstill swings with the rotor angle as "
+       "sin(2 theta_e), not by one constant angle: the angle sensor reads true + amplitude sin(2 theta_e + phase) "
+       "(a resolver's unequal winding amplitudes or an eccentric encoder disc)",
+       {{"harmonic_amplitude_rad", "rad", 0.0, 1e-2, 0.25 * kPi / 180, FloorKind::kAbsolute, 0.0},
+        {"harmonic_phase_rad", "rad", 0.0, 1.0, std::numeric_limits<double>::infinity()}},
+       false},
   };
   return rows;
+}
+
+double AngleSensorError(const Effects& e, double theta_true_rad) {
+  return e.offset_rad + e.harmonic_amplitude_rad * std::sin(2 * theta_true_rad + e.harmonic_phase_rad);
 }
 
 const EffectRow* FindEffect(std::string_view name) {
@@ -156,7 +177,9 @@ std::map<std::string, double*> DoubleFields(Effects* e) {
           {"offset_c_a", &e->offset_c_a},     {"udc_sense_gain", &e->udc_sense_gain},
           {"dr_a_ohm", &e->dr_a_ohm},         {"dr_b_ohm", &e->dr_b_ohm},
           {"dr_c_ohm", &e->dr_c_ohm},         {"winding_temp_rise_k", &e->winding_temp_rise_k},
-          {"threshold_v", &e->threshold_v},   {"slope_ohm", &e->slope_ohm}};
+          {"threshold_v", &e->threshold_v},   {"slope_ohm", &e->slope_ohm},
+          {"harmonic_amplitude_rad", &e->harmonic_amplitude_rad},
+          {"harmonic_phase_rad", &e->harmonic_phase_rad}};
 }
 
 }  // namespace
@@ -211,6 +234,9 @@ std::map<std::string, double> EffectParameters(const Effects& e, std::string_vie
   }
   if (effect == "stator_temperature_drift") return {{"winding_temp_rise_k", e.winding_temp_rise_k}};
   if (effect == "inverter_voltage_drop") return {{"threshold_v", e.threshold_v}, {"slope_ohm", e.slope_ohm}};
+  if (effect == "position_sensor_harmonic") {
+    return {{"harmonic_amplitude_rad", e.harmonic_amplitude_rad}, {"harmonic_phase_rad", e.harmonic_phase_rad}};
+  }
   return {};
 }
 
@@ -223,6 +249,7 @@ std::vector<std::string> ActiveEffectNames(const Effects& e) {
     else if (name == "stator_resistance") on = e.rs_ohm.has_value();
     else if (name == "magnet_temperature") on = e.psi_pm_wb.has_value();
     else if (name == "spatial_harmonics") on = e.order != 0 && e.amplitude_h != 0;
+    else if (name == "position_sensor_harmonic") on = e.harmonic_amplitude_rad != 0;
     else {
       // Any catalogue parameter away from its neutral value.
       const auto values = EffectParameters(e, name);

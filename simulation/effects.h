@@ -75,7 +75,14 @@ struct Effects {
   double dr_a_ohm = 0.0, dr_b_ohm = 0.0, dr_c_ohm = 0.0;   // phase_resistance_imbalance
   double winding_temp_rise_k = 0.0;   // stator_temperature_drift: rise over the locked points
   double threshold_v = 0.0, slope_ohm = 0.0;   // inverter_voltage_drop: V_th sign(i_x) + r_on i_x per phase
+  // position_sensor_harmonic: measured angle = true + offset + amplitude sin(2 theta_e + phase).
+  double harmonic_amplitude_rad = 0.0, harmonic_phase_rad = 0.0;
 };
+
+// The angle sensor's reading error at the true electrical angle: the
+// position_offset plus the position_sensor_harmonic (one home for both the
+// bench and the replays).
+double AngleSensorError(const Effects& e, double theta_true_rad);
 
 // Parses "dead_time_s=2e-6,offset_rad=0.05,..." (keys: Effects' fields plus
 // noise_a). Unknown keys are errors listing the known ones.

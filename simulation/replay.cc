@@ -72,7 +72,11 @@ absl::StatusOr<std::vector<ReplayPoint>> ReplayOpenLoop(const io::RecordingSet& 
     // The recorded commands are already limited: no modulator limit.
     const PlantModel m = ReplayPlant(model, mf.points[p].temperature_c.value_or(25.0), opt.rs_ohm, opt.effects,
                                      PointUdc(w, mf.drive.udc_v.value_or(50.0), opt.effects), ts, 1e9);
-    auto true_theta = [&](size_t k) { return w.theta_e_rad[k] - opt.effects.offset_rad; };
+    // Inverting measured = true + error(true) to first order in the error
+    // (a fraction of a degree): error(measured - offset).
+    auto true_theta = [&](size_t k) {
+      return w.theta_e_rad[k] - AngleSensorError(opt.effects, w.theta_e_rad[k] - opt.effects.offset_rad);
+    };
     // Unwrapped angle and its per-sample rate (the plant needs w_e).
     std::vector<double> th(n);
     th[0] = true_theta(0);
@@ -209,7 +213,12 @@ absl::StatusOr<std::vector<ReplayPoint>> ReplayClosedLoop(const io::RecordingSet
     const double speed_rpm = ElectricalRadSToRpm(we, cfg.motor.pole_pairs);
     const size_t n_settle = static_cast<size_t>(std::llround(opt.settle_s * fs));
     const double settle_s = static_cast<double>(n_settle) * ts;
-    const double theta0 = intercept - opt.effects.offset_rad - we * settle_s;
+    // At standstill the reading's error is the one at the locked angle; at
+    // speed the line through the readings averages its harmonic out.
+    const double error_rad = std::abs(speed_rpm) < 1.0
+                                 ? AngleSensorError(opt.effects, intercept - opt.effects.offset_rad)
+                                 : opt.effects.offset_rad;
+    const double theta0 = intercept - error_rad - we * settle_s;
     // The command's component at w_i is the injection plus what the
     // controller adds there (at speed its injection-free feedback keeps a
     // little HF ripple), so the phase is refined once: run, compare the

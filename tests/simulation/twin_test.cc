@@ -307,6 +307,32 @@ TEST(Twin, SecondUdcPlanRecordsBothVoltages) {
   EXPECT_NEAR(mean(r->set.waveforms[1].udc_v), 35.0, 0.05);
 }
 
+// The bench's angle reading at a locked point: true + offset + the
+// sensor's harmonic at twice the true angle.
+TEST(Effects, PositionSensorHarmonicBendsTheReading) {
+  TwinConfig cfg;
+  cfg.effects.offset_rad = 0.01;
+  cfg.effects.harmonic_amplitude_rad = 0.02;
+  cfg.effects.harmonic_phase_rad = 0.5;
+  cfg.sensors.encoder_counts_per_mech_rev = 0;   // ideal resolution
+  Plan plan;
+  plan.record_s = 0.01;
+  for (double th : {0.3, 1.2, 2.9}) {
+    PlanPoint p;
+    p.id = "p" + std::to_string(static_cast<int>(10 * th));
+    p.id_ref_a = -20;
+    p.iq_ref_a = 20;
+    p.theta_e_rad = th;
+    plan.points.push_back(p);
+  }
+  auto r = Simulate(cfg, plan);
+  ASSERT_TRUE(r.ok());
+  for (size_t k = 0; k < plan.points.size(); ++k) {
+    const double th = plan.points[k].theta_e_rad;
+    EXPECT_NEAR(r->set.waveforms[k].theta_e_rad[0], th + 0.01 + 0.02 * std::sin(2 * th + 0.5), 1e-9) << th;
+  }
+}
+
 TEST(Twin, Deterministic) {
   TwinConfig cfg;
   cfg.seed = 9;
