@@ -1,14 +1,21 @@
 // fluxcal report calibration.json [--set RECORDING_SET_DIR] [--diagnosis report.json]
 //                [--speed-rpm N] [--udc-v V] --out report.html [--json]
-// fluxcal report SERIAL --server ADDR [--version N] [...same flags]
+// fluxcal report SERIAL --server ADDR [--version N] [--speed-rpm N] [--udc-v V]
+//                [--set DIR] [--diagnosis FILE] --out report.html [--json]
 // One self-contained static HTML page per calibration (report/report.h,
 // docs/report.md). With --set the set is identified again so that the
 // page shows the identified points against the fitted surfaces, the
 // verdict is judged as the EOL flow judges it, and the manifest's DC-link
-// voltage sets the voltage limit. With --server the stored calibration is
-// fetched with what only the store knows: when it was created, its stored
-// verdict and whether it is released for flashing.
+// voltage sets the voltage limit. With --server the service builds the
+// page from what only the store knows (when the version was created, its
+// stored verdict, whether it is released for flashing, the fleet) with its
+// GetReport, and the page is written as it arrived: one page per stored
+// version, whoever asks. --set and --diagnosis are local files the service
+// never sees: with them the page is built here, from the stored calibration
+// and the same provenance and fleet read over the API, as before GetReport
+// existed (pipeline/report.h holds what both ways share).
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <ctime>
 #include <filesystem>
@@ -24,9 +31,11 @@
 #include "identification/identify.h"
 #include "io/csv.h"
 #include "io/recording_set.h"
+#include "io/sha256.h"
 #include "nlohmann/json.hpp"
 #include "pipeline/pipeline.h"
 #include "pipeline/points.h"
+#include "pipeline/report.h"
 #include "report/report.h"
 
 namespace fluxcal::cli {
@@ -60,8 +69,8 @@ absl::StatusOr<nlohmann::json> ReadJson(const std::string& path) {
   }
 }
 
-// The stored calibration of `serial` with the store's provenance merged
-// into its JSON (created_utc, verdict, released), as the report reads it.
+// --server with local extras: the stored calibration with the store's
+// provenance merged into its JSON, read over the API.
 absl::StatusOr<nlohmann::json> FetchCalibration(const std::string& server, const std::string& serial, int version) {
   auto stub = MakeStub(server);
   if (!stub) return absl::InvalidArgumentError("--server " + server + ": cannot set up the client");
@@ -76,17 +85,14 @@ absl::StatusOr<nlohmann::json> FetchCalibration(const std::string& server, const
     ReportRpcError("report", s);   // the status, with a hint for setup mistakes
     return absl::UnavailableError("GetCalibration " + serial + " failed");
   }
-  nlohmann::json j;
-  try {
-    j = nlohmann::json::parse(rec.calibration_json());
-  } catch (const nlohmann::json::exception& e) {
-    return absl::DataLossError("stored calibration of " + serial + " is not JSON: " + e.what());
+  nlohmann::json j = nlohmann::json::parse(rec.calibration_json(), nullptr, false);
+  if (j.is_discarded() || !j.is_object()) {
+    return absl::DataLossError("stored calibration of " + serial + " is not a JSON object");
   }
-  j["version"] = rec.version();
-  j["created_utc"] = rec.created_utc();
-  j["verdict"] = rec.verdict();
   // The release flag comes with a table export; a caller without the
-  // right to export unreleased versions learns nothing, and says so.
+  // right to export unreleased versions learns nothing, and the page says
+  // the state is not known.
+  std::optional<bool> released;
   v1::ExportTableRequest er;
   er.set_serial(serial);
   er.set_version(rec.version());
@@ -95,13 +101,13 @@ absl::StatusOr<nlohmann::json> FetchCalibration(const std::string& server, const
   v1::ExportTableResponse eresp;
   grpc::ClientContext ectx;
   ectx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
-  if (stub->ExportTable(&ectx, er, &eresp).ok()) {
-    j["released"] = eresp.released() ? "released for flashing" : "not released";
-  }
+  if (stub->ExportTable(&ectx, er, &eresp).ok()) released = eresp.released();
+  pipeline::MergeStoredProvenance(rec.version(), rec.created_utc(), rec.verdict(), released, &j);
   return j;
 }
 
-// The service's fleet statistics at its default operating points.
+// --server with local extras: the service's fleet statistics at its
+// default operating points.
 absl::StatusOr<std::vector<report::FleetPoint>> FetchFleet(const std::string& server) {
   auto stub = MakeStub(server);
   if (!stub) return absl::InvalidArgumentError("--server " + server + ": cannot set up the client");
@@ -111,87 +117,165 @@ absl::StatusOr<std::vector<report::FleetPoint>> FetchFleet(const std::string& se
   ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
   auto s = stub->FleetStatistics(&ctx, req, &resp);
   if (!s.ok()) return absl::UnavailableError("FleetStatistics: " + s.error_message());
-  std::vector<report::FleetPoint> out;
+  std::vector<pipeline::FleetPoint> points;
   for (const auto& p : resp.points()) {
-    report::FleetPoint f;
+    pipeline::FleetPoint f;
     f.id_a = p.id_a(); f.iq_a = p.iq_a(); f.serials = p.serials();
-    f.ldd_h_mean = p.ldd_h_mean(); f.ldd_h_std = p.ldd_h_std();
-    f.lqq_h_mean = p.lqq_h_mean(); f.lqq_h_std = p.lqq_h_std();
-    f.psi_d_wb_mean = p.psi_d_wb_mean(); f.psi_d_wb_std = p.psi_d_wb_std();
-    f.torque_nm_mean = p.torque_nm_mean(); f.torque_nm_std = p.torque_nm_std();
+    f.ldd_mean = p.ldd_h_mean(); f.ldd_std = p.ldd_h_std();
+    f.lqq_mean = p.lqq_h_mean(); f.lqq_std = p.lqq_h_std();
+    f.psi_d_mean = p.psi_d_wb_mean(); f.psi_d_std = p.psi_d_wb_std();
+    f.torque_mean = p.torque_nm_mean(); f.torque_std = p.torque_nm_std();
     f.outliers.assign(p.outliers().begin(), p.outliers().end());
-    out.push_back(std::move(f));
+    points.push_back(std::move(f));
   }
-  return out;
+  return pipeline::ToReportFleet(points);
+}
+
+// What every mode prints once the page is written.
+struct Written {
+  std::string out, serial, verdict, sha256;
+  int version = 0, figures = 0;
+  size_t bytes = 0;
+  double voltage_limit_speed_rpm = 0;
+};
+
+void PrintSummary(const Written& w, bool json) {
+  if (json) {
+    std::cout << nlohmann::json{{"out", w.out}, {"serial", w.serial}, {"version", w.version},
+                                {"verdict", w.verdict}, {"figures", w.figures}, {"bytes", w.bytes},
+                                {"voltage_limit_speed_rpm", w.voltage_limit_speed_rpm}, {"sha256", w.sha256}}
+                     .dump(2, ' ', false, nlohmann::json::error_handler_t::replace)
+              << "\n";
+  } else {
+    std::fprintf(w.out == "-" ? stderr : stdout, "%s: report for %s v%d (%s), %d figures, %zu bytes\n", w.out.c_str(),
+                 w.serial.c_str(), w.version, w.verdict.c_str(), w.figures, w.bytes);
+  }
+}
+
+// --server: the service's page (GetReport), its SHA-256 checked, written
+// byte for byte.
+int RunRemoteReport(const std::string& server, const std::string& serial, int version, double speed_rpm,
+                    std::optional<double> udc_v, const std::string& out, bool json) {
+  auto stub = MakeStub(server);
+  if (!stub) return Fail("--server " + server + ": cannot set up the client");
+  v1::GetReportRequest req;
+  req.set_serial(serial);
+  req.set_version(version);
+  req.set_speed_rpm(speed_rpm);
+  if (udc_v) req.set_udc_v(*udc_v);
+  v1::GetReportResponse resp;
+  grpc::ClientContext ctx;
+  // Tables, figures and the fleet over every serial: about a second on a
+  // small store, more with a large fleet.
+  ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(120));
+  std::fprintf(stderr, "report: the service builds the page for %s\n", serial.c_str());
+  if (auto s = stub->GetReport(&ctx, req, &resp); !s.ok()) return ReportRpcError("report", s);
+  if (const std::string got = io::Sha256Hex(resp.html()); got != resp.html_sha256()) {
+    return Fail("GetReport " + serial + ": the page arrived damaged (SHA-256 " + got + ", the service sent " +
+                resp.html_sha256() + "); nothing written");
+  }
+  if (!resp.fleet_included()) {
+    std::fprintf(stderr, "fluxcal report: no fleet comparison: the service shows it to roles that may read fleet "
+                         "statistics (engineer, admin)\n");
+  }
+  if (auto st = WriteOutput(out, resp.html()); !st.ok()) return Fail(std::string(st.message()));
+  PrintSummary({out, resp.serial(), resp.verdict(), resp.html_sha256(), resp.version(), resp.figures(),
+                resp.html().size(), resp.voltage_limit_speed_rpm()},
+               json);
+  return 0;
 }
 
 const FlagSpecs kReportFlags = {
     {"out", "FILE", "HTML page to write (required; - for stdout)"},
-    {"server", "ADDR", "the positional argument is a SERIAL stored there, HOST[:PORT] (default port 50051)"},
+    {"server", "ADDR",
+     "the positional argument is a SERIAL stored there, HOST[:PORT] (default port 50051); the service builds the page"},
     {"version", "N", "with --server: calibration version (default the latest)"},
-    {"set", "DIR", "recording set: draws the identified points, judges the verdict, gives the DC-link voltage"},
-    {"diagnosis", "FILE", "a `fluxcal diagnose --json` document to include"},
+    {"set", "DIR",
+     "recording set: draws the identified points, judges the verdict, gives the DC-link voltage "
+     "(with --server: page built here)"},
+    {"diagnosis", "FILE", "a `fluxcal diagnose --json` document to include (with --server: page built here)"},
     {"speed-rpm", "RPM", "speed of the voltage-limit curve, mechanical rpm (default 1.5 x base speed)"},
     {"udc-v", "V", "DC-link voltage, V (default the set's manifest drive.udc_v, else 50 as export)"},
-    {"json", "", "print a summary (verdict, figures, bytes) as one JSON document"},
+    {"json", "", "print a summary (verdict, figures, bytes, sha256) as one JSON document"},
 };
+
+// A positive finite flag value, or none; InvalidArgument naming the flag.
+absl::StatusOr<std::optional<double>> PositiveFlag(const ParsedArgs& args, const char* flag) {
+  auto v = args.GetDouble(flag);
+  if (!v.ok() || !v->has_value()) return v;
+  if (!(**v > 0) || !std::isfinite(**v)) {
+    return absl::InvalidArgumentError(std::string("flag --") + flag + ": must be a positive number");
+  }
+  return v;
+}
 
 int RunReport(const std::vector<std::string>& argv) {
   auto args = ParseArgs(argv, kReportFlags);
   if (!args.ok()) return Fail(std::string(args.status().message()), 2);
   if (auto e = CheckOutToStdout(*args); !e.empty()) return Fail(e, 2);
   if (args->positional.size() != 1 || !args->Get("out")) {
-    return Fail("usage: fluxcal report calibration.json|SERIAL --server ADDR [--version N] [--set RECORDING_SET_DIR] "
-                "[--diagnosis report.json] [--speed-rpm N] [--udc-v V] --out report.html [--json]", 2);
+    return Fail("usage: fluxcal report calibration.json [--set RECORDING_SET_DIR] [--diagnosis report.json] "
+                "[--speed-rpm N] [--udc-v V] --out report.html [--json]\n"
+                "       fluxcal report SERIAL --server ADDR [--version N] [--speed-rpm N] [--udc-v V] "
+                "[--set DIR] [--diagnosis FILE] --out report.html [--json]", 2);
   }
   const std::string cal_path = args->positional[0];
+  const std::string out = *args->Get("out");
+  auto speed = PositiveFlag(*args, "speed-rpm");
+  if (!speed.ok()) return Fail(std::string(speed.status().message()), 2);
+  auto udc = PositiveFlag(*args, "udc-v");
+  if (!udc.ok()) return Fail(std::string(udc.status().message()), 2);
+
   absl::StatusOr<nlohmann::json> cal_json;
-  report::ReportInputs in;
+  std::string source, source_fleet, mtime = "unknown";
+  std::optional<std::vector<report::FleetPoint>> fleet;
   if (auto server = args->Get("server")) {
     int version = 0;
     if (auto v = args->Get("version"); v && (!absl::SimpleAtoi(*v, &version) || version < 0)) {
       return Fail("flag --version: expected a non-negative integer", 2);
     }
-    cal_json = FetchCalibration(*server, cal_path, version);
-    in.calibration_path = cal_path + " from the service at " + *server;
-    if (auto fleet = FetchFleet(*server); fleet.ok()) {
-      in.fleet = std::move(*fleet);
-      in.fleet_source = "FleetStatistics of the service at " + *server + " (latest calibration of every serial)";
-    } else {
-      std::fprintf(stderr, "fluxcal report: no fleet comparison: %s\n", std::string(fleet.status().message()).c_str());
+    if (!args->Has("set") && !args->Has("diagnosis")) {
+      return RunRemoteReport(*server, cal_path, version, speed->value_or(0.0), *udc, out, args->Has("json"));
     }
-    in.calibration_file_mtime_utc = "unknown";
+    std::fprintf(stderr, "report: --set/--diagnosis are local: the page is built here, not by the service\n");
+    cal_json = FetchCalibration(*server, cal_path, version);
+    if (!cal_json.ok()) return Fail(std::string(cal_json.status().message()));
+    source = cal_path + " from the service at " + *server;
+    if (auto f = FetchFleet(*server); f.ok()) {
+      fleet = std::move(*f);
+    } else {
+      std::fprintf(stderr, "fluxcal report: no fleet comparison: %s\n", std::string(f.status().message()).c_str());
+    }
+    source_fleet = "FleetStatistics of the service at " + *server + " (latest calibration of every serial)";
   } else {
     if (args->Get("version")) return Fail("flag --version needs --server", 2);
     cal_json = ReadJson(cal_path);
-    in.calibration_path = cal_path;
-    in.calibration_file_mtime_utc = FileMtimeUtc(cal_path);
+    source = cal_path;
+    mtime = FileMtimeUtc(cal_path);
   }
   if (!cal_json.ok()) return Fail(std::string(cal_json.status().message()));
   auto cal = fit::Calibration::FromJson(*cal_json);
-  if (!cal.ok()) return Fail(in.calibration_path + ": " + std::string(cal.status().message()));
+  if (!cal.ok()) return Fail(source + ": " + std::string(cal.status().message()));
 
-  in.calibration = &*cal;
-  in.calibration_json = *cal_json;
-  in.software_version = FLUXCAL_VERSION;
-  for (auto [flag, dst] : {std::pair<const char*, double*>{"speed-rpm", &in.ellipse_speed_rpm}}) {
-    auto v = args->GetDouble(flag);
-    if (!v.ok()) return Fail(std::string(v.status().message()), 2);
-    if (v->has_value()) {
-      if (!(**v > 0)) return Fail(std::string("flag --") + flag + ": must be positive", 2);
-      *dst = **v;
-    }
+  // Verdict, the findings of a diagnosed calibration and the software
+  // version as the service's page takes them; a set or a diagnosis
+  // document given here replaces them below.
+  report::ReportInputs in;
+  pipeline::FillReportInputsFromJson(*cal, *cal_json, &in);
+  in.calibration_path = source;
+  in.calibration_file_mtime_utc = mtime;
+  if (fleet) {
+    in.fleet = std::move(*fleet);
+    in.fleet_source = source_fleet;
   }
-  auto udc = args->GetDouble("udc-v");
-  if (!udc.ok()) return Fail(std::string(udc.status().message()), 2);
-  if (udc->has_value()) {
-    if (!(**udc > 0)) return Fail("flag --udc-v: must be positive", 2);
+  in.ellipse_speed_rpm = speed->value_or(0.0);
+  if (*udc) {
     in.udc_v = **udc;
     in.udc_source = "--udc-v";
   }
 
   // Verdict: as the EOL flow judges it when the set is here (nominal
-  // psi_pm, unreliable points); otherwise from the fit alone.
+  // psi_pm, unreliable points).
   fit::FitData identified;
   pipeline::FitTolerances tol;
   if (auto set_dir = args->Get("set")) {
@@ -228,12 +312,6 @@ int RunReport(const std::vector<std::string>& argv) {
     const double nominal = set->manifest.motor.psi_pm_wb.value_or(0.0);
     in.verdict = pipeline::Verdict(*cal, nominal, identified.inductances.size(), unreliable, tol);
     in.verdict_basis = "judged as the EOL flow does: fit, psi_pm against the manifest's nominal, point flags";
-  } else if (cal_json->contains("verdict") && (*cal_json)["verdict"].is_string()) {
-    in.verdict = (*cal_json)["verdict"].get<std::string>();
-    in.verdict_basis = "as stored with the calibration";
-  } else {
-    in.verdict = pipeline::Verdict(*cal, 0.0, 0, 0, tol);
-    in.verdict_basis = "from the fit alone; give --set to also check psi_pm against nominal and the point flags";
   }
   if (auto d = args->Get("diagnosis")) {
     auto dj = ReadJson(*d);
@@ -244,18 +322,10 @@ int RunReport(const std::vector<std::string>& argv) {
   std::fprintf(stderr, "report: building tables and figures for %s\n", cal->serial().c_str());
   auto rep = report::BuildReport(in);
   if (!rep.ok()) return Fail(std::string(rep.status().message()));
-  const std::string out = *args->Get("out");
   if (auto st = WriteOutput(out, rep->html); !st.ok()) return Fail(std::string(st.message()));
-  if (args->Has("json")) {
-    std::cout << nlohmann::json{{"out", out}, {"serial", cal->serial()}, {"version", cal->version},
-                                {"verdict", in.verdict}, {"figures", rep->figures}, {"bytes", rep->html.size()},
-                                {"voltage_limit_speed_rpm", rep->ellipse_speed_rpm}}
-                     .dump(2, ' ', false, nlohmann::json::error_handler_t::replace)
-              << "\n";
-  } else {
-    std::fprintf(out == "-" ? stderr : stdout, "%s: report for %s v%d (%s), %d figures, %zu bytes\n", out.c_str(), cal->serial().c_str(),
-                cal->version, in.verdict.c_str(), rep->figures, rep->html.size());
-  }
+  PrintSummary({out, cal->serial(), in.verdict, io::Sha256Hex(rep->html), cal->version, rep->figures,
+                rep->html.size(), rep->ellipse_speed_rpm},
+               args->Has("json"));
   return 0;
 }
 
@@ -263,7 +333,9 @@ int RunReport(const std::vector<std::string>& argv) {
 
 FLUXCAL_REGISTER_COMMAND("report", "one self-contained HTML report page for a calibration", RunReport,
                          "fluxcal report calibration.json --out report.html [--set DIR] [--diagnosis FILE] [flags]\n"
-                         "fluxcal report SERIAL --server ADDR [--version N] --out report.html [--set DIR] [flags]",
+                         "fluxcal report SERIAL --server ADDR [--version N] [--speed-rpm N] [--udc-v V] "
+                         "--out report.html\n"
+                         "fluxcal report SERIAL --server ADDR --set DIR [--diagnosis FILE] [flags]   (page built here)",
                          kReportFlags);
 
 }  // namespace fluxcal::cli

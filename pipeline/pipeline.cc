@@ -384,11 +384,12 @@ absl::StatusOr<ExportResult> ExportTable(storage::Store& store, const std::strin
 
 absl::StatusOr<std::vector<FleetPoint>> FleetStatistics(storage::Store& store,
                                                         const std::vector<std::pair<double, double>>& points,
-                                                        double outlier_sigma) {
+                                                        double outlier_sigma, const CancelledFn& cancelled) {
   auto rows = store.LatestCalibrations();
   if (!rows.ok()) return rows.status();
   std::vector<std::pair<std::string, fit::Calibration>> cals;
   for (const auto& r : *rows) {
+    if (cancelled && cancelled()) return absl::CancelledError("fleet statistics: cancelled by the caller");
     nlohmann::json j = nlohmann::json::parse(r.calibration_json, nullptr, false);
     if (j.is_discarded()) continue;
     j["version"] = r.version;

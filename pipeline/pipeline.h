@@ -119,9 +119,16 @@ struct FleetPoint {
   double torque_mean = 0, torque_std = 0;
   std::vector<std::string> outliers;
 };
+// The operating points (id_a, iq_a) and outlier threshold (standard
+// deviations) when a caller names none: the FleetStatistics RPC's defaults
+// and the report's fleet section, so both show the same comparison.
+inline constexpr std::pair<double, double> kDefaultFleetPointsA[] = {{-20, 40}, {-60, 80}, {0, 100}};
+inline constexpr double kDefaultOutlierSigma = 3.0;
+// `cancelled` is polled per parsed calibration: a large fleet of spline
+// calibrations takes seconds to parse.
 absl::StatusOr<std::vector<FleetPoint>> FleetStatistics(storage::Store& store,
                                                         const std::vector<std::pair<double, double>>& points,
-                                                        double outlier_sigma);
+                                                        double outlier_sigma, const CancelledFn& cancelled = {});
 
 // A stored raw recording (by SHA-256), unpacked and read in memory.
 absl::StatusOr<io::RecordingSet> LoadStoredRecording(storage::Store& store, const std::string& sha256);

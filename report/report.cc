@@ -564,7 +564,9 @@ absl::StatusOr<Report> BuildReport(const ReportInputs& in) {
     }
     b += "</table>\n";
     const auto mism = d.value("mismatches", nlohmann::json::array());
-    b += absl::StrFormat("<h3>Mismatches against the baseline (%zu)</h3>\n", mism.size());
+    // The findings marked into a diagnosed calibration come without the
+    // mismatches: no count where none is known.
+    if (d.contains("mismatches")) b += absl::StrFormat("<h3>Mismatches against the baseline (%zu)</h3>\n", mism.size());
     if (!mism.empty()) {
       b += "<table class=\"list\"><tr><th>signal</th><th>where</th><th>points</th><th>significance</th></tr>\n";
       for (const auto& m : mism) {

@@ -58,6 +58,7 @@ std::string_view RpcName(Rpc r) {
     case Rpc::kDiagnose: return "Diagnose";
     case Rpc::kRelease: return "Release";
     case Rpc::kAudit: return "Audit";
+    case Rpc::kGetReport: return "GetReport";
   }
   return "?";
 }
@@ -73,6 +74,7 @@ bool RoleMayCall(Role role, Rpc rpc) {
     case Rpc::kExportTable:
       return true;   // every role fetches tables (flashers only this)
     case Rpc::kGetCalibration:
+    case Rpc::kGetReport:   // the stored calibration drawn: readers of it may read the page
     case Rpc::kQueryFlux:
       return role == Role::kEngineer || role == Role::kRelease || role == Role::kStation;
     case Rpc::kListMotors:

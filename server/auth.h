@@ -37,12 +37,12 @@ std::optional<Role> ParseRole(std::string_view name);
 
 enum class Rpc {
   kIngestHfResults, kIngestRecording, kFit, kGetCalibration, kListMotors, kHistory,
-  kQueryFlux, kExportTable, kFleetStatistics, kDiagnose, kRelease, kAudit,
+  kQueryFlux, kExportTable, kFleetStatistics, kDiagnose, kRelease, kAudit, kGetReport,
 };
 inline constexpr Rpc kAllRpcs[] = {Rpc::kIngestHfResults, Rpc::kIngestRecording, Rpc::kFit, Rpc::kGetCalibration,
                                    Rpc::kListMotors,      Rpc::kHistory,         Rpc::kQueryFlux,
                                    Rpc::kExportTable,     Rpc::kFleetStatistics, Rpc::kDiagnose,
-                                   Rpc::kRelease,         Rpc::kAudit};
+                                   Rpc::kRelease,         Rpc::kAudit,           Rpc::kGetReport};
 std::string_view RpcName(Rpc r);
 // The permission table above, in one place.
 bool RoleMayCall(Role role, Rpc rpc);

@@ -8,6 +8,7 @@
 
 #include <chrono>
 #include <cstdio>
+#include <iterator>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -15,6 +16,7 @@
 #include "io/recording_set.h"
 #include "nlohmann/json.hpp"
 #include "pipeline/pipeline.h"
+#include "pipeline/report.h"
 #include "server/reflection.h"
 #include "server/validation.h"
 #include "tables/signature.h"
@@ -445,10 +447,10 @@ grpc::Status CalibrationServiceImpl::FleetStatistics(grpc::ServerContext* ctx, c
     if (auto s = ValidateOperatingPoint(req->points(k), k); !s.ok()) return ToGrpcStatus(s);
     pts.push_back({req->points(k).id_a(), req->points(k).iq_a()});
   }
-  if (pts.empty()) pts = {{-20, 40}, {-60, 80}, {0, 100}};
-  const double sigma = req->outlier_sigma() > 0 ? req->outlier_sigma() : 3.0;
-  auto stats = pipeline::FleetStatistics(*store_, pts, sigma);
-  if (!stats.ok()) return ToGrpcStatus(stats.status());
+  if (pts.empty()) pts.assign(std::begin(pipeline::kDefaultFleetPointsA), std::end(pipeline::kDefaultFleetPointsA));
+  const double sigma = req->outlier_sigma() > 0 ? req->outlier_sigma() : pipeline::kDefaultOutlierSigma;
+  auto stats = pipeline::FleetStatistics(*store_, pts, sigma, CancelledBy(ctx));
+  if (!stats.ok()) return StoppedOr(ctx, stats.status());
   for (const auto& s : *stats) {
     auto* p = resp->add_points();
     p->set_id_a(s.id_a); p->set_iq_a(s.iq_a); p->set_serials(s.serials);
@@ -532,6 +534,39 @@ grpc::Status CalibrationServiceImpl::Audit(grpc::ServerContext* ctx, const v1::A
     e->set_id(r.id); e->set_utc(r.utc); e->set_identity(r.identity); e->set_role(r.role); e->set_peer(r.peer);
     e->set_request_id(r.request_id); e->set_rpc(r.rpc); e->set_detail(r.detail);
   }
+  return grpc::Status::OK;
+}
+
+grpc::Status CalibrationServiceImpl::GetReport(grpc::ServerContext* ctx, const v1::GetReportRequest* req,
+                                               v1::GetReportResponse* resp) {
+  auto who = auth_->Authorize(*ctx, Rpc::kGetReport);
+  if (!who.ok()) return ToGrpcStatus(who.status());
+  if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
+  if (auto s = ValidateVersion(req->version()); !s.ok()) return ToGrpcStatus(s);
+  if (auto s = ValidateDefaultable("speed_rpm", req->speed_rpm(), kMaxSpeedRpm, "rpm"); !s.ok()) return ToGrpcStatus(s);
+  if (auto s = ValidateDefaultable("udc_v", req->udc_v(), kMaxUdcV, "V"); !s.ok()) return ToGrpcStatus(s);
+  pipeline::StoredReportOptions options;
+  options.speed_rpm = req->speed_rpm();
+  options.udc_v = req->udc_v();
+  // The fleet section names other serials (its outliers): only for a role
+  // that may read fleet statistics anyway.
+  options.include_fleet =
+      (!req->has_include_fleet() || req->include_fleet()) && RoleMayCall(who->role, Rpc::kFleetStatistics);
+  auto rep = pipeline::BuildStoredReport(*store_, req->serial(), req->version(), options, CancelledBy(ctx));
+  if (!rep.ok()) return StoppedOr(ctx, rep.status());
+  if (rep->page.html.size() > kMaxReportBytes) {
+    return ToGrpcStatus(absl::ResourceExhaustedError(absl::StrCat(
+        "html: the page of ", req->serial(), " version ", rep->version, " has ", rep->page.html.size(),
+        " bytes, above the limit of ", kMaxReportBytes)));
+  }
+  resp->set_html(rep->page.html);
+  resp->set_serial(rep->serial);
+  resp->set_version(rep->version);
+  resp->set_verdict(rep->verdict);
+  resp->set_figures(rep->page.figures);
+  resp->set_html_sha256(rep->html_sha256);
+  resp->set_voltage_limit_speed_rpm(rep->page.ellipse_speed_rpm);
+  resp->set_fleet_included(rep->fleet_included);
   return grpc::Status::OK;
 }
 

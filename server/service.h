@@ -57,6 +57,8 @@ class CalibrationServiceImpl final : public fluxcal::v1::CalibrationService::Ser
   grpc::Status Diagnose(grpc::ServerContext* ctx, const v1::DiagnoseRequest* req, v1::DiagnoseResponse* resp) override;
   grpc::Status Release(grpc::ServerContext* ctx, const v1::ReleaseRequest* req, v1::ReleaseResponse* resp) override;
   grpc::Status Audit(grpc::ServerContext* ctx, const v1::AuditRequest* req, v1::AuditResponse* resp) override;
+  grpc::Status GetReport(grpc::ServerContext* ctx, const v1::GetReportRequest* req,
+                         v1::GetReportResponse* resp) override;
 
  private:
   // The audit row of a write, handed to the store, which inserts it in the

@@ -96,6 +96,12 @@ absl::Status ValidateVersion(int version) {
   return absl::OkStatus();
 }
 
+absl::Status ValidateDefaultable(const std::string& field, double value, double max, const std::string& unit) {
+  if (value == 0) return absl::OkStatus();
+  return Range(field, value, std::nextafter(0.0, 1.0), max,
+               absl::StrFormat("must be in (0, %g] %s (0: default)", max, unit));
+}
+
 absl::StatusOr<int> ParsePageToken(const std::string& token) {
   int offset = 0;
   if (token.empty()) return 0;

@@ -39,6 +39,14 @@ inline constexpr long long kMaxRecordingBytes = 256LL << 20;
 inline constexpr int kMaxRecordingFiles = 4096;
 // Free-text identifiers (station_id, point_id): printable ASCII only.
 inline constexpr size_t kMaxIdentifierBytes = 64;
+// Operating conditions a request may name (GetReport): the speed bound of
+// every other speed field, the DC-link bound of ExportTable.
+inline constexpr double kMaxSpeedRpm = 1e5;
+inline constexpr double kMaxUdcV = 5000;
+// A report page is ~0.5 MB; the bound keeps a reply under gRPC's default
+// 4 MiB receive limit, so a client with default settings (grpcio,
+// grpcurl) can take every page this service sends.
+inline constexpr size_t kMaxReportBytes = 4000000;
 
 absl::Status ValidateSerial(const std::string& serial, const std::string& field = "serial");
 // station_id / point_id: at most kMaxIdentifierBytes of printable ASCII
@@ -50,6 +58,9 @@ absl::Status ValidatePoint(const fluxcal::v1::HfPoint& p, int index);
 absl::Status ValidateOperatingPoint(const fluxcal::v1::OperatingPoint& p, int index);
 // version: 0 = latest, n > 0 = that version; negative is refused.
 absl::Status ValidateVersion(int version);
+// An optional quantity where 0 means "the default": 0, or finite in
+// (0, max]; the message names field, range and unit.
+absl::Status ValidateDefaultable(const std::string& field, double value, double max, const std::string& unit);
 // A page token this service issued: a non-negative decimal offset.
 absl::StatusOr<int> ParsePageToken(const std::string& token);
 

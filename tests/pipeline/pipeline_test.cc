@@ -10,7 +10,11 @@
 #include <filesystem>
 #include <fstream>
 
+#include "absl/strings/str_format.h"
 #include "gtest/gtest.h"
+#include "io/sha256.h"
+#include "nlohmann/json.hpp"
+#include "pipeline/report.h"
 #include "simulation/twin.h"
 #include "storage/sqlite_store.h"
 #include "tests/support/pg_cluster.h"
@@ -150,6 +154,90 @@ TEST(Pipeline, FitJudgeQueryExport) {
   EXPECT_NE(e->exported.bytes.find("# release_state: not released\n"), std::string::npos);
   EXPECT_NE(e->exported.bytes.find("# serial: IPM-F\n"), std::string::npos);
   EXPECT_EQ(QueryFlux(**store, "NOPE", 0, {{0, 0}}).status().code(), absl::StatusCode::kNotFound);
+}
+
+// The stored version's page: the store's provenance on it, the fleet at
+// FleetStatistics' default points, the deadline honoured between steps
+// and inside the fleet, NotFound for what is not stored.
+TEST(Pipeline, StoredReport) {
+  auto store = storage::Store::Open(":memory:");
+  ASSERT_TRUE(store.ok());
+  ASSERT_TRUE(IngestHfRun(**store, "IPM-R", "st", kMotor, Grid(1.0)).ok());
+  ASSERT_TRUE(IngestHfRun(**store, "IPM-S", "st", kMotor, Grid(1.05)).ok());
+  ASSERT_TRUE(FitSerial(**store, "IPM-R", "analytic", {}).ok());
+  ASSERT_TRUE(FitSerial(**store, "IPM-S", "analytic", {}).ok());
+  auto rep = BuildStoredReport(**store, "IPM-R", 0);
+  ASSERT_TRUE(rep.ok()) << rep.status();
+  EXPECT_EQ(rep->version, 1);
+  EXPECT_EQ(rep->verdict, "pass");
+  EXPECT_EQ(rep->html_sha256, io::Sha256Hex(rep->page.html));
+  const std::string& html = rep->page.html;
+  EXPECT_NE(html.find("<th>calibration created</th><td>" + (*store)->GetCalibration("IPM-R", 1)->created_utc),
+            std::string::npos);
+  EXPECT_NE(html.find("<th>release state</th><td>not released</td>"), std::string::npos);
+  EXPECT_NE(html.find("<th>calibration from</th><td>IPM-R version 1 from the service's store</td>"),
+            std::string::npos) << html.substr(html.find("calibration from"), 120);
+  ASSERT_TRUE(rep->fleet_included);
+  for (const auto& [id, iq] : kDefaultFleetPointsA) {
+    EXPECT_NE(html.find(absl::StrFormat("<td>%.4g A, %.4g A</td><td>2</td>", id, iq)), std::string::npos) << id;
+  }
+  StoredReportOptions no_fleet;
+  no_fleet.include_fleet = false;
+  rep = BuildStoredReport(**store, "IPM-R", 1, no_fleet);
+  ASSERT_TRUE(rep.ok());
+  EXPECT_FALSE(rep->fleet_included);
+  EXPECT_EQ(rep->page.html.find("<h2>Fleet</h2>"), std::string::npos);
+
+  EXPECT_EQ(BuildStoredReport(**store, "IPM-R", 2).status().code(), absl::StatusCode::kNotFound);
+  EXPECT_EQ(BuildStoredReport(**store, "IPM-NONE", 0).status().code(), absl::StatusCode::kNotFound);
+  // Cancelled at the first poll (after reading the version), and inside
+  // the fleet (the third poll: the step before, then one per calibration).
+  for (int stop_at : {1, 3}) {
+    int polls = 0;
+    auto stopped = BuildStoredReport(**store, "IPM-R", 0, {}, [&] { return ++polls >= stop_at; });
+    EXPECT_EQ(stopped.status().code(), absl::StatusCode::kCancelled) << stop_at;
+    EXPECT_EQ(polls, stop_at);
+  }
+}
+
+// What a page takes from a calibration's JSON, a file's or the store's:
+// a stored verdict as stored, else the fit's own; the findings a diagnosed
+// calibration carries (another format is left out, not fatal).
+TEST(Pipeline, ReportInputsFromTheCalibrationJson) {
+  auto store = storage::Store::Open(":memory:");
+  ASSERT_TRUE(store.ok());
+  ASSERT_TRUE(IngestHfRun(**store, "IPM-J", "st", kMotor, Grid(1.0)).ok());
+  ASSERT_TRUE(FitSerial(**store, "IPM-J", "analytic", {}).ok());
+  auto cal = LoadCalibration(**store, "IPM-J", 0);
+  ASSERT_TRUE(cal.ok());
+  nlohmann::json j = cal->ToJson();
+  report::ReportInputs in;
+  FillReportInputsFromJson(*cal, j, &in);
+  EXPECT_EQ(in.calibration, &*cal);
+  EXPECT_EQ(in.verdict, Verdict(*cal, 0, 0, 0, {}));
+  EXPECT_EQ(in.verdict_basis.rfind("from the fit alone", 0), 0u) << in.verdict_basis;
+  EXPECT_FALSE(in.diagnosis.has_value());
+  EXPECT_FALSE(in.software_version.empty());
+  j["verdict"] = "fail: stored reason";
+  j["diagnosis"] = {{"format", "fluxcal.diagnosis.v1"}, {"verdict", "explained"},
+                    {"findings", {{{"effect", "dead_time"}, {"parameters", {{"dead_time_s", 2.5e-6}}}}}}};
+  report::ReportInputs marked;
+  FillReportInputsFromJson(*cal, j, &marked);
+  EXPECT_EQ(marked.verdict, "fail: stored reason");
+  EXPECT_EQ(marked.verdict_basis, "as stored with the calibration");
+  ASSERT_TRUE(marked.diagnosis.has_value());
+  EXPECT_EQ((*marked.diagnosis)["serial"], "IPM-J");
+  EXPECT_EQ((*marked.diagnosis)["findings"][0]["effect"], "dead_time");
+  auto page = report::BuildReport(marked);
+  ASSERT_TRUE(page.ok()) << page.status();
+  EXPECT_NE(page->html.find("<td>dead_time</td>"), std::string::npos);
+  j["diagnosis"]["format"] = "something.else";
+  report::ReportInputs other;
+  FillReportInputsFromJson(*cal, j, &other);
+  EXPECT_FALSE(other.diagnosis.has_value());
+  j["diagnosis"] = "not an object";
+  FillReportInputsFromJson(*cal, j, &other);
+  EXPECT_FALSE(other.diagnosis.has_value());
 }
 
 // Identified points of a simulated set go through the one converter; the

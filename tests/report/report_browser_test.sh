@@ -43,8 +43,9 @@ trap 'rm -rf "$W"' EXIT
 "$F" diagnose "$W/sim" --json > "$W/diag.json" 2>/dev/null || true
 "$F" report "$W/sim.json" --set "$W/sim" --diagnosis "$W/diag.json" --out "$A/sim.html" --json > "$W/sim_report.json"
 
-# From the service: the stored calibration with the store's provenance
-# (version, creation time, stored verdict, release state). A port the
+# From the service: the page its GetReport builds for the stored version,
+# with the store's provenance (version, creation time, stored verdict,
+# release state) and the fleet. A port the
 # kernel just handed out (bind to 0), not one derived from the process id:
 # two tests must not meet on one port.
 PORT=$(python3 -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1]); s.close()')
@@ -60,7 +61,7 @@ done
 "$F" eol "$W/sim" --server "127.0.0.1:$PORT" --json > "$W/eol.json" 2>/dev/null || true
 grep -q '"version": 1' "$W/eol.json" || { echo "FAIL: eol stored no calibration:" >&2; cat "$W/eol.json" >&2; exit 1; }
 "$F" report IPM-REPORT-TEST --server "127.0.0.1:$PORT" --out "$A/service.html" --json > "$W/service_report.json"
-for want in "calibration version</th><td>1</td>" "release state</th><td>not released" "calibration created</th><td>20" "from the service at" "<h2>Fleet</h2>" "IPM-REPORT-TEST"; do
+for want in "calibration version</th><td>1</td>" "release state</th><td>not released" "calibration created</th><td>20" "from the service's store" "<h2>Fleet</h2>" "IPM-REPORT-TEST"; do
   grep -qF "$want" "$A/service.html" || { echo "FAIL: service.html lacks '$want'" >&2; exit 1; }
 done
 # The EOL flow with the raw recording uploaded, then the service's own
@@ -75,6 +76,12 @@ names = [f.get("effect") for f in d.get("findings", [])]
 if "dead_time" not in names or d.get("stored", {}).get("version", 0) < 2:
     sys.exit(f"FAIL: remote diagnose --store: findings {names}, stored {d.get('stored')}")
 PY
+# The diagnosed version's page carries the findings it was stored with.
+"$F" report IPM-REPORT-TEST --server "127.0.0.1:$PORT" --out "$A/service_diagnosed.html" --json \
+  > "$W/service_diagnosed_report.json"
+for want in "<h2>Diagnosis</h2>" "<td>dead_time</td>" "from the service's store"; do
+  grep -qF "$want" "$A/service_diagnosed.html" || { echo "FAIL: service_diagnosed.html lacks '$want'" >&2; exit 1; }
+done
 kill $SERVER; wait $SERVER 2>/dev/null || true
 
 # Bad input names the file and field.
@@ -84,7 +91,7 @@ if "$F" report "$W/sim.json" --diagnosis "$W/bad_diag.json" --out "$W/x.html" 2>
 fi
 grep -q "bad_diag.json: field 'format'" "$W/bad.err" || { echo "FAIL: error does not name file and field:"; cat "$W/bad.err"; exit 1; } >&2
 
-for name in baldor sim; do
+for name in baldor sim service service_diagnosed; do
   html="$A/$name.html"
   # --dump-dom prints the DOM after layout; console messages go to stderr
   # with --enable-logging=stderr --v=0.

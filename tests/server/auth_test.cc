@@ -129,6 +129,10 @@ grpc::Status Call(v1::CalibrationService::Stub* stub, Rpc rpc) {
       v1::ReleaseRequest q; q.set_serial("IPM-AUTH-1"); q.set_version(1); v1::ReleaseResponse r;
       return stub->Release(&ctx, q, &r);
     }
+    case Rpc::kGetReport: {
+      v1::GetReportRequest q; q.set_serial("IPM-AUTH-1"); v1::GetReportResponse r;
+      return stub->GetReport(&ctx, q, &r);
+    }
   }
   return grpc::Status::CANCELLED;
 }
@@ -209,6 +213,9 @@ TEST(Roles, MatrixOfEveryRoleAndRpc) {
   EXPECT_TRUE(RoleMayCall(Role::kFlasher, Rpc::kExportTable));
   EXPECT_FALSE(RoleMayCall(Role::kStation, Rpc::kDiagnose));
   EXPECT_FALSE(RoleMayCall(Role::kRelease, Rpc::kIngestRecording));
+  for (Role r : {Role::kStation, Role::kRelease, Role::kFlasher, Role::kEngineer, Role::kAdmin}) {
+    EXPECT_EQ(RoleMayCall(r, Rpc::kGetReport), RoleMayCall(r, Rpc::kGetCalibration)) << RoleName(r);
+  }
   EXPECT_GT(denied, 10);
   EXPECT_GT(allowed, 10);
 }
@@ -336,6 +343,68 @@ TEST(Roles, AStationIngestsAsItselfAndCannotLoosenTheVerdict) {
   const grpc::Status s = stub->Fit(&ctx, q, &r);
   EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
   EXPECT_NE(s.error_message().find("may only tighten the server policy"), std::string::npos) << s.error_message();
+}
+
+// GetReport goes with GetCalibration: a flasher (no read right) is refused
+// naming the RPC, the readers get the page. Its fleet section names other
+// serials, so it is only on the pages of roles that may call
+// FleetStatistics, whatever the request asks.
+TEST(Roles, GetReportReadsLikeGetCalibrationAndTheFleetStaysWithEngineers) {
+  Fixture f("report");
+  auto as = [&](Role r) {
+    return v1::CalibrationService::NewStub(Channel(f.addr(), grpc::InsecureChannelCredentials(), f.tokens[r]));
+  };
+  auto admin = as(Role::kAdmin);
+  {
+    sim::AnalyticMotor m{sim::MotorParams{}};
+    grpc::ClientContext ctx;
+    v1::IngestHfResultsResponse r;
+    auto w = admin->IngestHfResults(&ctx, &r);
+    v1::IngestHfResultsRequest msg;
+    msg.set_serial("IPM-RPT-A");
+    msg.mutable_motor()->set_pole_pairs(4);
+    for (int a = 0; a < 6; ++a) {
+      for (int b = 0; b < 6; ++b) {
+        auto* p = msg.add_points();
+        p->set_point_id("p" + std::to_string(6 * a + b));
+        p->set_id_a(-100 + 20 * a); p->set_iq_a(20 * b);
+        const auto L = m.Inductance(p->id_a(), p->iq_a());
+        p->set_ld_h(L.ldd_h); p->set_lq_h(L.lqq_h); p->set_ldq_h(L.ldq_h);
+        p->set_temperature_c(25); p->set_reliable(true);
+      }
+    }
+    w->Write(msg);
+    w->WritesDone();
+    ASSERT_TRUE(w->Finish().ok());
+    grpc::ClientContext fc;
+    v1::FitRequest fq;
+    fq.set_serial("IPM-RPT-A");
+    v1::FitResponse fr;
+    ASSERT_TRUE(admin->Fit(&fc, fq, &fr).ok());
+  }
+  auto report = [&](Role r, v1::GetReportResponse* resp) {
+    grpc::ClientContext c;
+    c.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
+    v1::GetReportRequest q;
+    q.set_serial("IPM-RPT-A");
+    q.set_include_fleet(true);
+    return as(r)->GetReport(&c, q, resp);
+  };
+  v1::GetReportResponse page;
+  const grpc::Status denied = report(Role::kFlasher, &page);
+  EXPECT_EQ(denied.error_code(), grpc::StatusCode::PERMISSION_DENIED);
+  EXPECT_NE(denied.error_message().find("'flasher-1' (role flasher) may not call GetReport"), std::string::npos)
+      << denied.error_message();
+  EXPECT_TRUE(page.html().empty());
+  for (Role r : {Role::kStation, Role::kRelease, Role::kEngineer, Role::kAdmin}) {
+    v1::GetReportResponse p;
+    const grpc::Status s = report(r, &p);
+    ASSERT_TRUE(s.ok()) << RoleName(r) << ": " << s.error_message();
+    EXPECT_NE(p.html().find("IPM-RPT-A"), std::string::npos);
+    const bool fleet = RoleMayCall(r, Rpc::kFleetStatistics);
+    EXPECT_EQ(p.fleet_included(), fleet) << RoleName(r);
+    EXPECT_EQ(p.html().find("<h2>Fleet</h2>") != std::string::npos, fleet) << RoleName(r);
+  }
 }
 
 // Release and flashing: a failed calibration cannot be released; flashers

@@ -398,6 +398,29 @@ std::vector<Case> Cases() {
   add("FleetStatistics too many points", fleet(0, std::vector<std::pair<double, double>>(kMaxFleetPoints + 1, {-20, 40})));
   add("FleetStatistics id_a NaN", fleet(0, {{kNaN, 40}}));
   add("FleetStatistics iq_a 1e300", fleet(0, {{-20, 1e300}}));
+
+  // --- GetReport.
+  auto report = [](std::function<void(v1::GetReportRequest*)> set) {
+    return [set](Stub* st) {
+      grpc::ClientContext c;
+      v1::GetReportRequest q;
+      q.set_serial("IPM-GOOD");
+      set(&q);
+      v1::GetReportResponse r;
+      return st->GetReport(&c, q, &r);
+    };
+  };
+  for (const auto& s : bad_serials) {
+    add("GetReport serial '" + io::Printable(s.substr(0, 20)) + "'", report([s](auto* q) { q->set_serial(s); }));
+  }
+  add("GetReport unknown serial", report([](auto* q) { q->set_serial("IPM-NOPE"); }));
+  for (int v : {-1, -2147483647, 999}) {
+    add("GetReport version " + std::to_string(v), report([v](auto* q) { q->set_version(v); }));
+  }
+  for (double v : {-1.0, kNaN, kInf, -kInf, 1e9, -1e-300}) {
+    add("GetReport speed_rpm " + std::to_string(v), report([v](auto* q) { q->set_speed_rpm(v); }));
+    add("GetReport udc_v " + std::to_string(v), report([v](auto* q) { q->set_udc_v(v); }));
+  }
   return cs;
 }
 

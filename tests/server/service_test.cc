@@ -1,7 +1,8 @@
 // The service end to end over loopback, on SQLite and on PostgreSQL (a
 // server started by the test): validation rules (status code and message),
 // NOT_FOUND, 8 concurrent station streams, fit, export, query, recording
-// ingest and diagnosis; and kill -9 of a real `fluxcal serve` mid-stream.
+// ingest and diagnosis, the report page (GetReport, and `fluxcal report
+// --server` writing it); and kill -9 of a real `fluxcal serve` mid-stream.
 #include <signal.h>
 #include <sqlite3.h>
 #include <arpa/inet.h>
@@ -22,6 +23,7 @@
 #include "nlohmann/json.hpp"
 #include "server/service.h"
 #include "io/recording_set.h"
+#include "io/sha256.h"
 #include "simulation/twin.h"
 #include "storage/store.h"
 #include "tables/signature.h"
@@ -382,6 +384,20 @@ TEST_P(ServiceTest, IngestRecordingThenDiagnose) {
     const auto j = nlohmann::json::parse(rec.calibration_json());
     ASSERT_TRUE(j.contains("diagnosis"));
     EXPECT_EQ(j["diagnosis"]["findings"][0]["effect"], "dead_time");
+    // The report of that version shows the findings it carries; the
+    // plain fit's version before it has none.
+    grpc::ClientContext rc;
+    v1::GetReportRequest rr;
+    rr.set_serial("IPM-REC-1");
+    rr.set_version(sd.stored_version());
+    v1::GetReportResponse page;
+    ASSERT_TRUE(stub_->GetReport(&rc, rr, &page).ok());
+    EXPECT_EQ(page.version(), sd.stored_version());
+    EXPECT_EQ(page.verdict(), sd.stored_verdict());
+    EXPECT_NE(page.html().find("<h2>Diagnosis</h2>"), std::string::npos);
+    EXPECT_NE(page.html().find("<td>dead_time</td>"), std::string::npos);
+    EXPECT_EQ(page.html().find("Mismatches against the baseline"), std::string::npos)
+        << "the marks carry no mismatches; the page must not count zero";
   }
   fs::remove_all(dir);
   // A set whose manifest names another serial is refused.
@@ -476,6 +492,119 @@ TEST_P(ServiceTest, ClientDeadlineStopsTheWorkAndStoresNothing) {
   ASSERT_TRUE(trail.ok());
   ASSERT_EQ(trail->size(), 2u) << "ingest and the one stored Fit";
   EXPECT_EQ(trail->at(1).rpc, "Fit");
+}
+
+grpc::Status GetReport(v1::CalibrationService::Stub* stub, const v1::GetReportRequest& req,
+                       v1::GetReportResponse* resp) {
+  grpc::ClientContext c;
+  c.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
+  return stub->GetReport(&c, req, resp);
+}
+
+// The page of a stored version: serial, version, stored verdict and
+// release state on it, its SHA-256 over exactly the bytes sent, the
+// request's speed used, the fleet on request, versions resolved.
+TEST_P(ServiceTest, GetReportOfAStoredCalibration) {
+  v1::IngestHfResultsResponse ir;
+  ASSERT_TRUE(Ingest("IPM-RPT-1", GridPoints(), &ir).ok());
+  ASSERT_TRUE(Ingest("IPM-RPT-2", GridPoints(1.02), &ir).ok());
+  v1::FitResponse fit;
+  for (const char* serial : {"IPM-RPT-1", "IPM-RPT-2"}) {
+    grpc::ClientContext fc;
+    v1::FitRequest f;
+    f.set_serial(serial);
+    ASSERT_TRUE(stub_->Fit(&fc, f, &fit).ok());
+  }
+  ASSERT_TRUE(fit.pass()) << fit.calibration().verdict();
+  v1::GetReportRequest req;
+  req.set_serial("IPM-RPT-2");
+  v1::GetReportResponse page;
+  ASSERT_TRUE(GetReport(stub_.get(), req, &page).ok());
+  const std::string& html = page.html();
+  EXPECT_EQ(page.serial(), "IPM-RPT-2");
+  EXPECT_EQ(page.version(), 1);
+  EXPECT_EQ(page.verdict(), fit.calibration().verdict());
+  EXPECT_EQ(page.html_sha256(), io::Sha256Hex(html));
+  EXPECT_EQ(page.html_sha256().size(), 64u);
+  EXPECT_GE(page.figures(), 5);
+  EXPECT_GT(page.voltage_limit_speed_rpm(), 0);
+  EXPECT_EQ(html.rfind("<!DOCTYPE html>", 0), 0u) << html.substr(0, 80);
+  EXPECT_NE(html.find("Calibration report: IPM-RPT-2 <span class=\"ver\">version 1</span>"), std::string::npos);
+  EXPECT_NE(html.find("<th>calibration version</th><td>1</td>"), std::string::npos);
+  EXPECT_NE(html.find("<th>calibration created</th><td>" + store_->GetCalibration("IPM-RPT-2", 1)->created_utc),
+            std::string::npos);
+  EXPECT_NE(html.find("<th>release state</th><td>not released</td>"), std::string::npos);
+  EXPECT_NE(html.find("pass <small>(as stored with the calibration)</small>"), std::string::npos);
+  EXPECT_EQ(html.find("<script"), std::string::npos);
+  // The fleet: both serials at the default points.
+  EXPECT_TRUE(page.fleet_included());
+  EXPECT_NE(html.find("<h2>Fleet</h2>"), std::string::npos);
+  EXPECT_NE(html.find("<td>-20 A, 40 A</td><td>2</td>"), std::string::npos);
+
+  // Released, the page says so; a second fit is the latest version, the
+  // first still reachable by number.
+  {
+    grpc::ClientContext c;
+    v1::ReleaseRequest r;
+    r.set_serial("IPM-RPT-2");
+    r.set_version(1);
+    v1::ReleaseResponse rr;
+    ASSERT_TRUE(stub_->Release(&c, r, &rr).ok());
+    grpc::ClientContext fc;
+    v1::FitRequest f;
+    f.set_serial("IPM-RPT-2");
+    ASSERT_TRUE(stub_->Fit(&fc, f, &fit).ok());
+    ASSERT_EQ(fit.calibration().version(), 2);
+  }
+  ASSERT_TRUE(GetReport(stub_.get(), req, &page).ok());
+  EXPECT_EQ(page.version(), 2);
+  EXPECT_NE(page.html().find("<th>release state</th><td>not released</td>"), std::string::npos);
+  req.set_version(1);
+  ASSERT_TRUE(GetReport(stub_.get(), req, &page).ok());
+  EXPECT_EQ(page.version(), 1);
+  EXPECT_NE(page.html().find("<th>release state</th><td>released for flashing</td>"), std::string::npos);
+
+  // The request's speed draws the voltage limit; the fleet left out on request.
+  req.set_speed_rpm(2500);
+  req.set_udc_v(320);
+  req.set_include_fleet(false);
+  ASSERT_TRUE(GetReport(stub_.get(), req, &page).ok());
+  EXPECT_EQ(page.voltage_limit_speed_rpm(), 2500);
+  EXPECT_NE(page.html().find("udc_v of the request"), std::string::npos);
+  EXPECT_FALSE(page.fleet_included());
+  EXPECT_EQ(page.html().find("<h2>Fleet</h2>"), std::string::npos);
+  EXPECT_EQ(page.html_sha256(), io::Sha256Hex(page.html()));
+}
+
+TEST_P(ServiceTest, GetReportRefusesBadRequestsAndUnknownCalibrations) {
+  v1::IngestHfResultsResponse ir;
+  ASSERT_TRUE(Ingest("IPM-RPT-3", GridPoints(), &ir).ok());   // a motor without a calibration
+  auto call = [&](const std::function<void(v1::GetReportRequest*)>& set) {
+    v1::GetReportRequest req;
+    req.set_serial("IPM-RPT-3");
+    set(&req);
+    v1::GetReportResponse resp;
+    const grpc::Status s = GetReport(stub_.get(), req, &resp);
+    EXPECT_TRUE(resp.html().empty());
+    return s;
+  };
+  ExpectStatus(call([](auto* r) { r->set_serial("IPM-NONE"); }), grpc::StatusCode::NOT_FOUND, "IPM-NONE");
+  ExpectStatus(call([](auto*) {}), grpc::StatusCode::NOT_FOUND, "IPM-RPT-3");
+  ExpectStatus(call([](auto* r) { r->set_version(7); }), grpc::StatusCode::NOT_FOUND, "version 7");
+  ExpectStatus(call([](auto* r) { r->set_serial("bad serial!"); }), grpc::StatusCode::INVALID_ARGUMENT,
+               "serial: illegal serial");
+  ExpectStatus(call([](auto* r) { r->set_serial(""); }), grpc::StatusCode::INVALID_ARGUMENT,
+               "serial: must not be empty");
+  ExpectStatus(call([](auto* r) { r->set_version(-1); }), grpc::StatusCode::INVALID_ARGUMENT, "version: must be >= 0");
+  ExpectStatus(call([](auto* r) { r->set_speed_rpm(std::nan("")); }), grpc::StatusCode::INVALID_ARGUMENT,
+               "speed_rpm: must be a finite number");
+  ExpectStatus(call([](auto* r) { r->set_speed_rpm(-100); }), grpc::StatusCode::INVALID_ARGUMENT,
+               "speed_rpm: must be in (0, 100000] rpm");
+  ExpectStatus(call([](auto* r) { r->set_speed_rpm(2e5); }), grpc::StatusCode::INVALID_ARGUMENT, "speed_rpm");
+  ExpectStatus(call([](auto* r) { r->set_udc_v(INFINITY); }), grpc::StatusCode::INVALID_ARGUMENT,
+               "udc_v: must be a finite number");
+  ExpectStatus(call([](auto* r) { r->set_udc_v(1e9); }), grpc::StatusCode::INVALID_ARGUMENT,
+               "udc_v: must be in (0, 5000] V");
 }
 
 INSTANTIATE_TEST_SUITE_P(Backends, ServiceTest, ::testing::Bool(),
@@ -665,6 +794,143 @@ TEST(EolFlow, UploadRecordingThenDiagnoseAndTheLocalFitAgrees) {
   for (const auto& e : h.events()) runs += e.kind() == "calibration" ? 0 : 1;
   EXPECT_EQ(runs, 2) << "one HF run and one recording run";
 
+  kill(child, SIGTERM);
+  int status = 0;
+  waitpid(child, &status, 0);
+  fs::remove_all(dir);
+}
+
+// The page without its "report written" row: two pages of one version
+// differ only in the time they were built.
+std::string WithoutWriteTime(const std::string& html) {
+  const std::string row = "<tr><th>report written</th>";
+  const size_t a = html.find(row);
+  if (a == std::string::npos) return html;
+  const size_t b = html.find("</tr>", a);
+  return html.substr(0, a) + html.substr(b == std::string::npos ? html.size() : b);
+}
+
+// `fluxcal report SERIAL --server` writes the page the service builds
+// (GetReport) byte for byte: its SHA-256 is the one the service sent, and
+// the page equals one fetched directly but for the time it was built.
+// With a local extra the page is built here from the same stored facts;
+// an unknown serial fails.
+TEST(ReportCli, WritesThePageTheServiceBuilt) {
+  const std::string dir = TempPath("reportcli");
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const std::string db = dir + "/store.db";
+  int port = 0;
+  {
+    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    socklen_t len = sizeof a;
+    ASSERT_EQ(::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a), 0);
+    ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len);
+    port = ntohs(a.sin_port);
+    ::close(fd);
+  }
+  const std::string addr = "127.0.0.1:" + std::to_string(port);
+  const pid_t child = fork();
+  if (child == 0) {
+    execl(FLUXCAL_BINARY, FLUXCAL_BINARY, "serve", "--db", db.c_str(), "--listen", addr.c_str(), "--quiet", nullptr);
+    _exit(127);
+  }
+  auto stub = v1::CalibrationService::NewStub(grpc::CreateChannel(addr, grpc::InsecureChannelCredentials()));
+  bool up = false;
+  for (int k = 0; k < 100 && !up; ++k) {
+    grpc::ClientContext c;
+    c.set_deadline(std::chrono::system_clock::now() + std::chrono::milliseconds(200));
+    v1::ListMotorsResponse lr;
+    up = stub->ListMotors(&c, v1::ListMotorsRequest(), &lr).ok();
+    if (!up) std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  ASSERT_TRUE(up) << "fluxcal serve did not come up on " << addr;
+  {
+    grpc::ClientContext c;
+    v1::IngestHfResultsResponse r;
+    auto w = stub->IngestHfResults(&c, &r);
+    v1::IngestHfResultsRequest m;
+    m.set_serial("IPM-CLI-RPT");
+    m.mutable_motor()->set_pole_pairs(4);
+    m.mutable_motor()->set_rs_ohm(0.011);
+    m.mutable_motor()->set_psi_pm_wb(0.0114);
+    for (const auto& p : GridPoints()) *m.add_points() = p;
+    w->Write(m);
+    w->WritesDone();
+    ASSERT_TRUE(w->Finish().ok());
+    grpc::ClientContext fc;
+    v1::FitRequest f;
+    f.set_serial("IPM-CLI-RPT");
+    v1::FitResponse fr;
+    ASSERT_TRUE(stub->Fit(&fc, f, &fr).ok());
+  }
+  v1::GetReportRequest req;
+  req.set_serial("IPM-CLI-RPT");
+  req.set_speed_rpm(3000);
+  v1::GetReportResponse served;
+  ASSERT_TRUE(GetReport(stub.get(), req, &served).ok());
+
+  const std::string out = dir + "/report.html";
+  auto j = JsonOf(Fluxcal("report IPM-CLI-RPT --server " + addr + " --speed-rpm 3000 --out " + out + " --json"));
+  std::ifstream f(out, std::ios::binary);
+  const std::string written((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+  ASSERT_FALSE(written.empty());
+  EXPECT_EQ(j["sha256"], io::Sha256Hex(written)) << "the file is the page the service sent, byte for byte";
+  EXPECT_EQ(j["bytes"].get<size_t>(), written.size());
+  EXPECT_EQ(j["serial"], "IPM-CLI-RPT");
+  EXPECT_EQ(j["version"], served.version());
+  EXPECT_EQ(j["verdict"], served.verdict());
+  EXPECT_EQ(j["figures"], served.figures());
+  EXPECT_EQ(j["voltage_limit_speed_rpm"].get<double>(), 3000.0);
+  EXPECT_EQ(j["out"], out);
+  EXPECT_EQ(WithoutWriteTime(written), WithoutWriteTime(served.html()));
+  EXPECT_NE(WithoutWriteTime(written), written) << "the row the comparison leaves out exists";
+
+  // --out -: the page on stdout.
+  const auto to_stdout = Fluxcal("report IPM-CLI-RPT --server " + addr + " --speed-rpm 3000 --out -");
+  EXPECT_EQ(to_stdout.first, 0);
+  EXPECT_EQ(WithoutWriteTime(to_stdout.second), WithoutWriteTime(served.html()));
+
+  // With a local file (here a diagnosis document) the page is built on
+  // this side from the stored calibration and the same provenance and
+  // fleet read over the API: the same tables, checksums and fleet numbers
+  // as the service's page, plus the document.
+  const std::string diag = dir + "/diag.json";
+  std::ofstream(diag) << R"({"format": "fluxcal.diagnosis.v1", "serial": "IPM-CLI-RPT", "verdict": "explained",
+                             "findings": [{"effect": "local_finding", "parameters": {"x": 1}}]})";
+  const std::string local = dir + "/local.html";
+  auto lj = JsonOf(Fluxcal("report IPM-CLI-RPT --server " + addr + " --speed-rpm 3000 --diagnosis " + diag +
+                           " --out " + local + " --json"));
+  std::ifstream lf(local, std::ios::binary);
+  const std::string lhtml((std::istreambuf_iterator<char>(lf)), std::istreambuf_iterator<char>());
+  EXPECT_EQ(lj["sha256"], io::Sha256Hex(lhtml));
+  EXPECT_EQ(lj["version"], served.version());
+  EXPECT_EQ(lj["verdict"], served.verdict());
+  for (const std::string want : {"<td>local_finding</td>", "<th>release state</th><td>not released</td>",
+                                 "<h2>Fleet</h2>", "IPM-CLI-RPT from the service at "}) {
+    EXPECT_NE(lhtml.find(want), std::string::npos) << want;
+  }
+  // From `from` to the end of its section.
+  auto part = [](const std::string& html, const std::string& heading, const std::string& from) {
+    const size_t h = html.find(heading);
+    const size_t a = h == std::string::npos ? h : html.find(from, h);
+    return a == std::string::npos ? std::string() : html.substr(a, html.find("</section>", a) - a);
+  };
+  const std::string tables = part(served.html(), "<h2>ECU tables", "<h2>");
+  ASSERT_FALSE(tables.empty());
+  EXPECT_EQ(part(lhtml, "<h2>ECU tables", "<h2>"), tables);
+  const std::string fleet_rows = part(served.html(), "<h2>Fleet</h2>", "<table");
+  ASSERT_FALSE(fleet_rows.empty());
+  EXPECT_EQ(part(lhtml, "<h2>Fleet</h2>", "<table"), fleet_rows);
+
+  // An unknown serial fails and writes nothing.
+  EXPECT_EQ(Fluxcal("report IPM-NOPE --server " + addr + " --out " + dir + "/nope.html").first, 1);
+  EXPECT_FALSE(fs::exists(dir + "/nope.html"));
+
+  stub.reset();
   kill(child, SIGTERM);
   int status = 0;
   waitpid(child, &status, 0);

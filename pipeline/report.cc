@@ -1,0 +1,125 @@
+#include "pipeline/report.h"
+
+#include <iterator>
+#include <utility>
+#include <vector>
+
+#include "absl/strings/str_cat.h"
+#include "io/sha256.h"
+#include "tables/tables.h"
+
+namespace fluxcal::pipeline {
+namespace {
+
+constexpr char kDiagnosisFormat[] = "fluxcal.diagnosis.v1";
+
+}  // namespace
+
+void MergeStoredProvenance(int version, const std::string& created_utc, const std::string& verdict,
+                           std::optional<bool> released, nlohmann::json* j) {
+  (*j)["version"] = version;
+  (*j)["created_utc"] = created_utc;
+  if (!verdict.empty()) (*j)["verdict"] = verdict;
+  if (released) (*j)["released"] = *released ? "released for flashing" : "not released";
+}
+
+std::vector<report::FleetPoint> ToReportFleet(const std::vector<FleetPoint>& points) {
+  std::vector<report::FleetPoint> out;
+  out.reserve(points.size());
+  for (const auto& p : points) {
+    report::FleetPoint f;
+    f.id_a = p.id_a; f.iq_a = p.iq_a; f.serials = p.serials;
+    f.ldd_h_mean = p.ldd_mean; f.ldd_h_std = p.ldd_std;
+    f.lqq_h_mean = p.lqq_mean; f.lqq_h_std = p.lqq_std;
+    f.psi_d_wb_mean = p.psi_d_mean; f.psi_d_wb_std = p.psi_d_std;
+    f.torque_nm_mean = p.torque_mean; f.torque_nm_std = p.torque_std;
+    f.outliers = p.outliers;
+    out.push_back(std::move(f));
+  }
+  return out;
+}
+
+void FillReportInputsFromJson(const fit::Calibration& cal, const nlohmann::json& cal_json, report::ReportInputs* in) {
+  in->calibration = &cal;
+  in->calibration_json = cal_json;
+  in->software_version = tables::FluxcalVersion();
+  if (auto v = cal_json.find("verdict"); v != cal_json.end() && v->is_string()) {
+    in->verdict = v->get<std::string>();
+    in->verdict_basis = "as stored with the calibration";
+  } else {
+    in->verdict = Verdict(cal, 0.0, 0, 0, FitTolerances{});
+    in->verdict_basis = "from the fit alone; give --set to also check psi_pm against nominal and the point flags";
+  }
+  // A diagnosed calibration carries its findings (effect and parameters)
+  // but not the rest of the diagnosis (mismatches, residuals): the page
+  // shows what is there and says where the whole report comes from. A
+  // block of another format is left out rather than failing the page.
+  if (auto d = cal_json.find("diagnosis"); d != cal_json.end() && d->is_object()) {
+    if (auto f = d->find("format"); f != d->end() && *f == kDiagnosisFormat) {
+      nlohmann::json doc = *d;
+      if (!doc.contains("serial")) doc["serial"] = cal.serial();
+      in->diagnosis = std::move(doc);
+      in->diagnosis_path =
+          "the findings marked into this diagnosed calibration (the whole diagnosis with its mismatches and "
+          "residuals: fluxcal diagnose)";
+    }
+  }
+}
+
+absl::StatusOr<StoredReport> BuildStoredReport(storage::Store& store, const std::string& serial, int version,
+                                               const StoredReportOptions& options, const CancelledFn& cancelled) {
+  auto stopped = [&cancelled] { return cancelled && cancelled(); };
+  const auto cancelled_error = [] { return absl::CancelledError("report: cancelled by the caller"); };
+  auto row = store.GetCalibration(serial, version);
+  if (!row.ok()) return row.status();
+  auto released = store.IsReleased(serial, row->version);
+  if (!released.ok()) return released.status();
+  nlohmann::json j = nlohmann::json::parse(row->calibration_json, nullptr, false);
+  if (j.is_discarded() || !j.is_object()) {
+    return absl::DataLossError(
+        absl::StrCat("stored calibration of ", serial, " version ", row->version, " is corrupt: not a JSON object"));
+  }
+  MergeStoredProvenance(row->version, row->created_utc, row->verdict, *released, &j);
+  auto cal = fit::Calibration::FromJson(j);
+  if (!cal.ok()) {
+    return absl::DataLossError(
+        absl::StrCat("stored calibration of ", serial, " version ", row->version, ": ", cal.status().message()));
+  }
+  if (stopped()) return cancelled_error();
+
+  report::ReportInputs in;
+  FillReportInputsFromJson(*cal, j, &in);
+  in.calibration_path = absl::StrCat(serial, " version ", row->version, " from the service's store");
+  // The store always records the creation time; the page shows that.
+  in.calibration_file_mtime_utc = "unknown";
+  if (options.speed_rpm > 0) in.ellipse_speed_rpm = options.speed_rpm;
+  if (options.udc_v > 0) {
+    in.udc_v = options.udc_v;
+    in.udc_source = "udc_v of the request (fluxcal report --udc-v)";
+  }
+  StoredReport out;
+  if (options.include_fleet) {
+    const std::vector<std::pair<double, double>> points(std::begin(kDefaultFleetPointsA),
+                                                        std::end(kDefaultFleetPointsA));
+    auto fleet = FleetStatistics(store, points, kDefaultOutlierSigma, cancelled);
+    if (!fleet.ok()) return fleet.status();
+    in.fleet = ToReportFleet(*fleet);
+    in.fleet_source =
+        "FleetStatistics of the service at its default operating points (latest calibration of every serial)";
+    out.fleet_included = !in.fleet.empty();
+  }
+  if (stopped()) return cancelled_error();
+  auto page = report::BuildReport(in);
+  if (!page.ok()) {
+    // The request was valid; the stored calibration cannot be drawn.
+    return absl::FailedPreconditionError(page.status().message());
+  }
+  out.page = std::move(*page);
+  out.html_sha256 = io::Sha256Hex(out.page.html);
+  out.serial = serial;
+  out.version = row->version;
+  out.verdict = in.verdict;
+  return out;
+}
+
+}  // namespace fluxcal::pipeline

@@ -1,0 +1,72 @@
+// The report page (report/report.h) assembled from what fluxcal knows about
+// a calibration, written once for both producers: `fluxcal report
+// cal.json` (a file) and the service's GetReport (a stored version, which
+// `fluxcal report SERIAL --server` writes out as served).
+#ifndef FLUXCAL_PIPELINE_REPORT_H_
+#define FLUXCAL_PIPELINE_REPORT_H_
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "absl/status/statusor.h"
+#include "fitting/calibration.h"
+#include "pipeline/pipeline.h"
+#include "report/report.h"
+#include "storage/store.h"
+
+namespace fluxcal::pipeline {
+
+// What every page takes from the calibration and its JSON alone, whoever
+// read it: the verdict (as stored when the JSON carries one, else judged
+// from the fit alone), the findings a diagnosed calibration carries (the
+// "diagnosis" block of diag::MarkedCalibrationJson) and the version of the
+// software writing the page. `cal` must outlive `in`. A caller that knows
+// more (a recording set, a diagnosis document) overrides fields afterwards.
+void FillReportInputsFromJson(const fit::Calibration& cal, const nlohmann::json& cal_json, report::ReportInputs* in);
+
+// What only the store knows about a stored version, merged into its JSON
+// under the keys the page reads: version, created_utc, the stored verdict
+// (when there is one) and the release state ("released for flashing" /
+// "not released"; nullopt: unknown, left out). For the service's page and
+// for `fluxcal report SERIAL --server` with local extras, which reads the
+// same facts over the API.
+void MergeStoredProvenance(int version, const std::string& created_utc, const std::string& verdict,
+                           std::optional<bool> released, nlohmann::json* cal_json);
+
+// FleetStatistics' result as the page's fleet section takes it.
+std::vector<report::FleetPoint> ToReportFleet(const std::vector<FleetPoint>& points);
+
+struct StoredReportOptions {
+  double speed_rpm = 0;        // voltage-limit curve, mechanical rpm; <= 0: 1.5 x base speed
+  double udc_v = 0;            // DC-link voltage; <= 0: the export default
+  bool include_fleet = true;   // FleetStatistics at its default points
+};
+
+struct StoredReport {
+  report::Report page;        // html, figures, voltage-limit speed
+  std::string html_sha256;    // io::Sha256Hex(page.html)
+  std::string serial;
+  int version = 0;            // resolved (0 asked: the latest)
+  std::string verdict;        // as stored
+  bool fleet_included = false;
+};
+
+// The page of calibration `version` (0: latest) of `serial` as stored: its
+// JSON with the store's provenance merged (version, created_utc, the stored
+// verdict, release state), the findings when it is a diagnosed version,
+// the fleet comparison when asked, then report::BuildReport. `cancelled`
+// is polled between the steps and per fleet calibration (the page itself
+// is built in one go, about a second).
+// Errors: NotFound (serial or version), DataLoss (stored JSON unreadable),
+// FailedPrecondition (no page can be drawn from the stored calibration),
+// Cancelled, or the store's.
+absl::StatusOr<StoredReport> BuildStoredReport(storage::Store& store, const std::string& serial, int version,
+                                               const StoredReportOptions& options = {},
+                                               const CancelledFn& cancelled = {});
+
+}  // namespace fluxcal::pipeline
+
+#endif  // FLUXCAL_PIPELINE_REPORT_H_
