@@ -127,10 +127,15 @@ int RunExport(const std::vector<std::string>& argv) {
     } else {
       tables::TableSpec ms = spec;
       ms.kind = "mtpa";
-      auto mtpa = spec.kind == "mtpa" ? *table : *tables::BuildTable(*cal, lim, ms);
-      ms.kind = "mtpv";
-      auto mtpv = tables::BuildTable(*cal, lim, ms);
-      text = tables::PlotCurvesSvg(*cal, lim, mtpa, mtpv.ok() ? &*mtpv : nullptr);
+      auto mtpa = spec.kind == "mtpa" ? absl::StatusOr<tables::Table>(*table) : tables::BuildTable(*cal, lim, ms);
+      if (spec.kind == "mtpv") {
+        // The MTPV table's own figure; MTPA beside it for reference.
+        text = tables::PlotMtpvSvg(*cal, lim, *table, mtpa.ok() ? &*mtpa : nullptr);
+      } else {
+        ms.kind = "mtpv";
+        auto mtpv = tables::BuildTable(*cal, lim, ms);
+        text = tables::PlotCurvesSvg(*cal, lim, *mtpa, mtpv.ok() ? &*mtpv : nullptr);
+      }
     }
     if (auto st = io::WriteFileAtomically(*svg, text); !st.ok()) return Fail(std::string(st.message()));
   }

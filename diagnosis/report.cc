@@ -3,6 +3,7 @@
 #include <fstream>
 #include <functional>
 #include <sstream>
+#include <tuple>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -12,6 +13,7 @@
 #include "diagnosis/diagnose.h"
 #include "io/csv.h"
 #include "nlohmann/json.hpp"
+#include "plot/plot.h"
 
 namespace fluxcal::diag {
 
@@ -148,21 +150,34 @@ std::string ToText(const DiagnosisReport& r) {
 
 std::string ResidualMapSvg(const DiagnosisReport& r, bool after) {
   // One panel per standstill signal (HF phasors, held DC voltages): a cell
-  // per operating point on the (id, iq) grid, coloured by the normalised
-  // residual |z| (its RMS per real component, in sigma) and labelled with
-  // it. Green below 2 sigma, amber to 5, red above.
+  // per operating point on the (id, iq) grid, coloured by the class of the
+  // normalised residual |z| (its RMS per real component, in sigma) and
+  // labelled with it: green below 2 sigma, amber to 5, red from 5.
   const char* signals[2] = {"hf_current", "dc_voltage"};
+  const char* what[2] = {"HF current phasors", "held DC voltages"};
   std::vector<double> ids, iqs;
   for (const auto& z : r.residuals) {
     if (z.speed_rpm != 0 || (z.signal != signals[0] && z.signal != signals[1])) continue;
     ids.push_back(z.id_a);
     iqs.push_back(z.iq_a);
   }
+  // Grid levels: operating points are held to their reference within
+  // +-3 A; a level is the mean of the currents it gathers.
   auto levels = [](std::vector<double> v) {
     std::sort(v.begin(), v.end());
-    std::vector<double> out;
-    for (double x : v) if (out.empty() || x - out.back() > 3.0) out.push_back(x);   // held to +-3 A
-    return out;
+    std::vector<double> sum;
+    std::vector<int> count;
+    for (double x : v) {
+      if (sum.empty() || x - sum.back() / count.back() > 3.0) {
+        sum.push_back(x);
+        count.push_back(1);
+      } else {
+        sum.back() += x;
+        ++count.back();
+      }
+    }
+    for (size_t k = 0; k < sum.size(); ++k) sum[k] /= count[k];
+    return sum;
   };
   const auto lx = levels(ids), ly = levels(iqs);
   auto nearest = [](const std::vector<double>& l, double v) {
@@ -170,77 +185,97 @@ std::string ResidualMapSvg(const DiagnosisReport& r, bool after) {
     for (size_t k = 1; k < l.size(); ++k) if (std::abs(l[k] - v) < std::abs(l[best] - v)) best = k;
     return best;
   };
-  const double pw = 360, ph = 320, y0 = 50;
-  const double cw = lx.empty() ? pw : pw / lx.size(), ch = ly.empty() ? ph : ph / ly.size();
-  std::string s = absl::StrFormat(
-      "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"880\" height=\"440\" font-family=\"sans-serif\" "
-      "font-size=\"11\">\n<text x=\"60\" y=\"18\" font-size=\"13\">%s: normalised residual per standstill point, "
-      "%s the findings (|z| in sigma; green &lt; 2, amber &lt; 5, red &gt;= 5)</text>\n",
-      r.serial, after ? "after" : "before");
+  std::vector<plot::Figure> panels;
   for (int p = 0; p < 2; ++p) {
-    const double x0 = 60 + p * 430;
-    s += absl::StrFormat("<text x=\"%.1f\" y=\"%.1f\" font-size=\"12\">%s</text>\n", x0, y0 - 8, signals[p]);
-    s += absl::StrFormat("<rect x=\"%.1f\" y=\"%.1f\" width=\"%.1f\" height=\"%.1f\" fill=\"#eee\" stroke=\"black\"/>\n",
-                         x0, y0, pw, ph);
-    for (size_t i = 0; i < lx.size(); ++i) {
-      s += absl::StrFormat("<text x=\"%.1f\" y=\"%.1f\" text-anchor=\"middle\">%.0f</text>\n", x0 + (i + 0.5) * cw,
-                           y0 + ph + 14, std::round(lx[i]) + 0.0);
+    plot::Figure f(absl::StrFormat("residual-%s-%s", after ? "after" : "before", signals[p]), 560, 440);
+    f.SetTitle(absl::StrFormat("%s (%s)", signals[p], what[p]));
+    f.SetXLabel("id [A]");
+    f.SetYLabel("iq [A]");
+    plot::HeatOptions o;
+    o.colour_label = "|z| [sigma]";
+    o.class_bounds = {2, 5};
+    o.class_colours = {"#88cc88", "#ffcc66", "#ee5555"};
+    o.value_format = "%.1f";
+    std::vector<double> z(lx.size() * ly.size(), std::nan(""));
+    o.cell_titles.assign(z.size(), "");
+    size_t points = 0, shared = 0;
+    for (const auto& q : r.residuals) {
+      if (q.speed_rpm != 0 || q.signal != signals[p]) continue;
+      const double v = after ? q.after : q.before;
+      const size_t k = nearest(ly, q.iq_a) * lx.size() + nearest(lx, q.id_a);
+      ++points;
+      // Two points in one cell (a repeated operating point): the cell
+      // shows the worse, its tooltip names both.
+      if (std::isfinite(z[k])) ++shared;
+      z[k] = std::isfinite(z[k]) ? std::max(z[k], v) : v;
+      o.cell_titles[k] += absl::StrFormat("%s%s %s: |z| = %.2f sigma (%s %.2f)", o.cell_titles[k].empty() ? "" : "; ",
+                                          q.point, q.signal, v, after ? "before" : "after", after ? q.before : q.after);
     }
-    for (size_t j = 0; j < ly.size(); ++j) {
-      s += absl::StrFormat("<text x=\"%.1f\" y=\"%.1f\" text-anchor=\"end\">%.0f</text>\n", x0 - 4,
-                           y0 + ph - (j + 0.5) * ch + 4, std::round(ly[j]) + 0.0);
+    if (points == 0) {
+      f.Note("no standstill point of this signal");
+    } else {
+      f.Heatmap(lx, ly, z, std::move(o));
+      if (shared > 0) f.Note(absl::StrFormat("%zu repeated points: a cell shows the larger |z|", shared));
     }
-    s += absl::StrFormat("<text x=\"%.1f\" y=\"%.1f\" text-anchor=\"middle\">id [A]</text>\n", x0 + pw / 2, y0 + ph + 30);
-    s += absl::StrFormat("<text x=\"%.1f\" y=\"%.1f\" transform=\"rotate(-90 %.1f %.1f)\" text-anchor=\"middle\">iq [A]</text>\n",
-                         x0 - 36, y0 + ph / 2, x0 - 36, y0 + ph / 2);
-    for (const auto& z : r.residuals) {
-      if (z.speed_rpm != 0 || z.signal != signals[p]) continue;
-      const double v = after ? z.after : z.before;
-      const size_t i = nearest(lx, z.id_a), j = nearest(ly, z.iq_a);
-      const char* fill = v < 2 ? "#8c8" : (v < 5 ? "#fc6" : "#e55");
-      const double cx = x0 + i * cw, cy = y0 + ph - (j + 1) * ch;
-      s += absl::StrFormat(
-          "<rect class=\"point\" x=\"%.1f\" y=\"%.1f\" width=\"%.1f\" height=\"%.1f\" fill=\"%s\" stroke=\"white\">"
-          "<title>%s %s |z| = %.2f</title></rect>\n<text x=\"%.1f\" y=\"%.1f\" text-anchor=\"middle\">%.1f</text>\n",
-          cx, cy, cw, ch, fill, z.point, z.signal, v, cx + cw / 2, cy + ch / 2 + 4, v);
-    }
+    panels.push_back(std::move(f));
   }
-  s += "</svg>\n";
-  return s;
+  return plot::PanelsSvg(absl::StrFormat("residual-%s", after ? "after" : "before"),
+                         absl::StrFormat("%s: normalised residual |z| per standstill point, %s the findings (green "
+                                         "< 2 sigma, amber < 5, red >= 5)",
+                                         r.serial, after ? "after" : "before"),
+                         panels, 2);
 }
 
 std::string SpectrumSvg(const DiagnosisReport& r) {
-  const double x0 = 80, y0 = 30, w = 560, h = 380;
-  double top = 1e-9;
-  for (double v : r.spectrum_before_a) top = std::max(top, v);
-  for (double v : r.spectrum_after_a) top = std::max(top, v);
-  // Log axis over five decades below the next power of ten above the top.
-  constexpr int kDecades = 5;
-  const double hi = std::pow(10.0, std::ceil(std::log10(top))), lo = hi * std::pow(10.0, -kDecades);
-  std::string s = "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"760\" height=\"460\" font-family=\"sans-serif\" font-size=\"11\">\n";
-  s += absl::StrFormat("<text x=\"%g\" y=\"18\">%s: spectrum of the replay residual (complex alpha-beta); red = nominal "
-                       "model, blue = final model</text>\n", x0, r.serial);
-  s += absl::StrFormat("<rect x=\"%g\" y=\"%g\" width=\"%g\" height=\"%g\" fill=\"none\" stroke=\"black\"/>\n", x0, y0, w, h);
-  auto y = [&](double v) { return y0 + h - h * std::log10(std::max(v, lo) / lo) / kDecades; };
-  for (int d = 0; d <= kDecades; ++d) {
-    const double v = lo * std::pow(10.0, d);
-    s += absl::StrFormat("<line x1=\"%g\" y1=\"%.1f\" x2=\"%g\" y2=\"%.1f\" stroke=\"#ddd\"/>"
-                         "<text x=\"%g\" y=\"%.1f\" text-anchor=\"end\">%.0e A</text>\n",
-                         x0, y(v), x0 + w, y(v), x0 - 4, y(v) + 4, v);
+  plot::Figure f("replay-spectrum", 980, 560);
+  f.SetTitle(absl::StrFormat("%s: spectrum of the replay residual (complex alpha-beta): %.3g A RMS with the nominal "
+                             "model, %.3g A with the final one",
+                             r.serial, r.waveform_rms_before_a, r.waveform_rms_after_a));
+  f.SetXLabel("frequency [Hz]");
+  f.SetYLabel("residual amplitude [A]");
+  // Log axis over at most seven decades below the top: the final model's
+  // broadband floor stays on it; bins even lower are marked on the floor.
+  f.SetYLog(true, 7);
+  // Below the axes: 2 x 101 bars need the width.
+  f.SetLegendBelow(true);
+  const size_t n = std::min({r.spectrum_hz.size(), r.spectrum_before_a.size(), r.spectrum_after_a.size()});
+  if (n == 0) {
+    f.SetXRange(-1, 1);
+    f.Note("no replay: waveform evidence was not computed");
+    return f.Svg();
   }
-  const size_t n = r.spectrum_hz.size();
-  for (size_t k = 0; k < n; ++k) {
-    const double x = x0 + w * (k + 0.5) / n;
-    s += absl::StrFormat("<line x1=\"%.1f\" y1=\"%.1f\" x2=\"%.1f\" y2=\"%.1f\" stroke=\"#c33\" stroke-width=\"2.5\"/>\n",
-                         x - 1.3, y0 + h, x - 1.3, y(r.spectrum_before_a[k]));
-    s += absl::StrFormat("<line x1=\"%.1f\" y1=\"%.1f\" x2=\"%.1f\" y2=\"%.1f\" stroke=\"#36c\" stroke-width=\"2.5\"/>\n",
-                         x + 1.3, y0 + h, x + 1.3, y(r.spectrum_after_a[k]));
-    if (static_cast<int>(r.spectrum_hz[k]) % 500 == 0) {
-      s += absl::StrFormat("<text x=\"%.1f\" y=\"%g\" text-anchor=\"middle\">%.0f</text>\n", x, y0 + h + 14, r.spectrum_hz[k]);
-    }
+  const std::vector<double> hz(r.spectrum_hz.begin(), r.spectrum_hz.begin() + n);
+  const std::vector<double> before(r.spectrum_before_a.begin(), r.spectrum_before_a.begin() + n);
+  const std::vector<double> after(r.spectrum_after_a.begin(), r.spectrum_after_a.begin() + n);
+  // Bin spacing: the pair of bars of a bin fills 80 % of it.
+  double bin = 0;
+  for (size_t k = 1; k < n; ++k) {
+    const double d = std::abs(hz[k] - hz[k - 1]);
+    if (d > 0 && (bin == 0 || d < bin)) bin = d;
   }
-  s += absl::StrFormat("<text x=\"%g\" y=\"450\" text-anchor=\"middle\">frequency [Hz]</text>\n</svg>\n", x0 + w / 2);
-  return s;
+  if (bin == 0) bin = 1;
+  plot::Style nominal, final_model;
+  nominal.colour = "#cc3333";
+  final_model.colour = "#3366cc";
+  f.Bars(hz, before, 0.4 * bin, nominal, "nominal model (before)", -0.2 * bin);
+  f.Bars(hz, after, 0.4 * bin, final_model, "final model (after)", 0.2 * bin);
+  // Where a bin counts as standing out (docs/diagnosis.md): 10x (20 dB)
+  // above the spectrum's own median bin.
+  auto threshold = [](std::vector<double> v) {
+    std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+    return 10.0 * v[v.size() / 2];
+  };
+  const double x0 = hz.front() - bin, x1 = hz.back() + bin;
+  for (const auto& [v, st, who] : {std::tuple{&before, nominal, "nominal"}, std::tuple{&after, final_model, "final"}}) {
+    plot::Style line = st;
+    line.width_px = 1.2;
+    line.dash = "6 3";
+    const double t = threshold(*v);
+    f.Line({x0, x1}, {t, t}, line, absl::StrFormat("%s: 20 dB above its median bin (%.2g A)", who, t));
+  }
+  f.SetXRange(x0, x1);
+  f.SetTight(true, false);
+  return f.Svg();
 }
 
 absl::StatusOr<std::vector<Table1Row>> ReadTable1(const std::string& path) {

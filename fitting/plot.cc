@@ -2,50 +2,158 @@
 
 #include <algorithm>
 #include <cmath>
-#include <map>
+#include <limits>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "absl/strings/str_join.h"
+#include "plot/plot.h"
 
 namespace fluxcal::fit {
 namespace {
 
-constexpr const char* kColours[] = {"#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e",
-                                    "#8c564b", "#e377c2", "#17becf", "#7f7f7f", "#bcbd22"};
+// Inductances are quoted in mH: the values engineers compare.
+constexpr double kMilli = 1e3;
 
 // Distinct values, merged when closer than `tol` (operating points are held
-// to a reference with a little control error).
+// to a reference with a little control error); each level is the mean of
+// the values it merges, so that a label names what was held.
 std::vector<double> Levels(std::vector<double> v, double tol) {
   std::sort(v.begin(), v.end());
   std::vector<double> out;
+  std::vector<size_t> count;
   for (double x : v) {
-    if (out.empty() || x - out.back() > tol) out.push_back(x);
+    if (out.empty() || x - out.back() / count.back() > tol) {
+      out.push_back(x);
+      count.push_back(1);
+    } else {
+      out.back() += x;
+      ++count.back();
+    }
   }
+  for (size_t k = 0; k < out.size(); ++k) out[k] /= count[k];
   return out;
 }
 
-struct Panel {
-  double x0, y0, w, h;          // pixel frame
-  double xlo, xhi, ylo, yhi;    // data range
-  double X(double x) const { return x0 + (x - xlo) / (xhi - xlo) * w; }
-  double Y(double y) const { return y0 + h - (y - ylo) / (yhi - ylo) * h; }
+size_t Nearest(const std::vector<double>& levels, double v) {
+  size_t best = 0;
+  for (size_t k = 1; k < levels.size(); ++k) {
+    if (std::abs(levels[k] - v) < std::abs(levels[best] - v)) best = k;
+  }
+  return best;
+}
+
+// "iq = 40 A", "iq = 0, 40, 80 A" (curves that lie on top of each other,
+// drawn once), "iq = 0 .. 160 A (6 levels, one curve)" when the list would
+// be long.
+std::string LevelLabel(const char* name, const std::vector<double>& values) {
+  std::vector<std::string> v;
+  for (double x : values) v.push_back(absl::StrFormat("%.0f", std::round(x) + 0.0));
+  if (v.size() > 4) {
+    return absl::StrFormat("%s = %s .. %s A (%zu levels, one curve)", name, v.front(), v.back(), v.size());
+  }
+  return absl::StrFormat("%s = %s A", name, absl::StrJoin(v, ", "));
+}
+
+// One panel: L (Ldd or Lqq) against x (id or iq), one curve per level of
+// the other current, identified points in the colour of their curve.
+struct PanelSpec {
+  bool ldd;                 // Ldd over id (curves per iq), else Lqq over iq (curves per id)
+  const char* id;
+  const char* title;
+  const char* xlabel;
+  const char* ylabel;
+  const char* level_name;   // the current held constant along a curve
 };
 
-std::string Frame(const Panel& p, const std::string& xlabel, const std::string& ylabel) {
-  std::string s = absl::StrFormat(
-      "<rect x=\"%.1f\" y=\"%.1f\" width=\"%.1f\" height=\"%.1f\" fill=\"white\" stroke=\"black\"/>\n", p.x0, p.y0,
-      p.w, p.h);
-  for (int k = 0; k <= 4; ++k) {
-    const double x = p.xlo + (p.xhi - p.xlo) * k / 4, y = p.ylo + (p.yhi - p.ylo) * k / 4;
-    s += absl::StrFormat("<text x=\"%.1f\" y=\"%.1f\" text-anchor=\"middle\">%.0f</text>\n", p.X(x), p.y0 + p.h + 14, x);
-    s += absl::StrFormat("<text x=\"%.1f\" y=\"%.1f\" text-anchor=\"end\">%.3f</text>\n", p.x0 - 4, p.Y(y) + 4,
-                         y * 1e3);
+plot::Figure Panel(const Calibration& cal, const FitData& data, const PanelSpec& p, double x_lo, double x_hi,
+                   const std::vector<double>& levels) {
+  plot::Figure f(p.id, 600, 500);
+  f.SetTitle(p.title);
+  // Below the axes: level lists are long, the curves need the width.
+  f.SetLegendBelow(true);
+  f.SetXLabel(p.xlabel);
+  f.SetYLabel(p.ylabel);
+  // The frame ends at the data's extent (plus a margin for the dots):
+  // whole-tick ends would add bands with nothing in them.
+  const double pad = 0.04 * std::max(1.0, x_hi - x_lo);
+  f.SetXRange(x_lo - pad, x_hi + pad);
+  f.SetTight(true, false);
+  constexpr int kSamples = 81;
+  std::vector<double> xs;
+  for (int k = 0; k < kSamples; ++k) xs.push_back(x_lo - pad + (x_hi - x_lo + 2 * pad) * k / (kSamples - 1));
+  std::vector<std::vector<double>> curves(levels.size());
+  std::vector<std::vector<bool>> extrapolated(levels.size());
+  double y_lo = std::numeric_limits<double>::infinity(), y_hi = -y_lo;
+  for (size_t l = 0; l < levels.size(); ++l) {
+    for (double x : xs) {
+      const double id = p.ldd ? x : levels[l], iq = p.ldd ? levels[l] : x;
+      const auto L = cal.Inductance(id, iq);
+      const double v = kMilli * (p.ldd ? L.ldd_h : L.lqq_h);
+      curves[l].push_back(v);
+      extrapolated[l].push_back(!cal.InMeasuredRegion(id, iq));
+      if (std::isfinite(v)) y_lo = std::min(y_lo, v), y_hi = std::max(y_hi, v);
+    }
   }
-  s += absl::StrFormat("<text x=\"%.1f\" y=\"%.1f\" text-anchor=\"middle\">%s</text>\n", p.x0 + p.w / 2,
-                       p.y0 + p.h + 30, xlabel);
-  s += absl::StrFormat("<text x=\"%.1f\" y=\"%.1f\">%s</text>\n", p.x0, p.y0 - 6, ylabel);
-  return s;
+  // Curves closer than 0.5 % of the panel's range (about a pixel) are one
+  // line: drawn once, with one legend entry naming all their levels.
+  const double tol = 0.005 * std::max(y_hi - y_lo, 1e-9);
+  const auto group = plot::CoincidentGroups(curves, tol);
+  std::vector<size_t> colour_of(levels.size());
+  size_t colours = 0;
+  bool any_extrapolated = false;
+  for (size_t l = 0; l < levels.size(); ++l) {
+    if (group[l] != l) {
+      colour_of[l] = colour_of[group[l]];
+      continue;
+    }
+    colour_of[l] = colours++;
+    std::vector<double> members;
+    for (size_t m = l; m < levels.size(); ++m) {
+      if (group[m] == l) members.push_back(levels[m]);
+    }
+    plot::Style st;
+    st.colour = plot::Palette(static_cast<int>(colour_of[l]));
+    // The measured stretch solid, the extrapolated one dashed; each keeps
+    // the sample where the state changes, so that the two join.
+    std::vector<double> in(curves[l].size(), std::nan("")), out(curves[l].size(), std::nan(""));
+    for (size_t k = 0; k < curves[l].size(); ++k) {
+      const bool ex = extrapolated[l][k];
+      const bool edge = (k > 0 && extrapolated[l][k - 1] != ex) ||
+                        (k + 1 < curves[l].size() && extrapolated[l][k + 1] != ex);
+      (ex ? out : in)[k] = curves[l][k];
+      if (edge) in[k] = out[k] = curves[l][k];
+      any_extrapolated |= ex;
+    }
+    f.Line(xs, in, st, LevelLabel(p.level_name, members));
+    plot::Style dashed = st;
+    dashed.dash = "5 3";
+    f.Line(xs, out, dashed, "");
+  }
+  // Identified points with +-1 sigma, in the colour of their curve.
+  std::vector<std::vector<double>> px(colours), py(colours), pe(colours);
+  for (const auto& o : data.inductances) {
+    const size_t c = colour_of[Nearest(levels, p.ldd ? std::abs(o.iq_a) : o.id_a)];
+    px[c].push_back(p.ldd ? o.id_a : std::abs(o.iq_a));
+    py[c].push_back(kMilli * (p.ldd ? o.ldd_h : o.lqq_h));
+    pe[c].push_back(kMilli * (p.ldd ? o.ldd_h_std : o.lqq_h_std));
+  }
+  for (size_t c = 0; c < colours; ++c) {
+    plot::Style st;
+    st.colour = plot::Palette(static_cast<int>(c));
+    st.marker_px = 3;
+    f.Scatter(px[c], py[c], st, "", pe[c]);
+  }
+  plot::Style grey;
+  grey.colour = "#555";
+  grey.marker_px = 3;
+  if (!data.inductances.empty()) f.Scatter({}, {}, grey, "identified, +-1 sigma");
+  if (any_extrapolated) {
+    grey.dash = "5 3";
+    f.Line({}, {}, grey, "outside the measured region");
+  }
+  return f;
 }
 
 }  // namespace
@@ -53,109 +161,39 @@ std::string Frame(const Panel& p, const std::string& xlabel, const std::string& 
 std::string PlotFitSvg(const Calibration& cal, const FitData& data) {
   const auto& obs = data.inductances;
   double id_lo = 0, id_hi = 0, iq_hi = 1;
-  double d_lo = 1e9, d_hi = 0, q_lo = 1e9, q_hi = 0;   // Ldd, Lqq ranges
+  bool negative_iq = false;
   std::vector<double> ids, iqs;
   for (const auto& o : obs) {
     id_lo = std::min(id_lo, o.id_a);
     id_hi = std::max(id_hi, o.id_a);
     iq_hi = std::max(iq_hi, std::abs(o.iq_a));
-    d_lo = std::min(d_lo, o.ldd_h - o.ldd_h_std);
-    d_hi = std::max(d_hi, o.ldd_h + o.ldd_h_std);
-    q_lo = std::min(q_lo, o.lqq_h - o.lqq_h_std);
-    q_hi = std::max(q_hi, o.lqq_h + o.lqq_h_std);
+    negative_iq |= o.iq_a < 0;
     ids.push_back(o.id_a);
     iqs.push_back(std::abs(o.iq_a));
   }
-  const double span = std::max(1.0, id_hi - id_lo);
-  id_lo -= 0.1 * span;
-  id_hi += 0.05 * span;
-  iq_hi *= 1.1;
-  const double tol = 0.03 * std::max(span, iq_hi);
-  const auto iq_levels = Levels(iqs, tol), id_levels = Levels(ids, tol);
-  // Curves first, so the range covers them too.
-  struct Curve { std::vector<std::pair<double, double>> pts; std::vector<bool> extrapolated; };
-  auto sample = [&](bool ldd, double level) {
-    Curve c;
-    for (int k = 0; k <= 80; ++k) {
-      const double x = ldd ? id_lo + (id_hi - id_lo) * k / 80 : iq_hi * k / 80;
-      const double id = ldd ? x : level, iq = ldd ? level : x;
-      const auto L = cal.Inductance(id, iq);
-      c.pts.push_back({x, ldd ? L.ldd_h : L.lqq_h});
-      c.extrapolated.push_back(!cal.InMeasuredRegion(id, iq));
-    }
-    return c;
-  };
-  std::vector<Curve> dd, qq;
-  for (double q : iq_levels) dd.push_back(sample(true, q));
-  for (double d : id_levels) qq.push_back(sample(false, d));
-  auto cover = [](const std::vector<Curve>& curves, double* lo, double* hi) {
-    for (const auto& c : curves) {
-      for (const auto& [x, y] : c.pts) {
-        if (std::isfinite(y)) { *lo = std::min(*lo, y); *hi = std::max(*hi, y); }
-      }
-    }
-    const double pad = 0.05 * std::max(*hi - *lo, 1e-6);
-    *lo -= pad;
-    *hi += pad;
-  };
-  cover(dd, &d_lo, &d_hi);
-  cover(qq, &q_lo, &q_hi);
-  const Panel pd{70, 40, 400, 320, id_lo, id_hi, d_lo, d_hi};
-  const Panel pq{600, 40, 400, 320, 0.0, iq_hi, q_lo, q_hi};
-  std::string s = absl::StrFormat(
-      "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"1090\" height=\"430\" font-family=\"sans-serif\" "
-      "font-size=\"11\">\n<text x=\"70\" y=\"16\" font-size=\"13\">%s: fitted %s (lines; dashed = outside the "
-      "measured region) against identified inductances (dots, +-1 sigma)</text>\n",
-      cal.serial(), cal.family().Name());
-  s += Frame(pd, "id [A]", "Ldd [mH]");
-  s += Frame(pq, "iq [A]", "Lqq [mH]");
-  auto polyline = [&](const Panel& p, const Curve& c, const char* colour) {
-    // Split into runs of equal extrapolation state.
-    std::string out;
-    size_t k = 0;
-    while (k < c.pts.size()) {
-      const bool ex = c.extrapolated[k];
-      std::string pts;
-      size_t e = k;
-      while (e < c.pts.size() && c.extrapolated[e] == ex) {
-        pts += absl::StrFormat("%.1f,%.1f ", p.X(c.pts[e].first), p.Y(c.pts[e].second));
-        ++e;
-      }
-      if (e < c.pts.size()) pts += absl::StrFormat("%.1f,%.1f ", p.X(c.pts[e].first), p.Y(c.pts[e].second));
-      out += absl::StrFormat("<polyline points=\"%s\" fill=\"none\" stroke=\"%s\" stroke-width=\"1.5\"%s/>\n", pts,
-                             colour, ex ? " stroke-dasharray=\"5 3\"" : "");
-      k = e;
-    }
-    return out;
-  };
-  auto nearest = [](const std::vector<double>& levels, double v) {
-    size_t best = 0;
-    for (size_t k = 1; k < levels.size(); ++k)
-      if (std::abs(levels[k] - v) < std::abs(levels[best] - v)) best = k;
-    return best;
-  };
-  for (size_t k = 0; k < dd.size(); ++k) {
-    s += polyline(pd, dd[k], kColours[k % 10]);
-    s += absl::StrFormat("<text x=\"%.1f\" y=\"%.1f\" fill=\"%s\">iq %.0f A</text>\n", pd.x0 + pd.w + 5,
-                         pd.y0 + 14 * (k + 1), kColours[k % 10], iq_levels[k] + 0.0);
+  const double tol = 0.03 * std::max(std::max(1.0, id_hi - id_lo), iq_hi);
+  std::vector<double> iq_levels = Levels(iqs, tol), id_levels = Levels(ids, tol);
+  // Without data, one curve through the middle of the measured region.
+  if (iq_levels.empty()) iq_levels = {0.5 * (cal.iq_min_a() + cal.iq_max_a())};
+  if (id_levels.empty()) id_levels = {0.5 * (cal.id_min_a() + cal.id_max_a())};
+  if (obs.empty()) {
+    id_lo = cal.id_min_a();
+    id_hi = cal.id_max_a();
+    iq_hi = std::max(1.0, cal.iq_max_a());
   }
-  for (size_t k = 0; k < qq.size(); ++k) {
-    s += polyline(pq, qq[k], kColours[k % 10]);
-    s += absl::StrFormat("<text x=\"%.1f\" y=\"%.1f\" fill=\"%s\">id %.0f A</text>\n", pq.x0 + pq.w + 5,
-                         pq.y0 + 14 * (k + 1), kColours[k % 10], std::round(id_levels[k]) + 0.0);
-  }
-  auto dot = [&](const Panel& p, double x, double y, double sd, const char* colour) {
-    return absl::StrFormat(
-        "<line x1=\"%.1f\" y1=\"%.1f\" x2=\"%.1f\" y2=\"%.1f\" stroke=\"%s\"/>"
-        "<circle cx=\"%.1f\" cy=\"%.1f\" r=\"3\" fill=\"%s\"/>\n",
-        p.X(x), p.Y(y - sd), p.X(x), p.Y(y + sd), colour, p.X(x), p.Y(y), colour);
-  };
-  for (const auto& o : obs) {
-    s += dot(pd, o.id_a, o.ldd_h, o.ldd_h_std, kColours[nearest(iq_levels, std::abs(o.iq_a)) % 10]);
-    s += dot(pq, std::abs(o.iq_a), o.lqq_h, o.lqq_h_std, kColours[nearest(id_levels, o.id_a) % 10]);
-  }
-  s += "</svg>\n";
-  return s;
+  const char* iq_axis = negative_iq ? "|iq| [A]" : "iq [A]";
+  const std::vector<plot::Figure> panels = {
+      Panel(cal, data,
+            {true, "fit-ldd", "Ldd = dpsi_d/did against id", "id [A]", "Ldd [mH]", negative_iq ? "|iq|" : "iq"}, id_lo,
+            id_hi, iq_levels),
+      Panel(cal, data, {false, "fit-lqq", "Lqq = dpsi_q/diq against iq", iq_axis, "Lqq [mH]", "id"}, 0.0, iq_hi,
+            id_levels)};
+  return plot::PanelsSvg(
+      "fit",
+      absl::StrFormat("%s: fitted %s (lines: one per held current, dashed outside the measured region) against the "
+                      "%zu identified inductances (dots, +-1 sigma)",
+                      cal.serial(), cal.family().Name(), obs.size()),
+      panels, 2);
 }
 
 }  // namespace fluxcal::fit

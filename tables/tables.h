@@ -163,10 +163,23 @@ struct Exported {
 // Errors: InvalidArgument (empty table, a non-finite value: named by field).
 absl::StatusOr<Exported> Export(const Table& t, Format f, const ExportOptions& opt = {});
 
-// SVG plots: MTPA/MTPV over torque contours in the (id, iq) plane; the
-// field-weakening table as a heat map.
+// SVG plots (drawn with plot/), the motoring half of the (id, iq) plane on
+// equal axes: round-valued torque contours, the current limit circle (and
+// the measured one where it differs), the voltage limit at a speed its
+// legend states, and the tables' motoring rows; rows flagged clamped or
+// extrapolated get their own markers.
+// The MTPA table's figure: MTPA bold with a dot per row, the voltage limit
+// at 1.5 x base speed; the MTPV table (if given) thin, for reference.
 std::string PlotCurvesSvg(const sim::MagneticModel& m, const MachineLimits& lim, const Table& mtpa,
                           const Table* mtpv);
+// The MTPV table's figure: MTPV bold with a dot per row, the voltage limit
+// at the speed where MTPV operation begins (through its row of largest
+// current inside the current limit); the MTPA table (if given) thin.
+std::string PlotMtpvSvg(const sim::MagneticModel& m, const MachineLimits& lim, const Table& mtpv,
+                        const Table* mtpa);
+// The field-weakening table's `output_name` as a heat map over speed and
+// torque request, a colour bar with round ticks along its length, a cross
+// on each clamped cell and a square on each extrapolated one.
 std::string PlotMapSvg(const Table& fw, const std::string& output_name);
 
 }  // namespace fluxcal::tables

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <functional>
 #include <random>
 #include <set>
@@ -16,6 +17,7 @@
 #include "identification/identify.h"
 #include "simulation/twin.h"
 #include "tables/tables.h"
+#include "tinyxml2.h"
 
 namespace fluxcal::diag {
 namespace {
@@ -631,9 +633,11 @@ TEST(Nominal, DeclaredUncompensatedDeadTimeIsNotAFinding) {
   EXPECT_TRUE(r->findings.empty()) << r->findings[0].effect << " " << nlohmann::json(r->findings[0].parameters).dump();
 }
 
-// The plots: one labelled cell per standstill point and signal in the
-// residual maps, red (>= 5 sigma) before and none after for a concealed dead
-// time; one pair of bars per frequency bin in the spectrum.
+// The plots: one coloured, labelled cell per standstill point and signal
+// in the residual maps,
+// red (>= 5 sigma) before and none after for a concealed dead time; in the
+// spectrum, every bin of both spectra either a bar or a mark on the log
+// axis's floor, no bar below that floor.
 TEST(Plots, ResidualMapsAndSpectrum) {
   sim::TwinConfig cfg;
   cfg.seed = 42;
@@ -642,23 +646,59 @@ TEST(Plots, ResidualMapsAndSpectrum) {
   ASSERT_TRUE(sim.ok());
   auto r = Diagnose(sim->set);
   ASSERT_TRUE(r.ok());
-  auto count = [](const std::string& svg, const std::string& what) {
-    size_t n = 0;
-    for (size_t at = svg.find(what); at != std::string::npos; at = svg.find(what, at + 1)) ++n;
-    return n;
-  };
   size_t standstill = 0;
   for (const auto& z : r->residuals) {
     if (z.speed_rpm == 0 && (z.signal == "hf_current" || z.signal == "dc_voltage")) ++standstill;
   }
-  const std::string before = ResidualMapSvg(*r, false), after = ResidualMapSvg(*r, true);
-  EXPECT_EQ(count(before, "class=\"point\""), standstill);
-  EXPECT_EQ(count(after, "class=\"point\""), standstill);
-  EXPECT_GT(count(before, "#e55"), standstill / 4) << "the dead time's DC-voltage signature, red";
-  EXPECT_EQ(count(after, "#e55"), 0u) << "explained: nothing red after";
+  // Cells (class "cell") by fill, and their labels.
+  struct Cells {
+    size_t total = 0, red = 0, labels = 0;
+  };
+  auto cells = [](const std::string& svg) {
+    tinyxml2::XMLDocument doc;
+    EXPECT_EQ(doc.Parse(svg.c_str()), tinyxml2::XML_SUCCESS) << doc.ErrorStr();
+    Cells c;
+    std::function<void(const tinyxml2::XMLElement*)> walk = [&](const tinyxml2::XMLElement* e) {
+      for (auto* k = e->FirstChildElement(); k; k = k->NextSiblingElement()) {
+        const char* cls = k->Attribute("class");
+        if (cls && std::string(cls) == "cell") {
+          ++c.total;
+          c.red += std::string(k->Attribute("fill")) == "#ee5555";
+        }
+        if (cls && std::string(cls) == "cell-label") ++c.labels;
+        walk(k);
+      }
+    };
+    if (doc.RootElement()) walk(doc.RootElement());
+    return c;
+  };
+  const Cells before = cells(ResidualMapSvg(*r, false)), after = cells(ResidualMapSvg(*r, true));
+  EXPECT_EQ(before.total, standstill);
+  EXPECT_EQ(after.total, standstill);
+  EXPECT_EQ(before.labels, before.total) << "every cell labelled with its |z|";
+  EXPECT_GT(before.red, standstill / 4) << "the dead time's DC-voltage signature, red";
+  EXPECT_EQ(after.red, 0u) << "explained: nothing red after";
+
+  tinyxml2::XMLDocument sdoc;
   const std::string spectrum = SpectrumSvg(*r);
-  EXPECT_EQ(count(spectrum, "stroke=\"#c33\""), r->spectrum_hz.size());
-  EXPECT_EQ(count(spectrum, "stroke=\"#36c\""), r->spectrum_hz.size());
+  ASSERT_EQ(sdoc.Parse(spectrum.c_str()), tinyxml2::XML_SUCCESS) << sdoc.ErrorStr();
+  const auto* clip = sdoc.RootElement()->FirstChildElement("defs")->FirstChildElement("clipPath")->FirstChildElement("rect");
+  const double floor_px = clip->DoubleAttribute("y") + clip->DoubleAttribute("height");
+  std::map<std::string, size_t> per_colour;   // bars and floor marks per series
+  std::function<void(const tinyxml2::XMLElement*)> walk = [&](const tinyxml2::XMLElement* e) {
+    for (auto* k = e->FirstChildElement(); k; k = k->NextSiblingElement()) {
+      const char* cls = k->Attribute("class");
+      if (cls && std::string(cls) == "bar") {
+        ++per_colour[k->Attribute("fill")];
+        EXPECT_LE(k->DoubleAttribute("y") + k->DoubleAttribute("height"), floor_px + 0.05) << "bar below the floor";
+      }
+      if (cls && std::string(cls) == "below-floor") ++per_colour[k->Attribute("fill")];
+      walk(k);
+    }
+  };
+  walk(sdoc.RootElement());
+  EXPECT_EQ(per_colour["#cc3333"], r->spectrum_hz.size()) << "nominal model";
+  EXPECT_EQ(per_colour["#3366cc"], r->spectrum_hz.size()) << "final model";
 }
 
 TEST(Table1, DifferentialInductanceFromPublishedData) {

@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <functional>
 #include <map>
 #include <numbers>
 #include <regex>
@@ -15,6 +16,7 @@
 #include "nlohmann/json.hpp"
 #include "simulation/twin.h"
 #include "io/sha256.h"
+#include "plot/plot.h"
 #include "tables/signature.h"
 #include "tables/tables.h"
 #include "tinyxml2.h"
@@ -327,10 +329,68 @@ TEST(Export, CHeaderCompilesAsC99AndCarriesTheValues) {
   EXPECT_EQ(sha, t.sha256);
 }
 
+// Reading a plot back: elements by class, the axes' data-to-pixel maps
+// from their own tick labels, path coordinates.
+void Walk(const tinyxml2::XMLElement* e, const std::function<void(const tinyxml2::XMLElement*)>& f) {
+  for (auto* c = e->FirstChildElement(); c; c = c->NextSiblingElement()) {
+    f(c);
+    Walk(c, f);
+  }
+}
+std::vector<const tinyxml2::XMLElement*> ByClass(const tinyxml2::XMLElement* root, const std::string& cls) {
+  std::vector<const tinyxml2::XMLElement*> out;
+  Walk(root, [&](const tinyxml2::XMLElement* e) {
+    if (e->Attribute("class") && cls == e->Attribute("class")) out.push_back(e);
+  });
+  return out;
+}
+std::vector<std::string> TextsIn(const tinyxml2::XMLElement* g) {
+  std::vector<std::string> out;
+  Walk(g, [&](const tinyxml2::XMLElement* e) {
+    if (std::string(e->Name()) == "text" && e->GetText()) out.push_back(e->GetText());
+  });
+  return out;
+}
+// Pixel -> data along one axis, from the first and last tick label of the
+// group ("xticks": label x is the tick; "yticks": label y is the tick + 4).
+struct AxisMap {
+  double a = 0, b = 0;   // value = a + b * px
+  double operator()(double px) const { return a + b * px; }
+};
+AxisMap FromTicks(const tinyxml2::XMLElement* svg, bool x_axis) {
+  std::vector<std::pair<double, double>> ticks;   // (px, value)
+  const auto groups = ByClass(svg, x_axis ? "xticks" : "yticks");
+  EXPECT_EQ(groups.size(), 1u);
+  if (groups.empty()) return {};
+  Walk(groups[0], [&](const tinyxml2::XMLElement* e) {
+    if (std::string(e->Name()) != "text") return;
+    ticks.push_back({x_axis ? e->DoubleAttribute("x") : e->DoubleAttribute("y") - 4, std::stod(e->GetText())});
+  });
+  EXPECT_GE(ticks.size(), 3u);
+  if (ticks.size() < 2) return {};
+  AxisMap m;
+  m.b = (ticks.back().second - ticks.front().second) / (ticks.back().first - ticks.front().first);
+  m.a = ticks.front().second - m.b * ticks.front().first;
+  return m;
+}
+std::vector<std::pair<double, double>> PathPoints(const char* d) {
+  std::vector<std::pair<double, double>> out;
+  std::string s(d);
+  for (auto& c : s) if (c == 'M' || c == 'L') c = ' ';
+  std::istringstream in(s);
+  double x, y;
+  while (in >> x >> y) out.push_back({x, y});
+  return out;
+}
+
 // The plots are well-formed SVG (an XML parser reads them) and draw the
-// table's data: the MTPA polyline maps back to the table's rows, the dashed
-// current-limit arc lies on |i| = i_max, and the heat map has one cell per
-// table entry whose colour encodes its value.
+// tables' data, read back through the axes' own tick labels: the MTPA and
+// MTPV lines map back to the tables' motoring rows, the current-limit
+// circle lies on |i| = i_max and the voltage limit on |u| = u_max at the
+// speed its legend names; every line has a legend entry. The heat map has
+// one cell per table entry at its speed and torque, coloured as the colour
+// bar (whose labels are round ticks from end to end) shows its value, and
+// one cross per clamped cell.
 TEST(Plots, SvgParsesAndDrawsTheTables) {
   const auto m = Motor();
   MachineLimits lim;
@@ -338,66 +398,152 @@ TEST(Plots, SvgParsesAndDrawsTheTables) {
   spec.points = 9;
   auto mtpa = BuildTable(m, lim, spec);
   ASSERT_TRUE(mtpa.ok());
-  const std::string curves = PlotCurvesSvg(m, lim, *mtpa, nullptr);
-  tinyxml2::XMLDocument doc;
-  ASSERT_EQ(doc.Parse(curves.c_str()), tinyxml2::XML_SUCCESS) << doc.ErrorStr();
-  const tinyxml2::XMLElement* svg = doc.RootElement();
-  ASSERT_STREQ(svg->Name(), "svg");
-  // Plot frame: x0 = 60, y0 = 20, 560 x 420 px over id in [-i_max, 0.1 i_max],
-  // iq in [0, 1.1 i_max] (tables.cc PlotCurvesSvg).
-  auto id_of = [&](double x) { return -lim.i_max_a + (x - 60) / 560 * 1.1 * lim.i_max_a; };
-  auto iq_of = [&](double y) { return (20 + 420 - y) / 420 * 1.1 * lim.i_max_a; };
-  auto points = [](const char* attr) {
-    std::vector<std::pair<double, double>> out;
-    std::string a(attr);
-    for (auto& c : a) if (c == ',') c = ' ';
-    std::istringstream in(a);
-    double x, y;
-    while (in >> x >> y) out.push_back({x, y});
-    return out;
+  spec.kind = "mtpv";
+  spec.allow_extrapolation = true;
+  auto mtpv = BuildTable(m, lim, spec);
+  ASSERT_TRUE(mtpv.ok()) << mtpv.status();
+  auto rows_of = [](const Table& t) {
+    std::vector<std::pair<double, double>> rows;
+    for (size_t k = 0; k < t.outputs[0].values.size(); ++k) {
+      if (t.outputs[1].values[k] < 0) continue;
+      // MTPV rows the solver could not place (no torque, id at its search
+      // bound of -2 i_max) are not points of the curve.
+      if (t.kind == "mtpv" && (!(t.outputs[2].values[k] > 0) || t.outputs[0].values[k] < -1.99 * t.limits.i_max_a)) {
+        continue;
+      }
+      rows.push_back({t.outputs[0].values[k], t.outputs[1].values[k]});
+    }
+    return rows;
   };
-  bool saw_mtpa = false, saw_limit = false;
-  for (auto* e = svg->FirstChildElement("polyline"); e; e = e->NextSiblingElement("polyline")) {
-    const char* stroke = e->Attribute("stroke");
-    const auto pts = points(e->Attribute("points"));
-    if (stroke && std::string(stroke) == "#c00") {
-      saw_mtpa = true;
-      std::vector<std::pair<double, double>> rows;
-      for (size_t k = 0; k < mtpa->outputs[0].values.size(); ++k)
-        if (mtpa->outputs[1].values[k] >= 0) rows.push_back({mtpa->outputs[0].values[k], mtpa->outputs[1].values[k]});
-      ASSERT_EQ(pts.size(), rows.size());
-      for (size_t k = 0; k < pts.size(); ++k) {
-        EXPECT_NEAR(id_of(pts[k].first), rows[k].first, 0.2) << "MTPA point " << k;
-        EXPECT_NEAR(iq_of(pts[k].second), rows[k].second, 0.2) << "MTPA point " << k;
+  // Each table's figure: both curves, the subject bold with a dot per row.
+  for (const bool mtpv_subject : {false, true}) {
+    SCOPED_TRACE(mtpv_subject ? "MTPV figure" : "MTPA figure");
+    const std::string curves = mtpv_subject ? PlotMtpvSvg(m, lim, *mtpv, &*mtpa) : PlotCurvesSvg(m, lim, *mtpa, &*mtpv);
+    tinyxml2::XMLDocument doc;
+    ASSERT_EQ(doc.Parse(curves.c_str()), tinyxml2::XML_SUCCESS) << doc.ErrorStr();
+    const tinyxml2::XMLElement* svg = doc.RootElement();
+    ASSERT_STREQ(svg->Name(), "svg");
+    const AxisMap id_of = FromTicks(svg, true), iq_of = FromTicks(svg, false);
+    const auto legend = ByClass(svg, "legend");
+    ASSERT_EQ(legend.size(), 1u);
+    const auto labels = TextsIn(legend[0]);
+    auto label_with = [&](const std::string& start) {
+      for (const auto& l : labels) if (l.rfind(start, 0) == 0) return l;
+      return std::string();
+    };
+    double rpm = 0;
+    ASSERT_EQ(std::sscanf(label_with("voltage limit").c_str(), "voltage limit |u| = %*f V at %lf rpm", &rpm), 1)
+        << "the voltage limit's legend entry names its speed";
+    const double we = rpm * lim.pole_pairs * 2 * std::numbers::pi / 60;
+    EXPECT_FALSE(label_with("current limit |i| = 150 A").empty());
+    EXPECT_FALSE(label_with("constant torque").empty());
+    const std::string subject = mtpv_subject ? "MTPV table" : "MTPA table";
+    const std::string other = mtpv_subject ? "MTPA table" : "MTPV table";
+    EXPECT_FALSE(label_with(subject).empty());
+    EXPECT_NE(label_with(other).find("for reference"), std::string::npos);
+    bool saw_mtpa = false, saw_mtpv = false, saw_limit = false, saw_voltage = false;
+    std::map<std::string, double> width;
+    for (const auto* e : ByClass(svg, "line")) {
+      const std::string stroke = e->Attribute("stroke");
+      const auto pts = PathPoints(e->Attribute("d"));
+      if (stroke == "#d62728" || stroke == "#1f77b4") {
+        const bool is_mtpa = stroke == "#d62728";
+        (is_mtpa ? saw_mtpa : saw_mtpv) = true;
+        width[stroke] = e->DoubleAttribute("stroke-width");
+        const auto rows = rows_of(is_mtpa ? *mtpa : *mtpv);
+        ASSERT_EQ(pts.size(), rows.size()) << stroke;
+        for (size_t k = 0; k < pts.size(); ++k) {
+          EXPECT_NEAR(id_of(pts[k].first), rows[k].first, 0.5) << stroke << " point " << k;
+          EXPECT_NEAR(iq_of(pts[k].second), rows[k].second, 0.5) << stroke << " point " << k;
+        }
+      }
+      if (stroke == "#000000" && e->Attribute("stroke-dasharray")) {
+        saw_limit = true;
+        for (const auto& p : pts) EXPECT_NEAR(std::hypot(id_of(p.first), iq_of(p.second)), lim.i_max_a, 0.5);
       }
     }
-    if (e->Attribute("stroke-dasharray")) {
-      saw_limit = true;
-      for (const auto& p : pts)
-        EXPECT_NEAR(std::hypot(id_of(p.first), iq_of(p.second)), lim.i_max_a, 0.5);
+    std::vector<std::pair<double, double>> ellipse;
+    for (const auto* e : ByClass(svg, "contour")) {
+      if (std::string(e->Attribute("stroke")) != "#ff7f0e") continue;
+      saw_voltage = true;
+      for (const auto& p : PathPoints(e->Attribute("d"))) {
+        ellipse.push_back({id_of(p.first), iq_of(p.second)});
+        EXPECT_NEAR(VoltageV(m, lim, ellipse.back().first, ellipse.back().second, we) / lim.UMaxV(), 1.0, 0.02);
+      }
+    }
+    EXPECT_TRUE(saw_mtpa);
+    EXPECT_TRUE(saw_mtpv);
+    EXPECT_TRUE(saw_limit);
+    EXPECT_TRUE(saw_voltage);
+    const std::string bold = mtpv_subject ? "#1f77b4" : "#d62728", thin = mtpv_subject ? "#d62728" : "#1f77b4";
+    EXPECT_GT(width[bold], width[thin]) << "the subject drawn bold";
+    // Every row of the subject a dot in its colour; none on the other.
+    std::map<std::string, size_t> dots;
+    for (const auto* e : ByClass(svg, "point")) {
+      if (std::string(e->Name()) == "circle") ++dots[e->Attribute("fill")];
+    }
+    EXPECT_EQ(dots[bold], rows_of(mtpv_subject ? *mtpv : *mtpa).size());
+    EXPECT_EQ(dots[thin], 0u);
+    if (mtpv_subject) {
+      // MTPV operation begins where the voltage limit reaches the MTPV row
+      // of largest current inside the current limit: the drawn limit
+      // passes through that row.
+      std::pair<double, double> start{0, 0};
+      for (const auto& r : rows_of(*mtpv)) {
+        const double i = std::hypot(r.first, r.second);
+        if (i <= lim.i_max_a * (1 + 1e-9) && i > std::hypot(start.first, start.second)) start = r;
+      }
+      // Distance to the drawn segments (vertices lie a grid step apart).
+      double nearest = 1e9;
+      for (size_t k = 1; k < ellipse.size(); ++k) {
+        const auto [x0, y0] = ellipse[k - 1];
+        const auto [x1, y1] = ellipse[k];
+        const double dx = x1 - x0, dy = y1 - y0, len2 = dx * dx + dy * dy;
+        if (len2 > 25) continue;   // a jump between two pieces of the contour
+        const double t = len2 > 0 ? std::clamp(((start.first - x0) * dx + (start.second - y0) * dy) / len2, 0.0, 1.0) : 0;
+        nearest = std::min(nearest, std::hypot(start.first - x0 - t * dx, start.second - y0 - t * dy));
+      }
+      EXPECT_LT(nearest, 0.5) << "the voltage limit misses the MTPV start (" << start.first << ", " << start.second << ")";
     }
   }
-  EXPECT_TRUE(saw_mtpa);
-  EXPECT_TRUE(saw_limit);
 
   const Table fw = SmallTable("fw");
   const std::string map = PlotMapSvg(fw, "id_a");
   tinyxml2::XMLDocument mdoc;
   ASSERT_EQ(mdoc.Parse(map.c_str()), tinyxml2::XML_SUCCESS) << mdoc.ErrorStr();
+  const auto* msvg = mdoc.RootElement();
   const auto& v = fw.outputs[0].values;
-  const double lo = *std::min_element(v.begin(), v.end()), hi = *std::max_element(v.begin(), v.end());
   const size_t n1 = fw.axes[1].values.size();
+  const auto bar = ByClass(msvg, "colourbar");
+  ASSERT_EQ(bar.size(), 1u);
+  auto ticks = TextsIn(bar[0]);
+  ASSERT_GE(ticks.size(), 4u);
+  EXPECT_EQ(ticks.back(), "id [A]");
+  ticks.pop_back();
+  const double lo = std::stod(ticks.front()), hi = std::stod(ticks.back());
+  EXPECT_LE(lo, *std::min_element(v.begin(), v.end()));
+  EXPECT_GE(hi, *std::max_element(v.begin(), v.end()));
+  const double step = std::stod(ticks[1]) - lo;
+  for (const auto& t : ticks) EXPECT_NEAR(std::stod(t) / step, std::round(std::stod(t) / step), 1e-6) << t;
+  const AxisMap speed_of = FromTicks(msvg, true), torque_of = FromTicks(msvg, false);
+  const double speed_span = fw.axes[1].values.back() - fw.axes[1].values.front();
+  const double torque_span = fw.axes[0].values.back() - fw.axes[0].values.front();
   size_t cells = 0;
-  for (auto* e = mdoc.RootElement()->FirstChildElement("rect"); e; e = e->NextSiblingElement("rect")) {
-    if (std::string(e->Attribute("class") ? e->Attribute("class") : "") != "cell") continue;   // colour bar
-    int r, b;
-    ASSERT_EQ(std::sscanf(e->Attribute("fill"), "rgb(%d,60,%d)", &r, &b), 2);
+  for (const auto* e : ByClass(msvg, "cell")) {
+    ASSERT_LT(cells, v.size());
     // Cells are written row-major over (torque, speed), like the table.
-    EXPECT_NEAR(lo + (hi - lo) * r / 255.0, v[cells], (hi - lo) / 255.0 + 1e-9) << "cell " << cells;
-    EXPECT_NEAR(e->DoubleAttribute("x"), 70 + (cells % n1) * 540.0 / n1, 0.01);
+    EXPECT_EQ(std::string(e->Attribute("fill")), plot::ColourMap((v[cells] - lo) / (hi - lo))) << "cell " << cells;
+    const double cx = e->DoubleAttribute("x") + e->DoubleAttribute("width") / 2;
+    const double cy = e->DoubleAttribute("y") + e->DoubleAttribute("height") / 2;
+    EXPECT_NEAR(speed_of(cx), fw.axes[1].values[cells % n1], 0.01 * speed_span) << "cell " << cells;
+    EXPECT_NEAR(torque_of(cy), fw.axes[0].values[cells / n1], 0.01 * torque_span) << "cell " << cells;
     ++cells;
   }
   EXPECT_EQ(cells, v.size());
+  size_t clamped = 0, crosses = 0;
+  for (auto c : fw.clamped) clamped += c;
+  for (const auto* e : ByClass(msvg, "point")) crosses += std::string(e->Name()) == "path";
+  EXPECT_EQ(crosses, clamped) << "one cross per clamped cell, drawn unlike valid cells";
 }
 
 TEST(Export, CdfxRoundTripThroughXmlParser) {
