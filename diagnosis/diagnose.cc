@@ -63,7 +63,7 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
       {"spatial_harmonics", kHarm, 12}, {"current_sensor_offset", kSensorOffset},
       {"dc_link_sense_gain", kUdcGain}, {"phase_resistance_imbalance", kRImb},
       {"stator_temperature_drift", kDrift}, {"inverter_voltage_drop", kVth},
-      {"position_sensor_harmonic", kAngleHarm}};
+      {"position_sensor_harmonic", kAngleHarm}, {"iron_loss", kIronLoss}};
   // A switch threshold is a candidate only where the held points span two
   // DC-link voltages; at one it is the dead time's signature exactly, and
   // the dead_time finding names it as the alternative (verdict.cc).

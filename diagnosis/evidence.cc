@@ -50,6 +50,7 @@ double ReplayResidual(const io::RecordingSet& set, const Model& m, const Params&
   opt.effects.amplitude_h = m.Harm(ptr.data());
   opt.effects.udc_sense_gain = m.UdcGain(ptr.data());
   opt.effects.threshold_v = m.Vth(ptr.data());
+  opt.effects.r_fe_ohm = m.Gfe(ptr.data()) > 0 ? 1.0 / m.Gfe(ptr.data()) : 0.0;
   opt.effects.harmonic_amplitude_rad = std::abs(m.AngleHarm(ptr.data()));
   opt.effects.harmonic_phase_rad = std::arg(m.AngleHarm(ptr.data()));
   for (int x = 0; x < 3; ++x) {

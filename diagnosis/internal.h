@@ -46,9 +46,9 @@ inline double IPow(double x, int n) {
 // ---- Parameter blocks (scaled to order one) -----------------------------
 enum Block {
   kBase, kCross, kDead, kRs, kRhf, kOffset, kGain, kPsi, kDelay, kHarm, kSensorOffset, kUdcGain, kRImb, kDrift,
-  kVth, kAngleHarm, kNumBlocks
+  kVth, kAngleHarm, kIronLoss, kNumBlocks
 };
-constexpr int kBlockSize[kNumBlocks] = {10, 8, 1, 1, 1, 1, 3, 1, 1, 1, 2, 1, 2, 1, 1, 2};
+constexpr int kBlockSize[kNumBlocks] = {10, 8, 1, 1, 1, 1, 3, 1, 1, 1, 2, 1, 2, 1, 1, 2, 1};
 // Fit scales of the effect blocks, from the catalogue (simulation/effects.h):
 // value = neutral + scale x block value (psi_pm relative to its nominal).
 const double kScaleDead = sim::EffectParam("dead_time", "dead_time_s").fit_scale;
@@ -64,6 +64,8 @@ const double kScaleUdcGain = sim::EffectParam("dc_link_sense_gain", "udc_sense_g
 const double kScaleRImb = sim::EffectParam("phase_resistance_imbalance", "dr_a_ohm").fit_scale;
 const double kScaleDrift = sim::EffectParam("stator_temperature_drift", "winding_temp_rise_k").fit_scale;
 const double kScaleVth = sim::EffectParam("inverter_voltage_drop", "threshold_v").fit_scale;
+// iron_loss is fitted as the conductance 1 / R_fe (linear in the model).
+const double kScaleGfe = sim::EffectParam("iron_loss", "r_fe_ohm").fit_scale;
 const double kScaleAngleHarm = sim::EffectParam("position_sensor_harmonic", "harmonic_amplitude_rad").fit_scale;
 // Cross terms x^a y^b of the co-energy (a >= 1, b >= 2 even): they vanish
 // with iq = 0 or id = 0 as the machine's symmetry requires.
@@ -172,6 +174,22 @@ struct Model {
   // inverter_voltage_drop: the switches' threshold V_th (its slope r_on is
   // in series with Rs and lives in Rs(p); docs/diagnosis.md).
   double Vth(const double* const* p) const { return kScaleVth * p[kVth][0]; }
+  // iron_loss: conductance of the branch parallel to the magnetising one.
+  double Gfe(const double* const* p) const { return kScaleGfe * p[kIronLoss][0]; }
+  // Steady state with iron loss: the branch voltage e = w_e J psi(i_m) drives
+  // g e beside the magnetising current, so i_m = i - g w_e J psi(i_m), solved
+  // by two fixed-point steps (g w_e L ~ 1e-2: each step gains two digits).
+  Complex MagnetisingCurrent(const double* const* p, Complex i, double w_e) const {
+    const double g = Gfe(p);
+    if (g == 0.0 || w_e == 0.0) return i;
+    Complex im = i;
+    for (int it = 0; it < 2; ++it) {
+      double pd, pq;
+      Flux(p, im.real(), im.imag(), &pd, &pq);
+      im = i - g * w_e * Complex(-pq, pd);
+    }
+    return im;
+  }
   // position_sensor_harmonic as c = amplitude e^{j phase}: the reading's
   // error a sin(2 theta + phase) = Im(c e^{j 2 theta}), linear in the block.
   Complex AngleHarm(const double* const* p) const {
@@ -212,12 +230,33 @@ struct Model {
 
   // Eqs. (E1)-(E2) of identification/inductance.h with a voltage on both
   // sequences: V = R I0 + j w (S I0 + D conj(I1)), Vn = R I1 + j w2 (S I1 + D conj(I0)).
-  void SolvePhasors(double ldd, double lqq, double ldq, double r, Complex v, Complex vn, double w_e,
-                    Complex* i0, Complex* i1) const {
+  // The magnetising branch at angular frequency w, exactly: jwL alone, or
+  // with iron loss (g = 1 / R_fe > 0) in parallel, jwL (I + jw g L)^-1 (a
+  // complex symmetric matrix; it commutes with L). A symmetric 2x2 matrix M
+  // acts on a sequence's phasor as S_M I + D_M conj(I_other) with
+  // S_M = (M_dd + M_qq) / 2, D_M = (M_dd - M_qq) / 2 + j M_dq, complex entries
+  // included (derivation: docs/diagnosis.md, "Iron loss").
+  static void BranchSD(double ldd, double lqq, double ldq, double w, double g, Complex* S, Complex* D) {
     const Complex j(0.0, 1.0);
-    const double S = 0.5 * (ldd + lqq), w2 = 2.0 * w_e - w_i;
-    const Complex D(0.5 * (ldd - lqq), ldq);
-    const Complex a1 = r + j * w_i * S, b1 = j * w_i * D, a2 = r + j * w2 * S, b2 = j * w2 * D;
+    Complex mdd = j * w * ldd, mqq = j * w * lqq, mdq = j * w * ldq;
+    if (g != 0.0) {
+      // N = I + jw g L; M = jwL N^-1.
+      const Complex a = 1.0 + j * w * g * ldd, b = j * w * g * ldq, d = 1.0 + j * w * g * lqq;
+      const Complex det = a * d - b * b;
+      const Complex ia = d / det, ib = -b / det, id = a / det;
+      const Complex ndd = mdd * ia + mdq * ib, ndq = mdd * ib + mdq * id, nqq = mdq * ib + mqq * id;
+      mdd = ndd; mdq = ndq; mqq = nqq;
+    }
+    *S = 0.5 * (mdd + mqq);
+    *D = 0.5 * (mdd - mqq) + j * mdq;
+  }
+  void SolvePhasors(double ldd, double lqq, double ldq, double r, Complex v, Complex vn, double w_e,
+                    Complex* i0, Complex* i1, double g_fe = 0.0) const {
+    const double w2 = 2.0 * w_e - w_i;
+    Complex S1, D1, S2, D2;
+    BranchSD(ldd, lqq, ldq, w_i, g_fe, &S1, &D1);
+    BranchSD(ldd, lqq, ldq, w2, g_fe, &S2, &D2);
+    const Complex a1 = r + S1, b1 = D1, a2 = r + S2, b2 = D2;
     Eigen::Matrix4d A;
     A << a1.real(), -a1.imag(), b1.real(), b1.imag(),
          a1.imag(), a1.real(), b1.imag(), -b1.real(),
@@ -274,7 +313,7 @@ struct Model {
       v -= up * o.harm_p[hk] + down * o.harm_q[hk];
       vn -= up * std::conj(o.harm_q[hk]) + down * std::conj(o.harm_p[hk]);
     }
-    SolvePhasors(ldd, lqq, ldq, r, v, vn, o.w_e, i0, i1);
+    SolvePhasors(ldd, lqq, ldq, r, v, vn, o.w_e, i0, i1, Gfe(p));
     // The measured angle is true + offset: the negative sequence appears
     // rotated by -2 offset in the measured frame.
     *i1 *= std::conj(rot * rot);
@@ -308,8 +347,9 @@ struct Model {
   Complex PredictSs(const double* const* p, const SsObs& o) const {
     const Complex rot = std::polar(1.0, Offset(p));
     const Complex it = rot * Complex(o.id_a, o.iq_a) / M1(p);
+    const Complex im = MagnetisingCurrent(p, it, o.w_e);
     double pd, pq;
-    Flux(p, it.real(), it.imag(), &pd, &pq);
+    Flux(p, im.real(), im.imag(), &pd, &pq);
     const double rs = RsAt(p, 1.0);   // recorded after the points: the winding is warm
     const Complex u_true(rs * it.real() - o.w_e * pq, rs * it.imag() + o.w_e * pd);
     return UdcGain(p) * (std::conj(rot) * u_true * std::polar(1.0, o.w_e * Delay(p)) + DeadTime(p) * o.dead +
@@ -317,9 +357,11 @@ struct Model {
   }
   double PredictTorque(const double* const* p, const SsObs& o) const {
     const Complex it = std::polar(1.0, Offset(p)) * Complex(o.id_a, o.iq_a) / M1(p);
+    // Only the magnetising current makes torque (the iron-loss current none).
+    const Complex im = MagnetisingCurrent(p, it, o.w_e);
     double pd, pq;
-    Flux(p, it.real(), it.imag(), &pd, &pq);
-    return 1.5 * pole_pairs * (pd * it.imag() - pq * it.real());
+    Flux(p, im.real(), im.imag(), &pd, &pq);
+    return 1.5 * pole_pairs * (pd * im.imag() - pq * im.real());
   }
 };
 

@@ -67,6 +67,13 @@ Finding Describe(const Candidate& c, const Model& m, const FitOut& f) {
       out.parameter_std["harmonic_phase_rad"] = std::abs(c) > 0 ? sa / std::abs(c) : kPi;
       break;
     }
+    case kIronLoss: {
+      // Reported as the resistance; its deviation by the delta method.
+      const double g = m.Gfe(p), sg = kScaleGfe * sd(kIronLoss, 0);
+      out.parameters["r_fe_ohm"] = g != 0.0 ? 1.0 / g : 0.0;
+      out.parameter_std["r_fe_ohm"] = g != 0.0 ? sg / (g * g) : 0.0;
+      break;
+    }
     case kVth:
       out.parameters["threshold_v"] = m.Vth(p);
       out.parameter_std["threshold_v"] = kScaleVth * sd(kVth, 0);
@@ -180,6 +187,11 @@ double Significance(const Candidate& c, const FitOut& f, const Model& m) {
     const auto it = d.parameters.find(std::string(par.name));
     if (it == d.parameters.end() || par.name == "order") continue;
     double size = 0, floor = par.floor;
+    if (par.floor_kind == sim::FloorKind::kBelow) {
+      // A parallel resistance: material when present (> 0) and small.
+      if (it->second > 0 && it->second <= par.floor) material = true;
+      continue;
+    }
     if (par.floor_kind == sim::FloorKind::kRelativeNominal) {
       const double nominal = par.name == "rs_ohm" ? m.rs_nom : m.psi_nom;
       size = std::abs(it->second - nominal);

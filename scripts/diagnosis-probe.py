@@ -91,6 +91,26 @@ for k, seed in enumerate((91, 92, 93)):
     EXT.append((f'pair_udc_cso_s{seed}', seed, f'udc_sense_gain={(1.03, 0.96, 1.05)[k]},offset_b_a=1.2', True, 'default'))
     EXT.append((f'pair_pri_sg_s{seed}', seed, f'dr_b_ohm={(0.003, 0.004, 0.0035)[k]},gain_a=1.02', True, 'b'))
     EXT.append((f'pair_std_dt_s{seed}', seed, f'winding_temp_rise_k={(20, 25, 15)[k]},dead_time_s=1.0e-6', True, 'b'))
+# The later extensions: inverter_voltage_drop (on plans with points repeated
+# at a second DC-link voltage: variants '*_2udc'), position_sensor_harmonic
+# and iron_loss, alone with three seeds on both motors and in pairs (three
+# seeds each).
+for variant in ('b', 'default'):
+    for k, seed in enumerate((141, 142, 143)):
+        EXT.append((f'ivd_{variant}_s{seed}', seed, f'threshold_v={(0.8, 0.5, 1.1)[k]}', True, variant + '_2udc'))
+        EXT.append((f'psh_{variant}_s{seed}', seed,
+                    f'harmonic_amplitude_rad={(0.02, 0.012, 0.025)[k]},harmonic_phase_rad={(0.7, -2.0, 2.8)[k]}',
+                    True, variant))
+        EXT.append((f'fe_{variant}_s{seed}', seed, f'r_fe_ohm={(20, 40, 60)[k]}', True, variant))
+for k, seed in enumerate((151, 152, 153)):
+    EXT.append((f'pair_ivd_dt_s{seed}', seed, f'threshold_v={(0.7, 0.6, 0.9)[k]},dead_time_s=1.0e-6', True, 'b_2udc'))
+    EXT.append((f'pair_ivd_rs_s{seed}', seed, f'threshold_v={(0.7, 0.6, 0.9)[k]},rs_ohm=0.016', True, 'default_2udc'))
+    EXT.append((f'pair_psh_po_s{seed}', seed,
+                f'harmonic_amplitude_rad=0.02,harmonic_phase_rad={(2.0, -0.5, 1.0)[k]},offset_rad=0.04', True, 'b'))
+    EXT.append((f'pair_psh_sg_s{seed}', seed,
+                f'harmonic_amplitude_rad=0.02,harmonic_phase_rad={(0.3, 1.5, -1.0)[k]},gain_b=1.02', True, 'default'))
+    EXT.append((f'pair_fe_rhf_s{seed}', seed, f'r_fe_ohm={(25, 30, 40)[k]},r_hf_ohm=0.02', True, 'b'))
+    EXT.append((f'pair_fe_mt_s{seed}', seed, f'r_fe_ohm={(25, 30, 40)[k]},psi_pm_wb=0.0108', True, 'default'))
 TWIN += EXT
 
 # Physics outside the vocabulary: an effect concealed with its catalogue
@@ -104,6 +124,10 @@ OUTSIDE = [
     ('outside_dt_s89', 89, 'dead_time_s=1.5e-6', True, 'b', 'dead_time'),
     ('outside_pri_s90', 90, 'dr_a_ohm=0.004', True, 'b', 'phase_resistance_imbalance'),
     ('outside_std_s94', 94, 'winding_temp_rise_k=25', True, 'b', 'stator_temperature_drift'),
+    ('outside_ivd_s95', 95, 'threshold_v=0.8', True, 'b_2udc', 'inverter_voltage_drop'),
+    ('outside_psh_s96', 96, 'harmonic_amplitude_rad=0.025,harmonic_phase_rad=1.0', True, 'default',
+     'position_sensor_harmonic'),
+    ('outside_fe_s97', 97, 'r_fe_ohm=20', True, 'b', 'iron_loss'),
 ]
 TWIN += [c[:5] for c in OUTSIDE]
 EXCLUDED = {c[0]: c[5] for c in OUTSIDE}
@@ -135,6 +159,15 @@ def within(truth, rep, tol=0.15):
             for n in names:
                 if abs(p[n] - (t[n] - mean)) > tol * size:
                     bad.append(f'{n} {p[n]:.5f} vs {t[n] - mean:.5f}')
+        if e['effect'] == 'inverter_voltage_drop' and 'inverter_voltage_drop' in found:
+            if abs(p['threshold_v'] / t['threshold_v'] - 1) > tol:
+                bad.append(f"threshold_v {p['threshold_v']:.3f} vs {t['threshold_v']}")
+        if e['effect'] == 'position_sensor_harmonic':
+            if abs(p['harmonic_amplitude_rad'] / t['harmonic_amplitude_rad'] - 1) > tol:
+                bad.append(f"harmonic_amplitude_rad {p['harmonic_amplitude_rad']:.4f} vs {t['harmonic_amplitude_rad']}")
+        if e['effect'] == 'iron_loss':
+            if abs(p['r_fe_ohm'] / t['r_fe_ohm'] - 1) > tol:
+                bad.append(f"r_fe_ohm {p['r_fe_ohm']:.2f} vs {t['r_fe_ohm']}")
         if e['effect'] == 'stator_temperature_drift':
             if abs(p['winding_temp_rise_k'] / t['winding_temp_rise_k'] - 1) > tol:
                 bad.append(f"winding_temp_rise_k {p['winding_temp_rise_k']:.2f} vs {t['winding_temp_rise_k']}")
@@ -151,6 +184,8 @@ def expected(want, truth):
             mean = (t['dr_a_ohm'] + t['dr_b_ohm'] + t['dr_c_ohm']) / 3
             if mean > 0.03 * truth['motor']['rs_ohm']:
                 want.add('stator_resistance')
+        if e['effect'] == 'inverter_voltage_drop' and e['parameters'].get('slope_ohm', 0) > 0:
+            want.add('stator_resistance')   # the slope is in series with Rs
     return sorted(want)
 
 
@@ -250,6 +285,7 @@ def main():
     m['sensors']['udc_noise_v'] = 0.0
     json.dump(m, open(udc0, 'w'), indent=1)
     motors = {'b': motor, 'b_udc0': udc0, 'default': os.path.join(ROOT, 'data', 'motors', 'default_motor.json')}
+    motors['b_2udc'], motors['default_2udc'] = motors['b'], motors['default']
     plan = os.path.join(ROOT, 'data', 'plans', 'eol_like_plan.json')
 
     def simulate(case):
@@ -261,6 +297,8 @@ def main():
             cmd += ['--effects', effects]
         if spread:
             cmd.append('--spread')
+        if variant.endswith('_2udc'):
+            cmd += ['--second-udc-v', '35']
         subprocess.run(cmd, check=True, capture_output=True)
         truth = json.load(open(d + '.truth.json'))
         return name, d, sorted({e['effect'] for e in truth['concealed_effects']}), truth

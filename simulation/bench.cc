@@ -43,6 +43,7 @@ PointRun RunPoint(const TwinConfig& cfg, const PlantModel& m, double id_ref, dou
   m.Flux(id_ref, iq_ref, theta0, &x.psd, &x.psq);
   x.lpd = id_ref; x.lpq = iq_ref;
   x.i = Vec2{id_ref, iq_ref};
+  x.i_term = x.i;
   double int_d = cfg.motor.rs_ohm * id_ref, int_q = cfg.motor.rs_ohm * iq_ref;
 
   std::deque<std::pair<double, double>> cmd_hist;   // alpha-beta commands by period
@@ -70,7 +71,8 @@ PointRun RunPoint(const TwinConfig& cfg, const PlantModel& m, double id_ref, dou
     const double th = theta0 + we * t;
     // --- Sample: sensors.
     const double c = std::cos(th), s = std::sin(th);
-    const double ial = c * x.i.d - s * x.i.q, ibe = s * x.i.d + c * x.i.q;
+    // The sensors read the terminal current (iron-loss current included).
+    const double ial = c * x.i_term.d - s * x.i_term.q, ibe = s * x.i_term.d + c * x.i_term.q;
     const Phases iph = InverseClarke(ial, ibe);
     const double ia = iph.a, ib = iph.b, ic = iph.c;
     const double lsb = cfg.sensors.adc_lsb_a;
@@ -228,6 +230,7 @@ PlantModel MakePlant(const TwinConfig& cfg, double temperature_c) {
   m.dr_c_ohm = cfg.effects.dr_c_ohm;
   m.threshold_v = cfg.effects.threshold_v;
   m.slope_ohm = cfg.effects.slope_ohm;
+  m.g_fe_s = cfg.effects.r_fe_ohm > 0 ? 1.0 / cfg.effects.r_fe_ohm : 0.0;
   return m;
 }
 

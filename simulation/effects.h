@@ -23,6 +23,7 @@ namespace fluxcal::sim {
 enum class FloorKind {
   kAbsolute,          // |value - neutral| >= floor, in the parameter's unit
   kRelativeNominal,   // |value - nominal| >= floor x |nominal| (nominal from the manifest)
+  kBelow,             // 0 < value <= floor: a parallel resistance, the smaller the larger the effect
 };
 
 struct EffectParameter {
@@ -77,6 +78,7 @@ struct Effects {
   double threshold_v = 0.0, slope_ohm = 0.0;   // inverter_voltage_drop: V_th sign(i_x) + r_on i_x per phase
   // position_sensor_harmonic: measured angle = true + offset + amplitude sin(2 theta_e + phase).
   double harmonic_amplitude_rad = 0.0, harmonic_phase_rad = 0.0;
+  double r_fe_ohm = 0.0;         // iron_loss: parallel (iron-loss) resistance; 0: none
 };
 
 // The angle sensor's reading error at the true electrical angle: the

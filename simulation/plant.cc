@@ -14,7 +14,7 @@ void DeadTimeError(const PlantModel& m, double ia, double ib, double ic, double*
 }
 
 void Derivative(const PlantModel& m, const State& x, double th, double we, double ual, double ube,
-                double* dpsd, double* dpsq, double* dlpd, double* dlpq, Vec2* i_out) {
+                double* dpsd, double* dpsq, double* dlpd, double* dlpq, Vec2* i_out, Vec2* i_terminal) {
   const Vec2 i = m.Current(x.psd, x.psq, th, x.i);
   *i_out = i;
   const double c = std::cos(th), s = std::sin(th);
@@ -29,8 +29,12 @@ void Derivative(const PlantModel& m, const State& x, double th, double we, doubl
                               (m.dr_c_ohm + m.slope_ohm) * ph.c);
   const double ua = m.voltage_gain * ual + eal - dr.alpha, ub = m.voltage_gain * ube + ebe - dr.beta;
   const double ud = c * ua + s * ub, uq = -s * ua + c * ub;
-  *dpsd = ud - m.rs_ohm * i.d - m.r_hf_ohm * (i.d - x.lpd) + we * x.psq;
-  *dpsq = uq - m.rs_ohm * i.q - m.r_hf_ohm * (i.q - x.lpq) - we * x.psd;
+  const double k = 1.0 / (1.0 + m.rs_ohm * m.g_fe_s);
+  const double ed = k * (ud - m.rs_ohm * i.d - m.r_hf_ohm * (i.d - x.lpd));
+  const double eq = k * (uq - m.rs_ohm * i.q - m.r_hf_ohm * (i.q - x.lpq));
+  *dpsd = ed + we * x.psq;
+  *dpsq = eq - we * x.psd;
+  if (i_terminal != nullptr) *i_terminal = Vec2{i.d + m.g_fe_s * ed, i.q + m.g_fe_s * eq};
   *dlpd = m.hf_corner_rad_s * (i.d - x.lpd);
   *dlpq = m.hf_corner_rad_s * (i.q - x.lpq);
 }
@@ -57,6 +61,14 @@ void Rk4(const PlantModel& m, State* x, double th0, double we, double h, double 
   x->lpd += h / 6 * (k1[2] + 2 * k2[2] + 2 * k3[2] + k4[2]);
   x->lpq += h / 6 * (k1[3] + 2 * k2[3] + 2 * k3[3] + k4[3]);
   x->i = m.Current(x->psd, x->psq, th0 + h * we, i);
+  x->i_term = x->i;
+  if (m.g_fe_s != 0.0) {
+    // The terminal current at the end of the step, under the voltage held
+    // over it (what a sensor sampling before the next command reads).
+    double d[4];
+    Vec2 im;
+    Derivative(m, *x, th0 + h * we, we, ual, ube, &d[0], &d[1], &d[2], &d[3], &im, &x->i_term);
+  }
 }
 
 }  // namespace fluxcal::sim

@@ -39,6 +39,10 @@ struct PlantModel {
   // (in DeadTimeError: the same soft sign as the dead time) and its slope
   // r_on i_x (in Derivative: a series resistance in every phase).
   double threshold_v = 0, slope_ohm = 0;
+  // iron_loss: conductance 1 / R_fe of a resistance in parallel with the
+  // magnetising branch (0: none). The flux follows the magnetising current
+  // i_m; the terminals carry i_m + g e, e the voltage across the branch.
+  double g_fe_s = 0;
 
   // psi(i, theta) including the spatial-harmonic term amp cos(n theta) i.
   void Flux(double id, double iq, double th, double* pd, double* pq) const {
@@ -99,12 +103,18 @@ void DeadTimeError(const PlantModel& m, double ia, double ib, double ic, double*
 struct State {
   double psd, psq;       // flux linkage in the true dq frame
   double lpd, lpq;       // low-passed current (eddy branch)
-  Vec2 i;                // current consistent with psi (cache)
+  Vec2 i;                // magnetising current consistent with psi (cache)
+  Vec2 i_term{};         // terminal current: i plus the iron-loss current (= i without iron loss)
 };
 
-// dx/dt in the true rotor frame: dpsi/dt = u - Rs i - R_hf (i - i_lp) - w J psi.
+// dx/dt in the true rotor frame: dpsi/dt = e - w J psi with e, the voltage
+// across the magnetising branch, = (u - Rs i_m - R_hf (i_m - i_lp)) / (1 + Rs g)
+// (u = Rs (i_m + g e) + e solved for e; g = 0 without iron loss). i_out: the
+// magnetising current; i_terminal (optional): i_m + g e. Dead time, the
+// switches' and the joints' drops see the phase currents of i_m: the loss
+// current is a percent of it.
 void Derivative(const PlantModel& m, const State& x, double th, double we, double ual, double ube,
-                double* dpsd, double* dpsq, double* dlpd, double* dlpq, Vec2* i_out);
+                double* dpsd, double* dpsq, double* dlpd, double* dlpq, Vec2* i_out, Vec2* i_terminal = nullptr);
 
 // One RK4 step of length h with a held alpha-beta voltage.
 void Rk4(const PlantModel& m, State* x, double th0, double we, double h, double ual, double ube);

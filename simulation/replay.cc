@@ -36,6 +36,7 @@ PlantModel ReplayPlant(const MagneticModel& model, double temperature_c, double 
   m.dr_b_ohm = e.dr_b_ohm;
   m.dr_c_ohm = e.dr_c_ohm;
   m.threshold_v = e.threshold_v;
+  m.g_fe_s = e.r_fe_ohm > 0 ? 1.0 / e.r_fe_ohm : 0.0;
   m.slope_ohm = e.slope_ohm;
   return m;
 }
@@ -99,6 +100,7 @@ absl::StatusOr<std::vector<ReplayPoint>> ReplayOpenLoop(const io::RecordingSet& 
     m.Flux(x.i.d, x.i.q, th[1], &x.psd, &x.psq);
     x.lpd = x.i.d;
     x.lpq = x.i.q;
+    x.i_term = x.i;
     ReplayPoint rp;
     rp.point = mf.points[p].id;
     rp.ia_a.push_back(w.ia_a[0]);   // sample 0 is not simulated
@@ -107,7 +109,7 @@ absl::StatusOr<std::vector<ReplayPoint>> ReplayOpenLoop(const io::RecordingSet& 
     double se = 0;
     for (size_t k = 1; k < n; ++k) {
       const double c = std::cos(th[k]), s = std::sin(th[k]);
-      const double a = c * x.i.d - s * x.i.q, b = s * x.i.d + c * x.i.q;
+      const double a = c * x.i_term.d - s * x.i_term.q, b = s * x.i_term.d + c * x.i_term.q;
       const Phases ph = InverseClarke(a, b);
       const double sa = fx.gain_a * ph.a + fx.offset_a_a;
       const double sb = fx.gain_b * ph.b + fx.offset_b_a;

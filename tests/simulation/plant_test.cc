@@ -155,6 +155,31 @@ TEST(Plant, ThresholdVoltageDoesNotScaleWithUdc) {
   EXPECT_NEAR(dq, 0.0, 1e-9);
 }
 
+// Iron loss at steady state at speed: with u = Rs (i_m + g e) + e and
+// e = w J psi(i_m) the flux does not move, and the terminal current is the
+// magnetising one plus g e.
+TEST(Plant, IronLossCurrentAtSteadyState) {
+  PlantModel m;
+  ToArray(SaturationParams{}, m.p);
+  m.rs_ohm = 0.01;
+  m.r_hf_ohm = 0;
+  m.g_fe_s = 1.0 / 20;
+  const double we = 800, idm = -30, iqm = 40;
+  double pd, pq;
+  m.Flux(idm, iqm, 0.0, &pd, &pq);
+  State x{pd, pq, idm, iqm, Vec2{idm, iqm}};
+  const double ed = -we * pq, eq = we * pd;
+  const double ud = m.rs_ohm * (idm + m.g_fe_s * ed) + ed, uq = m.rs_ohm * (iqm + m.g_fe_s * eq) + eq;
+  double dd, dq, dl1, dl2;
+  Vec2 i, it;
+  Derivative(m, x, 0.0, we, ud, uq, &dd, &dq, &dl1, &dl2, &i, &it);
+  EXPECT_NEAR(dd, 0.0, 1e-9);
+  EXPECT_NEAR(dq, 0.0, 1e-9);
+  EXPECT_NEAR(it.d, idm + ed / 20, 1e-9);
+  EXPECT_NEAR(it.q, iqm + eq / 20, 1e-9);
+  EXPECT_GT(std::abs(ed / 20), 0.1);   // the loss current is not negligible here
+}
+
 TEST(Catalogue, RowsAreUniqueAndDocumented) {
   std::ifstream f(std::string(FLUXCAL_SOURCE_DIR) + "/docs/diagnosis-report.md");
   std::stringstream ss;
