@@ -282,7 +282,11 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
             const double d = f.p.b[b][i] - current.p.b[b][i];
             if (d == 0.0) continue;
             const double sf = f.stdev.at(b)[i], sc = current.stdev.at(b)[i];
-            const double var = std::max(sf * sf - sc * sc, std::max(sf * sf, sc * sc) * 1e-2);
+            // The difference's variance is sd_without^2 - sd_full^2 where
+            // that is positive; where the two fits' chi^2 scales make it not
+            // (the full fit's residual is worse than the noise model), the
+            // sum, as if the estimates were independent (conservative).
+            const double var = sf > sc ? sf * sf - sc * sc : sf * sf + sc * sc;
             if (var > 0) worst = std::max(worst, std::abs(d) / std::sqrt(var));
           }
         }

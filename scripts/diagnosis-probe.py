@@ -119,7 +119,9 @@ OUTSIDE = [
     ('outside_udc_s84', 84, 'udc_sense_gain=0.954', True, 'b', 'dc_link_sense_gain'),
     ('outside_udc_default_s85', 85, 'udc_sense_gain=1.04', True, 'default', 'dc_link_sense_gain'),
     ('outside_cso_s86', 86, 'offset_b_a=1.5', True, 'b', 'current_sensor_offset'),
-    ('outside_rhf_s87', 87, 'r_hf_ohm=0.015', True, 'b', 'hf_resistance'),
+    # An HF resistance is iron loss seen at one frequency (eddy currents):
+    # outside the vocabulary means outside both rows.
+    ('outside_rhf_s87', 87, 'r_hf_ohm=0.015', True, 'b', 'hf_resistance,iron_loss'),
     ('outside_sd_s88', 88, 'delay_s=40e-6', True, 'b', 'sampling_delay'),
     ('outside_dt_s89', 89, 'dead_time_s=1.5e-6', True, 'b', 'dead_time'),
     ('outside_pri_s90', 90, 'dr_a_ohm=0.004', True, 'b', 'phase_resistance_imbalance'),
