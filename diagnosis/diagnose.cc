@@ -285,8 +285,12 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
             // The difference's variance is sd_without^2 - sd_full^2 where
             // that is positive; where the two fits' chi^2 scales make it not
             // (the full fit's residual is worse than the noise model), the
-            // sum, as if the estimates were independent (conservative).
-            const double var = sf > sc ? sf * sf - sc * sc : sf * sf + sc * sc;
+            // sum, as if the estimates were independent (conservative). Where
+            // the HF hardly informs a parameter (sd_without ~ sd_full) the
+            // difference is ill-conditioned: its sd is floored at 10 % of
+            // sd_without, below which the two solves' own tolerances and the
+            // covariances' accuracy make any move meaningless.
+            const double var = sf > sc ? std::max(sf * sf - sc * sc, 0.01 * sf * sf) : sf * sf + sc * sc;
             if (var > 0) worst = std::max(worst, std::abs(d) / std::sqrt(var));
           }
         }
