@@ -407,6 +407,10 @@ struct Z {
   std::string point, signal;
   double id_a, iq_a, speed_rpm, z2;
   int dof;
+  // The signed normalised components behind z2 and the rotor angle of a
+  // standstill point (for the angle patterns of AnglePatterns).
+  std::vector<double> r;
+  double theta = 0;
 };
 std::vector<Z> Residuals(const Model& m, const Params& p);
 struct RegionStat {
@@ -418,6 +422,10 @@ struct RegionStat {
   double Sigma() const { return k ? (chi2 - k) / std::sqrt(2.0 * k) : 0.0; }
 };
 std::vector<RegionStat> RegionStats(const std::vector<Z>& zs);
+// Standstill residuals that vary with the rotor angle as cos(k theta + phi)
+// (k = 1, 2, 3, 4, 6): per signal and order, the chi^2 the pattern explains
+// beyond a constant, as a significance; those reaching `threshold`.
+std::vector<Mismatch> AnglePatterns(const std::vector<Z>& zs, double threshold);
 std::vector<Mismatch> Locate(const std::vector<Z>& zs, double threshold);
 bool PracticallySignificant(const std::vector<Z>& before, const std::vector<Z>& after, double rms_before,
                             double rms_after, const DiagnoseOptions& opt);

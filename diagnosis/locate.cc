@@ -17,11 +17,13 @@ std::vector<Z> Residuals(const Model& m, const Params& p) {
   for (const auto& o : m.hf) {
     Complex i0, i1;
     m.PredictHf(ptr.data(), o, &i0, &i1);
-    out.push_back({o.point, "hf_current", o.id_a, o.iq_a, o.speed_rpm,
-                   std::norm((o.i0 - i0) / o.sigma0) + std::norm((o.i1 - i1) / o.sigma1), 4});
+    const Complex d0 = (o.i0 - i0) / o.sigma0, d1 = (o.i1 - i1) / o.sigma1;
+    out.push_back({o.point, "hf_current", o.id_a, o.iq_a, o.speed_rpm, std::norm(d0) + std::norm(d1), 4,
+                   {d0.real(), d0.imag(), d1.real(), d1.imag()}, o.theta});
   }
   for (const auto& o : m.dc) {
-    out.push_back({o.point, "dc_voltage", o.id_a, o.iq_a, 0.0, std::norm((o.u - m.PredictDc(ptr.data(), o)) / o.sigma), 2});
+    const Complex d = (o.u - m.PredictDc(ptr.data(), o)) / o.sigma;
+    out.push_back({o.point, "dc_voltage", o.id_a, o.iq_a, 0.0, std::norm(d), 2, {d.real(), d.imag()}, o.theta});
   }
   for (size_t k = 0; k < m.ss.size(); ++k) {
     const auto& o = m.ss[k];
@@ -67,7 +69,63 @@ std::vector<RegionStat> RegionStats(const std::vector<Z>& zs) {
   return out;
 }
 
-// Regions whose significance reaches `threshold`.
+std::vector<Mismatch> AnglePatterns(const std::vector<Z>& zs, double threshold) {
+  std::vector<Mismatch> out;
+  for (const char* signal : {"hf_current", "dc_voltage"}) {
+    std::vector<const Z*> pts;
+    for (const auto& z : zs) {
+      if (z.signal == signal && z.speed_rpm == 0 && !z.r.empty()) pts.push_back(&z);
+    }
+    // A pattern of order k needs well more points than its 3 coefficients
+    // per component.
+    if (pts.size() < 12) continue;
+    for (int k : {1, 2, 3, 4, 6}) {
+      // Per component: least squares on [1, cos k theta, sin k theta]; the
+      // chi^2 the two angle terms explain beyond the constant is
+      // chi^2(2) per component for pure noise.
+      Eigen::MatrixXd A(pts.size(), 3);
+      for (size_t i = 0; i < pts.size(); ++i) {
+        A(i, 0) = 1.0;
+        A(i, 1) = std::cos(k * pts[i]->theta);
+        A(i, 2) = std::sin(k * pts[i]->theta);
+      }
+      const auto qr = A.colPivHouseholderQr();
+      if (qr.rank() < 3) continue;
+      double explained = 0;
+      int dof = 0;
+      const size_t nc = pts[0]->r.size();
+      std::vector<double> fitted_sq(pts.size(), 0.0);
+      for (size_t c = 0; c < nc; ++c) {
+        Eigen::VectorXd y(pts.size());
+        for (size_t i = 0; i < pts.size(); ++i) y(i) = pts[i]->r[c];
+        const Eigen::VectorXd x = qr.solve(y);
+        const double mean = y.mean();
+        const Eigen::VectorXd with = A * x;
+        // RSS(constant) - RSS(constant + pattern) = |fit - mean|^2.
+        for (size_t i = 0; i < pts.size(); ++i) {
+          const double d = with(i) - mean;
+          explained += d * d;
+          fitted_sq[i] += d * d;
+        }
+        dof += 2;
+      }
+      const double sigma = (explained - dof) / std::sqrt(2.0 * dof);
+      if (sigma < threshold) continue;
+      Mismatch mm;
+      mm.signal = signal;
+      mm.where = absl::StrFormat("standstill, varying with the rotor angle as cos(%d theta_e + phase)", k);
+      mm.significance_sigma = sigma;
+      std::vector<std::pair<double, std::string>> worst;
+      for (size_t i = 0; i < pts.size(); ++i) worst.push_back({fitted_sq[i], pts[i]->point});
+      std::sort(worst.rbegin(), worst.rend());
+      for (size_t i = 0; i < worst.size() && i < 6; ++i) mm.points.push_back(worst[i].second);
+      out.push_back(mm);
+    }
+  }
+  return out;
+}
+
+// Regions whose significance reaches `threshold`, then the angle patterns.
 std::vector<Mismatch> Locate(const std::vector<Z>& zs, double threshold) {
   std::vector<Mismatch> out;
   for (auto& r : RegionStats(zs)) {
@@ -80,6 +138,7 @@ std::vector<Mismatch> Locate(const std::vector<Z>& zs, double threshold) {
     for (const auto& [v, name] : r.points) if (v > 4.0 && mm.points.size() < 12) mm.points.push_back(name);
     out.push_back(mm);
   }
+  for (auto& mm : AnglePatterns(zs, threshold)) out.push_back(std::move(mm));
   return out;
 }
 

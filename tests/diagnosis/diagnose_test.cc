@@ -492,7 +492,8 @@ TEST(Matrix, PositionSensorHarmonic) {
 
 // The angle harmonic with its row removed: fitted by a stand-in (unequal
 // sensor gains, which also bend the HF phase with 2 theta) whose parameters
-// the held DC voltages contradict, or not located at all; never explained.
+// the held DC voltages contradict, or located by its angle pattern (the HF
+// residual varying as cos(2 theta_e)) and left unexplained; never explained.
 TEST(Honesty, AngleSensorHarmonicOutsideTheCatalogue) {
   for (uint64_t seed : {111, 112, 113}) {
     sim::TwinConfig cfg;

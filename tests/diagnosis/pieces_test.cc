@@ -124,6 +124,27 @@ TEST(Locate, RegionSignificance) {
   EXPECT_EQ(mm[0].points.size(), 8u) << "points above 4 per degree of freedom are listed";
 }
 
+// A residual that swings with the rotor angle as 3 cos(2 theta + 0.4) on one
+// of four components, over 36 points spread by the golden angle: too little
+// excess for its region (chi^2 162 on 144 dof, 1.1 sigma), but the order-2
+// pattern explains 162 of chi^2 on 8 dof: (162 - 8) / 4 = 38.5 sigma, and
+// no other order reaches 5.
+TEST(Locate, AnglePatternOfTheRotorAngle) {
+  std::vector<Z> zs;
+  for (int k = 0; k < 36; ++k) {
+    const double th = std::fmod(0.3 + 2.39996322972865332 * k, 2 * M_PI);
+    const double r0 = 3 * std::cos(2 * th + 0.4);
+    zs.push_back({"p" + std::to_string(k), "hf_current", -10, 10, 0, r0 * r0, 4, {r0, 0, 0, 0}, th});
+  }
+  const auto mm = Locate(zs, 5.0);
+  ASSERT_EQ(mm.size(), 1u);
+  EXPECT_EQ(mm[0].signal, "hf_current");
+  EXPECT_NE(mm[0].where.find("cos(2 theta_e"), std::string::npos) << mm[0].where;
+  double explained = 0;
+  for (const auto& z : zs) explained += z.z2;
+  EXPECT_NEAR(mm[0].significance_sigma, (explained - 8) / 4, 0.05 * explained / 4);
+}
+
 // Phase parameters: a gain on one phase g_a = 1 + d is m1 = 1 + d/3,
 // m2 = d/3 (measured = m1 i + m2 conj(i)); a zero-sum offset set round-trips
 // through its alpha-beta vector.
