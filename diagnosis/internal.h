@@ -344,12 +344,30 @@ struct Model {
     const Complex imb = RImb(p) * std::polar(1.0, -2 * o.theta) * std::conj(it);
     return UdcGain(p) * (RsAt(p, o.progress) * it + imb + DeadTime(p) * o.dead + Vth(p) * o.dead_v);
   }
+  // The flux at speed behind a measured mean current. With spatial
+  // harmonics the inductance swings as L + h cos(n theta) while the flux
+  // stays nearly constant (the controller's voltage is smooth at n w_e), so
+  // the current swings as psi_i / (L + h cos n theta) and its mean is
+  // (psi_i / L)(1 + h^2 / (2 L^2)): the current-dependent flux behind a mean
+  // current i is L i (1 - h^2 / (2 L^2)) per axis, to second order in h / L
+  // (a 20 uH harmonic on 150 uH moves it 0.9 %).
+  void SteadyFlux(const double* const* p, Complex im, double* pd, double* pq) const {
+    Flux(p, im.real(), im.imag(), pd, pq);
+    if (p[kHarm][0] == 0.0) return;
+    const double h = Harm(p);
+    double ldd, lqq, ldq;
+    Inductance(p, im.real(), im.imag(), &ldd, &lqq, &ldq);
+    double p0d, p0q;
+    Flux(p, 0.0, 0.0, &p0d, &p0q);
+    if (ldd > 0) *pd = p0d + (*pd - p0d) * (1.0 - 0.5 * h * h / (ldd * ldd));
+    if (lqq > 0) *pq *= 1.0 - 0.5 * h * h / (lqq * lqq);
+  }
   Complex PredictSs(const double* const* p, const SsObs& o) const {
     const Complex rot = std::polar(1.0, Offset(p));
     const Complex it = rot * Complex(o.id_a, o.iq_a) / M1(p);
     const Complex im = MagnetisingCurrent(p, it, o.w_e);
     double pd, pq;
-    Flux(p, im.real(), im.imag(), &pd, &pq);
+    SteadyFlux(p, im, &pd, &pq);
     const double rs = RsAt(p, 1.0);   // recorded after the points: the winding is warm
     const Complex u_true(rs * it.real() - o.w_e * pq, rs * it.imag() + o.w_e * pd);
     return UdcGain(p) * (std::conj(rot) * u_true * std::polar(1.0, o.w_e * Delay(p)) + DeadTime(p) * o.dead +
@@ -360,7 +378,7 @@ struct Model {
     // Only the magnetising current makes torque (the iron-loss current none).
     const Complex im = MagnetisingCurrent(p, it, o.w_e);
     double pd, pq;
-    Flux(p, im.real(), im.imag(), &pd, &pq);
+    SteadyFlux(p, im, &pd, &pq);
     return 1.5 * pole_pairs * (pd * im.imag() - pq * im.real());
   }
 };

@@ -97,6 +97,45 @@ TEST(EffectModel, PredictSsAnalytic) {
   EXPECT_NEAR(m.PredictTorque(ptr.data(), o), 1.5 * 4 * (psd * o.iq_a - psq * o.id_a), 1e-12);
 }
 
+// Steady state with a spatial harmonic h: the current-dependent flux behind
+// a mean current is L i (1 - h^2 / (2 L^2)) per axis (Model::SteadyFlux),
+// checked against the mean of psi / (L + h cos x) over a revolution; and
+// with iron loss (g = 1 / R_fe) the torque follows the magnetising current
+// i - g w_e J psi.
+TEST(EffectModel, SteadyFluxWithHarmonicAndIronLoss) {
+  Model m = TestModel();
+  Params p;
+  p.b[kBase][0] = 1.8;   // Ldd = 0.18 mH
+  p.b[kBase][5] = 3.6;   // Lqq = 0.36 mH
+  p.b[kHarm] = {20.0};   // 20 uH
+  auto ptr = p.Ptrs();
+  double pd, pq;
+  m.SteadyFlux(ptr.data(), Complex(-20, 50), &pd, &pq);
+  // The current a constant flux psi_i drives through L + h cos x, averaged.
+  auto mean_current = [](double psi_i, double l, double h) {
+    double s = 0;
+    for (int k = 0; k < 3600; ++k) s += psi_i / (l + h * std::cos(2 * M_PI * k / 3600));
+    return s / 3600;
+  };
+  EXPECT_NEAR(mean_current(pd - m.psi_nom, 1.8e-4, 2e-5), -20.0, 20 * 1e-3);
+  EXPECT_NEAR(mean_current(pq, 3.6e-4, 2e-5), 50.0, 50 * 1e-4);
+  Params q;
+  q.b[kBase][0] = 1.8;
+  q.b[kBase][5] = 3.6;
+  q.b[kIronLoss] = {5.0};   // 0.05 S: 20 ohm
+  ptr = q.Ptrs();
+  SsObs o{};
+  o.id_a = -20;
+  o.iq_a = 50;
+  o.w_e = 600;
+  const Complex im = m.MagnetisingCurrent(ptr.data(), Complex(o.id_a, o.iq_a), o.w_e);
+  double fd, fq;
+  m.Flux(ptr.data(), im.real(), im.imag(), &fd, &fq);
+  // Two fixed-point steps: the error shrinks by g w_e L ~ 1 % per step.
+  EXPECT_NEAR(std::abs(Complex(o.id_a, o.iq_a) - im - 0.05 * o.w_e * Complex(-fq, fd)), 0.0, 2e-4);
+  EXPECT_NEAR(m.PredictTorque(ptr.data(), o), 1.5 * 4 * (fd * im.imag() - fq * im.real()), 1e-12);
+}
+
 // The mean of tanh(i / 1 A) over a linear ramp: tanh at a constant current,
 // +-1 far from zero, 0 over a symmetric ramp through zero.
 TEST(Observations, MeanSoftSign) {
