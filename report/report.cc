@@ -375,43 +375,10 @@ absl::StatusOr<Report> BuildReport(const ReportInputs& in) {
     f.SetYRange(0, 1.2 * im);
     f.SetEqualAspect(true);
     f.SetTight(true, true);
-    // The fields are sampled well beyond the view (equal scaling widens
-    // one axis); the figure clips the lines at its frame.
-    const auto xs = Linspace(-2.5 * im, 0.6 * im, 156), ys = Linspace(-0.2 * im, 2.5 * im, 136);
-    std::vector<double> tz, uz;
-    double tmax = 0;
-    for (double iq : ys) {
-      for (double id : xs) {
-        const double t = tables::TorqueNm(cal, lim.pole_pairs, id, iq, lim.temperature_c);
-        tz.push_back(t);
-        uz.push_back(tables::VoltageV(cal, lim, id, iq, ell_we));
-        if (std::hypot(id, iq) <= im) tmax = std::max(tmax, t);
-      }
-    }
-    std::vector<double> levels;
-    for (double v : plot::NiceTicks(0, tmax, 6)) {
-      if (v > 0 && v <= tmax) levels.push_back(v);
-    }
-    plot::Style contour;
-    contour.colour = "#777";
-    contour.width_px = 1;
-    f.Contours(xs, ys, tz, levels, contour, "torque [N m] (labelled)", "%g");
-    plot::Style circle;
-    circle.colour = "#000";
-    circle.dash = "6 4";
-    std::vector<double> cx, cy;
-    for (int k = 0; k <= 120; ++k) {
-      const double a = kPi / 2 + kPi / 2 * k / 120;
-      cx.push_back(im * std::cos(a));
-      cy.push_back(im * std::sin(a));
-    }
-    f.Line(cx, cy, circle, absl::StrFormat("current limit %.4g A", im));
-    plot::Style volt;
-    volt.colour = "#ff7f0e";
-    volt.width_px = 2;
-    volt.dash = "2 3";
-    f.Contours(xs, ys, uz, {lim.UMaxV()}, volt, absl::StrFormat("voltage limit %.3g V at %.0f rpm", lim.UMaxV(), ell_rpm),
-               "");
+    // Torque contours, current circle and voltage limit: the same drawing
+    // as the exported MTPA / MTPV figures (tables::DrawCurrentPlane).
+    tables::DrawCurrentPlane(&f, cal, lim, -2.5 * im, 2.5 * im, ell_we,
+                             absl::StrFormat("voltage limit |u| = %.3g V at %.0f rpm", lim.UMaxV(), ell_rpm));
     plot::Style region;
     region.colour = "#2ca02c";
     region.width_px = 1;

@@ -795,12 +795,6 @@ absl::StatusOr<Exported> Export(const Table& t, Format f, const ExportOptions& o
 
 namespace {
 
-std::vector<double> Span(double lo, double hi, int n) {
-  std::vector<double> v;
-  for (int k = 0; k < n; ++k) v.push_back(lo + (hi - lo) * k / (n - 1));
-  return v;
-}
-
 double RpmOf(double we_rad_s, int pole_pairs) { return we_rad_s / pole_pairs * 60 / (2 * kPi); }
 
 // Base speed: where the MTPA point of the largest motoring torque meets the
@@ -918,8 +912,7 @@ std::string CurvesFigure(const sim::MagneticModel& m, const MachineLimits& lim, 
   f.SetTight(true, true);
   // Fields sampled well beyond the view (equal scaling widens one axis);
   // the figure clips the lines at its frame.
-  const auto xs = Span(std::min(x_lo, -2.0 * im) - 0.2 * im, 0.6 * im, 161);
-  const auto ys = Span(-0.2 * im, 2.2 * im, 121);
+  const double field_id_lo_a = std::min(x_lo, -2.0 * im) - 0.2 * im, field_iq_hi_a = 2.2 * im;
   // The voltage limit at a speed that explains the subject. MTPA: 1.5 x
   // base speed, rounded to two digits, far enough into field weakening that
   // it cuts the current circle. MTPV: the speed at which MTPV operation
@@ -958,35 +951,11 @@ std::string CurvesFigure(const sim::MagneticModel& m, const MachineLimits& lim, 
     }
   }
   const double we = rpm * lim.pole_pairs * 2 * kPi / 60;
-  std::vector<double> tz, uz;
-  double tmax = 0;
-  for (double iq : ys) {
-    for (double id : xs) {
-      const double t = TorqueNm(m, lim.pole_pairs, id, iq, lim.temperature_c);
-      tz.push_back(t);
-      if (rpm > 0) uz.push_back(VoltageV(m, lim, id, iq, we));
-      if (std::hypot(id, iq) <= im) tmax = std::max(tmax, t);
-    }
-  }
-  // Torque contours at round values inside the current limit's torque.
-  std::vector<double> levels;
-  for (double v : plot::NiceTicks(0, tmax, 6)) {
-    if (v > 0 && v <= tmax) levels.push_back(v);
-  }
-  plot::Style contour;
-  contour.colour = "#888888";
-  contour.width_px = 1;
-  f.Contours(xs, ys, tz, levels, contour, "constant torque [N m] (labelled)", "%g");
-  plot::Style circle;
-  circle.colour = "#000000";
-  circle.dash = "6 4";
-  std::vector<double> cx, cy;
-  for (int k = 0; k <= 120; ++k) {
-    const double a = kPi / 2 + kPi / 2 * k / 120;
-    cx.push_back(im * std::cos(a));
-    cy.push_back(im * std::sin(a));
-  }
-  f.Line(cx, cy, circle, absl::StrFormat("current limit |i| = %.4g A", im));
+  const PlaneCircle circle = DrawCurrentPlane(
+      &f, m, lim, field_id_lo_a, field_iq_hi_a, rpm > 0 ? we : 0.0,
+      absl::StrFormat("voltage limit |u| = %.3g V at %.0f rpm%s", lim.UMaxV(), rpm, why));
+  const std::vector<double>& cx = circle.id_a;
+  const std::vector<double>& cy = circle.iq_a;
   const double meas = subject.measured_current_limit_a;
   if (meas > 0 && std::abs(meas - im) > 1e-6 * im) {
     plot::Style mc;
@@ -999,12 +968,7 @@ std::string CurvesFigure(const sim::MagneticModel& m, const MachineLimits& lim, 
     f.Line(mx, my, mc, absl::StrFormat("measured current limit %.4g A", meas));
   }
   if (rpm > 0) {
-    plot::Style volt;
-    volt.colour = "#ff7f0e";
-    volt.width_px = 2;
-    volt.dash = "2 3";
-    f.Contours(xs, ys, uz, {lim.UMaxV()}, volt,
-               absl::StrFormat("voltage limit |u| = %.3g V at %.0f rpm%s", lim.UMaxV(), rpm, why), "");
+    // drawn with the plane (DrawCurrentPlane)
   } else if (!no_voltage.empty()) {
     f.Note(absl::StrFormat("no voltage limit drawn: u_max %.3g V is %s", lim.UMaxV(), no_voltage));
   } else {
@@ -1066,6 +1030,50 @@ std::string CurvesFigure(const sim::MagneticModel& m, const MachineLimits& lim, 
 }
 
 }  // namespace
+
+PlaneCircle DrawCurrentPlane(plot::Figure* f, const sim::MagneticModel& m, const MachineLimits& lim, double id_lo_a,
+                             double iq_hi_a, double we_rad_s, const std::string& voltage_label) {
+  const double im = lim.i_max_a;
+  const auto xs = Linspace(id_lo_a, 0.6 * im, 161);
+  const auto ys = Linspace(-0.2 * im, iq_hi_a, 121);
+  std::vector<double> tz, uz;
+  double tmax = 0;
+  for (double iq : ys) {
+    for (double id : xs) {
+      const double t = TorqueNm(m, lim.pole_pairs, id, iq, lim.temperature_c);
+      tz.push_back(t);
+      if (we_rad_s > 0) uz.push_back(VoltageV(m, lim, id, iq, we_rad_s));
+      if (std::hypot(id, iq) <= im) tmax = std::max(tmax, t);
+    }
+  }
+  // Torque contours at round values inside the current limit's torque.
+  std::vector<double> levels;
+  for (double v : plot::NiceTicks(0, tmax, 6)) {
+    if (v > 0 && v <= tmax) levels.push_back(v);
+  }
+  plot::Style contour;
+  contour.colour = "#888888";
+  contour.width_px = 1;
+  f->Contours(xs, ys, tz, levels, contour, "constant torque [N m] (labelled)", "%g");
+  plot::Style circle;
+  circle.colour = "#000000";
+  circle.dash = "6 4";
+  PlaneCircle c;
+  for (int k = 0; k <= 120; ++k) {
+    const double a = kPi / 2 + kPi / 2 * k / 120;
+    c.id_a.push_back(im * std::cos(a));
+    c.iq_a.push_back(im * std::sin(a));
+  }
+  f->Line(c.id_a, c.iq_a, circle, absl::StrFormat("current limit |i| = %.4g A", im));
+  if (we_rad_s > 0) {
+    plot::Style volt;
+    volt.colour = "#ff7f0e";
+    volt.width_px = 2;
+    volt.dash = "2 3";
+    f->Contours(xs, ys, uz, {lim.UMaxV()}, volt, voltage_label, "");
+  }
+  return c;
+}
 
 std::string PlotCurvesSvg(const sim::MagneticModel& m, const MachineLimits& lim, const Table& mtpa,
                           const Table* mtpv) {

@@ -15,6 +15,10 @@
 #include "absl/status/statusor.h"
 #include "simulation/magnetic_model.h"
 
+namespace fluxcal::plot {
+class Figure;
+}
+
 namespace fluxcal::tables {
 
 struct MachineLimits {
@@ -134,6 +138,20 @@ OperatingPoint SolveLeastCurrent(const sim::MagneticModel& m, const MachineLimit
 // we_rad_s > 0), motoring (sign > 0) or generating (sign < 0).
 double MaxTorqueNm(const sim::MagneticModel& m, const MachineLimits& lim, double we_rad_s,
                    double sign = 1.0);
+
+// The current plane behind an MTPA / MTPV figure (the export's and the
+// report's: one drawing of it): torque contours at round values up to the
+// torque at the current limit, the current-limit circle, and for
+// we_rad_s > 0 the voltage limit |u| = u_max at that speed, labelled
+// `voltage_label`. The fields are sampled over [id_lo_a, 0.6 i_max] x
+// [-0.2 i_max, iq_hi_a], beyond the view (equal scaling widens one axis;
+// the figure clips at its frame). Returns the circle's points (for a
+// second circle drawn to scale).
+struct PlaneCircle {
+  std::vector<double> id_a, iq_a;
+};
+PlaneCircle DrawCurrentPlane(plot::Figure* f, const sim::MagneticModel& m, const MachineLimits& lim, double id_lo_a,
+                             double iq_hi_a, double we_rad_s, const std::string& voltage_label);
 
 // Errors: InvalidArgument (points, limits, kind; a current limit above the
 // measured one without allow_extrapolation), FailedPrecondition (mtpv: no

@@ -45,6 +45,28 @@ DiagnosisReport SimulateAndDiagnose(const sim::TwinConfig& cfg) {
   return *rep;
 }
 
+// A matrix case's bench: the twin's motor on the default plan, or the
+// second motor (data/motors/second_motor.json) on the EOL-like plan
+// (data/plans/eol_like_plan.json), with production spread from `seed`.
+struct CaseBench {
+  sim::TwinConfig cfg;
+  sim::Plan plan;
+  bool ok = true;
+};
+CaseBench MotorOnPlan(bool second_motor, uint64_t seed) {
+  CaseBench b;
+  b.plan = sim::DefaultPlan();
+  if (second_motor) {
+    const fs::path data = fs::path(FLUXCAL_SOURCE_DIR) / "data";
+    auto eol = sim::LoadPlanJson((data / "plans" / "eol_like_plan.json").string());
+    b.ok = eol.ok() && sim::LoadMotorJson((data / "motors" / "second_motor.json").string(), &b.cfg).ok();
+    if (eol.ok()) b.plan = *eol;
+  }
+  b.cfg.seed = seed;
+  b.cfg.motor = sim::PerturbForProduction(b.cfg.motor, seed);
+  return b;
+}
+
 TEST(Matrix, CleanSetsHaveNoFindings) {
   for (uint64_t seed : {1u, 2u, 3u}) {
     sim::TwinConfig cfg;
@@ -239,9 +261,6 @@ TEST(Matrix, SecondMotorEolLikePlan) {
 // named, alone, `explained`, parameters within 15 %. (Three seeds each and
 // pairs: scripts/diagnosis-probe.py.)
 TEST(Matrix, ExtensionsAloneOnBothMotors) {
-  const fs::path data = fs::path(FLUXCAL_SOURCE_DIR) / "data";
-  auto eol = sim::LoadPlanJson((data / "plans" / "eol_like_plan.json").string());
-  ASSERT_TRUE(eol.ok());
   struct Case {
     std::string effect;
     bool second_motor;
@@ -259,14 +278,8 @@ TEST(Matrix, ExtensionsAloneOnBothMotors) {
       {"stator_temperature_drift", true, 68, [](sim::Effects* e) { e->winding_temp_rise_k = 15; }},
   };
   for (const auto& c : cases) {
-    sim::TwinConfig cfg;
-    sim::Plan plan = sim::DefaultPlan();
-    if (c.second_motor) {
-      ASSERT_TRUE(sim::LoadMotorJson((data / "motors" / "second_motor.json").string(), &cfg).ok());
-      plan = *eol;
-    }
-    cfg.seed = c.seed;
-    cfg.motor = sim::PerturbForProduction(cfg.motor, c.seed);
+    auto [cfg, plan, bench_ok] = MotorOnPlan(c.second_motor, c.seed);
+    ASSERT_TRUE(bench_ok);
     c.set(&cfg.effects);
     auto simulated = sim::Simulate(cfg, plan);
     ASSERT_TRUE(simulated.ok());
@@ -345,9 +358,6 @@ TEST(Honesty, OutsideTheCatalogueIsNeverExplained) {
 // alternative; at one Udc a threshold is named as the dead time it equals,
 // with the threshold as the alternative.
 TEST(Matrix, InverterVoltageDrop) {
-  const fs::path data = fs::path(FLUXCAL_SOURCE_DIR) / "data";
-  auto eol = sim::LoadPlanJson((data / "plans" / "eol_like_plan.json").string());
-  ASSERT_TRUE(eol.ok());
   struct Case {
     bool second_motor, second_udc;
     uint64_t seed;
@@ -361,15 +371,9 @@ TEST(Matrix, InverterVoltageDrop) {
       {false, false, 92, 0.8, 0, 0},     {true, false, 93, 0.6, 0, 0},
   };
   for (const auto& c : cases) {
-    sim::TwinConfig cfg;
-    sim::Plan plan = sim::DefaultPlan();
-    if (c.second_motor) {
-      ASSERT_TRUE(sim::LoadMotorJson((data / "motors" / "second_motor.json").string(), &cfg).ok());
-      plan = *eol;
-    }
+    auto [cfg, plan, bench_ok] = MotorOnPlan(c.second_motor, c.seed);
+    ASSERT_TRUE(bench_ok);
     if (c.second_udc) plan = sim::WithSecondUdc(plan, 0.7 * cfg.drive.udc_v);
-    cfg.seed = c.seed;
-    cfg.motor = sim::PerturbForProduction(cfg.motor, c.seed);
     cfg.effects.threshold_v = c.threshold_v;
     cfg.effects.slope_ohm = c.slope_ohm;
     cfg.effects.dead_time_s = c.dead_time_s;
@@ -443,9 +447,6 @@ TEST(Honesty, InverterVoltageErrorOutsideTheCatalogue) {
 // its signature (a constant offset, a dead time); amplitude within 15 %,
 // phase within 0.15 rad.
 TEST(Matrix, PositionSensorHarmonic) {
-  const fs::path data = fs::path(FLUXCAL_SOURCE_DIR) / "data";
-  auto eol = sim::LoadPlanJson((data / "plans" / "eol_like_plan.json").string());
-  ASSERT_TRUE(eol.ok());
   struct Case {
     bool second_motor;
     uint64_t seed;
@@ -457,14 +458,8 @@ TEST(Matrix, PositionSensorHarmonic) {
       {false, 107, 0.02, 2.0, 0.04, 0}, {true, 108, 0.02, -0.5, -0.03, 0}, {false, 109, 0.02, 0.3, 0, 1e-6},
   };
   for (const auto& c : cases) {
-    sim::TwinConfig cfg;
-    sim::Plan plan = sim::DefaultPlan();
-    if (c.second_motor) {
-      ASSERT_TRUE(sim::LoadMotorJson((data / "motors" / "second_motor.json").string(), &cfg).ok());
-      plan = *eol;
-    }
-    cfg.seed = c.seed;
-    cfg.motor = sim::PerturbForProduction(cfg.motor, c.seed);
+    auto [cfg, plan, bench_ok] = MotorOnPlan(c.second_motor, c.seed);
+    ASSERT_TRUE(bench_ok);
     cfg.effects.harmonic_amplitude_rad = c.amplitude_rad;
     cfg.effects.harmonic_phase_rad = c.phase_rad;
     cfg.effects.offset_rad = c.offset_rad;
@@ -516,9 +511,6 @@ TEST(Honesty, AngleSensorHarmonicOutsideTheCatalogue) {
 // signature (an HF resistance in the HF, a magnet flux change in the
 // steady-state voltages and torque, a dead time, a delay); R_fe within 15 %.
 TEST(Matrix, IronLoss) {
-  const fs::path data = fs::path(FLUXCAL_SOURCE_DIR) / "data";
-  auto eol = sim::LoadPlanJson((data / "plans" / "eol_like_plan.json").string());
-  ASSERT_TRUE(eol.ok());
   struct Case {
     bool second_motor;
     uint64_t seed;
@@ -540,14 +532,8 @@ TEST(Matrix, IronLoss) {
       {true, 130, 30, "sampling_delay", [](sim::Effects* e) { e->delay_s = 20e-6; }},
   };
   for (const auto& c : cases) {
-    sim::TwinConfig cfg;
-    sim::Plan plan = sim::DefaultPlan();
-    if (c.second_motor) {
-      ASSERT_TRUE(sim::LoadMotorJson((data / "motors" / "second_motor.json").string(), &cfg).ok());
-      plan = *eol;
-    }
-    cfg.seed = c.seed;
-    cfg.motor = sim::PerturbForProduction(cfg.motor, c.seed);
+    auto [cfg, plan, bench_ok] = MotorOnPlan(c.second_motor, c.seed);
+    ASSERT_TRUE(bench_ok);
     cfg.effects.r_fe_ohm = c.r_fe_ohm;
     c.set(&cfg.effects);
     auto simulated = sim::Simulate(cfg, plan);
@@ -568,18 +554,9 @@ TEST(Matrix, IronLoss) {
 // flux, an offset) cannot make the HF resistance follow L^2 and the torque
 // fall short of the current at once; never explained.
 TEST(Honesty, IronLossOutsideTheCatalogue) {
-  const fs::path data = fs::path(FLUXCAL_SOURCE_DIR) / "data";
-  auto eol = sim::LoadPlanJson((data / "plans" / "eol_like_plan.json").string());
-  ASSERT_TRUE(eol.ok());
   for (uint64_t seed : {131, 132, 133}) {
-    sim::TwinConfig cfg;
-    sim::Plan plan = sim::DefaultPlan();
-    if (seed == 133) {
-      ASSERT_TRUE(sim::LoadMotorJson((data / "motors" / "second_motor.json").string(), &cfg).ok());
-      plan = *eol;
-    }
-    cfg.seed = seed;
-    cfg.motor = sim::PerturbForProduction(cfg.motor, seed);
+    auto [cfg, plan, bench_ok] = MotorOnPlan(seed == 133, seed);
+    ASSERT_TRUE(bench_ok);
     cfg.effects.r_fe_ohm = 20;
     auto simulated = sim::Simulate(cfg, plan);
     ASSERT_TRUE(simulated.ok());
