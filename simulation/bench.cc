@@ -72,7 +72,22 @@ PointRun RunPoint(const TwinConfig& cfg, const PlantModel& m, double id_ref, dou
     // --- Sample: sensors.
     const double c = std::cos(th), s = std::sin(th);
     // The sensors read the terminal current (iron-loss current included).
-    const double ial = c * x.i_term.d - s * x.i_term.q, ibe = s * x.i_term.d + c * x.i_term.q;
+    // The loss current g e steps with the held voltage at each period
+    // boundary; a sample there reads the mean of its values under the
+    // period ending (x.i_term) and the one starting (its command is known:
+    // it was computed one period ago), as the magnetising current, which is
+    // continuous, is read at the boundary itself.
+    Vec2 i_sample = x.i_term;
+    if (m.g_fe_s != 0.0) {
+      const long sub = static_cast<long>(k) * S - delay_sub;
+      const long per = (sub >= 0 ? sub / S : (sub - S + 1) / S) - 1;
+      const std::pair<double, double> u = per >= 0 ? cmds[per] : cmd_hist.front();
+      double d[4];
+      Vec2 im, next;
+      Derivative(m, x, th, we, u.first, u.second, &d[0], &d[1], &d[2], &d[3], &im, &next);
+      i_sample = Vec2{0.5 * (x.i_term.d + next.d), 0.5 * (x.i_term.q + next.q)};
+    }
+    const double ial = c * i_sample.d - s * i_sample.q, ibe = s * i_sample.d + c * i_sample.q;
     const Phases iph = InverseClarke(ial, ibe);
     const double ia = iph.a, ib = iph.b, ic = iph.c;
     const double lsb = cfg.sensors.adc_lsb_a;
