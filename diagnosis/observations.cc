@@ -95,8 +95,9 @@ absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident:
     Complex acc_u = 0;
     for (size_t s = 0; s < n; ++s) {
       const double udc = std::isnan(w.udc_v[s]) ? udc_nom : w.udc_v[s];
-      const Complex e = DeadTimeInterval(w, s, udc, m.ts);
-      const Complex e_v = DeadTimeInterval(w, s, m.ts, m.ts);   // per volt of threshold
+      // Per volt of switch threshold; the dead time's is Udc / Ts times it.
+      const Complex e_v = DeadTimeInterval(w, s, m.ts, m.ts);
+      const Complex e = e_v * (udc / m.ts);
       udc_sum += udc;
       const double t = static_cast<double>(s) / fs;
       hf += e * std::polar(1.0, -m.w_i * t);
@@ -164,9 +165,9 @@ absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident:
       const double th = 2 * kPi * s / 360;
       const double ia = mag * std::cos(th + gam), ib = mag * std::cos(th + gam - 2 * kPi / 3),
                    ic = mag * std::cos(th + gam + 2 * kPi / 3);
-      dead += DeadTimeUnit(ia, ib, ic, udc_nom, m.ts) * std::polar(1.0, -th);
       dead_v += DeadTimeUnit(ia, ib, ic, m.ts, m.ts) * std::polar(1.0, -th);
     }
+    dead = dead_v * (udc_nom / m.ts);
     o.dead = dead / 360.0;
     o.dead_v = dead_v / 360.0;
     o.scale = std::abs(o.u);

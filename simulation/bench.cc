@@ -66,6 +66,14 @@ PointRun RunPoint(const TwinConfig& cfg, const PlantModel& m, double id_ref, dou
   size_t acc_app = 0;
   std::vector<std::pair<double, double>> cmds(n_total + 2);
 
+  // The alpha-beta voltage held over sub-step `sub` (counted from the
+  // run's start): the command of the period before (one PWM period late),
+  // shifted further by the sampling_delay effect.
+  auto held = [&](long sub) {
+    sub -= delay_sub;
+    const long per = (sub >= 0 ? sub / S : (sub - S + 1) / S) - 1;
+    return per >= 0 ? cmds[per] : cmd_hist.front();
+  };
   for (size_t k = 0; k < n_total; ++k) {
     const double t = static_cast<double>(k) * ts;
     const double th = theta0 + we * t;
@@ -79,9 +87,7 @@ PointRun RunPoint(const TwinConfig& cfg, const PlantModel& m, double id_ref, dou
     // continuous, is read at the boundary itself.
     Vec2 i_sample = x.i_term;
     if (m.g_fe_s != 0.0) {
-      const long sub = static_cast<long>(k) * S - delay_sub;
-      const long per = (sub >= 0 ? sub / S : (sub - S + 1) / S) - 1;
-      const std::pair<double, double> u = per >= 0 ? cmds[per] : cmd_hist.front();
+      const std::pair<double, double> u = held(static_cast<long>(k) * S);
       double d[4];
       Vec2 im, next;
       Derivative(m, x, th, we, u.first, u.second, &d[0], &d[1], &d[2], &d[3], &im, &next);
@@ -171,9 +177,7 @@ PointRun RunPoint(const TwinConfig& cfg, const PlantModel& m, double id_ref, dou
     // --- Plant over [t_k, t_{k+1}): the command of period k-1 (one PWM
     // period late), shifted further by the sampling_delay effect.
     for (int j = 0; j < S; ++j) {
-      const long sub = static_cast<long>(k) * S + j - delay_sub;
-      const long per = (sub >= 0 ? sub / S : (sub - S + 1) / S) - 1;
-      std::pair<double, double> u = per >= 0 ? cmds[per] : cmd_hist.front();
+      std::pair<double, double> u = held(static_cast<long>(k) * S + j);
       const double th_j = th + we * h * j;
       if (k >= n_settle) {
         // Exact mean of the held alpha-beta voltage in the rotating frame

@@ -843,21 +843,17 @@ CurvePoints MotoringRows(const Table& t) {
 // Marker styles shared by the curve and map figures: clamped (the request
 // exceeded the limits) and extrapolated (beyond the measured current
 // limit) must not look like valid entries.
-plot::Style ClampedStyle(double size_px) {
+plot::Style MarkStyle(plot::Marker marker, const char* colour, const char* halo, double size_px) {
   plot::Style s;
-  s.marker = plot::Marker::kCross;
-  s.colour = "#000000";
-  s.halo = "#ffffff";
+  s.marker = marker;
+  s.colour = colour;
+  s.halo = halo;
   s.marker_px = size_px;
   return s;
 }
+plot::Style ClampedStyle(double size_px) { return MarkStyle(plot::Marker::kCross, "#000000", "#ffffff", size_px); }
 plot::Style ExtrapolatedStyle(double size_px) {
-  plot::Style s;
-  s.marker = plot::Marker::kSquare;
-  s.colour = "#ffffff";
-  s.halo = "#000000";
-  s.marker_px = size_px;
-  return s;
+  return MarkStyle(plot::Marker::kSquare, "#ffffff", "#000000", size_px);
 }
 
 }  // namespace

@@ -67,6 +67,13 @@ CaseBench MotorOnPlan(bool second_motor, uint64_t seed) {
   return b;
 }
 
+// A recording of `cfg` on `plan`, diagnosed with the default options.
+absl::StatusOr<DiagnosisReport> SimulateThenDiagnose(const sim::TwinConfig& cfg, const sim::Plan& plan) {
+  auto simulated = sim::Simulate(cfg, plan);
+  if (!simulated.ok()) return simulated.status();
+  return Diagnose(simulated->set);
+}
+
 TEST(Matrix, CleanSetsHaveNoFindings) {
   for (uint64_t seed : {1u, 2u, 3u}) {
     sim::TwinConfig cfg;
@@ -281,10 +288,8 @@ TEST(Matrix, ExtensionsAloneOnBothMotors) {
     auto [cfg, plan, bench_ok] = MotorOnPlan(c.second_motor, c.seed);
     ASSERT_TRUE(bench_ok);
     c.set(&cfg.effects);
-    auto simulated = sim::Simulate(cfg, plan);
-    ASSERT_TRUE(simulated.ok());
-    auto r = Diagnose(simulated->set);
-    ASSERT_TRUE(r.ok());
+    auto r = SimulateThenDiagnose(cfg, plan);
+    ASSERT_TRUE(r.ok()) << r.status();
     const std::string label = c.effect + (c.second_motor ? " (second motor)" : "");
     EXPECT_EQ(r->verdict, "explained") << label;
     const auto& e = cfg.effects;
@@ -377,10 +382,8 @@ TEST(Matrix, InverterVoltageDrop) {
     cfg.effects.threshold_v = c.threshold_v;
     cfg.effects.slope_ohm = c.slope_ohm;
     cfg.effects.dead_time_s = c.dead_time_s;
-    auto simulated = sim::Simulate(cfg, plan);
-    ASSERT_TRUE(simulated.ok());
-    auto r = Diagnose(simulated->set);
-    ASSERT_TRUE(r.ok());
+    auto r = SimulateThenDiagnose(cfg, plan);
+    ASSERT_TRUE(r.ok()) << r.status();
     const std::string label = absl::StrCat("seed ", c.seed);
     EXPECT_EQ(r->verdict, "explained") << label;
     std::set<std::string> want;
@@ -464,10 +467,8 @@ TEST(Matrix, PositionSensorHarmonic) {
     cfg.effects.harmonic_phase_rad = c.phase_rad;
     cfg.effects.offset_rad = c.offset_rad;
     cfg.effects.dead_time_s = c.dead_time_s;
-    auto simulated = sim::Simulate(cfg, plan);
-    ASSERT_TRUE(simulated.ok());
-    auto r = Diagnose(simulated->set);
-    ASSERT_TRUE(r.ok());
+    auto r = SimulateThenDiagnose(cfg, plan);
+    ASSERT_TRUE(r.ok()) << r.status();
     const std::string label = absl::StrCat("seed ", c.seed);
     EXPECT_EQ(r->verdict, "explained") << label;
     std::set<std::string> want = {"position_sensor_harmonic"};
@@ -538,10 +539,8 @@ TEST(Matrix, IronLoss) {
     ASSERT_TRUE(bench_ok);
     cfg.effects.r_fe_ohm = c.r_fe_ohm;
     c.set(&cfg.effects);
-    auto simulated = sim::Simulate(cfg, plan);
-    ASSERT_TRUE(simulated.ok());
-    auto r = Diagnose(simulated->set);
-    ASSERT_TRUE(r.ok());
+    auto r = SimulateThenDiagnose(cfg, plan);
+    ASSERT_TRUE(r.ok()) << r.status();
     const std::string label = absl::StrCat("seed ", c.seed);
     EXPECT_EQ(r->verdict, "explained") << label;
     std::set<std::string> want = {"iron_loss"};
@@ -678,7 +677,8 @@ TEST(Examples, IndependentSets) {
 
 // The calibration of the true motor from a truth file's per-point flux
 // linkages and differential inductances, fitted through the same families.
-absl::StatusOr<fit::Calibration> TrueMotorCalibration(const nlohmann::json& truth, const io::Manifest& mf) {
+absl::StatusOr<fit::Calibration> TrueMotorCalibration(const nlohmann::json& truth, const io::Manifest& mf,
+                                                      const std::string& model = "auto") {
   fit::FitData t;
   t.serial = mf.serial;
   t.pole_pairs = mf.motor.pole_pairs;
@@ -700,7 +700,9 @@ absl::StatusOr<fit::Calibration> TrueMotorCalibration(const nlohmann::json& trut
     o.ldq_h_std = 1e-3 * o.lqq_h;
     t.inductances.push_back(o);
   }
-  return fit::Fit(t);
+  fit::FitOptions options;
+  options.model = model;
+  return fit::Fit(t, options);
 }
 
 // The check on the independent example: `diagnose dead_time
@@ -737,6 +739,14 @@ TEST(Examples, DiagnosedDeadTimeTablesAgainstTheTrueMotor) {
     ASSERT_TRUE(diagnosed.ok()) << diagnosed.status();
     d[0] = MtpaTableDifference(*true_motor, *diagnosed);
     d[1] = MtpaTableDifference(*true_motor, *plain);
+    // How well the reference itself is known: the same truth points
+    // through the polynomial family instead of `auto`'s choice.
+    auto other = TrueMotorCalibration(truth, set->manifest, "poly");
+    ASSERT_TRUE(other.ok()) << other.status();
+    std::printf("true-motor reference: %s vs %s differ by %.4f %%; diagnosed vs the %s one %.4f %%\n",
+                true_motor->family().Name().c_str(), other->family().Name().c_str(),
+                100 * MtpaTableDifference(*true_motor, *other), other->family().Name().c_str(),
+                100 * MtpaTableDifference(*other, *diagnosed));
   }
   std::printf("examples, MTPA table vs the true motor: dead_time diagnosed %.4f %%, dead_time plain fit %.4f %%, "
               "clean plain fit %.4f %%\n", 100 * d[0], 100 * d[1], 100 * d[2]);

@@ -704,6 +704,52 @@ nlohmann::json EolJsonOf(const std::pair<int, std::string>& r) {
   return j;
 }
 
+// A `fluxcal serve --quiet` child on `db` at a free loopback port (bound,
+// read, released for the server); port 0 when none could be bound.
+struct ServeChild {
+  pid_t pid = -1;
+  int port = 0;
+  std::string addr;
+};
+ServeChild StartServe(const std::string& db) {
+  ServeChild s;
+  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  socklen_t len = sizeof a;
+  if (::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0 &&
+      ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len) == 0) {
+    s.port = ntohs(a.sin_port);
+  }
+  ::close(fd);
+  if (s.port == 0) return s;
+  s.addr = "127.0.0.1:" + std::to_string(s.port);
+  s.pid = fork();
+  if (s.pid == 0) {
+    execl(FLUXCAL_BINARY, FLUXCAL_BINARY, "serve", "--db", db.c_str(), "--listen", s.addr.c_str(), "--quiet", nullptr);
+    _exit(127);
+  }
+  return s;
+}
+// Until the service answers ListMotors (10 s at most).
+bool WaitUntilUp(v1::CalibrationService::Stub* stub) {
+  for (int k = 0; k < 100; ++k) {
+    grpc::ClientContext c;
+    c.set_deadline(std::chrono::system_clock::now() + std::chrono::milliseconds(200));
+    v1::ListMotorsResponse lr;
+    if (stub->ListMotors(&c, v1::ListMotorsRequest(), &lr).ok()) return true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  return false;
+}
+void StopServe(const ServeChild& s) {
+  if (s.pid <= 0) return;
+  kill(s.pid, SIGTERM);
+  int status = 0;
+  waitpid(s.pid, &status, 0);
+}
+
 // The documented EOL flow with --upload-recording against a real `fluxcal
 // serve`: Diagnose answers for the serial (NOT_FOUND before); the service
 // fits the uploaded set as `fluxcal fit SET` does locally, so both give the
@@ -714,25 +760,9 @@ TEST(EolFlow, UploadRecordingThenDiagnoseAndTheLocalFitAgrees) {
   fs::create_directories(dir);
   const std::string set = dir + "/set", db = dir + "/eol.db";
   JsonOf(Fluxcal("simulate --out " + set + " --seed 11 --serial IPM-EOL-1 --effects dead_time_s=2e-6 --json"));
-  int port = 0;
-  {
-    // A free loopback port: bound, read, released for the server.
-    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-    sockaddr_in a{};
-    a.sin_family = AF_INET;
-    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    socklen_t len = sizeof a;
-    ASSERT_EQ(::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a), 0);
-    ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len);
-    port = ntohs(a.sin_port);
-    ::close(fd);
-  }
-  const std::string addr = "127.0.0.1:" + std::to_string(port);
-  const pid_t child = fork();
-  if (child == 0) {
-    execl(FLUXCAL_BINARY, FLUXCAL_BINARY, "serve", "--db", db.c_str(), "--listen", addr.c_str(), "--quiet", nullptr);
-    _exit(127);
-  }
+  const ServeChild serve = StartServe(db);
+  ASSERT_TRUE(serve.port > 0) << "no free loopback port";
+  const std::string& addr = serve.addr;
   auto stub = v1::CalibrationService::NewStub(grpc::CreateChannel(addr, grpc::InsecureChannelCredentials()));
   auto diagnose = [&] {
     grpc::ClientContext c;
@@ -742,15 +772,7 @@ TEST(EolFlow, UploadRecordingThenDiagnoseAndTheLocalFitAgrees) {
     v1::DiagnoseResponse d;
     return std::make_pair(stub->Diagnose(&c, dr, &d), d);
   };
-  bool up = false;
-  for (int k = 0; k < 100 && !up; ++k) {
-    grpc::ClientContext c;
-    c.set_deadline(std::chrono::system_clock::now() + std::chrono::milliseconds(200));
-    v1::ListMotorsResponse lr;
-    up = stub->ListMotors(&c, v1::ListMotorsRequest(), &lr).ok();
-    if (!up) std::this_thread::sleep_for(std::chrono::milliseconds(100));
-  }
-  ASSERT_TRUE(up) << "fluxcal serve did not come up on " << addr;
+  ASSERT_TRUE(WaitUntilUp(stub.get())) << "fluxcal serve did not come up on " << addr;
   EXPECT_EQ(diagnose().first.error_code(), grpc::StatusCode::NOT_FOUND);
 
   auto eol = EolJsonOf(Fluxcal("eol " + set + " --server " + addr + " --upload-recording --json"));
@@ -794,9 +816,7 @@ TEST(EolFlow, UploadRecordingThenDiagnoseAndTheLocalFitAgrees) {
   for (const auto& e : h.events()) runs += e.kind() == "calibration" ? 0 : 1;
   EXPECT_EQ(runs, 2) << "one HF run and one recording run";
 
-  kill(child, SIGTERM);
-  int status = 0;
-  waitpid(child, &status, 0);
+  StopServe(serve);
   fs::remove_all(dir);
 }
 
@@ -820,34 +840,11 @@ TEST(ReportCli, WritesThePageTheServiceBuilt) {
   fs::remove_all(dir);
   fs::create_directories(dir);
   const std::string db = dir + "/store.db";
-  int port = 0;
-  {
-    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-    sockaddr_in a{};
-    a.sin_family = AF_INET;
-    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    socklen_t len = sizeof a;
-    ASSERT_EQ(::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a), 0);
-    ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len);
-    port = ntohs(a.sin_port);
-    ::close(fd);
-  }
-  const std::string addr = "127.0.0.1:" + std::to_string(port);
-  const pid_t child = fork();
-  if (child == 0) {
-    execl(FLUXCAL_BINARY, FLUXCAL_BINARY, "serve", "--db", db.c_str(), "--listen", addr.c_str(), "--quiet", nullptr);
-    _exit(127);
-  }
+  const ServeChild serve = StartServe(db);
+  ASSERT_TRUE(serve.port > 0) << "no free loopback port";
+  const std::string& addr = serve.addr;
   auto stub = v1::CalibrationService::NewStub(grpc::CreateChannel(addr, grpc::InsecureChannelCredentials()));
-  bool up = false;
-  for (int k = 0; k < 100 && !up; ++k) {
-    grpc::ClientContext c;
-    c.set_deadline(std::chrono::system_clock::now() + std::chrono::milliseconds(200));
-    v1::ListMotorsResponse lr;
-    up = stub->ListMotors(&c, v1::ListMotorsRequest(), &lr).ok();
-    if (!up) std::this_thread::sleep_for(std::chrono::milliseconds(100));
-  }
-  ASSERT_TRUE(up) << "fluxcal serve did not come up on " << addr;
+  ASSERT_TRUE(WaitUntilUp(stub.get())) << "fluxcal serve did not come up on " << addr;
   {
     grpc::ClientContext c;
     v1::IngestHfResultsResponse r;
@@ -931,9 +928,7 @@ TEST(ReportCli, WritesThePageTheServiceBuilt) {
   EXPECT_FALSE(fs::exists(dir + "/nope.html"));
 
   stub.reset();
-  kill(child, SIGTERM);
-  int status = 0;
-  waitpid(child, &status, 0);
+  StopServe(serve);
   fs::remove_all(dir);
 }
 
