@@ -42,26 +42,44 @@ DifferentialInductance TraitMotor::Inductance(double id, double iq, double) cons
   return l;
 }
 
+namespace {
+
+// Parameters stated for a machine of `i_ref` amperes, scaled to the current
+// range m: inductances scale as 1/m and fluxes stay, so every map keeps its
+// shape and its flux level.
+MotorTraits Scaled(MotorTraits t, double i_ref, double m, double flux_scale) {
+  const double k = i_ref / m;   // L -> L k, I -> I / k
+  const double f = flux_scale;  // psi -> psi f, L -> L f
+  t.psi_pm_wb *= f;
+  t.ld0_h *= k * f; t.lds_h *= k * f; t.lq0_h *= k * f; t.lqs_h *= k * f;
+  t.id_knee_a /= k; t.iq_knee_a /= k; t.bump_r_a /= k;
+  t.cross_h *= k * f;
+  t.psi_q_offset_wb *= f;
+  t.bump_wb_a *= f / k;
+  return t;
+}
+
+}  // namespace
+
 std::vector<MotorTraits> RealLikeMotors(double m, double flux_scale) {
   // Parameters stated for a 200-400 A machine and scaled with the current
-  // range: inductances scale as 1/m and fluxes stay, so every map keeps
-  // its shape and its flux level.
-  auto scaled = [m, flux_scale](MotorTraits t, double i_ref) {
-    const double k = i_ref / m;   // L -> L k, I -> I / k
-    const double f = flux_scale;  // psi -> psi f, L -> L f
-    t.psi_pm_wb *= f;
-    t.ld0_h *= k * f; t.lds_h *= k * f; t.lq0_h *= k * f; t.lqs_h *= k * f;
-    t.id_knee_a /= k; t.iq_knee_a /= k; t.bump_r_a /= k;
-    t.cross_h *= k * f;
-    t.psi_q_offset_wb *= f;
-    t.bump_wb_a *= f / k;
-    return t;
-  };
+  // range.
+  auto scaled = [m, flux_scale](MotorTraits t, double i_ref) { return Scaled(t, i_ref, m, flux_scale); };
   return {
       scaled({"pm-syrm", 0.04, 0.6e-3, 0.35e-3, 80, 4.0e-3, 0.8e-3, 40, 3e-5, 0, 0, 1}, 200),
       scaled({"ipm-bridge", 0.09, 0.25e-3, 0.15e-3, 250, 1.5e-3, 0.15e-3, 60, 2e-5, 0, 0, 1}, 400),
       scaled({"psi-q-offset", 0.08, 0.3e-3, 0.18e-3, 200, 0.8e-3, 0.3e-3, 150, 1e-4, 0.015, 0, 1}, 300),
       scaled({"negative-slope", 0.08, 0.3e-3, 0.18e-3, 200, 0.8e-3, 0.3e-3, 150, 1e-4, 0, 0.6, 60}, 300),
+  };
+}
+
+std::vector<MotorTraits> OtherKindMotors(double m, double flux_scale) {
+  auto scaled = [m, flux_scale](MotorTraits t, double i_ref) { return Scaled(t, i_ref, m, flux_scale); };
+  return {
+      scaled({"syrm", 0.0, 0.5e-3, 0.3e-3, 80, 5e-3, 0.6e-3, 30, 5e-5, 0, 0, 1}, 200),
+      scaled({"spm", 0.1, 0.2e-3, 0.15e-3, 400, 0.21e-3, 0.15e-3, 300, 5e-6, 0, 0, 1}, 300),
+      scaled({"strong-cross", 0.08, 0.3e-3, 0.18e-3, 200, 0.8e-3, 0.3e-3, 150, 1.5e-4, 0, 0, 1}, 300),
+      scaled({"deep-sat", 0.06, 0.4e-3, 0.08e-3, 60, 1.2e-3, 0.15e-3, 50, 1e-5, 0, 0, 1}, 300),
   };
 }
 

@@ -61,6 +61,16 @@ class TraitMotor : public MagneticModel {
 // keep a recording plan's speeds inside the inverter's voltage.
 std::vector<MotorTraits> RealLikeMotors(double i_max_a, double flux_scale = 1.0);
 
+// Machines of kinds the fit was not developed on, as a check that it holds
+// beyond the four above (tests/fitting/real_maps_test.cc, OtherKinds),
+// scaled the same way: "syrm" (synchronous reluctance, no magnet: psi_pm = 0,
+// Lq0 10x Ld0, Lqq falling 10x through a knee at 15 % of the range),
+// "spm" (surface magnets: Ld ~ Lq, mild saturation), "strong-cross" (|Ldq|
+// up to 0.2 mH against Ldd 0.13-0.3 mH: det L near zero at the region's
+// corner), "deep-sat" (Ldd falling 6x and Lqq 9x through knees at 17-20 %
+// of the range).
+std::vector<MotorTraits> OtherKindMotors(double i_max_a, double flux_scale = 1.0);
+
 }  // namespace fluxcal::sim
 
 #endif  // FLUXCAL_SIMULATION_TRAIT_MOTOR_H_

@@ -205,41 +205,47 @@ std::vector<MachineMap> Machines() {
   return v;
 }
 
+// Bench draws `first_seed`.. of `m` fitted with `--model auto`: mean and
+// worst RMS flux error, draws above 0.5 %, the families chosen; `each` sees
+// every calibration and its error (a failed fit is a test failure).
+struct Draws {
+  double mean = 0, worst = 0;
+  int above = 0;
+  std::string families;
+};
+Draws FitDraws(const MachineMap& m, unsigned first_seed, unsigned count,
+               const std::function<void(const Calibration&, unsigned seed, double rms)>& each = {}) {
+  Draws r;
+  for (unsigned seed = first_seed; seed < first_seed + count; ++seed) {
+    auto cal = Fit(EolDraw(m, seed), {});
+    EXPECT_TRUE(cal.ok()) << m.name << " seed " << seed << ": " << cal.status();
+    if (!cal.ok()) continue;
+    const double rms = FluxRms(*cal, m);
+    r.worst = std::max(r.worst, rms);
+    r.mean += rms / count;
+    r.above += rms > 0.005;
+    r.families += cal->family().Name() + " ";
+    if (each) each(*cal, seed, rms);
+  }
+  return r;
+}
+
 // Five noise draws per machine, `--model auto`. The issue asks 0.5 % RMS on
-// every draw. What holds today (docs/fitting.md, "Real machines"): every
-// draw below 0.5 % on the three smooth trait maps; on the measured map the
-// mean below 0.5 % and every draw below 1 % (over 20 other draws: mean
-// 0.35 %, 18 below 0.5 %, worst 0.95 %: GCV's near-interpolating basin
-// still wins now and then and follows the noise); on the map with negative Ldd
+// every draw: it holds on the measured map and the three smooth trait maps
+// (and on 20 more draws, TwentyMoreDraws); on the map with negative Ldd
 // near zero current (which no positive-definite surface can follow) below
 // 0.8 %, its non-positive points excluded and listed.
 TEST(RealMaps, FluxErrorOnEveryDraw) {
   for (const auto& m : Machines()) {
-    double worst = 0, sum = 0;
-    std::string families;
-    for (unsigned seed = 1; seed <= 5; ++seed) {
-      auto cal = Fit(EolDraw(m, seed), {});
-      ASSERT_TRUE(cal.ok()) << m.name << " seed " << seed << ": " << cal.status();
-      const double rms = FluxRms(*cal, m);
-      worst = std::max(worst, rms);
-      sum += rms;
-      families += cal->family().Name() + " ";
-      if (m.name == "negative-slope") {
-        bool listed = false;
-        for (const auto& e : cal->summary.excluded) listed |= e.find("ldd_h") != std::string::npos;
-        EXPECT_TRUE(listed) << "the non-positive Ldd points are not listed as excluded";
-      }
-    }
-    std::printf("%-15s mean %.3f %% worst %.3f %%  [%s]\n", m.name.c_str(), 100 * sum / 5, 100 * worst,
-                families.c_str());
-    if (m.name == "negative-slope") {
-      EXPECT_LT(worst, 0.008) << m.name;
-    } else if (m.name == "baldor") {
-      EXPECT_LT(sum / 5, 0.005) << m.name;
-      EXPECT_LT(worst, 0.01) << m.name;
-    } else {
-      EXPECT_LT(worst, 0.005) << m.name;
-    }
+    const Draws d = FitDraws(m, 1, 5, [&](const Calibration& cal, unsigned, double) {
+      if (m.name != "negative-slope") return;
+      bool listed = false;
+      for (const auto& e : cal.summary.excluded) listed |= e.find("ldd_h") != std::string::npos;
+      EXPECT_TRUE(listed) << "the non-positive Ldd points are not listed as excluded";
+    });
+    std::printf("%-15s mean %.3f %% worst %.3f %%  [%s]\n", m.name.c_str(), 100 * d.mean, 100 * d.worst,
+                d.families.c_str());
+    EXPECT_LT(d.worst, m.name == "negative-slope" ? 0.008 : 0.005) << m.name;
   }
 }
 
@@ -343,8 +349,12 @@ TEST(RealMaps, WhatTheBenchLeavesOut) {
       }
       const char* names[] = {"as-is", "HF results alone", "no Ldq", "other grid"};
       std::printf("%-15s %-17s worst %.3f %% [%s]\n", m.name.c_str(), names[var], 100 * worst, fam.c_str());
-      if (var == 2) EXPECT_LT(worst, 0.006) << m.name;
-      if (var == 3) EXPECT_LT(worst, 0.008) << m.name;
+      if (var == 2) {
+        EXPECT_LT(worst, 0.006) << m.name;
+      }
+      if (var == 3) {
+        EXPECT_LT(worst, 0.008) << m.name;
+      }
     }
   }
 }
@@ -355,25 +365,52 @@ TEST(RealMaps, WhatTheBenchLeavesOut) {
 namespace fluxcal::fit {
 namespace {
 
-// The 20-draw figures in docs/fitting.md ("Real machines"), kept out of the
-// default run for time: `./build/tests/fitting/fitting_test
-// --gtest_also_run_disabled_tests --gtest_filter='RealMaps.DISABLED_TwentyMoreDraws'`.
-// Asserts only what the docs claim for every map: mean below 0.5 %.
-TEST(RealMaps, DISABLED_TwentyMoreDraws) {
+// Twenty more noise draws of every map (seeds 100-119), the issue's "any
+// noise draw": every draw within 0.5 % RMS, but on the map with negative
+// Ldd near zero current (no positive-definite surface follows it), whose
+// mean stays below 0.8 %. Before the restricted likelihood chose between
+// GCV's basins (fitting/fit.cc, SolveLinear), 2 of the measured map's 20
+// draws were above 0.5 % (worst 0.95 %). Figures in docs/fitting.md.
+TEST(RealMaps, TwentyMoreDraws) {
   for (const auto& m : Machines()) {
-    double worst = 0, sum = 0;
-    int above = 0;
-    for (unsigned seed = 100; seed < 120; ++seed) {
-      auto cal = Fit(EolDraw(m, seed), {});
-      ASSERT_TRUE(cal.ok()) << m.name << " seed " << seed << ": " << cal.status();
-      const double rms = FluxRms(*cal, m);
-      worst = std::max(worst, rms);
-      sum += rms;
-      above += rms > 0.005;
+    const Draws d = FitDraws(m, 100, 20, [&](const Calibration&, unsigned seed, double rms) {
+      if (m.name != "negative-slope") {
+        EXPECT_LT(rms, 0.005) << m.name << " seed " << seed;
+      }
+    });
+    std::printf("%-15s 20 draws: mean %.3f %%, worst %.3f %%, %d above 0.5 %%\n", m.name.c_str(), 100 * d.mean,
+                100 * d.worst, d.above);
+    if (m.name == "negative-slope") {
+      EXPECT_LT(d.mean, 0.008) << m.name;
     }
-    std::printf("%-15s 20 draws: mean %.3f %%, worst %.3f %%, %d above 0.5 %%\n", m.name.c_str(), 100 * sum / 20,
-                100 * worst, above);
-    if (m.name != "negative-slope") EXPECT_LT(sum / 20, 0.005) << m.name;
+  }
+}
+
+// Machines of kinds the fit was not developed on (sim::OtherKindMotors):
+// a synchronous reluctance machine without magnet (psi_pm = 0: its prior
+// once had a zero sigma, the analytic family's residual became 0/0 and the
+// covariance crashed the process), a surface-magnet machine, strong cross
+// saturation, deep saturation in both axes. Ten bench draws each, every
+// draw within 0.5 % RMS (the issue asks 1 % on unseen machines).
+TEST(RealMaps, OtherKinds) {
+  const double imax[] = {200, 300, 300, 300};
+  for (int k = 0; k < 4; ++k) {
+    const MachineMap m = TraitMachine(sim::OtherKindMotors(imax[k])[k], imax[k]);
+    const Draws d = FitDraws(m, 1, 10, [&](const Calibration&, unsigned seed, double rms) {
+      EXPECT_LT(rms, 0.005) << m.name << " seed " << seed;
+    });
+    std::printf("%-13s mean %.3f %% worst %.3f %%  [%s]\n", m.name.c_str(), 100 * d.mean, 100 * d.worst,
+                d.families.c_str());
+    if (m.name == "syrm") {
+      // The analytic family alone (the path that crashed): a finite fit
+      // with a finite covariance.
+      FitOptions analytic;
+      analytic.model = "analytic";
+      auto cal = Fit(EolDraw(m, 1), analytic);
+      ASSERT_TRUE(cal.ok()) << cal.status();
+      for (double c : cal->covariance()) EXPECT_TRUE(std::isfinite(c));
+      EXPECT_TRUE(std::isfinite(cal->Flux(-100, 100).psi_q_wb));
+    }
   }
 }
 
