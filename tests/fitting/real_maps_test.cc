@@ -282,10 +282,6 @@ TEST(RealMaps, TwinTraitMotorsEndToEnd) {
   }
 }
 
-}  // namespace
-}  // namespace fluxcal::fit
-namespace fluxcal::fit {
-namespace {
 
 // A coarse, exact flux map (each machine's 6 x 6 bench grid of flux nodes,
 // no noise, nothing else), as `fluxcal fit --map` gets from a coarse FEA
@@ -359,11 +355,6 @@ TEST(RealMaps, WhatTheBenchLeavesOut) {
   }
 }
 
-}  // namespace
-}  // namespace fluxcal::fit
-
-namespace fluxcal::fit {
-namespace {
 
 // Twenty more noise draws of every map (seeds 100-119), the issue's "any
 // noise draw": every draw within 0.5 % RMS, but on the map with negative
