@@ -1,5 +1,6 @@
 #include "fitting/calibration.h"
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <sstream>
@@ -39,13 +40,18 @@ bool Calibration::InMeasuredRegion(double id, double iq) const {
   return id >= id_min_a_ - mi && id <= id_max_a_ + mi && aq >= iq_min_a_ - mq && aq <= iq_max_a_ + mq;
 }
 
-bool Calibration::PhysicalOver(double factor) const {
+bool Calibration::PhysicalOver(double factor, const std::vector<Box>& except) const {
   const double lo = std::min(id_min_a_, 0.0) * factor, hi = std::max(id_max_a_, 0.0);
   const double qmax = std::max(iq_max_a_, 1.0) * factor;
   for (int a = 0; a <= 12; ++a) {
     const double id = lo + (hi - lo) * a / 12;
     for (int b = 0; b <= 12; ++b) {
-      const auto L = Inductance(id, qmax * b / 12);
+      const double iq = qmax * b / 12;
+      const bool excepted = std::any_of(except.begin(), except.end(), [&](const Box& x) {
+        return id >= x.id_lo_a && id <= x.id_hi_a && iq >= x.abs_iq_lo_a && iq <= x.abs_iq_hi_a;
+      });
+      if (excepted) continue;
+      const auto L = Inductance(id, iq);
       if (!(L.ldd_h > 0) || !(L.lqq_h > 0) || !(L.ldd_h * L.lqq_h - L.ldq_h * L.ldq_h > 0)) return false;
     }
   }

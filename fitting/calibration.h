@@ -67,7 +67,13 @@ class Calibration : public sim::MagneticModel {
   // the measured region widened by `factor` (towards negative id and larger
   // |iq|): the extrapolation a table generator may lean on stays physical.
   // (Saturation beyond the region is guaranteed by the analytic family only.)
-  bool PhysicalOver(double factor) const;
+  // Grid nodes inside a box of `except` (|iq|) are not checked: Fit passes
+  // the cells around a point the bench measured non-positive, where the
+  // data say the machine's map is not positive definite.
+  struct Box {
+    double id_lo_a, id_hi_a, abs_iq_lo_a, abs_iq_hi_a;
+  };
+  bool PhysicalOver(double factor, const std::vector<Box>& except = {}) const;
   // Largest current magnitude whose quarter circle stays in the measured
   // region (min(|id_min|, iq_max)); the tables' default current limit.
   double MeasuredCurrentLimitA() const;

@@ -118,6 +118,31 @@ TEST(Fit, GrossOutlierMovesNothing) {
   }
 }
 
+// A point read non-positive in a map that is positive definite everywhere
+// (a glitch, not a machine that falls there): excluded and listed with the
+// cells where positive definiteness is then not required, and the fit is
+// still positive definite there and leaves the other points where they were.
+TEST(Fit, NonPositiveGlitchMovesNothing) {
+  const Case& c = TwinCase();
+  auto base = Fit(c.data, {});
+  const size_t k = 14;   // interior point of the 6 x 6 grid
+  FitData d = c.data;
+  d.inductances[k].ldd_h = -0.5 * d.inductances[k].ldd_h;
+  auto bad = Fit(d, {});
+  ASSERT_TRUE(base.ok() && bad.ok()) << bad.status();
+  bool listed = false;
+  for (const auto& e : bad->summary.excluded) listed |= e.find("not required positive definite over id") != std::string::npos;
+  EXPECT_TRUE(listed) << "the glitch and its cells are not listed";
+  EXPECT_TRUE(bad->PhysicalOver(1.0)) << "the cells around a glitch went non-positive-definite";
+  for (size_t j = 0; j < c.sim.truth_points.size(); ++j) {
+    if (j == k) continue;
+    const auto& t = c.sim.truth_points[j];
+    const auto a = base->Predict(t.id_true_a, t.iq_true_a), b = bad->Predict(t.id_true_a, t.iq_true_a);
+    EXPECT_NEAR(b.ldd_h / a.ldd_h, 1.0, 0.003) << t.id;
+    EXPECT_NEAR(b.lqq_h / a.lqq_h, 1.0, 0.003) << t.id;
+  }
+}
+
 // Predicted steady-state voltage u = Rs i + w J psi(i) vs the recorded one.
 double WorstVoltageError(const Calibration& cal, const Case& c) {
   double worst = 0;

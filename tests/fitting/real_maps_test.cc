@@ -230,22 +230,26 @@ Draws FitDraws(const MachineMap& m, unsigned first_seed, unsigned count,
   return r;
 }
 
-// Five noise draws per machine, `--model auto`. The issue asks 0.5 % RMS on
-// every draw: it holds on the measured map and the three smooth trait maps
-// (and on 20 more draws, TwentyMoreDraws); on the map with negative Ldd
-// near zero current (which no positive-definite surface can follow) below
-// 0.8 %, its non-positive points excluded and listed.
+// Five noise draws per machine, `--model auto`: every draw within the
+// issue's 0.5 % RMS (and on 20 more draws, TwentyMoreDraws). On the map with
+// negative Ldd near zero current the non-positive point is excluded and
+// listed with the cells around it where the surface is not required
+// positive definite; required there too, every smoothing spline that
+// followed the neighbours into the dip was vetoed and a 4-span spline was
+// left, 0.67 % off.
 TEST(RealMaps, FluxErrorOnEveryDraw) {
   for (const auto& m : Machines()) {
     const Draws d = FitDraws(m, 1, 5, [&](const Calibration& cal, unsigned, double) {
       if (m.name != "negative-slope") return;
       bool listed = false;
-      for (const auto& e : cal.summary.excluded) listed |= e.find("ldd_h") != std::string::npos;
-      EXPECT_TRUE(listed) << "the non-positive Ldd points are not listed as excluded";
+      for (const auto& e : cal.summary.excluded) {
+        listed |= e.find("ldd_h") != std::string::npos && e.find("not required positive definite") != std::string::npos;
+      }
+      EXPECT_TRUE(listed) << "the non-positive Ldd point and its cells are not listed as excluded";
     });
     std::printf("%-15s mean %.3f %% worst %.3f %%  [%s]\n", m.name.c_str(), 100 * d.mean, 100 * d.worst,
                 d.families.c_str());
-    EXPECT_LT(d.worst, m.name == "negative-slope" ? 0.008 : 0.005) << m.name;
+    EXPECT_LT(d.worst, 0.005) << m.name;
   }
 }
 
@@ -256,7 +260,12 @@ TEST(RealMaps, TwinTraitMotorsEndToEnd) {
   // Flux scaled to the default twin motor's level (~0.05 Wb at 100 A), so
   // the plan's steady-state speeds stay inside the inverter's voltage.
   for (const auto& t : sim::RealLikeMotors(100.0, 0.15)) {
-    if (t.name == "negative-slope") continue;   // covered at bench resolution above
+    // The map with negative Ldd near zero current is covered at bench
+    // resolution above. Here (1.16 % RMS, open: docs/fitting.md) the HF
+    // current at (0, 0) sweeps past the small non-positive region and the
+    // identification reports the average over its ellipse (Ldd 0.070 mH
+    // where the motor has -0.015 mH), the same limit as the bridge knee's.
+    if (t.name == "negative-slope") continue;
     sim::TwinConfig cfg;
     cfg.seed = 31;
     cfg.serial = "TRAIT-" + t.name;
@@ -357,23 +366,19 @@ TEST(RealMaps, WhatTheBenchLeavesOut) {
 
 
 // Twenty more noise draws of every map (seeds 100-119), the issue's "any
-// noise draw": every draw within 0.5 % RMS, but on the map with negative
-// Ldd near zero current (no positive-definite surface follows it), whose
-// mean stays below 0.8 %. Before the restricted likelihood chose between
-// GCV's basins (fitting/fit.cc, SolveLinear), 2 of the measured map's 20
-// draws were above 0.5 % (worst 0.95 %). Figures in docs/fitting.md.
+// noise draw": every draw within 0.5 % RMS. Before the restricted
+// likelihood chose between GCV's basins (fitting/fit.cc, SolveLinear), 2 of
+// the measured map's 20 draws were above 0.5 % (worst 0.95 %); before it
+// also decided where GCV has no basin, one draw of the negative-slope map
+// (its GCV curve falling into interpolation) was 2.5 % off. Figures in
+// docs/fitting.md.
 TEST(RealMaps, TwentyMoreDraws) {
   for (const auto& m : Machines()) {
     const Draws d = FitDraws(m, 100, 20, [&](const Calibration&, unsigned seed, double rms) {
-      if (m.name != "negative-slope") {
-        EXPECT_LT(rms, 0.005) << m.name << " seed " << seed;
-      }
+      EXPECT_LT(rms, 0.005) << m.name << " seed " << seed;
     });
     std::printf("%-15s 20 draws: mean %.3f %%, worst %.3f %%, %d above 0.5 %%\n", m.name.c_str(), 100 * d.mean,
                 100 * d.worst, d.above);
-    if (m.name == "negative-slope") {
-      EXPECT_LT(d.mean, 0.008) << m.name;
-    }
   }
 }
 

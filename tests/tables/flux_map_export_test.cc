@@ -9,6 +9,7 @@
 #include "fitting/fit.h"
 #include "gtest/gtest.h"
 #include "io/flux_map.h"
+#include "simulation/trait_motor.h"
 #include "simulation/twin.h"
 #include "tables/flux_map_export.h"
 
@@ -252,6 +253,49 @@ TEST(FluxMapExport, InverseIsUniqueAndRejectsFluxOutsideTheRegion) {
   EXPECT_EQ(header, "psi_d_Vs,psi_q_Vs,id_A,iq_A,valid");
   EXPECT_EQ(row.substr(row.size() - 4), ",,,0") << row;
  }
+}
+
+// A calibration that is not positive definite everywhere: the trait motor
+// whose Ldd is negative near zero current, on a 6 x 6 bench grid (exact
+// inductances, the point at (0, 0) reads non-positive, so Fit exempts its
+// cells from the positive-definite check) with three flux nodes. The
+// inverse still returns a map, and every node it calls valid is solved.
+TEST(FluxMapExport, InverseOfAMapThatFallsNearZeroCurrent) {
+  sim::MotorTraits t;
+  for (const auto& m : sim::RealLikeMotors(300)) {
+    if (m.name == "negative-slope") t = m;
+  }
+  ASSERT_EQ(t.name, "negative-slope");
+  const sim::TraitMotor motor(t);
+  fit::FitData d;
+  d.serial = "NEG-SLOPE-1";
+  for (double id : {-300.0, -225.0, -165.0, -135.0, -60.0, 0.0}) {
+    for (double iq : {0.0, 51.0, 126.0, 174.0, 249.0, 300.0}) {
+      const auto L = motor.Inductance(id, iq);
+      d.inductances.push_back({id, iq, L.ldd_h, L.lqq_h, L.ldq_h, 0, 0, 0});
+    }
+  }
+  for (double id : {-300.0, -165.0, -60.0}) {
+    const auto f = motor.Flux(id, 150);
+    d.fluxes.push_back({id, 150, f.psi_d_wb, f.psi_q_wb, 1e-4});
+  }
+  ASSERT_LT(d.inductances[30].ldd_h, 0) << "the map no longer falls at (0, 0)";
+  auto cal = fit::Fit(d);
+  ASSERT_TRUE(cal.ok()) << cal.status();
+  LinearAxis pd, pq;
+  DefaultFluxGrid(*cal, &pd, &pq);
+  auto inv = InvertCalibration(*cal, pd, pq);
+  ASSERT_TRUE(inv.ok()) << inv.status();
+  EXPECT_GT(inv->valid_nodes, 441 / 3);
+  for (size_t i = 0; i < inv->psi_d_wb.size(); ++i) {
+    for (size_t j = 0; j < inv->psi_q_wb.size(); ++j) {
+      if (!inv->valid[i][j]) continue;
+      const auto f = cal->Flux(inv->id_a[i][j], inv->iq_a[i][j]);
+      EXPECT_LT(std::hypot(f.psi_d_wb - inv->psi_d_wb[i], f.psi_q_wb - inv->psi_q_wb[j]), 1e-9);
+    }
+  }
+  std::printf("inverse of a map falling near zero current: %d of 441 nodes valid; positive definite "
+              "everywhere: %s\n", inv->valid_nodes, cal->PhysicalOver(1.0) ? "yes" : "no");
 }
 
 TEST(FluxMapExport, GridsAreChecked) {
