@@ -65,7 +65,7 @@ struct FitOptions {
   // precise than the model family can represent (0.2 %).
   double relative_sigma_floor = 0.002;
   double psi_pm_prior_relative_std = 0.05;
-  // Robust loss scale in standard deviations (Cauchy).
+  // Robust loss scale in standard deviations (Huber; fitting/fit.cc says why).
   double robust_scale = 3.0;
   // Treat the differential inductance as apparent (psi = psi_pm + L i):
   // only for demonstrating the error (tests); never in production.

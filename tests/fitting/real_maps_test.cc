@@ -260,12 +260,6 @@ TEST(RealMaps, TwinTraitMotorsEndToEnd) {
   // Flux scaled to the default twin motor's level (~0.05 Wb at 100 A), so
   // the plan's steady-state speeds stay inside the inverter's voltage.
   for (const auto& t : sim::RealLikeMotors(100.0, 0.15)) {
-    // The map with negative Ldd near zero current is covered at bench
-    // resolution above. Here (1.16 % RMS, open: docs/fitting.md) the HF
-    // current at (0, 0) sweeps past the small non-positive region and the
-    // identification reports the average over its ellipse (Ldd 0.070 mH
-    // where the motor has -0.015 mH), the same limit as the bridge knee's.
-    if (t.name == "negative-slope") continue;
     sim::TwinConfig cfg;
     cfg.seed = 31;
     cfg.serial = "TRAIT-" + t.name;
@@ -282,13 +276,16 @@ TEST(RealMaps, TwinTraitMotorsEndToEnd) {
     const double rms = FluxRms(*cal, m, &mx);
     std::printf("twin %-13s %-12s flux RMS %.3f %% max %.3f %%\n", t.name.c_str(), cal->family().Name().c_str(),
                 100 * rms, 100 * mx);
-    // Open (docs/fitting.md): the bridge knee at 15 A lies between the
-    // plan's first two iq rows (0 and 20 A) and Lqq falls 10x through it;
-    // the robust loss ends up down-weighting the whole iq = 0 row (17 %
-    // RMS; 2.7 % without it), while the same motor sampled as a bench
-    // reports it fits to 0.3 %.
-    if (t.name == "ipm-bridge") continue;
-    EXPECT_LT(rms, 0.005) << t.name;
+    // Open (docs/fitting.md), asserted where they stand: on the bridge knee
+    // (at 15 A, between the plan's iq rows 0 and 20 A, Lqq falling 10x) and
+    // on the map falling near zero current the HF current sweeps through
+    // the feature, and the identification reports the average over its
+    // ellipse (Lqq 6-9 % high at iq = 40 A; Ldd 0.070 mH at (0, 0) where the
+    // motor has -0.015 mH): 2.7 % and 0.64 % RMS. The same motors sampled as
+    // a bench reports them fit to 0.3 % and 0.2 %. The bridge knee was 17 %
+    // while the robust loss was Cauchy's (fitting/fit.cc says why).
+    const double bound = t.name == "ipm-bridge" ? 0.035 : t.name == "negative-slope" ? 0.008 : 0.005;
+    EXPECT_LT(rms, bound) << t.name;
   }
 }
 
@@ -329,8 +326,8 @@ TEST(RealMaps, CoarseExactFluxMap) {
 // rows (HF results alone). Three draws each, worst RMS flux error printed;
 // asserted where the fit is expected to hold (docs/fitting.md): without Ldq
 // below 0.6 %, on another grid of the measured map below 0.8 %, and HF
-// results alone always give a calibration (their flux is the integral of
-// an interpolated inductance: 0.1-6 % on these maps, said in the docs).
+// results alone below 2 % (their flux is the integral of an interpolated
+// inductance: 0.1-1.5 % on these maps, said in the docs).
 TEST(RealMaps, WhatTheBenchLeavesOut) {
   for (const auto& m0 : Machines()) {
     for (int var = 0; var < 4; ++var) {
@@ -355,6 +352,9 @@ TEST(RealMaps, WhatTheBenchLeavesOut) {
       }
       const char* names[] = {"as-is", "HF results alone", "no Ldq", "other grid"};
       std::printf("%-15s %-17s worst %.3f %% [%s]\n", m.name.c_str(), names[var], 100 * worst, fam.c_str());
+      if (var == 1) {
+        EXPECT_LT(worst, 0.02) << m.name;   // 5.1 % on the PM-SyRM map with Cauchy's loss
+      }
       if (var == 2) {
         EXPECT_LT(worst, 0.006) << m.name;
       }
