@@ -29,10 +29,10 @@ std::vector<Z> Residuals(const Model& m, const Params& p) {
     const auto& o = m.ss[k];
     const std::string id = absl::StrFormat("steady_state[%d]", k);
     out.push_back({id, "steady_state_voltage", o.id_a, o.iq_a, o.speed_rpm,
-                   std::norm((o.u - m.PredictSs(ptr.data(), o)) / o.sigma), 2});
+                   std::norm((o.u - m.PredictSs(ptr.data(), o)) / o.sigma), 2, {}});
     if (o.has_torque) {
       const double d = (o.torque - m.PredictTorque(ptr.data(), o)) / o.torque_sigma;
-      out.push_back({id, "torque", o.id_a, o.iq_a, o.speed_rpm, d * d, 1});
+      out.push_back({id, "torque", o.id_a, o.iq_a, o.speed_rpm, d * d, 1, {}});
     }
   }
   return out;

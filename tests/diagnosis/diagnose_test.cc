@@ -181,8 +181,12 @@ TEST(Matrix, PairsSharingASignature) {
     cfg.effects.delay_s = 30e-6;
     const auto r = SimulateAndDiagnose(cfg);
     EXPECT_EQ(Named(r), (std::set<std::string>{"hf_resistance", "sampling_delay"})) << r.verdict;
-    if (const Finding* f = Find(r, "hf_resistance")) EXPECT_NEAR(f->parameters.at("r_hf_ohm") / 0.05, 1.0, 0.15);
-    if (const Finding* f = Find(r, "sampling_delay")) EXPECT_NEAR(f->parameters.at("delay_s") / 30e-6, 1.0, 0.15);
+    if (const Finding* f = Find(r, "hf_resistance")) {
+      EXPECT_NEAR(f->parameters.at("r_hf_ohm") / 0.05, 1.0, 0.15);
+    }
+    if (const Finding* f = Find(r, "sampling_delay")) {
+      EXPECT_NEAR(f->parameters.at("delay_s") / 30e-6, 1.0, 0.15);
+    }
     EXPECT_EQ(r.verdict, "explained");
   }
   {
@@ -193,8 +197,12 @@ TEST(Matrix, PairsSharingASignature) {
     cfg.effects.offset_rad = 0.04;
     const auto r = SimulateAndDiagnose(cfg);
     EXPECT_EQ(Named(r), (std::set<std::string>{"magnet_temperature", "position_offset"})) << r.verdict;
-    if (const Finding* f = Find(r, "magnet_temperature")) EXPECT_NEAR(f->parameters.at("psi_pm_wb") / 0.0108, 1.0, 0.02);
-    if (const Finding* f = Find(r, "position_offset")) EXPECT_NEAR(f->parameters.at("offset_rad"), 0.04, 0.5 * M_PI / 180);
+    if (const Finding* f = Find(r, "magnet_temperature")) {
+      EXPECT_NEAR(f->parameters.at("psi_pm_wb") / 0.0108, 1.0, 0.02);
+    }
+    if (const Finding* f = Find(r, "position_offset")) {
+      EXPECT_NEAR(f->parameters.at("offset_rad"), 0.04, 0.5 * M_PI / 180);
+    }
     EXPECT_EQ(r.verdict, "explained");
   }
 }
@@ -352,7 +360,9 @@ TEST(Honesty, OutsideTheCatalogueIsNeverExplained) {
     EXPECT_NE(r->verdict, "explained") << c.effect;
     EXPECT_NE(r->verdict, "no_mismatch") << c.effect;
     EXPECT_FALSE(r->mismatches.empty()) << c.effect << ": located";
-    if (r->verdict == "unexplained") EXPECT_FALSE(r->rejected.empty()) << c.effect << ": says what it tried";
+    if (r->verdict == "unexplained") {
+      EXPECT_FALSE(r->rejected.empty()) << c.effect << ": says what it tried";
+    }
   }
 }
 

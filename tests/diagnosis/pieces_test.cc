@@ -149,8 +149,8 @@ TEST(Observations, MeanSoftSign) {
 // A region's significance is (chi^2 - k) / sqrt(2k) over its points.
 TEST(Locate, RegionSignificance) {
   std::vector<Z> zs;
-  for (int k = 0; k < 8; ++k) zs.push_back({"p" + std::to_string(k), "hf_current", -10, 10, 0, 4.0 * 5, 4});
-  zs.push_back({"ss", "torque", 0, 40, 1000, 1.0, 1});
+  for (int k = 0; k < 8; ++k) zs.push_back({"p" + std::to_string(k), "hf_current", -10, 10, 0, 4.0 * 5, 4, {}});
+  zs.push_back({"ss", "torque", 0, 40, 1000, 1.0, 1, {}});
   const auto st = RegionStats(zs);
   double low = 0;
   for (const auto& r : st) {
