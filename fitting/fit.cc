@@ -8,6 +8,7 @@
 #include <functional>
 #include <limits>
 #include <numbers>
+#include <tuple>
 
 #include "absl/container/inlined_vector.h"
 #include "absl/strings/str_cat.h"
@@ -933,6 +934,13 @@ absl::StatusOr<Calibration> Fit(const FitData& input, const FitOptions& o) {
   std::vector<std::string> excluded;
   std::vector<Calibration::Box> not_pd;
   const FitData d = Screen(input, &excluded, &not_pd);
+  // One box per distinct cell: the check visits every box at each of its
+  // 169 nodes for every candidate lambda, and a file of many non-positive
+  // points on one grid would otherwise repeat the same cells.
+  auto key = [](const Calibration::Box& b) { return std::tie(b.id_lo_a, b.id_hi_a, b.abs_iq_lo_a, b.abs_iq_hi_a); };
+  std::sort(not_pd.begin(), not_pd.end(), [&](const auto& a, const auto& b) { return key(a) < key(b); });
+  not_pd.erase(std::unique(not_pd.begin(), not_pd.end(), [&](const auto& a, const auto& b) { return key(a) == key(b); }),
+               not_pd.end());
   if (d.inductances.size() < 3 && d.steady_state.size() < 3 && d.fluxes.size() < 3) {
     return absl::InvalidArgumentError(absl::StrCat(
         "field 'points': need at least 3 usable identified points to fit, got ", d.inductances.size(),
@@ -1079,9 +1087,9 @@ absl::StatusOr<Calibration> Fit(const FitData& input, const FitOptions& o) {
     nrel += 2;
   }
   cal.summary.rms_relative = nrel ? std::sqrt(rel / nrel) : 0.0;
-  // Points the robust loss down-weighted to a third or less (residual
-  // beyond 3 robust scales), so a station sees which points did not count
-  // fully.
+  // Points beyond 3 robust scales of their stated sigma (a Huber weight of
+  // a third or less at that scale), so a station sees which points did not
+  // count fully.
   for (size_t k = 0; k < d.inductances.size(); ++k) {
     const auto& obs = d.inductances[k];
     const auto L = cal.Inductance(obs.id_a, obs.iq_a);

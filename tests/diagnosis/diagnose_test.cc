@@ -765,6 +765,30 @@ TEST(Examples, DiagnosedDeadTimeTablesAgainstTheTrueMotor) {
   EXPECT_GT(d[1], 10 * d[0]) << "the plain fit carries the dead time's distortion";
 }
 
+// A plain fit of each independent example set that conceals nothing in
+// its magnetics' path (clean, cross saturation) against its true motor:
+// the MTPA table within 0.2 % (docs/fitting.md quotes these figures:
+// 0.098 % and 0.120 %).
+TEST(Examples, PlainFitTablesAgainstTheTrueMotor) {
+  const fs::path root = fs::path(FLUXCAL_SHARED_DIR) / "examples";
+  if (!fs::exists(root / "clean") || !fs::exists(root / "cross_saturation")) GTEST_SKIP() << "no shared examples";
+  for (const char* name : {"clean", "cross_saturation"}) {
+    std::ifstream tf(root / (std::string(name) + ".truth.json"));
+    const auto truth = nlohmann::json::parse(tf);
+    auto set = io::ReadRecordingSet((root / name).string());
+    ASSERT_TRUE(set.ok()) << set.status();
+    auto true_motor = TrueMotorCalibration(truth, set->manifest);
+    ASSERT_TRUE(true_motor.ok()) << true_motor.status();
+    auto ids = ident::IdentifySet(*set, {});
+    ASSERT_TRUE(ids.ok()) << ids.status();
+    auto plain = fit::Fit(fit::FitDataFromRecording(*set, *ids));
+    ASSERT_TRUE(plain.ok()) << plain.status();
+    const double e = MtpaTableDifference(*true_motor, *plain);
+    std::printf("examples, MTPA table vs the true motor: %s plain fit %.4f %%\n", name, 100 * e);
+    EXPECT_LT(e, 0.002) << name;
+  }
+}
+
 // A dead time the manifest declares uncompensated belongs to the nominal
 // model: the same recording is then no longer a mismatch.
 TEST(Nominal, DeclaredUncompensatedDeadTimeIsNotAFinding) {
