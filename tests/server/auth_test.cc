@@ -222,7 +222,7 @@ TEST(Roles, MatrixOfEveryRoleAndRpc) {
 
 TEST(Roles, WithoutAValidCredentialOnlyHealthAnswers) {
   Fixture f("anon");
-  for (const std::string token : {std::string(), std::string("not-a-token"), std::string(64, '0')}) {
+  for (const std::string& token : {std::string(), std::string("not-a-token"), std::string(64, '0')}) {
     auto ch = Channel(f.addr(), grpc::InsecureChannelCredentials(), token);
     auto stub = v1::CalibrationService::NewStub(ch);
     for (Rpc rpc : kAllRpcs) {
@@ -289,7 +289,7 @@ TEST(Reflection, AnyRoleOverV1AndV1alphaNotAnonymous) {
       EXPECT_EQ(file, "fluxcal/v1/calibration.proto") << what;
     }
   }
-  for (const std::string token : {std::string(), std::string("not-a-token")}) {
+  for (const std::string& token : {std::string(), std::string("not-a-token")}) {
     auto ch = Channel(f.addr(), grpc::InsecureChannelCredentials(), token);
     std::vector<std::string> services;
     std::string file;
