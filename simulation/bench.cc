@@ -34,8 +34,15 @@ PointRun RunPoint(const TwinConfig& cfg, const PlantModel& m, double id_ref, dou
 
   // Nominal controller (what the bench believes): PI with decoupling.
   const double psi_pm_nom = cfg.motor.sat.psi_pm_wb;
-  const double kp_d = 2 * kPi * cfg.control.bandwidth_hz * cfg.control.ld_nominal_h;
-  const double kp_q = 2 * kPi * cfg.control.bandwidth_hz * cfg.control.lq_nominal_h;
+  double l_ctrl_d = cfg.control.ld_nominal_h, l_ctrl_q = cfg.control.lq_nominal_h;
+  if (cfg.control.gain_scheduled) {
+    double ldd, lqq, ldq;
+    m.Jacobian(id_ref, iq_ref, theta0, &ldd, &lqq, &ldq);
+    if (std::isfinite(ldd)) l_ctrl_d = std::max(ldd, 0.1 * cfg.control.ld_nominal_h);
+    if (std::isfinite(lqq)) l_ctrl_q = std::max(lqq, 0.1 * cfg.control.lq_nominal_h);
+  }
+  const double kp_d = 2 * kPi * cfg.control.bandwidth_hz * l_ctrl_d;
+  const double kp_q = 2 * kPi * cfg.control.bandwidth_hz * l_ctrl_q;
   const double wc_i = 2 * kPi * cfg.control.integral_corner_hz;
 
   // Start in the steady state of the true machine at the reference.
@@ -130,8 +137,16 @@ PointRun RunPoint(const TwinConfig& cfg, const PlantModel& m, double id_ref, dou
     const double ed = id_ref - ifd, eq = iq_ref - ifq;
     int_d += kp_d * wc_i * ts * ed;
     int_q += kp_q * wc_i * ts * eq;
-    const double ud = kp_d * ed + int_d - we * cfg.control.lq_nominal_h * ifq;
-    const double uq = kp_q * eq + int_q + we * (cfg.control.ld_nominal_h * ifd + psi_pm_nom);
+    double ff_d = -we * cfg.control.lq_nominal_h * ifq, ff_q = we * (cfg.control.ld_nominal_h * ifd + psi_pm_nom);
+    if (cfg.control.gain_scheduled) {
+      // The same map decouples: the back-EMF of its flux at the measured current.
+      double pd, pq;
+      m.Flux(ifd, ifq, th_meas, &pd, &pq);
+      ff_d = -we * pq;
+      ff_q = we * pd;
+    }
+    const double ud = kp_d * ed + int_d + ff_d;
+    const double uq = kp_q * eq + int_q + ff_q;
     const double inj_c = std::cos(wi * t + align.injection_phase_rad),
                  inj_s = std::sin(wi * t + align.injection_phase_rad);
     // Inverse Park at the angle the rotor will have in the middle of the

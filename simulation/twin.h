@@ -63,6 +63,17 @@ struct ControlParams {
   double bandwidth_hz = 80.0;
   double integral_corner_hz = 10.0;
   double ld_nominal_h = 0.18e-3, lq_nominal_h = 0.35e-3;
+  // A controller tuned from the machine's own magnetics, as drives with a
+  // flux map are: proportional gains on the differential inductance at each
+  // point's reference current, kp = 2 pi bandwidth L(i_ref) (floored at
+  // 10 % of the nominal: a negative or vanishing L near zero current), and
+  // decoupling by the map's back-EMF w_e psi(i) at the measured current.
+  // Off: kp and decoupling on ld/lq_nominal_h at every point. A fixed gain
+  // tuned at the unsaturated L puts the crossover of a machine whose Lqq
+  // falls 10x through a bridge knee 10x higher, past what the
+  // one-injection-period feedback average allows; the loop oscillates into
+  // the voltage limit (docs/simulation.md).
+  bool gain_scheduled = false;
 };
 
 struct InjectionParams {

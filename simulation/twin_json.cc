@@ -111,7 +111,16 @@ absl::Status LoadMotorJson(const std::string& path, TwinConfig* cfg) {
                         {"encoder_counts_per_mech_rev", &counts}, {"udc_noise_v", &cfg->sensors.udc_noise_v}});
       cfg->sensors.encoder_counts_per_mech_rev = static_cast<int>(counts);
     } else if (k == "control") {
-      st = ReadNumbers(path, "control.", v,
+      nlohmann::json numbers = v;
+      if (v.is_object() && v.contains("gain_scheduled")) {
+        if (!v["gain_scheduled"].is_boolean()) {
+          return absl::InvalidArgumentError(
+              absl::StrCat(path, ": field 'control.gain_scheduled': expected true or false"));
+        }
+        cfg->control.gain_scheduled = v["gain_scheduled"].get<bool>();
+        numbers.erase("gain_scheduled");
+      }
+      st = ReadNumbers(path, "control.", numbers,
                        {{"bandwidth_hz", &cfg->control.bandwidth_hz},
                         {"integral_corner_hz", &cfg->control.integral_corner_hz},
                         {"ld_nominal_h", &cfg->control.ld_nominal_h},

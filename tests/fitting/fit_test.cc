@@ -143,6 +143,49 @@ TEST(Fit, NonPositiveGlitchMovesNothing) {
   }
 }
 
+// A steady-state row that averaged a limit cycle instead of a steady state:
+// its voltages say one flux, its torque another. Excluded by the rows'
+// torque consistency (fit.cc, ScreenRowsByTorque), listed with both
+// torques, and the surface stays where the other data put it. A torque
+// transducer reading every row 3 % low is the rows' consensus, not an
+// outlier: nothing is excluded for it.
+TEST(Fit, UnsteadyRowMovesNothing) {
+  const Case& c = TwinCase();
+  auto base = Fit(c.data, {});
+  ASSERT_TRUE(base.ok()) << base.status();
+  size_t with_torque = 0;
+  for (const auto& s : c.data.steady_state) with_torque += s.torque_nm.has_value();
+  ASSERT_GE(with_torque, 3u) << "the twin plan's rows report torque";
+  FitData d = c.data;
+  auto& row = d.steady_state[1];
+  ASSERT_TRUE(row.torque_nm.has_value());
+  // The voltages of a state near zero flux, the torque of the reference.
+  row.ud_ref_v *= 0.15;
+  row.uq_ref_v *= 0.15;
+  auto bad = Fit(d, {});
+  ASSERT_TRUE(bad.ok()) << bad.status();
+  bool listed = false;
+  for (const auto& e : bad->summary.excluded) {
+    listed |= e.find("steady-state row 2 ") != std::string::npos && e.find("not a steady state") != std::string::npos;
+  }
+  EXPECT_TRUE(listed) << "the unsteady row is not listed as excluded";
+  for (const auto& t : c.sim.truth_points) {
+    const auto a = base->Predict(t.id_true_a, t.iq_true_a), b = bad->Predict(t.id_true_a, t.iq_true_a);
+    // A row fewer moves the surface by what that row carried: 0.1 % of scale.
+    EXPECT_NEAR(b.psi_d_wb, a.psi_d_wb, 1e-3 * PsiScale(t)) << t.id;
+    EXPECT_NEAR(b.psi_q_wb, a.psi_q_wb, 1e-3 * PsiScale(t)) << t.id;
+  }
+  FitData g = c.data;
+  for (auto& s : g.steady_state) {
+    if (s.torque_nm) *s.torque_nm *= 0.97;
+  }
+  auto gain = Fit(g, {});
+  ASSERT_TRUE(gain.ok()) << gain.status();
+  for (const auto& e : gain->summary.excluded) {
+    EXPECT_EQ(e.find("not a steady state"), std::string::npos) << e;
+  }
+}
+
 // Predicted steady-state voltage u = Rs i + w J psi(i) vs the recorded one.
 double WorstVoltageError(const Calibration& cal, const Case& c) {
   double worst = 0;

@@ -256,9 +256,45 @@ TEST(RealMaps, FluxErrorOnEveryDraw) {
 // The same trait motors as the twin's plant: the full HF-injection
 // recording of the default plan (id -100..0 A, iq 0..100 A) simulated,
 // identified and fitted; flux over the plan's region against the motor.
+// End to end through the twin: HF injection simulated on each trait motor,
+// identified, fitted. The bench's controller is tuned from the motor's own
+// magnetics (control.gain_scheduled, docs/simulation.md), as a bench for
+// such a machine is; three noise draws.
 TEST(RealMaps, TwinTraitMotorsEndToEnd) {
   // Flux scaled to the default twin motor's level (~0.05 Wb at 100 A), so
   // the plan's steady-state speeds stay inside the inverter's voltage.
+  for (int seed : {31, 32, 33}) {
+    for (const auto& t : sim::RealLikeMotors(100.0, 0.15)) {
+      sim::TwinConfig cfg;
+      cfg.seed = seed;
+      cfg.serial = "TRAIT-" + t.name;
+      cfg.motor.sat.psi_pm_wb = t.psi_pm_wb;
+      cfg.magnetics = std::make_shared<sim::TraitMotor>(t);
+      cfg.control.gain_scheduled = true;
+      auto r = sim::Simulate(cfg, sim::DefaultPlan());
+      ASSERT_TRUE(r.ok()) << t.name << ": " << r.status();
+      auto ids = ident::IdentifySet(r->set, {});
+      ASSERT_TRUE(ids.ok()) << t.name << ": " << ids.status();
+      auto cal = Fit(FitDataFromRecording(r->set, *ids), {});
+      ASSERT_TRUE(cal.ok()) << t.name << ": " << cal.status();
+      const auto m = TraitMachine(t, 100.0);
+      double mx = 0;
+      const double rms = FluxRms(*cal, m, &mx);
+      std::printf("twin seed %d %-14s %-12s flux RMS %.3f %% max %.3f %%\n", seed, t.name.c_str(),
+                  cal->family().Name().c_str(), 100 * rms, 100 * mx);
+      EXPECT_LT(rms, 0.005) << t.name << " seed " << seed;
+    }
+  }
+}
+
+// The same motors on a bench whose fixed gains were tuned for the default
+// motor (0.18 / 0.35 mH): on the bridge-knee and negative-slope maps the
+// q loop oscillates into the voltage limit at 6-7 of 40 locked points and
+// at speed. What fluxcal gets is then a set with failed points and rows
+// that averaged a limit cycle. Nothing aborts, the failed points are
+// reported, and the fit stays bounded: 2.7 % and 0.6 % (the other two
+// motors, unaffected, 0.15 %).
+TEST(RealMaps, TwinTraitMotorsOnAMistunedBench) {
   for (const auto& t : sim::RealLikeMotors(100.0, 0.15)) {
     sim::TwinConfig cfg;
     cfg.seed = 31;
@@ -269,21 +305,15 @@ TEST(RealMaps, TwinTraitMotorsEndToEnd) {
     ASSERT_TRUE(r.ok()) << t.name << ": " << r.status();
     auto ids = ident::IdentifySet(r->set, {});
     ASSERT_TRUE(ids.ok()) << t.name << ": " << ids.status();
+    int failed = 0;
+    for (const auto& p : *ids) failed += !p.failure.empty();
     auto cal = Fit(FitDataFromRecording(r->set, *ids), {});
     ASSERT_TRUE(cal.ok()) << t.name << ": " << cal.status();
     const auto m = TraitMachine(t, 100.0);
     double mx = 0;
     const double rms = FluxRms(*cal, m, &mx);
-    std::printf("twin %-13s %-12s flux RMS %.3f %% max %.3f %%\n", t.name.c_str(), cal->family().Name().c_str(),
-                100 * rms, 100 * mx);
-    // Open (docs/fitting.md), asserted where they stand: on the bridge knee
-    // (at 15 A, between the plan's iq rows 0 and 20 A, Lqq falling 10x) and
-    // on the map falling near zero current the HF current sweeps through
-    // the feature, and the identification reports the average over its
-    // ellipse (Lqq 6-9 % high at iq = 40 A; Ldd 0.070 mH at (0, 0) where the
-    // motor has -0.015 mH): 2.7 % and 0.64 % RMS. The same motors sampled as
-    // a bench reports them fit to 0.3 % and 0.2 %. The bridge knee was 17 %
-    // while the robust loss was Cauchy's (fitting/fit.cc says why).
+    std::printf("mistuned bench %-14s %d points failed, %-12s flux RMS %.3f %% max %.3f %%\n", t.name.c_str(),
+                failed, cal->family().Name().c_str(), 100 * rms, 100 * mx);
     const double bound = t.name == "ipm-bridge" ? 0.035 : t.name == "negative-slope" ? 0.008 : 0.005;
     EXPECT_LT(rms, bound) << t.name;
   }
