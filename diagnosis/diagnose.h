@@ -112,6 +112,9 @@ struct DiagnoseOptions {
   double heldout_sigma = 5.0;
   double heldout_fraction = 0.02;   // ... or this share of the class's located significance
   bool waveform_replay = true;              // replay evidence and spectra
+  // Estimate the inverter's soft-sign current i_th when a dead time or a
+  // switch threshold is found (diagnose.cc); off: i_th = 1 A throughout.
+  bool profile_soft_sign = true;
   // Catalogue rows left out of the candidates (probes of physics outside
   // the vocabulary: conceal an effect, exclude its row).
   std::set<std::string> excluded_effects;

@@ -42,7 +42,7 @@ double ReplayResidual(const io::RecordingSet& set, const Model& m, const Params&
   opt.substeps = 5;   // RK4 at 20 us: w_i h = 0.06, far inside its accuracy
   opt.rs_ohm = m.Rs(ptr.data());
   opt.effects.dead_time_s = m.DeadTime(ptr.data());
-  opt.effects.dead_time_i_th_a = kIth;
+  opt.effects.dead_time_i_th_a = m.ith_a;
   opt.effects.offset_rad = m.Offset(ptr.data());
   opt.effects.delay_s = m.Delay(ptr.data());
   opt.effects.r_hf_ohm = m.RHf(ptr.data());

@@ -31,7 +31,7 @@ using sim::kPi;
 using sim::kSqrt3;
 constexpr double kL0 = 1e-4;    // inductance scale of the surface polynomials [H]
 constexpr double kI0 = 100.0;   // current scale [A]
-constexpr double kIth = 1.0;    // soft-sign current of the dead-time model [A]
+constexpr double kIth = 1.0;    // soft-sign current of the dead-time model [A], before its profile
 // Two DC-link voltages differing by more than 10 %: the dead time's error
 // (proportional to Udc) and a switch threshold (not) part by at least 10 %
 // of their size, several times the held voltages' noise at EOL currents.
@@ -83,6 +83,7 @@ struct HfObs {
   double id_a, iq_a, w_e, theta, speed_rpm;
   Complex i0, i1, v_eff, dead_hf, dead_neg;
   Complex dead_hf_v, dead_neg_v;   // the same per volt of switch threshold (no Udc / Ts factor)
+  size_t wave = 0, samples = 0;   // waveform index, samples the demodulator used
   Complex mean_e2;   // window mean of e^{-j 2 theta}: what a stationary-frame
                      // component at -w_i contributes to the I1 projection   // dead-time HF voltage error per second of Td, on the
                                             // positive- and negative-sequence bases
@@ -104,6 +105,7 @@ struct DcObs {
   std::string point;
   double id_a, iq_a, theta;
   double progress = 0;
+  size_t wave = 0, samples = 0;     // waveform index, samples averaged
   Complex u, dead;                  // dead: command change per second of dead time
   Complex dead_v;                   // the same per volt of switch threshold
   double udc_v = 0;                 // mean recorded DC-link voltage of the point
@@ -124,6 +126,11 @@ struct Model {
   // Dead time the manifest declares uncompensated (0 when compensated): part
   // of the nominal drive; the dead_time effect is what acts beyond it.
   double dead_nom_s = 0.0;
+  // Soft-sign current of the dead-time and threshold errors, tanh(i / i_th)
+  // per phase (SetSoftSignCurrent).
+  double ith_a = kIth;
+  bool ith_estimated = false;   // profiled by Diagnose (else kIth assumed)
+  double ith_std_a = 0.0;
   std::vector<HfObs> hf;
   std::vector<DcObs> dc;
   std::vector<SsObs> ss;
@@ -449,9 +456,14 @@ bool PracticallySignificant(const std::vector<Z>& before, const std::vector<Z>& 
                             double rms_after, const DiagnoseOptions& opt);
 
 // ---- observations.cc --------------------------------------------------------
-Complex DeadTimeUnit(double ia, double ib, double ic, double udc, double ts);
-double MeanSoftSign(double i0, double i1);
+Complex DeadTimeUnit(double ia, double ib, double ic, double udc, double ts, double ith_a = kIth);
+double MeanSoftSign(double i0, double i1, double ith_a = kIth);
 absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident::HfPointResult>* ids);
+// (Re)computes every observation's dead-time and switch-threshold
+// signatures (dead*, dead_*_v) with the soft sign tanh(i / ith_a) and sets
+// m->ith_a: the soft-sign current is a profile parameter of the model
+// (Diagnose), not linear in it like Td.
+void SetSoftSignCurrent(const io::RecordingSet& set, double ith_a, Model* m);
 void InitBase(const Model& m, const std::vector<ident::HfPointResult>& all_ids, Params* p);
 
 // ---- verdict.cc -------------------------------------------------------------

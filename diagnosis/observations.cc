@@ -14,9 +14,9 @@ namespace fluxcal::diag::detail {
 // The dead-time voltage error per second of dead time, in the command's
 // units: (Udc/Ts) Clarke(tanh(i_x / i_th)) -- the command must add this to
 // hold the current when Td is not compensated.
-Complex DeadTimeUnit(double ia, double ib, double ic, double udc, double ts) {
+Complex DeadTimeUnit(double ia, double ib, double ic, double udc, double ts, double ith_a) {
   const double k = udc / ts;
-  const double ea = k * std::tanh(ia / kIth), eb = k * std::tanh(ib / kIth), ec = k * std::tanh(ic / kIth);
+  const double ea = k * std::tanh(ia / ith_a), eb = k * std::tanh(ib / ith_a), ec = k * std::tanh(ic / ith_a);
   return Complex((2 * ea - eb - ec) / 3.0, (eb - ec) / kSqrt3);
 }
 
@@ -24,19 +24,84 @@ Complex DeadTimeUnit(double ia, double ib, double ic, double udc, double ts) {
 // linearly from i0 to i1: (i_th / (i1 - i0)) [ln cosh(i1/i_th) - ln cosh(i0/i_th)].
 // The HF ripple moves a phase current by ~2 A within one period, as much as
 // the soft-sign width, so the start-of-period sample is not enough.
-double MeanSoftSign(double i0, double i1) {
+double MeanSoftSign(double i0, double i1, double ith_a) {
   const double d = i1 - i0;
   auto lc = [](double x) { const double a = std::abs(x); return a + std::log1p(std::exp(-2 * a)) - std::log(2.0); };
-  if (std::abs(d) < 1e-6 * kIth) return std::tanh(0.5 * (i0 + i1) / kIth);
-  return kIth / d * (lc(i1 / kIth) - lc(i0 / kIth));
+  if (std::abs(d) < 1e-6 * ith_a) return std::tanh(0.5 * (i0 + i1) / ith_a);
+  return ith_a / d * (lc(i1 / ith_a) - lc(i0 / ith_a));
 }
 
-Complex DeadTimeInterval(const io::Waveform& w, size_t s, double udc, double ts) {
+namespace {
+
+Complex DeadTimeInterval(const io::Waveform& w, size_t s, double udc, double ts, double ith_a) {
   const size_t e = s + 1 < w.size() ? s + 1 : s;
   const double k = udc / ts;
-  const double ea = k * MeanSoftSign(w.ia_a[s], w.ia_a[e]), eb = k * MeanSoftSign(w.ib_a[s], w.ib_a[e]),
-               ec = k * MeanSoftSign(w.ic_a[s], w.ic_a[e]);
+  const double ea = k * MeanSoftSign(w.ia_a[s], w.ia_a[e], ith_a), eb = k * MeanSoftSign(w.ib_a[s], w.ib_a[e], ith_a),
+               ec = k * MeanSoftSign(w.ic_a[s], w.ic_a[e], ith_a);
   return Complex((2 * ea - eb - ec) / 3.0, (eb - ec) / kSqrt3);
+}
+
+}  // namespace
+
+void SetSoftSignCurrent(const io::RecordingSet& set, double ith_a, Model* m) {
+  m->ith_a = ith_a;
+  const auto& mf = set.manifest;
+  const double fs = mf.drive.f_sample_hz;
+  const double f_pwm = 1.0 / m->ts;
+  const double udc_nom = mf.drive.udc_v.value_or(0.0);
+  // Locked and rotating points: the recorded phase currents' soft signs,
+  // projected as the demodulators and the held-voltage means project them.
+  auto signatures = [&](size_t wave, size_t n, Complex* hf, Complex* neg, Complex* dc, Complex* hf_v,
+                        Complex* neg_v, Complex* dc_v) {
+    const auto& w = set.waveforms[wave];
+    *hf = *neg = *dc = *hf_v = *neg_v = *dc_v = 0;
+    for (size_t s = 0; s < n; ++s) {
+      const double udc = std::isnan(w.udc_v[s]) ? udc_nom : w.udc_v[s];
+      // Per volt of switch threshold; the dead time's is Udc / Ts times it.
+      const Complex e_v = DeadTimeInterval(w, s, m->ts, m->ts, ith_a);
+      const Complex e = e_v * (udc / m->ts);
+      const double t = static_cast<double>(s) / fs;
+      *hf += e * std::polar(1.0, -m->w_i * t);
+      *hf_v += e_v * std::polar(1.0, -m->w_i * t);
+      *neg_v += e_v * std::polar(1.0, m->w_i * t - 2 * w.theta_e_rad[s]);
+      *dc_v += e_v * std::polar(1.0, -w.theta_e_rad[s]);
+      *neg += e * std::polar(1.0, m->w_i * t - 2 * w.theta_e_rad[s]);
+      *dc += e * std::polar(1.0, -w.theta_e_rad[s]);
+    }
+    const double inv = 1.0 / static_cast<double>(std::max<size_t>(n, 1));
+    *hf *= inv; *neg *= inv; *dc *= inv; *hf_v *= inv; *neg_v *= inv; *dc_v *= inv;
+  };
+  for (auto& o : m->hf) {
+    Complex hf, neg, dc, hf_v, neg_v, dc_v;
+    signatures(o.wave, o.samples, &hf, &neg, &dc, &hf_v, &neg_v, &dc_v);
+    // The error of interval [t_k, t_k+1) acts in that interval, one period
+    // earlier than a command issued at t_k: EffectiveVoltage's 1.5-period
+    // delay less one period.
+    const double w2 = 2 * o.w_e - m->w_i;
+    o.dead_hf = ident::EffectiveVoltage(hf, m->w_i, f_pwm) * std::polar(1.0, m->w_i * m->ts);
+    o.dead_neg = ident::EffectiveVoltage(neg, w2, f_pwm) * std::polar(1.0, w2 * m->ts);
+    o.dead_hf_v = ident::EffectiveVoltage(hf_v, m->w_i, f_pwm) * std::polar(1.0, m->w_i * m->ts);
+    o.dead_neg_v = ident::EffectiveVoltage(neg_v, w2, f_pwm) * std::polar(1.0, w2 * m->ts);
+  }
+  for (auto& d : m->dc) {
+    Complex hf, neg, dc, hf_v, neg_v, dc_v;
+    signatures(d.wave, d.samples, &hf, &neg, &dc, &hf_v, &neg_v, &dc_v);
+    d.dead = dc;
+    d.dead_v = dc_v;
+  }
+  for (auto& o : m->ss) {
+    // Fundamental of the dead-time error over one electrical revolution.
+    Complex dead_v = 0;
+    const double mag = std::hypot(o.id_a, o.iq_a), gam = std::atan2(o.iq_a, o.id_a);
+    for (int s = 0; s < 360; ++s) {
+      const double th = 2 * kPi * s / 360;
+      const double ia = mag * std::cos(th + gam), ib = mag * std::cos(th + gam - 2 * kPi / 3),
+                   ic = mag * std::cos(th + gam + 2 * kPi / 3);
+      dead_v += DeadTimeUnit(ia, ib, ic, m->ts, m->ts, ith_a) * std::polar(1.0, -th);
+    }
+    o.dead = dead_v * (udc_nom / m->ts) / 360.0;
+    o.dead_v = dead_v / 360.0;
+  }
 }
 
 absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident::HfPointResult>* ids) {
@@ -86,24 +151,18 @@ absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident:
     o.sigma0 = std::sqrt(lsq->var_i0_a2 + floor * floor);
     o.sigma1 = std::sqrt(lsq->var_i1_a2 + floor * floor);
     o.scale = std::abs(o.i0);
-    // Dead-time signatures from the recorded phase currents.
+    // Window means for the spatial-harmonic and position terms, and the
+    // held command per injection period (the DC observation's noise).
     const size_t n = lsq->samples_used;
-    Complex hf = 0, neg = 0, dc = 0, hf_v = 0, neg_v = 0, dc_v = 0;
+    o.wave = k;
+    o.samples = n;
     double udc_sum = 0;
     std::vector<Complex> per_period;
     const size_t period = static_cast<size_t>(std::llround(fs / mf.injection->frequency_hz));
     Complex acc_u = 0;
     for (size_t s = 0; s < n; ++s) {
-      const double udc = std::isnan(w.udc_v[s]) ? udc_nom : w.udc_v[s];
-      // Per volt of switch threshold; the dead time's is Udc / Ts times it.
-      const Complex e_v = DeadTimeInterval(w, s, m.ts, m.ts);
-      const Complex e = e_v * (udc / m.ts);
-      udc_sum += udc;
+      udc_sum += std::isnan(w.udc_v[s]) ? udc_nom : w.udc_v[s];
       const double t = static_cast<double>(s) / fs;
-      hf += e * std::polar(1.0, -m.w_i * t);
-      hf_v += e_v * std::polar(1.0, -m.w_i * t);
-      neg_v += e_v * std::polar(1.0, m.w_i * t - 2 * w.theta_e_rad[s]);
-      dc_v += e_v * std::polar(1.0, -w.theta_e_rad[s]);
       o.mean_e2 += std::polar(1.0, -2 * w.theta_e_rad[s]);
       if (!o.locked) {
         for (int h = 0; h < 4; ++h) {
@@ -112,24 +171,14 @@ absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident:
           o.harm_q[h] += std::polar(1.0, -(nh - 1) * w.theta_e_rad[s] - m.w_i * t);
         }
       }
-      neg += e * std::polar(1.0, m.w_i * t - 2 * w.theta_e_rad[s]);
-      dc += e * std::polar(1.0, -w.theta_e_rad[s]);
       acc_u += Complex(w.ualpha_ref_v[s], w.ubeta_ref_v[s]) * std::polar(1.0, -w.theta_e_rad[s]);
       if ((s + 1) % period == 0) { per_period.push_back(acc_u / static_cast<double>(period)); acc_u = 0; }
     }
-    // The error of interval [t_k, t_k+1) acts in that interval, one period
-    // earlier than a command issued at t_k: EffectiveVoltage's 1.5-period
-    // delay less one period.
-    const double w2 = 2 * o.w_e - m.w_i;
     o.mean_e2 /= static_cast<double>(n);
     for (int h = 0; h < 4; ++h) {
       o.harm_p[h] /= static_cast<double>(n);
       o.harm_q[h] /= static_cast<double>(n);
     }
-    o.dead_hf = ident::EffectiveVoltage(hf / static_cast<double>(n), m.w_i, f_pwm) * std::polar(1.0, m.w_i * m.ts);
-    o.dead_neg = ident::EffectiveVoltage(neg / static_cast<double>(n), w2, f_pwm) * std::polar(1.0, w2 * m.ts);
-    o.dead_hf_v = ident::EffectiveVoltage(hf_v / static_cast<double>(n), m.w_i, f_pwm) * std::polar(1.0, m.w_i * m.ts);
-    o.dead_neg_v = ident::EffectiveVoltage(neg_v / static_cast<double>(n), w2, f_pwm) * std::polar(1.0, w2 * m.ts);
     m.hf.push_back(o);
     if (o.locked && per_period.size() >= 4) {
       DcObs d;
@@ -144,8 +193,8 @@ absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident:
       for (const auto& u : per_period) var += std::norm(u - mean);
       var /= static_cast<double>(per_period.size() - 1) * per_period.size();
       d.u = mean;
-      d.dead = dc / static_cast<double>(n);
-      d.dead_v = dc_v / static_cast<double>(n);
+      d.wave = k;
+      d.samples = n;
       d.udc_v = udc_sum / static_cast<double>(n);
       // Batch-means noise plus 5 mV: the command's resolution after the
       // bench's own (nominal) dead-time compensation and quantisation.
@@ -158,18 +207,6 @@ absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident:
     o.id_a = row.id_a; o.iq_a = row.iq_a; o.speed_rpm = row.speed_rpm;
     o.w_e = row.speed_rpm * m.pole_pairs * 2 * kPi / 60;
     o.u = sim::ZohGain(o.w_e, m.ts) * Complex(row.ud_ref_v, row.uq_ref_v);
-    // Fundamental of the dead-time error over one electrical revolution.
-    Complex dead = 0, dead_v = 0;
-    const double mag = std::hypot(o.id_a, o.iq_a), gam = std::atan2(o.iq_a, o.id_a);
-    for (int s = 0; s < 360; ++s) {
-      const double th = 2 * kPi * s / 360;
-      const double ia = mag * std::cos(th + gam), ib = mag * std::cos(th + gam - 2 * kPi / 3),
-                   ic = mag * std::cos(th + gam + 2 * kPi / 3);
-      dead_v += DeadTimeUnit(ia, ib, ic, m.ts, m.ts) * std::polar(1.0, -th);
-    }
-    dead = dead_v * (udc_nom / m.ts);
-    o.dead = dead / 360.0;
-    o.dead_v = dead_v / 360.0;
     o.scale = std::abs(o.u);
     // 20 mV and 0.3 % of the voltage: averaged commands, nominal Rs and
     // the bench's delay compensation.
@@ -201,6 +238,7 @@ absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident:
     for (auto& d : m.dc) d.second_udc = d.udc_v > 0 && std::abs(d.udc_v - main_udc) > 0.05 * main_udc;
   }
   if (nt) m.torque_scale_nm = std::max(0.1, std::sqrt(t2 / nt));
+  SetSoftSignCurrent(set, kIth, &m);
   return m;
 }
 

@@ -32,6 +32,12 @@ Finding Describe(const Candidate& c, const Model& m, const FitOut& f) {
       // Effective dead time acting (declared uncompensated part included).
       out.parameters["dead_time_s"] = m.DeadTime(p);
       out.parameter_std["dead_time_s"] = kScaleDead * sd(kDead, 0);
+      if (m.ith_estimated) {
+        // An extension of docs/diagnosis-report.md's vocabulary: the soft
+        // sign's current, profiled (diagnose.cc).
+        out.parameters["i_th_a"] = m.ith_a;
+        if (m.ith_std_a > 0) out.parameter_std["i_th_a"] = m.ith_std_a;
+      }
       if (m.udc_ratio <= kTwoUdcRatio && m.udc_nom_v > 0) {
         // Per phase the error is (Td/Ts) Udc + V_th times the same soft
         // sign: at one Udc the finding's extra Td is a threshold of
@@ -77,6 +83,10 @@ Finding Describe(const Candidate& c, const Model& m, const FitOut& f) {
     case kVth:
       out.parameters["threshold_v"] = m.Vth(p);
       out.parameter_std["threshold_v"] = kScaleVth * sd(kVth, 0);
+      if (m.ith_estimated) {   // the same soft sign as the dead time's
+        out.parameters["i_th_a"] = m.ith_a;
+        if (m.ith_std_a > 0) out.parameter_std["i_th_a"] = m.ith_std_a;
+      }
       break;
     case kRhf:
       out.parameters["r_hf_ohm"] = m.RHf(p);

@@ -144,6 +144,9 @@ TEST(Observations, MeanSoftSign) {
   EXPECT_NEAR(MeanSoftSign(-2, 2), 0.0, 1e-12);
   // (1/2) int_0^2 tanh = ln cosh(2) / 2.
   EXPECT_NEAR(MeanSoftSign(0, 2), std::log(std::cosh(2.0)) / 2, 1e-12);
+  // The soft-sign current scales the current: tanh(i / i_th).
+  EXPECT_NEAR(MeanSoftSign(0.6, 0.6, 2.0), std::tanh(0.3), 1e-9);
+  EXPECT_NEAR(MeanSoftSign(0, 4, 2.0), std::log(std::cosh(2.0)) / 2, 1e-12);
 }
 
 // A region's significance is (chi^2 - k) / sqrt(2k) over its points.
