@@ -287,6 +287,41 @@ TEST(RealMaps, TwinTraitMotorsEndToEnd) {
   }
 }
 
+// The machines of other kinds (sim::OtherKindMotors: synchronous
+// reluctance, surface magnet, strong cross saturation, deep saturation in
+// both axes) end to end through the twin on a bench tuned for each
+// (control.gain_scheduled): the 1 % for machines the fit was not
+// developed on. On the last two the bench's decoupled PI pair still runs
+// into the voltage limit at the high-current points (9-13 of 40; not
+// analysed further): the identification reports them failed, the fit uses
+// the rest, and the flux over the whole box is 0.39 % and 0.88-0.92 %.
+TEST(RealMaps, OtherKindsEndToEnd) {
+  for (int seed : {41, 42}) {
+    for (const auto& t : sim::OtherKindMotors(100.0, 0.15)) {
+      sim::TwinConfig cfg;
+      cfg.seed = seed;
+      cfg.serial = "OTHER-" + t.name;
+      cfg.motor.sat.psi_pm_wb = t.psi_pm_wb;
+      cfg.magnetics = std::make_shared<sim::TraitMotor>(t);
+      cfg.control.gain_scheduled = true;
+      auto r = sim::Simulate(cfg, sim::DefaultPlan());
+      ASSERT_TRUE(r.ok()) << t.name << ": " << r.status();
+      auto ids = ident::IdentifySet(r->set, {});
+      ASSERT_TRUE(ids.ok()) << t.name << ": " << ids.status();
+      int failed = 0;
+      for (const auto& p : *ids) failed += !p.failure.empty();
+      auto cal = Fit(FitDataFromRecording(r->set, *ids), {});
+      ASSERT_TRUE(cal.ok()) << t.name << ": " << cal.status();
+      const auto m = TraitMachine(t, 100.0);
+      double mx = 0;
+      const double rms = FluxRms(*cal, m, &mx);
+      std::printf("other kind, twin seed %d %-13s %d failed, %-12s flux RMS %.3f %% max %.3f %%\n", seed,
+                  t.name.c_str(), failed, cal->family().Name().c_str(), 100 * rms, 100 * mx);
+      EXPECT_LT(rms, 0.01) << t.name << " seed " << seed;
+    }
+  }
+}
+
 // The same motors on a bench whose fixed gains were tuned for the default
 // motor (0.18 / 0.35 mH): on the bridge-knee and negative-slope maps the
 // q loop oscillates into the voltage limit at 6-7 of 40 locked points and
