@@ -87,6 +87,11 @@ FitData FitDataFromHfRows(const io::Manifest* manifest, const std::vector<io::Hf
 // neither (nor pole pairs, which the caller gives).
 FitData FitDataFromFluxMap(const io::FluxMap& map, int pole_pairs, double psi_std_wb = 0.0);
 
+// The calibration of `data`: observations that are not data screened out
+// (non-finite or non-positive values, rows outside the measured region or
+// not a steady state), every candidate family fitted, the physical one with
+// the lowest cross-validation score kept; what was left out or
+// down-weighted is listed in summary.excluded with its reason (fit.cc).
 absl::StatusOr<Calibration> Fit(const FitData& data, const FitOptions& options = {});
 
 // Flux linkage measured by a steady-state row: psi_d = (uq' - Rs iq)/w,
