@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 #include <functional>
+#include <map>
+#include <tuple>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -71,9 +73,13 @@ void SetSoftSignCurrent(const io::RecordingSet& set, double ith_a, Model* m) {
     const double inv = 1.0 / static_cast<double>(std::max<size_t>(n, 1));
     *hf *= inv; *neg *= inv; *dc *= inv; *hf_v *= inv; *neg_v *= inv; *dc_v *= inv;
   };
+  // A locked point's DC observation averages the same samples of the same
+  // waveform as its HF observation (BuildModel): one pass serves both.
+  std::map<size_t, std::pair<Complex, Complex>> dc_of_wave;   // dead, dead_v
   for (auto& o : m->hf) {
     Complex hf, neg, dc, hf_v, neg_v, dc_v;
     signatures(o.wave, o.samples, &hf, &neg, &dc, &hf_v, &neg_v, &dc_v);
+    dc_of_wave[o.wave] = {dc, dc_v};
     // The error of interval [t_k, t_k+1) acts in that interval, one period
     // earlier than a command issued at t_k: EffectiveVoltage's 1.5-period
     // delay less one period.
@@ -84,6 +90,11 @@ void SetSoftSignCurrent(const io::RecordingSet& set, double ith_a, Model* m) {
     o.dead_neg_v = ident::EffectiveVoltage(neg_v, w2, f_pwm) * std::polar(1.0, w2 * m->ts);
   }
   for (auto& d : m->dc) {
+    const auto it = dc_of_wave.find(d.wave);
+    if (it != dc_of_wave.end()) {
+      std::tie(d.dead, d.dead_v) = it->second;
+      continue;
+    }
     Complex hf, neg, dc, hf_v, neg_v, dc_v;
     signatures(d.wave, d.samples, &hf, &neg, &dc, &hf_v, &neg_v, &dc_v);
     d.dead = dc;

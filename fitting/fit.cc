@@ -247,6 +247,28 @@ double RowFluxSigmaWb(double speed_rpm, int pole_pairs, double psi_d_wb, double 
 }
 double RowTorqueSigmaNm(double torque_nm) { return 0.02 + 0.005 * std::abs(torque_nm); }
 
+// The rows' agreement: median of a per-row score and its robust spread
+// (1.4826 MAD, Hampel), at least 1 (the scores are in sigmas). A row is
+// judged by how far its score lies from the others', not from zero.
+struct Consensus {
+  double mid = 0, spread = 1;
+};
+double Median(std::vector<double> v) {
+  const size_t h = v.size() / 2;
+  std::nth_element(v.begin(), v.begin() + h, v.end());
+  const double upper = v[h];
+  if (v.size() % 2) return upper;
+  return 0.5 * (upper + *std::max_element(v.begin(), v.begin() + h));
+}
+Consensus RowConsensus(const std::vector<double>& z) {
+  Consensus c;
+  c.mid = Median(z);
+  std::vector<double> dev;
+  for (double v : z) dev.push_back(std::abs(v - c.mid));
+  c.spread = std::max(1.0, 1.4826 * Median(dev));
+  return c;
+}
+
 Built Build(const Family& fam, const FitData& d, const FitOptions& o) {
   Built b;
   b.params = InitialParams(fam, d);
@@ -888,18 +910,9 @@ void ScreenRowsByTorque(FitData& d, std::vector<size_t>* input_index, std::vecto
     if (std::isfinite(z)) rows.push_back({k, z, *s.torque_nm, t_u});
   }
   if (rows.size() < 3) return;
-  auto median = [](std::vector<double> v) {
-    const size_t h = v.size() / 2;
-    std::nth_element(v.begin(), v.begin() + h, v.end());
-    const double upper = v[h];
-    if (v.size() % 2) return upper;
-    return 0.5 * (upper + *std::max_element(v.begin(), v.begin() + h));
-  };
-  std::vector<double> z, dev;
+  std::vector<double> z;
   for (const auto& r : rows) z.push_back(r.z);
-  const double mid = median(z);
-  for (double v : z) dev.push_back(std::abs(v - mid));
-  const double spread = std::max(1.0, 1.4826 * median(dev));
+  const auto [mid, spread] = RowConsensus(z);
   std::vector<bool> drop(d.steady_state.size(), false);
   for (const auto& r : rows) {
     if (std::abs(r.z - mid) <= kRowTorqueOutlier * spread) continue;
@@ -1021,7 +1034,8 @@ namespace {
 // the lowest cross-validation score. `excluded` lists what the screen left
 // out; the down-weighted points are added to it.
 absl::StatusOr<Calibration> FitScreened(const FitData& d, std::vector<std::string> excluded,
-                                        const std::vector<Calibration::Box>& not_pd, const FitOptions& o) {
+                                        const std::vector<Calibration::Box>& not_pd, const FitOptions& o,
+                                        int* down_weighted = nullptr) {
   if (d.inductances.size() < 3 && d.steady_state.size() < 3 && d.fluxes.size() < 3) {
     return absl::InvalidArgumentError(absl::StrCat(
         "field 'points': need at least 3 usable identified points to fit, got ", d.inductances.size(),
@@ -1179,6 +1193,7 @@ absl::StatusOr<Calibration> FitScreened(const FitData& d, std::vector<std::strin
     const double zd = (L.ldd_h - obs.ldd_h) / sd, zq = (L.lqq_h - obs.lqq_h) / sq;
     const double z = std::max(std::abs(zd), std::abs(zq));
     if (z > 3.0 * o.robust_scale) {
+      if (down_weighted != nullptr) ++*down_weighted;
       excluded.push_back(absl::StrFormat(
           "hf point (id %.6g A, iq %.6g A): %s off the surface by %.3g %% (%.0f sigma); down-weighted", obs.id_a,
           obs.iq_a, std::abs(zd) >= std::abs(zq) ? "ldd_h" : "lqq_h",
@@ -1205,13 +1220,6 @@ double RowMisfit(const Calibration& cal, const FitData& d, const SteadyStateObse
   return std::max(std::abs(f.psi_d_wb - pd), std::abs(f.psi_q_wb - pq)) / sigma;
 }
 
-double Median(std::vector<double> v) {
-  const size_t h = v.size() / 2;
-  std::nth_element(v.begin(), v.begin() + h, v.end());
-  const double upper = v[h];
-  if (v.size() % 2) return upper;
-  return 0.5 * (upper + *std::max_element(v.begin(), v.begin() + h));
-}
 }  // namespace
 
 // Screen, fit, and then the rows the torque screen could not judge. A row
@@ -1238,56 +1246,62 @@ absl::StatusOr<Calibration> Fit(const FitData& input, const FitOptions& o) {
   std::sort(not_pd.begin(), not_pd.end(), [&](const auto& a, const auto& b) { return key(a) < key(b); });
   not_pd.erase(std::unique(not_pd.begin(), not_pd.end(), [&](const auto& a, const auto& b) { return key(a) == key(b); }),
                not_pd.end());
-  auto cal = FitScreened(d, excluded, not_pd, o);
+  int down_weighted = 0;
+  auto cal = FitScreened(d, excluded, not_pd, o, &down_weighted);
   constexpr int kMaxRowsOut = 2;
   constexpr size_t kMaxRowsTried = 12;
   constexpr double kRowMisfitTrigger = 10.0;
   for (int round = 0; round < kMaxRowsOut && cal.ok() && d.steady_state.size() >= 3; ++round) {
-    bool down_weighted = false;
-    for (const auto& e : cal->summary.excluded) down_weighted |= e.find("down-weighted") != std::string::npos;
     std::vector<std::pair<double, size_t>> misfit;
     for (size_t k = 0; k < d.steady_state.size(); ++k) misfit.push_back({RowMisfit(*cal, d, d.steady_state[k]), k});
     std::sort(misfit.rbegin(), misfit.rend());
-    if (!down_weighted && misfit.front().first <= kRowMisfitTrigger) break;
+    if (down_weighted == 0 && misfit.front().first <= kRowMisfitTrigger) break;
     if (misfit.size() > kMaxRowsTried) misfit.resize(kMaxRowsTried);
-    std::vector<double> z;
-    std::vector<size_t> at;
+    struct LeftOut {
+      size_t row;
+      double z;
+      Calibration fit;   // of all data but the row
+      int down_weighted;
+    };
+    std::vector<LeftOut> loo;
     for (const auto& [in_fit, k] : misfit) {
       if (o.cancelled && o.cancelled()) {
         return absl::CancelledError("fit: stopped between leave-one-row-out fits (cancelled by the caller)");
       }
       FitData without = d;
       without.steady_state.erase(without.steady_state.begin() + static_cast<long>(k));
-      auto loo = FitScreened(without, {}, not_pd, o);
-      if (!loo.ok()) continue;
-      z.push_back(RowMisfit(*loo, d, d.steady_state[k]));
-      at.push_back(k);
+      int dw = 0;
+      auto f = FitScreened(without, excluded, not_pd, o, &dw);
+      if (!f.ok()) continue;
+      const double z = RowMisfit(*f, d, d.steady_state[k]);
+      loo.push_back({k, z, std::move(*f), dw});
     }
-    if (z.size() < 3) break;
-    const double mid = Median(z);
-    std::vector<double> dev;
-    for (double v : z) dev.push_back(std::abs(v - mid));
-    const double spread = std::max(1.0, 1.4826 * Median(dev));
-    const size_t worst = static_cast<size_t>(std::max_element(z.begin(), z.end()) - z.begin());
-    if (z[worst] - mid <= kRowTorqueOutlier * spread) break;
-    const size_t k = at[worst];
+    if (loo.size() < 3) break;
+    std::vector<double> z;
+    for (const auto& l : loo) z.push_back(l.z);
+    const auto [mid, spread] = RowConsensus(z);
+    auto worst = std::max_element(loo.begin(), loo.end(), [](const LeftOut& a, const LeftOut& b) { return a.z < b.z; });
+    if (worst->z - mid <= kRowTorqueOutlier * spread) break;
+    const size_t k = worst->row;
     const auto& s = d.steady_state[k];
     double pd, pq;
     SteadyStateFlux(s, d.pole_pairs, d.rs_ohm, d.f_pwm_hz, &pd, &pq);
-    FitData without = d;
-    without.steady_state.erase(without.steady_state.begin() + static_cast<long>(k));
-    auto loo = FitScreened(without, {}, not_pd, o);
-    if (!loo.ok()) break;
-    const auto f = loo->Flux(s.id_a, s.iq_a);
-    excluded.push_back(absl::StrFormat(
+    const auto f = worst->fit.Flux(s.id_a, s.iq_a);
+    const std::string why = absl::StrFormat(
         "steady-state row %d (id %.6g A, iq %.6g A, %.0f rpm): its voltages give psi %.4g, %.4g Wb, the fit of "
         "all other data %.4g, %.4g Wb (%.0f sigma, %.0f robust spreads beyond the other rows' agreement): not a "
         "steady state; excluded",
-        row_index[k] + 1, s.id_a, s.iq_a, s.speed_rpm, pd, pq, f.psi_d_wb, f.psi_q_wb, z[worst],
-        (z[worst] - mid) / spread));
-    d = std::move(without);
+        row_index[k] + 1, s.id_a, s.iq_a, s.speed_rpm, pd, pq, f.psi_d_wb, f.psi_q_wb, worst->z,
+        (worst->z - mid) / spread);
+    // The fit without the row is the new fit; its list gains the reason
+    // ahead of its own down-weighted points.
+    auto& list = worst->fit.summary.excluded;
+    list.insert(list.begin() + static_cast<long>(excluded.size()), why);
+    excluded.push_back(why);
+    d.steady_state.erase(d.steady_state.begin() + static_cast<long>(k));
     row_index.erase(row_index.begin() + static_cast<long>(k));
-    cal = FitScreened(d, excluded, not_pd, o);
+    down_weighted = worst->down_weighted;
+    cal = std::move(worst->fit);
   }
   return cal;
 }

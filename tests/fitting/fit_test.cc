@@ -169,12 +169,15 @@ TEST(Fit, UnsteadyRowMovesNothing) {
     listed |= e.find("steady-state row 2 ") != std::string::npos && e.find("not a steady state") != std::string::npos;
   }
   EXPECT_TRUE(listed) << "the unsteady row is not listed as excluded";
-  for (const auto& t : c.sim.truth_points) {
-    const auto a = base->Predict(t.id_true_a, t.iq_true_a), b = bad->Predict(t.id_true_a, t.iq_true_a);
-    // A row fewer moves the surface by what that row carried: 0.1 % of scale.
-    EXPECT_NEAR(b.psi_d_wb, a.psi_d_wb, 1e-3 * PsiScale(t)) << t.id;
-    EXPECT_NEAR(b.psi_q_wb, a.psi_q_wb, 1e-3 * PsiScale(t)) << t.id;
-  }
+  // A row fewer moves the surface by what that row carried: 0.1 % of scale.
+  auto expect_same_flux = [&](const Calibration& with, const Calibration& without_row, const char* what) {
+    for (const auto& t : c.sim.truth_points) {
+      const auto a = with.Predict(t.id_true_a, t.iq_true_a), b = without_row.Predict(t.id_true_a, t.iq_true_a);
+      EXPECT_NEAR(b.psi_d_wb, a.psi_d_wb, 1e-3 * PsiScale(t)) << what << " " << t.id;
+      EXPECT_NEAR(b.psi_q_wb, a.psi_q_wb, 1e-3 * PsiScale(t)) << what << " " << t.id;
+    }
+  };
+  expect_same_flux(*base, *bad, "with torque");
   // The same rows without torque (many EOL benches have no transducer):
   // the row is judged by the fit of all other data (leave one out).
   FitData no_torque = d;
@@ -189,20 +192,17 @@ TEST(Fit, UnsteadyRowMovesNothing) {
     listed |= e.find("steady-state row 2 ") != std::string::npos && e.find("not a steady state") != std::string::npos;
   }
   EXPECT_TRUE(listed) << "the unsteady row without torque is not listed as excluded";
-  for (const auto& t : c.sim.truth_points) {
-    const auto a = base_nt->Predict(t.id_true_a, t.iq_true_a), b = bad_nt->Predict(t.id_true_a, t.iq_true_a);
-    EXPECT_NEAR(b.psi_d_wb, a.psi_d_wb, 1e-3 * PsiScale(t)) << t.id;
-    EXPECT_NEAR(b.psi_q_wb, a.psi_q_wb, 1e-3 * PsiScale(t)) << t.id;
-  }
+  expect_same_flux(*base_nt, *bad_nt, "without torque");
   FitData g = c.data;
   for (auto& s : g.steady_state) {
     if (s.torque_nm) *s.torque_nm *= 0.97;
   }
+  auto expect_no_row_out = [](const Calibration& cal) {
+    for (const auto& e : cal.summary.excluded) EXPECT_EQ(e.find("not a steady state"), std::string::npos) << e;
+  };
   auto gain = Fit(g, {});
   ASSERT_TRUE(gain.ok()) << gain.status();
-  for (const auto& e : gain->summary.excluded) {
-    EXPECT_EQ(e.find("not a steady state"), std::string::npos) << e;
-  }
+  expect_no_row_out(*gain);
   // Nor a loss torque (friction, windage, iron) the transducer sees on
   // the shaft, growing with speed: 2 N m per 1000 rpm, up to 4 N m on rows
   // of 1-15 N m (far beyond the rows' stated 0.5 %).
@@ -212,9 +212,7 @@ TEST(Fit, UnsteadyRowMovesNothing) {
   }
   auto lossy = Fit(loss, {});
   ASSERT_TRUE(lossy.ok()) << lossy.status();
-  for (const auto& e : lossy->summary.excluded) {
-    EXPECT_EQ(e.find("not a steady state"), std::string::npos) << e;
-  }
+  expect_no_row_out(*lossy);
 }
 
 // Predicted steady-state voltage u = Rs i + w J psi(i) vs the recorded one.

@@ -253,36 +253,53 @@ TEST(RealMaps, FluxErrorOnEveryDraw) {
   }
 }
 
-// The same trait motors as the twin's plant: the full HF-injection
-// recording of the default plan (id -100..0 A, iq 0..100 A) simulated,
-// identified and fitted; flux over the plan's region against the motor.
-// End to end through the twin: HF injection simulated on each trait motor,
-// identified, fitted. The bench's controller is tuned from the motor's own
-// magnetics (control.gain_scheduled, docs/simulation.md), as a bench for
-// such a machine is; three noise draws.
+// A trait motor end to end through the twin: the default plan's HF
+// injection recording (id -100..0 A, iq 0..100 A) simulated, identified
+// and fitted; flux over the plan's region against the motor. Flux scaled
+// to the default twin motor's level (~0.05 Wb at 100 A, `flux_scale` 0.15
+// of the traits), so the plan's steady-state speeds stay inside the
+// inverter's voltage.
+struct EndToEnd {
+  bool ok = false;
+  int failed = 0;   // points the identification reports failed
+  std::string family;
+  double rms = 1, max = 1;
+};
+EndToEnd TwinEndToEnd(const sim::MotorTraits& t, int seed, bool gain_scheduled) {
+  EndToEnd e;
+  sim::TwinConfig cfg;
+  cfg.seed = seed;
+  cfg.serial = "TRAIT-" + t.name;
+  cfg.motor.sat.psi_pm_wb = t.psi_pm_wb;
+  cfg.magnetics = std::make_shared<sim::TraitMotor>(t);
+  cfg.control.gain_scheduled = gain_scheduled;
+  auto r = sim::Simulate(cfg, sim::DefaultPlan());
+  EXPECT_TRUE(r.ok()) << t.name << ": " << r.status();
+  if (!r.ok()) return e;
+  auto ids = ident::IdentifySet(r->set, {});
+  EXPECT_TRUE(ids.ok()) << t.name << ": " << ids.status();
+  if (!ids.ok()) return e;
+  for (const auto& p : *ids) e.failed += !p.failure.empty();
+  auto cal = Fit(FitDataFromRecording(r->set, *ids), {});
+  EXPECT_TRUE(cal.ok()) << t.name << ": " << cal.status();
+  if (!cal.ok()) return e;
+  e.ok = true;
+  e.family = cal->family().Name();
+  e.rms = FluxRms(*cal, TraitMachine(t, 100.0), &e.max);
+  return e;
+}
+
+// The trait motors on a bench whose controller is tuned from the motor's
+// own magnetics (control.gain_scheduled, docs/simulation.md), as a bench
+// for such a machine is; three noise draws.
 TEST(RealMaps, TwinTraitMotorsEndToEnd) {
-  // Flux scaled to the default twin motor's level (~0.05 Wb at 100 A), so
-  // the plan's steady-state speeds stay inside the inverter's voltage.
   for (int seed : {31, 32, 33}) {
     for (const auto& t : sim::RealLikeMotors(100.0, 0.15)) {
-      sim::TwinConfig cfg;
-      cfg.seed = seed;
-      cfg.serial = "TRAIT-" + t.name;
-      cfg.motor.sat.psi_pm_wb = t.psi_pm_wb;
-      cfg.magnetics = std::make_shared<sim::TraitMotor>(t);
-      cfg.control.gain_scheduled = true;
-      auto r = sim::Simulate(cfg, sim::DefaultPlan());
-      ASSERT_TRUE(r.ok()) << t.name << ": " << r.status();
-      auto ids = ident::IdentifySet(r->set, {});
-      ASSERT_TRUE(ids.ok()) << t.name << ": " << ids.status();
-      auto cal = Fit(FitDataFromRecording(r->set, *ids), {});
-      ASSERT_TRUE(cal.ok()) << t.name << ": " << cal.status();
-      const auto m = TraitMachine(t, 100.0);
-      double mx = 0;
-      const double rms = FluxRms(*cal, m, &mx);
-      std::printf("twin seed %d %-14s %-12s flux RMS %.3f %% max %.3f %%\n", seed, t.name.c_str(),
-                  cal->family().Name().c_str(), 100 * rms, 100 * mx);
-      EXPECT_LT(rms, 0.005) << t.name << " seed " << seed;
+      const EndToEnd e = TwinEndToEnd(t, seed, true);
+      ASSERT_TRUE(e.ok) << t.name;
+      std::printf("twin seed %d %-14s %-12s flux RMS %.3f %% max %.3f %%\n", seed, t.name.c_str(), e.family.c_str(),
+                  100 * e.rms, 100 * e.max);
+      EXPECT_LT(e.rms, 0.005) << t.name << " seed " << seed;
     }
   }
 }
@@ -298,26 +315,11 @@ TEST(RealMaps, TwinTraitMotorsEndToEnd) {
 TEST(RealMaps, OtherKindsEndToEnd) {
   for (int seed : {41, 42}) {
     for (const auto& t : sim::OtherKindMotors(100.0, 0.15)) {
-      sim::TwinConfig cfg;
-      cfg.seed = seed;
-      cfg.serial = "OTHER-" + t.name;
-      cfg.motor.sat.psi_pm_wb = t.psi_pm_wb;
-      cfg.magnetics = std::make_shared<sim::TraitMotor>(t);
-      cfg.control.gain_scheduled = true;
-      auto r = sim::Simulate(cfg, sim::DefaultPlan());
-      ASSERT_TRUE(r.ok()) << t.name << ": " << r.status();
-      auto ids = ident::IdentifySet(r->set, {});
-      ASSERT_TRUE(ids.ok()) << t.name << ": " << ids.status();
-      int failed = 0;
-      for (const auto& p : *ids) failed += !p.failure.empty();
-      auto cal = Fit(FitDataFromRecording(r->set, *ids), {});
-      ASSERT_TRUE(cal.ok()) << t.name << ": " << cal.status();
-      const auto m = TraitMachine(t, 100.0);
-      double mx = 0;
-      const double rms = FluxRms(*cal, m, &mx);
+      const EndToEnd e = TwinEndToEnd(t, seed, true);
+      ASSERT_TRUE(e.ok) << t.name;
       std::printf("other kind, twin seed %d %-13s %d failed, %-12s flux RMS %.3f %% max %.3f %%\n", seed,
-                  t.name.c_str(), failed, cal->family().Name().c_str(), 100 * rms, 100 * mx);
-      EXPECT_LT(rms, 0.01) << t.name << " seed " << seed;
+                  t.name.c_str(), e.failed, e.family.c_str(), 100 * e.rms, 100 * e.max);
+      EXPECT_LT(e.rms, 0.01) << t.name << " seed " << seed;
     }
   }
 }
@@ -331,29 +333,31 @@ TEST(RealMaps, OtherKindsEndToEnd) {
 // motors, unaffected, 0.15 %).
 TEST(RealMaps, TwinTraitMotorsOnAMistunedBench) {
   for (const auto& t : sim::RealLikeMotors(100.0, 0.15)) {
-    sim::TwinConfig cfg;
-    cfg.seed = 31;
-    cfg.serial = "TRAIT-" + t.name;
-    cfg.motor.sat.psi_pm_wb = t.psi_pm_wb;
-    cfg.magnetics = std::make_shared<sim::TraitMotor>(t);
-    auto r = sim::Simulate(cfg, sim::DefaultPlan());
-    ASSERT_TRUE(r.ok()) << t.name << ": " << r.status();
-    auto ids = ident::IdentifySet(r->set, {});
-    ASSERT_TRUE(ids.ok()) << t.name << ": " << ids.status();
-    int failed = 0;
-    for (const auto& p : *ids) failed += !p.failure.empty();
-    auto cal = Fit(FitDataFromRecording(r->set, *ids), {});
-    ASSERT_TRUE(cal.ok()) << t.name << ": " << cal.status();
-    const auto m = TraitMachine(t, 100.0);
-    double mx = 0;
-    const double rms = FluxRms(*cal, m, &mx);
+    const EndToEnd e = TwinEndToEnd(t, 31, false);
+    ASSERT_TRUE(e.ok) << t.name;
     std::printf("mistuned bench %-14s %d points failed, %-12s flux RMS %.3f %% max %.3f %%\n", t.name.c_str(),
-                failed, cal->family().Name().c_str(), 100 * rms, 100 * mx);
+                e.failed, e.family.c_str(), 100 * e.rms, 100 * e.max);
     const double bound = t.name == "ipm-bridge" ? 0.035 : t.name == "negative-slope" ? 0.008 : 0.005;
-    EXPECT_LT(rms, bound) << t.name;
+    EXPECT_LT(e.rms, bound) << t.name;
   }
 }
 
+// Open (docs/fitting.md, "Open: a bench that cannot hold some rows"): the
+// synchronous reluctance machine on the fixed-gain bench fits 19.8 % off
+// (seed 41): 3 of its 8 steady-state rows read psi_q 5-7 % low but agree
+// with their own torque, and with it they outweigh the iq = 0 HF row.
+// Disabled until the fit can tell such rows; it asserts what is wanted.
+// Run it with --gtest_also_run_disabled_tests.
+TEST(RealMaps, DISABLED_SelfConsistentBadRowsOnAMistunedBench) {
+  for (const auto& t : sim::OtherKindMotors(100.0, 0.15)) {
+    if (t.name != "syrm") continue;
+    const EndToEnd e = TwinEndToEnd(t, 41, false);
+    ASSERT_TRUE(e.ok);
+    std::printf("mistuned bench %-13s %d failed, %-12s flux RMS %.3f %% max %.3f %%\n", t.name.c_str(), e.failed,
+                e.family.c_str(), 100 * e.rms, 100 * e.max);
+    EXPECT_LT(e.rms, 0.01);
+  }
+}
 
 // A coarse, exact flux map (each machine's 6 x 6 bench grid of flux nodes,
 // no noise, nothing else), as `fluxcal fit --map` gets from a coarse FEA
