@@ -170,22 +170,7 @@ bool Plausible(const Candidate& c, const FitOut& f, const Model& m) {
 }
 
 // Distance of an effect's parameter from neutral, in standard deviations.
-// Cross saturation has no single parameter: it counts when the cross
-// coupling it fits is material, max |Ldq| over the measured points above the
-// identification's own Ldq accuracy (1 % of the mean inductance,
-// tests/identification); expressed on the same 3-sigma scale.
 double Significance(const Candidate& c, const FitOut& f, const Model& m) {
-  if (c.block == kCross) {
-    const auto ptr = f.p.Ptrs();
-    double max_ldq = 0, mean_l = 0;
-    for (const auto& o : m.hf) {
-      double ldd, lqq, ldq;
-      m.Inductance(ptr.data(), o.id_a, o.iq_a, &ldd, &lqq, &ldq);
-      max_ldq = std::max(max_ldq, std::abs(ldq));
-      mean_l += 0.5 * (ldd + lqq) / m.hf.size();
-    }
-    return 3.0 * max_ldq / (0.01 * mean_l);
-  }
   // Materiality (the catalogue's floors): below them no calibration
   // decision changes, however precisely the data pin the value down. The
   // size of a finding is its largest parameter's distance from neutral.

@@ -127,6 +127,8 @@ nlohmann::json Calibration::ToJson() const {
               {"rms_relative", summary.rms_relative}, {"termination", summary.termination},
               {"usable", summary.usable}, {"candidates", summary.candidates},
               {"excluded", summary.excluded}};
+  j["fit"]["effective_parameters"] = summary.effective_parameters;
+  if (summary.smoothing_lambda > 0) j["fit"]["smoothing_lambda"] = summary.smoothing_lambda;
   return j;
 }
 
@@ -203,6 +205,8 @@ absl::StatusOr<Calibration> Calibration::FromJson(const nlohmann::json& j) {
       c.summary.usable = f.value("usable", false);
       c.summary.candidates = f.value("candidates", std::vector<std::string>{});
       c.summary.excluded = f.value("excluded", std::vector<std::string>{});
+      c.summary.effective_parameters = f.value("effective_parameters", 0.0);
+      c.summary.smoothing_lambda = f.value("smoothing_lambda", 0.0);
     }
     return c;
   } catch (const nlohmann::json::exception& e) {

@@ -30,6 +30,11 @@ struct FitSummary {
   double chi2 = 0, bic = 0, rms_relative = 0;
   std::string termination;
   bool usable = false;
+  // The selected family's effective parameters (tr H of a penalised fit)
+  // and, for a smoothing spline, the penalty weight lambda it was fitted
+  // with (fit.cc, SolveLinear): what a refit of the same surfaces with other
+  // unknowns beside them (diagnosis) keeps them as smooth with.
+  double effective_parameters = 0, smoothing_lambda = 0;
   std::vector<std::string> candidates;   // model-selection table "name cv bic ..."
   // Observations the fit left out or the robust loss down-weighted, each
   // with its point and reason ("hf point 31 (id 0 A, iq 0 A): ldd_h ...").
