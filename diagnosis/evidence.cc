@@ -30,12 +30,8 @@ class SurfaceModel : public sim::MagneticModel {
   std::vector<const double*> ptr_;
 };
 
-// Replays every waveform point with the model and effects of `p`; returns
-// the overall RMS of simulated minus recorded phase currents and fills the
-// residual spectrum at `freqs` (mean over points of |DFT| of the complex
-// alpha-beta residual, in A).
-double ReplayResidual(const io::RecordingSet& set, const Model& m, const Params& p, int harm_order,
-                      const std::vector<double>& freqs, std::vector<double>* spectrum) {
+absl::StatusOr<std::vector<sim::ReplayPoint>> ReplayModel(const io::RecordingSet& set, const Model& m,
+                                                          const Params& p, int harm_order) {
   SurfaceModel model(m, p);
   const auto ptr = p.Ptrs();
   sim::ReplayOptions opt;
@@ -63,14 +59,17 @@ double ReplayResidual(const io::RecordingSet& set, const Model& m, const Params&
   opt.effects.offset_c_a = PhaseOffset(so, 2);
   double* g[3] = {&opt.effects.gain_a, &opt.effects.gain_b, &opt.effects.gain_c};
   for (int x = 0; x < 3; ++x) *g[x] = PhaseGain(m.M1(ptr.data()), m.M2(ptr.data()), x);
-  auto rep = sim::ReplayOpenLoop(set, model, opt);
+  return sim::ReplayOpenLoop(set, model, opt);
+}
+
+double ReplaySpectrum(const io::RecordingSet& set, const std::vector<sim::ReplayPoint>& replay,
+                      const std::vector<double>& freqs, std::vector<double>* spectrum) {
   spectrum->assign(freqs.size(), 0.0);
-  if (!rep.ok()) return std::nan("");
   double se = 0;
   size_t n_all = 0;
   const double fs = set.manifest.drive.f_sample_hz;
-  for (size_t k = 0; k < rep->size(); ++k) {
-    const auto& r = (*rep)[k];
+  for (size_t k = 0; k < replay.size(); ++k) {
+    const auto& r = replay[k];
     const auto& w = set.waveforms[k];
     se += r.residual_rms_a * r.residual_rms_a * 3.0 * (w.size() - 1);
     n_all += 3 * (w.size() - 1);
@@ -87,7 +86,7 @@ double ReplayResidual(const io::RecordingSet& set, const Model& m, const Params&
         acc += e[s] * rot;
         rot *= step;
       }
-      (*spectrum)[f] += std::abs(acc) / static_cast<double>(w.size() - 1) / static_cast<double>(rep->size());
+      (*spectrum)[f] += std::abs(acc) / static_cast<double>(w.size() - 1) / static_cast<double>(replay.size());
     }
   }
   return n_all ? std::sqrt(se / n_all) : 0.0;

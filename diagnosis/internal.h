@@ -25,6 +25,7 @@
 #include "io/recording_set.h"
 #include "simulation/effects.h"
 #include "simulation/frames.h"
+#include "simulation/twin.h"
 
 namespace fluxcal::diag::detail {
 
@@ -498,8 +499,44 @@ bool Plausible(const Candidate& c, const FitOut& f, const Model& m);
 double Significance(const Candidate& c, const FitOut& f, const Model& m);
 
 // ---- evidence.cc ------------------------------------------------------------
-double ReplayResidual(const io::RecordingSet& set, const Model& m, const Params& p, int harm_order,
+// Every waveform point replayed open loop through the twin with the
+// model's surfaces and the effects of `p` (sim::ReplayOpenLoop).
+absl::StatusOr<std::vector<sim::ReplayPoint>> ReplayModel(const io::RecordingSet& set, const Model& m,
+                                                          const Params& p, int harm_order);
+// The overall RMS of simulated minus recorded phase currents of a replay,
+// and the residual's spectrum at `freqs` (mean over points of |DFT| of the
+// complex alpha-beta residual, in A).
+double ReplaySpectrum(const io::RecordingSet& set, const std::vector<sim::ReplayPoint>& replay,
                       const std::vector<double>& freqs, std::vector<double>* spectrum);
+
+// ---- waveform.cc ------------------------------------------------------------
+struct WaveformLine {
+  std::string channel;   // phase_current | zero_sequence_current
+  double freq_hz = 0, amp_a = 0, z2 = 0;
+  double sim_amp_a = 0;  // the model's own line in the simulated current at that bin
+  std::string kind;      // what it is a multiple of ("" : nothing)
+  int order = 0, m = 0;
+};
+struct WaveformPoint {
+  std::string point;
+  size_t index = 0;                 // recording order
+  double id_a = 0, iq_a = 0, speed_rpm = 0, f_e_hz = 0, df_hz = 0;
+  double noise_a = 0;               // per-sample noise of the residual (recording's own)
+  double sigma2_bin = 0, sigma2_bin_zero = 0, coherent_gain = 1;
+  std::vector<double> freq_hz, nuisance_hz;
+  std::vector<Complex> spectrum, spectrum_zero;   // Hann-windowed residual spectra
+  std::vector<Complex> spectrum_sim;              // ... and the simulated current's
+  std::vector<WaveformLine> lines;
+};
+// The residual of every replayed point freed of the nuisance lines, its
+// spectra, noise and lines (waveform.cc's comment).
+std::vector<WaveformPoint> AnalyseWaveforms(const io::RecordingSet& set, const std::vector<sim::ReplayPoint>& replay,
+                                            int pole_pairs);
+// The lines grouped by what they are multiples of, each group with its
+// significance over the points, its size and dependence: the located
+// waveform mismatches at or above `sigma_threshold`.
+std::vector<Mismatch> WaveformMismatches(const std::vector<WaveformPoint>& pts, int pole_pairs, double f_inj_hz,
+                                         double sigma_threshold);
 
 // ---- corrected.cc -----------------------------------------------------------
 fit::FitData CorrectedFitData(const io::RecordingSet& set, const Model& m, const Params& final_p,

@@ -378,27 +378,45 @@ FitOut Solve(const Model& m, const Params& start, const std::vector<Block>& free
   if (std::getenv("FLUXCAL_DEBUG2")) std::fprintf(stderr, "solve: n %d x %d surf_off %d |J| %.3g |Jsurf| %.3g |S| %.3g lam %.3g f %.3g\n", rows, L.n, L.surf_offset, lin.J.norm(), L.surf_offset >= 0 ? lin.J.middleCols(L.surf_offset, m.BlockSize(kBase) - 1).norm() : 0.0, S.norm(), lambda, f);
   converge(40);
   if (penalised) {
-    // lambda by the BIC of the problem linearised at the solution.
-    const Eigen::MatrixXd JtJ = lin.J.transpose() * lin.J;
-    const Eigen::VectorXd Jtr = lin.J.transpose() * lin.r;
-    double best = std::numeric_limits<double>::infinity(), best_lam = lambda;
-    for (int e = -12; e <= 16; ++e) {
-      const double lam = m.surf_lambda * std::pow(10.0, 0.25 * e);
-      Eigen::MatrixXd A = JtJ + lam * S;
-      A.diagonal().array() += 1e-12 * A.diagonal().maxCoeff();
-      Eigen::LDLT<Eigen::MatrixXd> ldlt(A);
-      const Eigen::VectorXd dx = -ldlt.solve(Jtr + lam * (S * x));
-      if (!dx.allFinite()) continue;
-      const double rss = (lin.r + lin.J * dx).squaredNorm();
-      const double k_eff = ldlt.solve(JtJ).trace();
-      const double bic = Bic(rss, k_eff, rows);
-      if (bic < best) { best = bic; best_lam = lam; }
-    }
-    if (best_lam != lambda) {
-      lambda = best_lam;
-      f = objective(lin, x);
-      mu = 1e-6;
-      converge(40);
+    // lambda by the BIC of the problem linearised at the solution, for
+    // every lambda at the price of one eigendecomposition (the
+    // Demmler-Reinsch basis of fit.cc's SolveLinear): with B = S + eps I =
+    // L L^T and L^-1 A L^-T = U D U^T (A = J^T J), M = L^-T U,
+    //   (A + lambda B)^-1 = M (D + lambda)^-1 M^T,
+    //   k_eff = sum d_i / (d_i + lambda),
+    //   dx(lambda) = -M (D + lambda)^-1 M^T (J^T r + lambda B x).
+    // The grid spans 14 decades around the ratio of the two matrices'
+    // scales (the plain fit's lambda was chosen for other residuals, on
+    // data an effect may have roughened).
+    const Eigen::MatrixXd A = lin.J.transpose() * lin.J;
+    Eigen::MatrixXd B = S;
+    const double eps = 1e-9 * S.trace() / L.n;
+    B.diagonal().array() += eps;
+    Eigen::LLT<Eigen::MatrixXd> chol(B);
+    if (chol.info() == Eigen::Success) {
+      const Eigen::MatrixXd Linv = chol.matrixL().solve(Eigen::MatrixXd::Identity(L.n, L.n));
+      const Eigen::MatrixXd C = Linv * A * Linv.transpose();
+      Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (C + C.transpose()));
+      const Eigen::VectorXd d = es.eigenvalues().cwiseMax(0.0);
+      const Eigen::MatrixXd M = Linv.transpose() * es.eigenvectors();
+      const Eigen::MatrixXd JM = lin.J * M;
+      const Eigen::VectorXd z1 = M.transpose() * (lin.J.transpose() * lin.r), z2 = M.transpose() * (B * x);
+      const double unit = A.trace() / std::max(S.trace(), 1e-300);
+      double best = std::numeric_limits<double>::infinity(), best_lam = lambda;
+      for (int e = 0; e <= 56; ++e) {
+        const double lam = unit * std::pow(10.0, -10.0 + 0.25 * e);
+        const Eigen::VectorXd w = ((z1 + lam * z2).array() / (d.array() + lam)).matrix();
+        const double rss = (lin.r - JM * w).squaredNorm();
+        const double k_eff = (d.array() / (d.array() + lam)).sum();
+        const double bic = Bic(rss, k_eff, rows);
+        if (bic < best) { best = bic; best_lam = lam; }
+      }
+      if (best_lam != lambda) {
+        lambda = best_lam;
+        f = objective(lin, x);
+        mu = 1e-6;
+        converge(40);
+      }
     }
   }
   out.ok = lin.ok && x.allFinite();

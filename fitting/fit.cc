@@ -1085,7 +1085,7 @@ absl::StatusOr<Calibration> FitScreened(const FitData& d, std::vector<std::strin
   bool ldq_seen = false;
   for (const auto& obs : d.inductances) ldq_seen |= obs.ldq_h.has_value();
   const bool psi_q_level_seen = ldq_seen || !d.steady_state.empty() || !d.fluxes.empty();
-  if (o.model == "smooth-asym" || ((o.model == "smooth" || o.model == "auto") && psi_q_level_seen)) {
+  if (o.model == "smooth-asym" || ((o.model == "smooth" || o.model == "auto") && psi_q_level_seen && !std::getenv("FLUXCAL_SYM"))) {
     candidates.push_back(smooth(false));
   }
   if (candidates.empty()) {

@@ -32,6 +32,7 @@
 #define FLUXCAL_FITTING_FLUX_FAMILY_H_
 
 #include <cmath>
+#include <limits>
 #include <string>
 #include <utility>
 #include <vector>
@@ -179,6 +180,14 @@ inline Basis1d EvalBasis(double x, double lo, double hi, int spans) {
 template <typename T, typename P>
 void SplineFluxAndInductance(const SplineDomain& dom, double id, double iq, const P* p, T* psi_d,
                              T* psi_q, T* ldd, T* lqq, T* ldq) {
+  if (!std::isfinite(id) || !std::isfinite(iq)) {
+    // A diverging simulation's state: no basis to index; NaN out.
+    const T nan(std::numeric_limits<double>::quiet_NaN());
+    for (T* out : {psi_d, psi_q, ldd, lqq, ldq}) {
+      if (out != nullptr) *out = nan;
+    }
+    return;
+  }
   const int ne = dom.NumEven();
   auto even = [&](int j) { return dom.QIndex(j); };
   // sum over the nonzero basis products of coefficient * f(bd, bq, a, c).

@@ -1,6 +1,7 @@
 #include "fitting/surface.h"
 
 #include <cmath>
+#include <limits>
 #include <map>
 
 #include "ceres/jet.h"
@@ -112,6 +113,10 @@ void AnalyticAt(const double* p, double id, double iq, SurfacePoint* out) {
 
 SurfacePoint SurfaceAt(const Family& f, const double* params, double id_a, double iq_a) {
   SurfacePoint out;
+  if (!std::isfinite(id_a) || !std::isfinite(iq_a)) {
+    out.value.fill(std::numeric_limits<double>::quiet_NaN());
+    return out;
+  }
   if (f.kind == Family::kSpline) {
     SplineAt(f.spline, params, id_a, iq_a, &out);
   } else if (f.kind == Family::kPoly) {
