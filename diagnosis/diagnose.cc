@@ -75,7 +75,7 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
   std::vector<Candidate> cands = {
       {"dead_time", kDead}, {"stator_resistance", kRs},
       {"hf_resistance", kRhf}, {"position_offset", kOffset}, {"current_sensor_gain", kGain},
-      {"magnet_temperature", kPsi}, {"sampling_delay", kDelay},
+      {"magnet_temperature", kPsi}, {"magnet_temperature", kPsiDrift, 0, kPsi}, {"sampling_delay", kDelay},
       {"spatial_harmonics", kHarm, 4}, {"spatial_harmonics", kHarm, 6}, {"spatial_harmonics", kHarm, 8},
       {"spatial_harmonics", kHarm, 12}, {"current_sensor_offset", kSensorOffset},
       {"dc_link_sense_gain", kUdcGain}, {"phase_resistance_imbalance", kRImb},
@@ -88,9 +88,23 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
                              [&](const Candidate& c) {
                                return opt.excluded_effects.count(c.effect) > 0 ||
                                       (m.ss.empty() && c.effect == "magnet_temperature") ||
+                                      (c.block == kPsiDrift && m.ss.size() < 3) ||
                                       (c.block == kVth && m.udc_ratio <= kTwoUdcRatio);
                              }),
               cands.end());
+  // The blocks a candidate frees (its own, and for a drift the mean beside it).
+  auto blocks_of = [](const Candidate& c) {
+    std::vector<Block> v = {c.block};
+    if (c.also != kNumBlocks) v.push_back(c.also);
+    return v;
+  };
+  auto without = [](std::vector<Block> free_blocks, const std::vector<Block>& gone) {
+    std::vector<Block> out;
+    for (Block x : free_blocks) {
+      if (std::find(gone.begin(), gone.end(), x) == gone.end()) out.push_back(x);
+    }
+    return out;
+  };
   FitOut current = base;
   const Model m_base = m;   // the baseline's magnetics (the replay "before")
   // The magnetics with the effects found so far: the set's data freed of
@@ -151,7 +165,9 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
       if (std::find(free.begin(), free.end(), cands[c].block) != free.end()) continue;
       if (cands[c].block == kHarm) m.harm_order = cands[c].order;
       std::vector<Block> trial = free;
-      trial.push_back(cands[c].block);
+      for (Block b : blocks_of(cands[c])) {
+        if (std::find(trial.begin(), trial.end(), b) == trial.end()) trial.push_back(b);
+      }
       Params st = current.p;
       if (cands[c].block == kHarm) st.b[kHarm][0] = 0.0;
       FitOut f = Solve(m, st, trial);
@@ -210,14 +226,33 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
     used[best] = true;
     if (best_model) m = std::move(*best_model);
     if (cands[best].block == kHarm) m.harm_order = cands[best].order;
-    free.push_back(cands[best].block);
+    for (Block b : blocks_of(cands[best])) {
+      if (std::find(free.begin(), free.end(), b) == free.end()) free.push_back(b);
+    }
     Finding fd = Describe(cands[best], m, best_fit);
     fd.residual_rms_before = current.rms;
     fd.residual_rms_after = best_fit.rms;
     fd.delta_bic = best_fit.bic - current.bic;
-    rep.findings.push_back(fd);
-    model_name.push_back(cands[best].effect);
-    accepted.push_back(static_cast<size_t>(best));
+    // A refinement of a finding already made (a drift beside the mean)
+    // takes its place: one finding per effect.
+    size_t same = rep.findings.size();
+    for (size_t a = 0; a < rep.findings.size(); ++a) {
+      if (rep.findings[a].effect == cands[best].effect) same = a;
+    }
+    if (same < rep.findings.size()) {
+      fd.residual_rms_before = rep.findings[same].residual_rms_before;
+      fd.delta_bic += rep.findings[same].delta_bic;
+      rep.findings[same] = fd;
+      accepted[same] = static_cast<size_t>(best);
+    } else {
+      rep.findings.push_back(fd);
+      model_name.push_back(cands[best].effect);
+      accepted.push_back(static_cast<size_t>(best));
+    }
+    for (size_t c = 0; c < cands.size(); ++c) {
+      // The plain variant is done when its drift is in.
+      if (cands[c].effect == cands[best].effect && cands[c].block == cands[best].also) used[c] = true;
+    }
     current = best_fit;
     refresh(free);
   }
@@ -225,11 +260,10 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
   FitOut drop_fit;
   double drop_cost = opt.bic_threshold;
   for (size_t a = 0; accepted.size() >= 2 && a < accepted.size(); ++a) {
-    const Block b = cands[accepted[a]].block;
-    std::vector<Block> trial;
-    for (Block x : free) if (x != b) trial.push_back(x);
+    const std::vector<Block> gone = blocks_of(cands[accepted[a]]);
+    const std::vector<Block> trial = without(free, gone);
     Params st = current.p;
-    std::fill(st.b[b].begin(), st.b[b].end(), 0.0);
+    for (Block b : gone) std::fill(st.b[b].begin(), st.b[b].end(), 0.0);
     const FitOut f = Solve(m, st, trial);
     if (!f.ok) continue;
     // A finding no longer material or significant beside the others goes
@@ -239,7 +273,7 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
     if (cost < drop_cost) { drop = static_cast<int>(a); drop_cost = cost; drop_fit = f; }
   }
   if (drop < 0) break;
-  free.erase(std::find(free.begin(), free.end(), cands[accepted[drop]].block));
+  free = without(free, blocks_of(cands[accepted[drop]]));
   rep.findings.erase(rep.findings.begin() + drop);
   model_name.erase(model_name.begin() + 1 + drop);
   accepted.erase(accepted.begin() + drop);
@@ -311,11 +345,10 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
     for (size_t a = 0; a < accepted.size(); ++a) {
       if (cands[accepted[a]].block == kHarm) m.harm_order = cands[accepted[a]].order;
       if (Significance(cands[accepted[a]], current, m) >= opt.parameter_sigma) continue;
-      const Block b = cands[accepted[a]].block;
-      std::vector<Block> trial;
-      for (Block x : free) if (x != b) trial.push_back(x);
+      const std::vector<Block> gone = blocks_of(cands[accepted[a]]);
+      const std::vector<Block> trial = without(free, gone);
       Params st = current.p;
-      std::fill(st.b[b].begin(), st.b[b].end(), 0.0);
+      for (Block b : gone) std::fill(st.b[b].begin(), st.b[b].end(), 0.0);
       const FitOut f = Solve(m, st, trial);
       if (!f.ok) continue;
       free = trial;
@@ -530,6 +563,7 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
       rep.waveform_rms_after_a = ReplaySpectrum(set, *after, rep.spectrum_hz, &rep.spectrum_after_a);
       if (std::getenv("FLUXCAL_DEBUG3")) {
         for (const auto& wp : AnalyseWaveforms(set, *after, m.pole_pairs)) {
+          if (!wp.spectrum_angle.empty()) std::fprintf(stderr, "angle %s s2 %.3g\n", wp.point.c_str(), wp.sigma2_bin_angle);
           for (const auto& l : wp.lines) std::fprintf(stderr, "line %s %s f %.0f amp %.4f sim %.4f z2 %.0f kind %s %d %d\n", wp.point.c_str(), l.channel.c_str(), l.freq_hz, l.amp_a, l.sim_amp_a, l.z2, l.kind.c_str(), l.order, l.m);
         }
       }
@@ -550,6 +584,8 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
     rep.significant_hz_before = significant(rep.spectrum_before_a);
     rep.significant_hz_after = significant(rep.spectrum_after_a);
   }
+  AttachHypotheses(&rep.mismatches, m.pole_pairs);
+  AttachHypotheses(&rep.remaining, m.pole_pairs);
   // A waveform component the final model does not reproduce is a mismatch
   // no finding explains: never `explained`.
   if (waveform_remaining) all_explained = false;

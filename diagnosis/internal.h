@@ -46,9 +46,9 @@ constexpr double kTwoUdcRatio = 1.1;
 // the kPsi block.
 enum Block {
   kBase, kDead, kRs, kRhf, kOffset, kGain, kPsi, kDelay, kHarm, kSensorOffset, kUdcGain, kRImb, kDrift,
-  kVth, kAngleHarm, kIronLoss, kNumBlocks
+  kVth, kAngleHarm, kIronLoss, kPsiDrift, kNumBlocks
 };
-constexpr int kBlockSize[kNumBlocks] = {0, 1, 1, 1, 1, 3, 1, 1, 1, 2, 1, 2, 1, 1, 2, 1};
+constexpr int kBlockSize[kNumBlocks] = {0, 1, 1, 1, 1, 3, 1, 1, 1, 2, 1, 2, 1, 1, 2, 1, 1};
 // Fit scales of the effect blocks, from the catalogue (simulation/effects.h):
 // value = neutral + scale x block value (psi_pm relative to its nominal).
 const double kScaleDead = sim::EffectParam("dead_time", "dead_time_s").fit_scale;
@@ -71,6 +71,9 @@ struct Candidate {
   std::string effect;
   Block block;
   int order = 0;   // spatial harmonics only
+  // A second block freed with it (magnet_temperature drifting: the drift
+  // beside the mean); kNumBlocks: none.
+  Block also = kNumBlocks;
 };
 
 // Per-observation data, precomputed from the recording.
@@ -110,6 +113,7 @@ struct DcObs {
 };
 struct SsObs {
   double id_a, iq_a, speed_rpm, w_e;
+  double progress = 0.5;   // the row's place among the steady-state rows in recording order, 0..1
   Complex u, dead, dead_v;
   double sigma, scale;
   bool has_torque;
@@ -152,8 +156,14 @@ struct Model {
   double surf_lambda = 0;
   double surf_k_eff = 0;                // effective parameters of the surfaces (BIC)
   int BlockSize(int b) const { return b == kBase ? surf.NumParams() : kBlockSize[b]; }
-  // psi_pm at the kPsi block (magnet_temperature), relative to nominal.
-  double PsiPm(const double* const* p) const { return psi_nom * (1 + kScalePsi * p[kPsi][0]); }
+  // psi_pm at the kPsi block (magnet_temperature), relative to nominal;
+  // with `progress` (0..1, a steady-state row's place in recording order)
+  // also the drift of the kPsiDrift block: its change from the first row to
+  // the last, the mean kept at kPsi.
+  double PsiPm(const double* const* p, double progress = -1.0) const {
+    const double drift = progress >= 0.0 ? p[kPsiDrift][0] * (progress - 0.5) : 0.0;
+    return psi_nom * (1 + kScalePsi * (p[kPsi][0] + drift));
+  }
 
   // A probe of the surfaces for the chain rule (refit.cc): while `on`, every
   // surface value read is shifted by `delta` (psi_d, psi_q, Ldd, Lqq, Ldq)
@@ -180,9 +190,9 @@ struct Model {
   }
   // Flux linkage: gradient of the same co-energy (psi = grad W'), with the
   // magnet flux of the kPsi block.
-  void Flux(const double* const* p, double id, double iq, double* pd, double* pq) const {
+  void Flux(const double* const* p, double id, double iq, double* pd, double* pq, double progress = -1.0) const {
     fit::FamilyFlux(surf, id, iq, p[kBase], pd, pq);
-    *pd += PsiPm(p) - p[kBase][0];
+    *pd += PsiPm(p, progress) - p[kBase][0];
     if (probe.on) {
       *pd += probe.delta[fit::kPsiD];
       *pq += probe.delta[fit::kPsiQ];
@@ -201,13 +211,13 @@ struct Model {
   // Steady state with iron loss: the branch voltage e = w_e J psi(i_m) drives
   // g e beside the magnetising current, so i_m = i - g w_e J psi(i_m), solved
   // by two fixed-point steps (g w_e L ~ 1e-2: each step gains two digits).
-  Complex MagnetisingCurrent(const double* const* p, Complex i, double w_e) const {
+  Complex MagnetisingCurrent(const double* const* p, Complex i, double w_e, double progress = -1.0) const {
     const double g = Gfe(p);
     if (g == 0.0 || w_e == 0.0) return i;
     Complex im = i;
     for (int it = 0; it < 2; ++it) {
       double pd, pq;
-      Flux(p, im.real(), im.imag(), &pd, &pq);
+      Flux(p, im.real(), im.imag(), &pd, &pq, progress);
       im = i - g * w_e * Complex(-pq, pd);
     }
     return im;
@@ -373,22 +383,22 @@ struct Model {
   // (psi_i / L)(1 + h^2 / (2 L^2)): the current-dependent flux behind a mean
   // current i is L i (1 - h^2 / (2 L^2)) per axis, to second order in h / L
   // (a 20 uH harmonic on 150 uH moves it 0.9 %).
-  void SteadyFlux(const double* const* p, Complex im, double* pd, double* pq) const {
-    Flux(p, im.real(), im.imag(), pd, pq);
+  void SteadyFlux(const double* const* p, Complex im, double* pd, double* pq, double progress = -1.0) const {
+    Flux(p, im.real(), im.imag(), pd, pq, progress);
     if (p[kHarm][0] == 0.0) return;
     const double h = Harm(p);
     double ldd, lqq, ldq;
     Inductance(p, im.real(), im.imag(), &ldd, &lqq, &ldq);
-    const double p0d = PsiPm(p);   // psi(0, 0) = (psi_pm, 0) in every family
+    const double p0d = PsiPm(p, progress);   // psi(0, 0) = (psi_pm, 0) in every family
     if (ldd > 0) *pd = p0d + (*pd - p0d) * (1.0 - 0.5 * h * h / (ldd * ldd));
     if (lqq > 0) *pq *= 1.0 - 0.5 * h * h / (lqq * lqq);
   }
   Complex PredictSs(const double* const* p, const SsObs& o) const {
     const Complex rot = std::polar(1.0, Offset(p));
     const Complex it = rot * Complex(o.id_a, o.iq_a) / M1(p);
-    const Complex im = MagnetisingCurrent(p, it, o.w_e);
+    const Complex im = MagnetisingCurrent(p, it, o.w_e, o.progress);
     double pd, pq;
-    SteadyFlux(p, im, &pd, &pq);
+    SteadyFlux(p, im, &pd, &pq, o.progress);
     const double rs = RsAt(p, 1.0);   // recorded after the points: the winding is warm
     const Complex u_true(rs * it.real() - o.w_e * pq, rs * it.imag() + o.w_e * pd);
     return UdcGain(p) * (std::conj(rot) * u_true * std::polar(1.0, o.w_e * Delay(p)) + DeadTime(p) * o.dead +
@@ -397,9 +407,9 @@ struct Model {
   double PredictTorque(const double* const* p, const SsObs& o) const {
     const Complex it = std::polar(1.0, Offset(p)) * Complex(o.id_a, o.iq_a) / M1(p);
     // Only the magnetising current makes torque (the iron-loss current none).
-    const Complex im = MagnetisingCurrent(p, it, o.w_e);
+    const Complex im = MagnetisingCurrent(p, it, o.w_e, o.progress);
     double pd, pq;
-    SteadyFlux(p, im, &pd, &pq);
+    SteadyFlux(p, im, &pd, &pq, o.progress);
     return 1.5 * pole_pairs * (pd * im.imag() - pq * im.real());
   }
 };
@@ -511,7 +521,7 @@ double ReplaySpectrum(const io::RecordingSet& set, const std::vector<sim::Replay
 
 // ---- waveform.cc ------------------------------------------------------------
 struct WaveformLine {
-  std::string channel;   // phase_current | zero_sequence_current
+  std::string channel;   // phase_current | zero_sequence_current | rotor_angle
   double freq_hz = 0, amp_a = 0, z2 = 0;
   double sim_amp_a = 0;  // the model's own line in the simulated current at that bin
   std::string kind;      // what it is a multiple of ("" : nothing)
@@ -524,14 +534,23 @@ struct WaveformPoint {
   double noise_a = 0;               // per-sample noise of the residual (recording's own)
   double sigma2_bin = 0, sigma2_bin_zero = 0, coherent_gain = 1;
   std::vector<double> freq_hz, nuisance_hz;
+  std::vector<double> angle_nuisance_hz;          // the angle channel's: count-slip sawtooth harmonics
   std::vector<Complex> spectrum, spectrum_zero;   // Hann-windowed residual spectra
   std::vector<Complex> spectrum_sim;              // ... and the simulated current's
+  std::vector<Complex> spectrum_angle;            // rotating: the recorded angle less its line
+  std::vector<Complex> spectrum_angle_model;      // ... and its count quantisation's
+  double sigma2_bin_angle = 0;
   std::vector<WaveformLine> lines;
 };
 // The residual of every replayed point freed of the nuisance lines, its
 // spectra, noise and lines (waveform.cc's comment).
 std::vector<WaveformPoint> AnalyseWaveforms(const io::RecordingSet& set, const std::vector<sim::ReplayPoint>& replay,
                                             int pole_pairs);
+// ---- hypotheses.cc ------------------------------------------------------------
+// Fills each mismatch's ranked hypotheses (catalogue effects and physics
+// outside it) from its kind, signal and order.
+void AttachHypotheses(std::vector<Mismatch>* mismatches, int pole_pairs);
+
 // The lines grouped by what they are multiples of, each group with its
 // significance over the points, its size and dependence: the located
 // waveform mismatches at or above `sigma_threshold`.

@@ -213,8 +213,11 @@ absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident:
       m.dc.push_back(d);
     }
   }
-  for (const auto& row : set.steady_state) {
+  for (size_t r = 0; r < set.steady_state.size(); ++r) {
+    const auto& row = set.steady_state[r];
     SsObs o;
+    o.progress = set.steady_state.size() > 1 ? static_cast<double>(r) / static_cast<double>(set.steady_state.size() - 1)
+                                             : 0.5;
     o.id_a = row.id_a; o.iq_a = row.iq_a; o.speed_rpm = row.speed_rpm;
     o.w_e = row.speed_rpm * m.pole_pairs * 2 * kPi / 60;
     o.u = sim::ZohGain(o.w_e, m.ts) * Complex(row.ud_ref_v, row.uq_ref_v);

@@ -431,12 +431,11 @@ FitOut Solve(const Model& m, const Params& start, const std::vector<Block>& free
   out.bic = Bic(out.chi2, out.k_eff, rows);
   out.rms = RelativeRms(m, out.p);
   // Standard deviations of the effect parameters (not the surfaces): the
-  // posterior covariance (J^T J + lambda S)^-1 scaled by the reduced chi^2,
-  // the noise scale the data themselves give (as the BIC's): the stated
-  // sigmas carry model floors (0.25 % of an HF phasor) that a flexible
-  // baseline may undercut by a factor of ten, and a parameter is then
-  // known ten times better than they say.
-  const double scale = out.chi2 / std::max(1.0, rows - out.k_eff);
+  // posterior covariance (J^T J + lambda S)^-1, scaled by the reduced chi^2
+  // when the fit is worse than the stated sigmas (never below them: the
+  // classes' stated sigmas carry model floors of different sizes, so a
+  // reduced chi^2 below one says little about any one parameter).
+  const double scale = std::max(1.0, out.chi2 / std::max(1.0, rows - out.k_eff));
   int k_effects = 0;
   for (Block b : free_blocks) {
     if (b == kBase || !L.free[b]) continue;

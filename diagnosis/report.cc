@@ -61,7 +61,7 @@ std::string HypothesesText(const Mismatch& m) {
   std::string s;
   for (size_t k = 0; k < m.hypotheses.size(); ++k) {
     const auto& h = m.hypotheses[k];
-    s += absl::StrFormat("      %zu) %s%s: would %s.\n", k + 1, h.physics,
+    s += absl::StrFormat("      %zu) %s%s; it would %s.\n", k + 1, h.physics,
                          h.effect.empty() ? " (not in the catalogue)" : absl::StrCat(" (", h.effect, ")"), h.predicts);
   }
   return s;
@@ -126,8 +126,9 @@ nlohmann::json ToJson(const DiagnosisReport& r) {
 
 std::string ToText(const DiagnosisReport& r) {
   std::string s = absl::StrFormat("Diagnosis of %s: %s.\n", r.serial, r.verdict);
-  s += absl::StrFormat("The nominal model (manifest Rs and psi_pm, self-axis saturation only, dead time compensated, "
-                       "ideal sensors) leaves a relative residual of %.3g %%.\n", 100 * r.baseline.residual_rms);
+  s += absl::StrFormat("The nominal model (manifest Rs and psi_pm, the set's own calibration as its magnetics, dead "
+                       "time as the manifest declares, ideal sensors) leaves a relative residual of %.3g %%.\n",
+                       100 * r.baseline.residual_rms);
   if (r.mismatches.empty()) {
     s += "No region of the operating space or signal departs from it beyond the noise estimated from the data.\n";
   }

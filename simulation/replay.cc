@@ -154,13 +154,25 @@ absl::StatusOr<std::vector<ReplayPoint>> ReplayOpenLoop(const io::RecordingSet& 
       const double we = (th[k + 1] - th[k]) / ts;
       // Interval [t_k, t_k+1) holds the command of row k-1 (row 0 for the
       // first interval, whose predecessor was not recorded), shifted by the
-      // sampling_delay effect in sub-steps.
-      const int delay_sub = static_cast<int>(std::llround(opt.effects.delay_s / h));
-      for (int j = 0; j < S; ++j) {
-        const long sub = static_cast<long>(k) * S + j - delay_sub;
-        long row = (sub >= 0 ? sub / S : (sub - S + 1) / S) - 1;
-        row = std::clamp<long>(row, 0, static_cast<long>(n) - 1);   // before row 0: row 0
-        Rk4(m, &x, th[k] + we * h * j, we, h, w.ualpha_ref_v[row], w.ubeta_ref_v[row]);
+      // sampling_delay effect: delay = (d + a) Ts, so the interval holds row
+      // k-1-d-1 for its first a Ts and row k-1-d for the rest, each part
+      // integrated in sub-steps of at most h (a delay rounded to whole
+      // sub-steps, 20 us here, was another delay than the one fitted).
+      const double q = std::max(0.0, opt.effects.delay_s) / ts;
+      const long d = static_cast<long>(std::floor(q));
+      const double frac = q - static_cast<double>(d);
+      auto row_of = [&](long r) { return std::clamp<long>(r, 0, static_cast<long>(n) - 1); };
+      double t0 = 0.0;
+      for (int part = 0; part < 2; ++part) {
+        const double len = (part == 0 ? frac : 1.0 - frac) * ts;
+        if (len <= 1e-12 * ts) continue;
+        const long row = row_of(static_cast<long>(k) - 1 - d - (part == 0 ? 1 : 0));
+        const int steps = std::max(1, static_cast<int>(std::ceil(len / h - 1e-9)));
+        const double hs = len / steps;
+        for (int j = 0; j < steps; ++j) {
+          Rk4(m, &x, th[k] + we * (t0 + hs * j), we, hs, w.ualpha_ref_v[row], w.ubeta_ref_v[row]);
+        }
+        t0 += len;
       }
     }
     rp.residual_rms_a = std::sqrt(se / (3.0 * (n - 1)));
