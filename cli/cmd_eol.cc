@@ -211,6 +211,9 @@ int RunEol(const std::vector<std::string>& argv) {
       er.set_version(fit.calibration().version());
       er.set_table(table);
       er.set_format(format);
+      // The drive's Udc as the set states it (a run of HF results does not
+      // carry it into the store); without one the service asks for it.
+      if (set->manifest.drive.udc_v) er.set_udc_v(*set->manifest.drive.udc_v);
       v1::ExportTableResponse resp;
       grpc::ClientContext ctx;
       ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(120));

@@ -281,6 +281,7 @@ int RunRemoteExport(const std::vector<std::string>& argv, const FlagSpecs& flags
   req.set_format(args->Get("format").value_or("csv"));
   req.set_ctype(args->Get("ctype").value_or(""));
   req.set_allow_extrapolation(args->Has("allow-extrapolation"));
+  req.set_allow_clamped(args->Has("allow-clamped"));
   int n = 0;
   if (auto v = args->Get("points")) { if (!absl::SimpleAtoi(*v, &n)) return 2; req.set_points(n); }
   if (auto v = args->Get("speed-points")) { if (!absl::SimpleAtoi(*v, &n)) return 2; req.set_speed_points(n); }
@@ -288,7 +289,8 @@ int RunRemoteExport(const std::vector<std::string>& argv, const FlagSpecs& flags
   for (auto [flag, setter] : {std::pair<const char*, void (v1::ExportTableRequest::*)(double)>{
                                   "speed-max-rpm", &v1::ExportTableRequest::set_speed_max_rpm},
                               {"i-max-a", &v1::ExportTableRequest::set_i_max_a},
-                              {"udc-v", &v1::ExportTableRequest::set_udc_v}}) {
+                              {"udc-v", &v1::ExportTableRequest::set_udc_v},
+                              {"rs-ohm", &v1::ExportTableRequest::set_rs_ohm}}) {
     auto d = args->GetDouble(flag);
     if (!d.ok()) { std::fprintf(stderr, "%s\n", std::string(d.status().message()).c_str()); return 2; }
     if (d->has_value()) (req.*setter)(**d);
@@ -315,11 +317,17 @@ int RunRemoteExport(const std::vector<std::string>& argv, const FlagSpecs& flags
   // sha256: of the bytes written (= sha256sum FILE); the reply's crc32 and
   // sha256 are over the values (payload) and printed under those names.
   const std::string file_sha256 = io::Sha256Hex(resp.data());
+  const double clamped_share = resp.cells() > 0 ? static_cast<double>(resp.clamped_cells()) / resp.cells() : 0.0;
+  if (resp.clamped_cells() > 0) {
+    std::fprintf(stderr, "fluxcal export: warning: %d of %d cells (%.1f %%) clamped (requests beyond the limits)\n",
+                 resp.clamped_cells(), resp.cells(), 100 * clamped_share);
+  }
   if (args->Has("json")) {
     std::cout << nlohmann::json{{"out", *args->Get("out")}, {"serial", resp.serial()}, {"version", resp.version()},
                                 {"table", req.table()}, {"format", req.format()}, {"sha256", file_sha256},
                                 {"payload_crc32", resp.crc32()}, {"payload_sha256", resp.sha256()},
-                                {"clamped_cells", resp.clamped_cells()}, {"verdict", resp.verdict()},
+                                {"cells", resp.cells()}, {"clamped_cells", resp.clamped_cells()},
+                                {"clamped_share", clamped_share}, {"verdict", resp.verdict()},
                                 {"released", resp.released()}, {"bytes", resp.data().size()}}
                      .dump(2, ' ', false, nlohmann::json::error_handler_t::replace)
               << "\n";

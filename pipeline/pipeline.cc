@@ -79,7 +79,8 @@ fit::FitData FitDataFromPoints(const storage::MotorRow& motor, const std::vector
   fit::FitData d;
   d.serial = motor.serial;
   d.pole_pairs = motor.pole_pairs;
-  d.rs_ohm = motor.rs_ohm;
+  // The store keeps 0 for a value the station did not state (the wire's unset).
+  if (motor.rs_ohm > 0) d.rs_ohm = motor.rs_ohm;
   if (motor.psi_pm_wb > 0) d.psi_pm_prior_wb = motor.psi_pm_wb;
   for (const auto& p : points) d.inductances.push_back(ToObservation(p));
   return d;
@@ -98,8 +99,11 @@ absl::StatusOr<int64_t> IngestHfRun(storage::Store& store, const std::string& se
                                     const std::vector<IdentifiedPoint>& points, int rejected,
                                     const std::string& idempotency_key, bool* replayed,
                                     const storage::AuditContext* audit) {
-  storage::MotorRow m{serial, 4, 0.0, 0.0, ""};
+  storage::MotorRow m{serial, 0, 0.0, 0.0, ""};
   if (motor) {
+    if (motor->pole_pairs < 1 || motor->pole_pairs > 100) {
+      return absl::InvalidArgumentError(absl::StrCat("motor.pole_pairs: expected 1..100, got ", motor->pole_pairs));
+    }
     m.pole_pairs = motor->pole_pairs; m.rs_ohm = motor->rs_ohm; m.psi_pm_wb = motor->psi_pm_wb;
   } else if (auto known = store.GetMotor(serial); known.ok()) {
     m = *known;
@@ -165,8 +169,16 @@ absl::StatusOr<IngestRecordingResult> IngestRecording(storage::Store& store, con
 
 // ---------------------------------------------------------------- fit
 
-std::string Verdict(const fit::Calibration& cal, double nominal_psi_pm_wb, size_t points, size_t unreliable,
+std::string Verdict(const fit::Calibration& cal, std::optional<double> nominal, size_t points, size_t unreliable,
                     const FitTolerances& tol) {
+  // Facts first: without them no other check means anything.
+  if (cal.pole_pairs() < 1) return "fail: pole pairs unknown";
+  if (!nominal) nominal = cal.psi_pm_nominal_wb();
+  if (!nominal) {
+    return "fail: nominal psi_pm unknown (no motor.psi_pm_wb in the manifest or from the station, no "
+           "--psi-pm-wb): the fitted magnet flux cannot be judged";
+  }
+  const double nominal_psi_pm_wb = *nominal;
   if (!cal.summary.usable) return "fail: fit did not converge";
   if (cal.summary.rms_relative > tol.max_rms_relative) {
     return absl::StrFormat("fail: fit residual %.2f %% above %.2f %%", 100 * cal.summary.rms_relative,
@@ -232,7 +244,8 @@ absl::StatusOr<storage::CalibrationRow> FitSerial(storage::Store& store, const s
   row.model = cal->family().Name();
   row.psi_pm_wb = cal->psi_pm_wb();
   row.rms_relative = cal->summary.rms_relative;
-  row.verdict = Verdict(*cal, motor->psi_pm_wb, pts->size(), unreliable, tol);
+  row.verdict = Verdict(*cal, motor->psi_pm_wb > 0 ? std::optional<double>(motor->psi_pm_wb) : std::nullopt,
+                        pts->size(), unreliable, tol);
   row.calibration_json = cal->ToJson().dump();
   // An audit row without its own detail says what was stored.
   storage::AuditContext fit_audit;
@@ -345,7 +358,7 @@ absl::StatusOr<QueryResult> QueryFlux(storage::Store& store, const std::string& 
 }
 
 absl::StatusOr<ExportResult> ExportTable(storage::Store& store, const std::string& serial, int version,
-                                         const tables::TableSpec& spec_in, const tables::MachineLimits& lim_in,
+                                         const tables::TableSpec& spec_in, const tables::ExportRequest& request,
                                          const std::string& format, const tables::ExportOptions& options) {
   auto fmt = tables::ParseFormat(format);
   if (!fmt.ok()) return fmt.status();
@@ -363,22 +376,19 @@ absl::StatusOr<ExportResult> ExportTable(storage::Store& store, const std::strin
   spec.model = cal->family().Name();
   spec.verdict = row->verdict.empty() ? tables::kVerdictUnknown : row->verdict;
   spec.release_state = *released ? tables::kReleased : tables::kNotReleased;
-  spec.measured_current_limit_a = cal->MeasuredCurrentLimitA();
-  tables::MachineLimits lim = lim_in;
-  if (lim.i_max_a <= 0) lim.i_max_a = cal->MeasuredCurrentLimitA() > 0 ? cal->MeasuredCurrentLimitA() : 150.0;
-  lim.pole_pairs = cal->pole_pairs();
-  lim.rs_ohm = cal->rs_ohm();
-  auto t = tables::BuildTable(*cal, lim, spec);
-  if (!t.ok()) return t.status();
-  auto e = tables::Export(*t, *fmt, options);
+  auto built = tables::BuildExportTable(*cal, spec, request);
+  if (!built.ok()) return built.status();
+  auto e = tables::Export(built->table, *fmt, options);
   if (!e.ok()) return e.status();
   ExportResult r;
   r.exported = *e;
   r.version = cal->version;
   r.verdict = row->verdict;
   r.released = *released;
-  for (auto c : t->clamped) r.clamped_cells += c;
-  for (auto c : t->extrapolated) r.extrapolated_cells += c;
+  r.cells = static_cast<int>(built->clamped.cells);
+  r.clamped_cells = static_cast<int>(built->clamped.clamped);
+  for (auto c : built->table.extrapolated) r.extrapolated_cells += c;
+  r.limits = std::move(built->limits);
   return r;
 }
 
@@ -457,7 +467,8 @@ absl::StatusOr<storage::CalibrationRow> StoreDiagnosedCalibration(storage::Store
   row.model = cal->family().Name();
   row.psi_pm_wb = cal->psi_pm_wb();
   row.rms_relative = cal->summary.rms_relative;
-  row.verdict = Verdict(*cal, motor->psi_pm_wb, report.corrected_data.inductances.size(), 0, tol);
+  row.verdict = Verdict(*cal, motor->psi_pm_wb > 0 ? std::optional<double>(motor->psi_pm_wb) : std::nullopt,
+                        report.corrected_data.inductances.size(), 0, tol);
   row.calibration_json = diag::MarkedCalibrationJson(report, *cal).dump();
   storage::AuditContext a;
   if (audit != nullptr) {

@@ -380,13 +380,22 @@ grpc::Status CalibrationServiceImpl::ExportTable(grpc::ServerContext* ctx, const
         absl::StrCat("points x speed_points: a field-weakening map has at most ", kMaxTableCells, " cells")));
   }
   if (!(spec.speed_max_rpm > 0 && spec.speed_max_rpm <= 1e5)) return ToGrpcStatus(absl::InvalidArgumentError("speed_max_rpm: must be in (0, 100000]"));
-  tables::MachineLimits lim;
-  lim.i_max_a = req->i_max_a() == 0 ? -1 : req->i_max_a();   // 0: the calibration's measured current limit
-  if (req->udc_v() != 0) lim.udc_v = req->udc_v();
+  // 0 in a limit field: the calibration's (tables/export_rule.h).
+  tables::ExportRequest limits;
+  limits.names_flags = false;
   if (!(req->i_max_a() == 0 || (req->i_max_a() > 0 && req->i_max_a() <= 1e4))) {
     return ToGrpcStatus(absl::InvalidArgumentError("i_max_a: must be in (0, 10000] (0: measured limit)"));
   }
-  if (!(lim.udc_v > 0 && lim.udc_v <= 5000)) return ToGrpcStatus(absl::InvalidArgumentError("udc_v: must be in (0, 5000]"));
+  if (!(req->udc_v() == 0 || (req->udc_v() > 0 && req->udc_v() <= 5000))) {
+    return ToGrpcStatus(absl::InvalidArgumentError("udc_v: must be in (0, 5000] (0: the calibration's)"));
+  }
+  if (!(req->rs_ohm() == 0 || (req->rs_ohm() > 0 && req->rs_ohm() <= 1e3))) {
+    return ToGrpcStatus(absl::InvalidArgumentError("rs_ohm: must be in (0, 1000] (0: the calibration's)"));
+  }
+  if (req->i_max_a() != 0) limits.i_max_a = req->i_max_a();
+  if (req->udc_v() != 0) limits.udc_v = req->udc_v();
+  if (req->rs_ohm() != 0) limits.rs_ohm = req->rs_ohm();
+  limits.allow_clamped = req->allow_clamped();
   // Flashers get released calibrations only: version 0 is the newest
   // released one, an explicit version must be released.
   int version = req->version();
@@ -412,7 +421,7 @@ grpc::Status CalibrationServiceImpl::ExportTable(grpc::ServerContext* ctx, const
     if (!ct.ok()) return ToGrpcStatus(ct.status());
     options.ctype = *ct;
   }
-  auto r = pipeline::ExportTable(*store_, req->serial(), version, spec, lim,
+  auto r = pipeline::ExportTable(*store_, req->serial(), version, spec, limits,
                                 req->format().empty() ? "csv" : req->format(), options);
   if (!r.ok()) return ToGrpcStatus(r.status());
   resp->set_serial(req->serial());
@@ -421,6 +430,7 @@ grpc::Status CalibrationServiceImpl::ExportTable(grpc::ServerContext* ctx, const
   resp->set_crc32(absl::StrFormat("%08x", r->exported.payload_crc32));
   resp->set_sha256(r->exported.payload_sha256);
   resp->set_clamped_cells(r->clamped_cells);
+  resp->set_cells(r->cells);
   resp->set_verdict(r->verdict);
   resp->set_released(r->released);
   if (!signing_key_pem_.empty()) {

@@ -33,8 +33,8 @@ inline constexpr int kSchemaVersion = 6;
 
 struct MotorRow {
   std::string serial;
-  int pole_pairs = 4;
-  double rs_ohm = 0, psi_pm_wb = 0;
+  int pole_pairs = 0;                 // always stated by the station (1..100)
+  double rs_ohm = 0, psi_pm_wb = 0;   // 0: not stated
   std::string created_utc;   // set by the store
 };
 

@@ -14,6 +14,7 @@
 #include "gtest/gtest.h"
 #include "io/sha256.h"
 #include "nlohmann/json.hpp"
+#include "pipeline/facts.h"
 #include "pipeline/report.h"
 #include "simulation/twin.h"
 #include "storage/sqlite_store.h"
@@ -142,9 +143,7 @@ TEST(Pipeline, FitJudgeQueryExport) {
   EXPECT_NEAR(q->values[1].lqq_h / (1.02 * truth.Inductance(-20, 40).lqq_h), 1.0, 0.005);
   tables::TableSpec spec;
   spec.points = 16;
-  tables::MachineLimits lim;
-  lim.i_max_a = -1;
-  auto e = ExportTable(**store, "IPM-F", 0, spec, lim, "csv");
+  auto e = ExportTable(**store, "IPM-F", 0, spec, tables::ExportRequest{}, "csv");
   ASSERT_TRUE(e.ok()) << e.status();
   EXPECT_EQ(e->version, 2);
   EXPECT_EQ(e->exported.payload_sha256.size(), 64u);
@@ -154,6 +153,136 @@ TEST(Pipeline, FitJudgeQueryExport) {
   EXPECT_NE(e->exported.bytes.find("# release_state: not released\n"), std::string::npos);
   EXPECT_NE(e->exported.bytes.find("# serial: IPM-F\n"), std::string::npos);
   EXPECT_EQ(QueryFlux(**store, "NOPE", 0, {{0, 0}}).status().code(), absl::StatusCode::kNotFound);
+}
+
+// The service's export under the one export rule (tables/export_rule.h):
+// a run of HF results stores no DC-link voltage, so a field-weakening or
+// MTPV table needs udc_v in the request (before: 50 V, silently); a mostly
+// clamped table is FAILED_PRECONDITION unless allow_clamped; a calibration
+// without a measured current circle needs i_max_a (before: 150 A).
+TEST(Pipeline, ExportTakesTheCalibrationsFactsOrTheRequests) {
+  auto store = storage::Store::Open(":memory:");
+  ASSERT_TRUE(store.ok());
+  ASSERT_TRUE(IngestHfRun(**store, "IPM-X", "st", kMotor, Grid(1.0)).ok());
+  ASSERT_TRUE(FitSerial(**store, "IPM-X", "analytic", {}).ok());
+  tables::ExportRequest rpc;
+  rpc.names_flags = false;
+  tables::TableSpec spec;
+  spec.points = 9;
+  spec.speed_points = 8;
+  for (const char* kind : {"fw", "mtpv"}) {
+    spec.kind = kind;
+    auto e = ExportTable(**store, "IPM-X", 0, spec, rpc, "csv");
+    ASSERT_EQ(e.status().code(), absl::StatusCode::kInvalidArgument) << kind << ": " << e.status();
+    EXPECT_EQ(e.status().message().rfind("udc_v: ", 0), 0u) << e.status();
+  }
+  spec.kind = "fw";
+  rpc.udc_v = 50;
+  auto e = ExportTable(**store, "IPM-X", 0, spec, rpc, "csv");
+  ASSERT_TRUE(e.ok()) << e.status();
+  EXPECT_GT(e->cells, 0);
+  EXPECT_LE(e->cells, 9 * 8) << "at most --points x --speed-points cells";
+  EXPECT_NE(e->exported.bytes.find("# udc_v: 50 V"), std::string::npos);
+  EXPECT_EQ(e->limits.udc_source, "udc_v");
+  EXPECT_LE(e->clamped_cells * 2, e->cells);
+  rpc.udc_v = 8;
+  auto clamped = ExportTable(**store, "IPM-X", 0, spec, rpc, "csv");
+  ASSERT_EQ(clamped.status().code(), absl::StatusCode::kFailedPrecondition) << clamped.status();
+  EXPECT_NE(clamped.status().message().find("give allow_clamped"), std::string::npos) << clamped.status();
+  rpc.allow_clamped = true;
+  clamped = ExportTable(**store, "IPM-X", 0, spec, rpc, "csv");
+  ASSERT_TRUE(clamped.ok()) << clamped.status();
+  EXPECT_GT(clamped->clamped_cells * 2, clamped->cells);
+
+  // A stored calibration whose measured region holds no current circle.
+  auto cal = LoadCalibration(**store, "IPM-X", 1);
+  ASSERT_TRUE(cal.ok());
+  const fit::Calibration no_circle(cal->serial(), cal->family(), cal->params(), cal->covariance(), cal->pole_pairs(),
+                                   cal->rs_ohm(), 0.0, 20.0, 0.0, 100.0);
+  storage::CalibrationRow row;
+  row.serial = "IPM-X";
+  row.run_id = 1;
+  row.model = no_circle.family().Name();
+  row.verdict = "fail: test";
+  row.calibration_json = no_circle.ToJson().dump();
+  ASSERT_TRUE((*store)->AddCalibration(row).ok());
+  spec.kind = "mtpa";
+  rpc = tables::ExportRequest{};
+  rpc.names_flags = false;
+  auto i_max = ExportTable(**store, "IPM-X", 2, spec, rpc, "csv");
+  ASSERT_EQ(i_max.status().code(), absl::StatusCode::kInvalidArgument) << i_max.status();
+  EXPECT_EQ(i_max.status().message().rfind("i_max_a: ", 0), 0u) << i_max.status();
+}
+
+// The verdict never passes a calibration missing a fact it depends on: a
+// station that stated no nominal psi_pm gets a fail that says so (before:
+// pass, judged from the fit alone), and pole pairs are required at ingest.
+TEST(Pipeline, VerdictNeedsTheNominalMagnetFlux) {
+  auto store = storage::Store::Open(":memory:");
+  ASSERT_TRUE(store.ok());
+  EXPECT_EQ(IngestHfRun(**store, "IPM-V", "st", MotorNominal{0, 0.011, 0.0114}, Grid(1.0)).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  ASSERT_TRUE(IngestHfRun(**store, "IPM-V", "st", MotorNominal{4, 0.011, 0.0}, Grid(1.0)).ok());
+  auto row = FitSerial(**store, "IPM-V", "analytic", {});
+  ASSERT_TRUE(row.ok()) << row.status();
+  EXPECT_EQ(row->verdict.rfind("fail: nominal psi_pm unknown", 0), 0u) << row->verdict;
+  auto cal = LoadCalibration(**store, "IPM-V", 0);
+  ASSERT_TRUE(cal.ok());
+  EXPECT_FALSE(cal->psi_pm_nominal_wb().has_value());
+  EXPECT_FALSE(cal->udc_v().has_value()) << "an HF run states no Udc; none is invented";
+  // The page of a calibration file without the nominal psi_pm: no pass.
+  report::ReportInputs in;
+  FillReportInputsFromJson(*cal, cal->ToJson(), &in);
+  EXPECT_EQ(in.verdict.rfind("fail: nominal psi_pm unknown", 0), 0u) << in.verdict;
+  // A nominal given to the verdict (the manifest's, with --set) is judged:
+  // here the fit had no prior, and inductances alone do not observe psi_pm
+  // (it stayed near the fit's start value), which the verdict then shows.
+  EXPECT_EQ(Verdict(*cal, 0.0114, 36, 0, {}).rfind("fail: psi_pm", 0), 0u) << Verdict(*cal, 0.0114, 36, 0, {});
+}
+
+// Machine facts for a fit (pipeline/facts.h): the source's, a flag's where
+// the source says nothing, a contradiction refused, what a calibration
+// cannot do without named by its flag.
+TEST(Facts, StatedMergedOrRefused) {
+  fit::FitData bare;
+  bare.inductances.push_back(ToObservation(Grid(1.0)[7]));
+  fit::FitData d = bare;
+  auto st = ApplyStatedFacts({}, FactSource::kHfResults, &d);
+  ASSERT_EQ(st.code(), absl::StatusCode::kInvalidArgument);
+  for (const char* flag : {"--serial", "--pole-pairs", "--psi-pm-wb", "not observable"}) {
+    EXPECT_NE(st.message().find(flag), std::string::npos) << flag << " in " << st;
+  }
+  StatedFacts flags;
+  flags.serial = "IPM-S-1";
+  flags.pole_pairs = 4;
+  flags.psi_pm_wb = 0.0114;
+  std::vector<std::string> notes;
+  ASSERT_TRUE(ApplyStatedFacts(flags, FactSource::kHfResults, &d, &notes).ok());
+  EXPECT_EQ(d.serial, "IPM-S-1");
+  EXPECT_EQ(d.pole_pairs, 4);
+  EXPECT_EQ(*d.psi_pm_prior_wb, 0.0114);
+  EXPECT_FALSE(d.rs_ohm || d.udc_v) << "not stated: unknown";
+  EXPECT_EQ(notes.size(), 3u);
+  // Steady-state rows at speed observe psi_pm: no --psi-pm-wb needed.
+  fit::FitData with_rows = bare;
+  with_rows.steady_state.push_back({-20, 40, 2000, -3, 9, std::nullopt});
+  flags.psi_pm_wb.reset();
+  EXPECT_TRUE(ApplyStatedFacts(flags, FactSource::kRecordingSet, &with_rows).ok());
+  // A set's facts: an equal flag is fine, a different one refused, naming both.
+  fit::FitData set = d;
+  flags = {};
+  flags.pole_pairs = 4;
+  flags.udc_v = 48;
+  ASSERT_TRUE(ApplyStatedFacts(flags, FactSource::kRecordingSet, &set).ok());
+  EXPECT_EQ(*set.udc_v, 48.0) << "fills what the set does not state";
+  flags.udc_v = 50;
+  st = ApplyStatedFacts(flags, FactSource::kRecordingSet, &set);
+  ASSERT_EQ(st.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(st.message().find("flag --udc-v: 50 differs from the set's manifest's udc_v 48"), std::string::npos) << st;
+  flags = {};
+  flags.pole_pairs = 101;
+  EXPECT_NE(ApplyStatedFacts(flags, FactSource::kRecordingSet, &set).message().find("flag --pole-pairs"),
+            std::string::npos);
 }
 
 // The stored version's page: the store's provenance on it, the fleet at
@@ -214,8 +343,8 @@ TEST(Pipeline, ReportInputsFromTheCalibrationJson) {
   report::ReportInputs in;
   FillReportInputsFromJson(*cal, j, &in);
   EXPECT_EQ(in.calibration, &*cal);
-  EXPECT_EQ(in.verdict, Verdict(*cal, 0, 0, 0, {}));
-  EXPECT_EQ(in.verdict_basis.rfind("from the fit alone", 0), 0u) << in.verdict_basis;
+  EXPECT_EQ(in.verdict, Verdict(*cal, std::nullopt, 0, 0, {}));
+  EXPECT_EQ(in.verdict_basis.rfind("from the fit and the calibration's nominal psi_pm", 0), 0u) << in.verdict_basis;
   EXPECT_FALSE(in.diagnosis.has_value());
   EXPECT_FALSE(in.software_version.empty());
   j["verdict"] = "fail: stored reason";

@@ -298,7 +298,14 @@ TEST_P(ServiceTest, EightConcurrentStationsThenFitExportQuery) {
   ASSERT_TRUE(stub_->ExportTable(&ec, e, &er).ok());
   EXPECT_EQ(er.version(), 2);
   EXPECT_EQ(er.sha256().size(), 64u);
-  EXPECT_NE(er.data().find("KENNLINIE FLUXCAL_MTPA_ID_A 16"), std::string::npos);
+  // --points 16: at most 16 rows at round torques, 0 among them (odd).
+  {
+    const size_t at = er.data().find("KENNLINIE FLUXCAL_MTPA_ID_A ");
+    ASSERT_NE(at, std::string::npos);
+    const int rows = std::stoi(er.data().substr(at + 28));
+    EXPECT_LE(rows, 16);
+    EXPECT_EQ(rows % 2, 1);
+  }
   // Verdict, release state, provenance and limits are inside the file, not
   // only in the reply.
   EXPECT_FALSE(er.verdict().empty());
@@ -307,7 +314,29 @@ TEST_P(ServiceTest, EightConcurrentStationsThenFitExportQuery) {
             std::string::npos);
   EXPECT_NE(er.data().find("* serial: IPM-C-3\n"), std::string::npos);
   EXPECT_NE(er.data().find("FESTWERT FLUXCAL_MTPA_I_MAX_A\n"), std::string::npos);
-  EXPECT_NE(er.data().find("FESTWERT FLUXCAL_MTPA_U_MAX_V\n"), std::string::npos);
+  // An HF run states no DC-link voltage and MTPA needs none: the file
+  // states none either (before: 50 V, assumed).
+  EXPECT_EQ(er.data().find("FESTWERT FLUXCAL_MTPA_U_MAX_V\n"), std::string::npos);
+  EXPECT_EQ(er.data().find("FESTWERT FLUXCAL_MTPA_UDC_V\n"), std::string::npos);
+  {
+    // fw: udc_v 0 means the calibration's; it has none: INVALID_ARGUMENT
+    // naming udc_v. Given, the map is computed for it.
+    v1::ExportTableRequest fw = e;
+    fw.set_table("fw");
+    fw.set_points(9);
+    fw.set_speed_points(8);
+    v1::ExportTableResponse fr;
+    grpc::ClientContext c1;
+    const grpc::Status no_udc = stub_->ExportTable(&c1, fw, &fr);
+    EXPECT_EQ(no_udc.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+    EXPECT_EQ(no_udc.error_message().rfind("udc_v: ", 0), 0u) << no_udc.error_message();
+    fw.set_udc_v(50);
+    grpc::ClientContext c2;
+    ASSERT_TRUE(stub_->ExportTable(&c2, fw, &fr).ok());
+    EXPECT_GT(fr.cells(), 0);
+    EXPECT_LE(2 * fr.clamped_cells(), fr.cells());
+    EXPECT_NE(fr.data().find("FESTWERT FLUXCAL_FW_UDC_V\n"), std::string::npos);
+  }
   EXPECT_TRUE(er.signature().empty());
   // With a signing key every reply carries a detached signature of its data.
   auto kp = tables::GenerateEd25519();
@@ -527,7 +556,9 @@ TEST_P(ServiceTest, GetReportOfAStoredCalibration) {
   EXPECT_EQ(page.html_sha256(), io::Sha256Hex(html));
   EXPECT_EQ(page.html_sha256().size(), 64u);
   EXPECT_GE(page.figures(), 5);
-  EXPECT_GT(page.voltage_limit_speed_rpm(), 0);
+  // HF runs state no DC-link voltage: no voltage limit drawn, and said so.
+  EXPECT_EQ(page.voltage_limit_speed_rpm(), 0);
+  EXPECT_NE(html.find("The voltage limit and the field-weakening map cannot be drawn"), std::string::npos);
   EXPECT_EQ(html.rfind("<!DOCTYPE html>", 0), 0u) << html.substr(0, 80);
   EXPECT_NE(html.find("Calibration report: IPM-RPT-2 <span class=\"ver\">version 1</span>"), std::string::npos);
   EXPECT_NE(html.find("<th>calibration version</th><td>1</td>"), std::string::npos);
@@ -867,11 +898,12 @@ TEST(ReportCli, WritesThePageTheServiceBuilt) {
   v1::GetReportRequest req;
   req.set_serial("IPM-CLI-RPT");
   req.set_speed_rpm(3000);
+  req.set_udc_v(50);   // an HF run stores none: the voltage limit needs it
   v1::GetReportResponse served;
   ASSERT_TRUE(GetReport(stub.get(), req, &served).ok());
 
   const std::string out = dir + "/report.html";
-  auto j = JsonOf(Fluxcal("report IPM-CLI-RPT --server " + addr + " --speed-rpm 3000 --out " + out + " --json"));
+  auto j = JsonOf(Fluxcal("report IPM-CLI-RPT --server " + addr + " --speed-rpm 3000 --udc-v 50 --out " + out + " --json"));
   std::ifstream f(out, std::ios::binary);
   const std::string written((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
   ASSERT_FALSE(written.empty());
@@ -887,7 +919,7 @@ TEST(ReportCli, WritesThePageTheServiceBuilt) {
   EXPECT_NE(WithoutWriteTime(written), written) << "the row the comparison leaves out exists";
 
   // --out -: the page on stdout.
-  const auto to_stdout = Fluxcal("report IPM-CLI-RPT --server " + addr + " --speed-rpm 3000 --out -");
+  const auto to_stdout = Fluxcal("report IPM-CLI-RPT --server " + addr + " --speed-rpm 3000 --udc-v 50 --out -");
   EXPECT_EQ(to_stdout.first, 0);
   EXPECT_EQ(WithoutWriteTime(to_stdout.second), WithoutWriteTime(served.html()));
 
@@ -899,7 +931,7 @@ TEST(ReportCli, WritesThePageTheServiceBuilt) {
   std::ofstream(diag) << R"({"format": "fluxcal.diagnosis.v1", "serial": "IPM-CLI-RPT", "verdict": "explained",
                              "findings": [{"effect": "local_finding", "parameters": {"x": 1}}]})";
   const std::string local = dir + "/local.html";
-  auto lj = JsonOf(Fluxcal("report IPM-CLI-RPT --server " + addr + " --speed-rpm 3000 --diagnosis " + diag +
+  auto lj = JsonOf(Fluxcal("report IPM-CLI-RPT --server " + addr + " --speed-rpm 3000 --udc-v 50 --diagnosis " + diag +
                            " --out " + local + " --json"));
   std::ifstream lf(local, std::ios::binary);
   const std::string lhtml((std::istreambuf_iterator<char>(lf)), std::istreambuf_iterator<char>());
