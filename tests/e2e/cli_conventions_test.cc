@@ -119,7 +119,7 @@ TEST(CliConventions, OutDashWritesToStdout) {
   const fs::path dir = fs::temp_directory_path() / ("fluxcal_conv_out_" + std::to_string(::getpid()));
   fs::remove_all(dir);
   fs::create_directories(dir);
-  const std::string measured = std::string(FLUXCAL_SHARED_DIR) + "/examples/real/baldor_fluxmap_measured.csv";
+  const std::string measured = std::string(FLUXCAL_SOURCE_DIR) + "/data/real/baldor_fluxmap_measured.csv";
   const std::string cal = (dir / "cal.json").string();
   const std::string fit_args = "fit --map " + measured + " --pole-pairs 2 --serial BALDOR-OUT-1 ";
   ASSERT_EQ(Fluxcal(fit_args + "--out " + cal).code, 0);
