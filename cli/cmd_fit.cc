@@ -1,12 +1,16 @@
 // fluxcal fit <recording-set> [--model auto|analytic|spline|splineR|poly|polyN]
 //             --out calibration.json [--svg PLOT.svg] [--json] [machine-fact flags]
 // fluxcal fit hf_results.csv --serial S --pole-pairs P --psi-pm-wb WB [--rs-ohm R] [--udc-v V] ...
-// fluxcal fit --map map.csv --pole-pairs P [--psi-std-wb S] [--rs-ohm R] [--udc-v V] [--serial S] --out calibration.json
+// fluxcal fit --map map.csv --pole-pairs P [--psi-std-wb S] [--rs-ohm R] [--udc-v V] [--serial S]
+//             [--convention C] [--current S] [--flux-amplitude S] [--units U] --out calibration.json
 // Machine facts (serial, pole pairs, psi_pm, Rs, Udc) come from the set's
 // manifest or these flags, never from a default (pipeline/facts.h).
 // Identifies every waveform point (least squares), then fits the
 // flux-linkage surfaces jointly with hf_results and steady-state rows; or
-// fits them to a flux map's nodes (io/flux_map.h, fit::FitDataFromFluxMap).
+// fits them to a flux map's nodes (io/flux_map.h, fit::FitDataFromFluxMap),
+// read in the convention the flags name (cli/support_flux_map.h) and
+// refused when implausible; the fit's summary reports its flux error over
+// the nodes (FitSummary::flux_*).
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -14,17 +18,19 @@
 #include <optional>
 
 #include "absl/strings/numbers.h"
+#include "absl/strings/str_cat.h"
 #include "cli/args.h"
 #include "cli/command.h"
+#include "cli/support_flux_map.h"
 #include "fitting/fit.h"
 #include "fitting/plot.h"
 #include "io/csv.h"
 #include "io/flux_map.h"
+#include "io/plausibility.h"
 #include "identification/identify.h"
 #include "pipeline/facts.h"
 #include "pipeline/points.h"
 #include "nlohmann/json.hpp"
-#include "tables/flux_map_export.h"
 
 namespace fluxcal::cli {
 namespace {
@@ -46,7 +52,8 @@ bool KnownModel(const std::string& m) {
   return false;
 }
 
-const FlagSpecs kFitFlags = {
+const FlagSpecs kFitFlags = [] {
+  FlagSpecs f = {
     {"out", "FILE", "calibration JSON to write (required; - for stdout)"},
     {"model", "M", "auto|analytic|poly|polyN (N 2..10)|spline|splineN (N 1..8)|smooth|smooth-asym (default auto: best by BIC)"},
     {"svg", "FILE", "also plot the fit against the identified inductances (SVG; not with --map)"},
@@ -58,7 +65,13 @@ const FlagSpecs kFitFlags = {
     {"udc-v", "V", "DC-link voltage of the drive, V (optional; fw/mtpv exports need it)"},
     {"psi-std-wb", "S", "with --map: flux standard deviation per component, Wb (default 0.2 % of the largest |psi|)"},
     {"json", "", "print the calibration and fit summary as one JSON document"},
-};
+  };
+  for (auto c : FluxMapConventionFlags()) {
+    c.help = "with --map: " + c.help;
+    f.push_back(c);
+  }
+  return f;
+}();
 
 int RunFit(const std::vector<std::string>& argv) {
   auto args = ParseArgs(argv, kFitFlags);
@@ -77,7 +90,8 @@ int RunFit(const std::vector<std::string>& argv) {
                 "       fluxcal fit hf_results.csv --serial S --pole-pairs P --psi-pm-wb WB [--rs-ohm R] [--udc-v V] "
                 "[--model M] --out calibration.json [--json]\n"
                 "       fluxcal fit --map map.csv --pole-pairs P [--psi-std-wb S] [--rs-ohm R] [--udc-v V] [--serial S] "
-                "[--model M] --out calibration.json [--json]", 2);
+                "[--convention C] [--current S] [--flux-amplitude S] [--units U] [--model M] --out calibration.json "
+                "[--json]", 2);
   }
   if (!from_map && args->Get("psi-std-wb")) return Fail("flag --psi-std-wb needs --map", 2);
   // The machine facts the flags state (pipeline/facts.h merges them).
@@ -95,6 +109,11 @@ int RunFit(const std::vector<std::string>& argv) {
     *dst = *v;
   }
   pipeline::FactSource source = pipeline::FactSource::kRecordingSet;
+  if (!from_map && HasFluxMapConventionFlag(*args)) {
+    return Fail("flags --convention, --current, --flux-amplitude and --units describe a flux map: they need --map", 2);
+  }
+  auto convention = FluxMapConventionFromArgs(*args);
+  if (!convention.ok()) return Fail(std::string(convention.status().message()), 2);
   if (from_map && args->Get("svg")) {
     // The plot draws the fit against identified inductances; a map has none.
     return Fail("--svg plots identified inductances, which a flux map does not have; check a map fit with "
@@ -106,8 +125,9 @@ int RunFit(const std::vector<std::string>& argv) {
   if (from_map) {
     int pole_pairs = 0;
     auto pp = args->Get("pole-pairs");
-    if (!pp || !absl::SimpleAtoi(*pp, &pole_pairs) || pole_pairs < 1 || pole_pairs > 100) {
-      return Fail("--map needs --pole-pairs P (an integer 1..100): a flux map does not say", 2);
+    if (!pp || !absl::SimpleAtoi(*pp, &pole_pairs) || !io::CheckPolePairs("pole_pairs", pole_pairs).ok()) {
+      return Fail(absl::StrCat("--map needs --pole-pairs P (an integer 1..", io::kMaxPolePairs,
+                               "): a flux map does not say"), 2);
     }
     auto std_wb = args->GetDouble("psi-std-wb");
     if (!std_wb.ok()) return Fail(std::string(std_wb.status().message()), 2);
@@ -117,11 +137,11 @@ int RunFit(const std::vector<std::string>& argv) {
       return Fail("serial '" + io::Printable(serial) + "' (from " + (args->Get("serial") ? "--serial" : "the file name") +
                       ") is not 1 to 64 characters of A-Z a-z 0-9 - _ .; give --serial", 2);
     }
-    auto m = io::ReadFluxMapCsv(input);
+    io::FluxMapReadOptions ro;
+    ro.convention = *convention;
+    auto m = io::ReadFluxMapCsv(input, ro);
     if (!m.ok()) return Fail(std::string(m.status().message()));
-    double scale = 0;
-    for (const auto& p : m->Points()) scale = std::max(scale, std::hypot(p.psi_d_wb, p.psi_q_wb));
-    if (!(scale > 0)) return Fail(input + ": field 'psi_d': the map's flux is zero at every node");
+    std::fprintf(stderr, "fit: map %s: %s\n", input.c_str(), m->convention.Describe().c_str());
     data = fit::FitDataFromFluxMap(*m, pole_pairs, std_wb->value_or(0.0));
     data.serial = serial;
     source = pipeline::FactSource::kFluxMap;   // Rs and Udc: the flags', below
@@ -173,32 +193,33 @@ int RunFit(const std::vector<std::string>& argv) {
     }
     std::fprintf(stderr, "fit: plot %s\n", svg->c_str());
   }
-  // The fit's own rms_relative covers inductances; against a map the
-  // figure that matters is the flux error over all of its nodes.
-  std::optional<tables::FluxMapComparison> vs_map;
-  if (map) {
-    auto c = tables::CompareWithFluxMap(*cal, *map, {map->id_a.front(), map->id_a.back(), map->iq_a.front(),
-                                                     map->iq_a.back()});
-    if (!c.ok()) return Fail(std::string(c.status().message()));
-    vs_map = *c;
-  }
+  // A map fit's figure is its flux error over the map's nodes (the fit's
+  // summary, FitSummary::flux_*); rms_relative covers inductances.
+  const auto& sum = cal->summary;
   if (args->Has("json")) {
     nlohmann::json j = cal->ToJson();
     j["out"] = *args->Get("out");
-    if (vs_map) {
-      j["map"] = {{"path", input}, {"nodes", vs_map->nodes}, {"rms_relative", vs_map->rms_relative},
-                  {"max_relative", vs_map->max_relative}, {"rms_wb", vs_map->rms_wb}, {"max_wb", vs_map->max_wb}};
+    if (map) {
+      j["map"] = {{"path", input},
+                  {"nodes", sum.flux_nodes},
+                  {"rms_relative", sum.flux_rms_relative},
+                  {"max_relative", sum.flux_max_relative},
+                  {"rms_wb", sum.flux_rms_wb},
+                  {"max_wb", sum.flux_max_wb},
+                  {"psi_scale_wb", sum.flux_scale_wb},
+                  {"convention", FluxMapConventionJson(map->convention)}};
     }
     std::cout << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
-  } else if (vs_map) {
-    std::fprintf(to_stdout ? stderr : stdout, "serial %s: model %s, %d observations, flux error against the map RMS %.3f %% max %.3f %%, "
-                "psi_pm %.6g Wb -> %s\n",
-                cal->serial().c_str(), cal->family().Name().c_str(), cal->summary.observations,
-                100 * vs_map->rms_relative, 100 * vs_map->max_relative, cal->psi_pm_wb(), args->Get("out")->c_str());
+  } else if (map) {
+    std::fprintf(to_stdout ? stderr : stdout, "serial %s: model %s, %d observations, flux error against the map's %d nodes "
+                "RMS %.3f %% max %.3f %% (of %.4g Wb), psi_pm %.6g Wb -> %s\n",
+                cal->serial().c_str(), cal->family().Name().c_str(), sum.observations, sum.flux_nodes,
+                100 * sum.flux_rms_relative, 100 * sum.flux_max_relative, sum.flux_scale_wb, cal->psi_pm_wb(),
+                args->Get("out")->c_str());
   } else {
     std::fprintf(to_stdout ? stderr : stdout, "serial %s: model %s, %d observations, rms %.3f %%, psi_pm %.6g Wb -> %s\n",
-                cal->serial().c_str(), cal->family().Name().c_str(), cal->summary.observations,
-                100 * cal->summary.rms_relative, cal->psi_pm_wb(), args->Get("out")->c_str());
+                cal->serial().c_str(), cal->family().Name().c_str(), sum.observations,
+                100 * sum.rms_relative, cal->psi_pm_wb(), args->Get("out")->c_str());
   }
   return 0;
 }
@@ -207,8 +228,10 @@ int RunFit(const std::vector<std::string>& argv) {
 
 FLUXCAL_REGISTER_COMMAND("fit", "fit flux-linkage surfaces (Ceres) to a recording set or hf_results.csv",
                          RunFit,
-                         "fluxcal fit <recording-set | hf_results.csv> --out calibration.json [--model M] [--svg PLOT.svg] [--json]\n"
-                         "fluxcal fit --map map.csv --pole-pairs P [--psi-std-wb S] [--rs-ohm R] [--serial S] [--model M] --out calibration.json [--json]",
+                         "fluxcal fit <recording-set> --out calibration.json [--model M] [--svg PLOT.svg] [--udc-v V] [--rs-ohm R] [--json]\n"
+                         "fluxcal fit hf_results.csv --serial S --pole-pairs P --psi-pm-wb WB [--rs-ohm R] [--udc-v V] --out calibration.json [--json]\n"
+                         "fluxcal fit --map map.csv --pole-pairs P [--psi-std-wb S] [--rs-ohm R] [--udc-v V] [--serial S] [--convention C] "
+                         "[--current S] [--flux-amplitude S] [--units U] [--model M] --out calibration.json [--json]",
                          kFitFlags);
 
 }  // namespace fluxcal::cli

@@ -130,6 +130,15 @@ nlohmann::json Calibration::ToJson() const {
               {"rms_relative", summary.rms_relative}, {"termination", summary.termination},
               {"usable", summary.usable}, {"candidates", summary.candidates},
               {"excluded", summary.excluded}};
+  if (summary.flux_nodes > 0) {
+    auto& f = j["fit"];
+    f["flux_nodes"] = summary.flux_nodes;
+    f["flux_rms_relative"] = summary.flux_rms_relative;
+    f["flux_max_relative"] = summary.flux_max_relative;
+    f["flux_rms_wb"] = summary.flux_rms_wb;
+    f["flux_max_wb"] = summary.flux_max_wb;
+    f["flux_scale_wb"] = summary.flux_scale_wb;
+  }
   return j;
 }
 
@@ -231,6 +240,13 @@ absl::StatusOr<Calibration> Calibration::FromJson(const nlohmann::json& j) {
       c.summary.usable = f.value("usable", false);
       c.summary.candidates = f.value("candidates", std::vector<std::string>{});
       c.summary.excluded = f.value("excluded", std::vector<std::string>{});
+      // Absent before map fits reported them (and for fits without flux nodes).
+      c.summary.flux_nodes = f.value("flux_nodes", 0);
+      c.summary.flux_rms_relative = f.value("flux_rms_relative", 0.0);
+      c.summary.flux_max_relative = f.value("flux_max_relative", 0.0);
+      c.summary.flux_rms_wb = f.value("flux_rms_wb", 0.0);
+      c.summary.flux_max_wb = f.value("flux_max_wb", 0.0);
+      c.summary.flux_scale_wb = f.value("flux_scale_wb", 0.0);
     }
     return c;
   } catch (const nlohmann::json::exception& e) {

@@ -41,6 +41,13 @@ struct FitSummary {
   // Observations the fit left out or the robust loss down-weighted, each
   // with its point and reason ("hf point 31 (id 0 A, iq 0 A): ldd_h ...").
   std::vector<std::string> excluded;
+  // A fit to flux nodes (a flux map, FitData::fluxes; rms_relative above
+  // covers identified inductances, which a map has none of): the flux
+  // error over those nodes, fitting/flux_error.h. flux_nodes = 0: no flux
+  // nodes were fitted and the flux_* fields are 0 (and absent from JSON).
+  int flux_nodes = 0;
+  double flux_rms_relative = 0, flux_max_relative = 0;   // of flux_scale_wb
+  double flux_rms_wb = 0, flux_max_wb = 0, flux_scale_wb = 0;
 };
 
 class Calibration : public sim::MagneticModel {

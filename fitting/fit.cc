@@ -16,6 +16,7 @@
 #include "ceres/ceres.h"
 #include <Eigen/Dense>
 #include <Eigen/Sparse>
+#include "fitting/flux_error.h"
 #include "identification/identify.h"
 #include "io/flux_map.h"
 
@@ -1184,6 +1185,17 @@ absl::StatusOr<Calibration> FitScreened(const FitData& d, std::vector<std::strin
     nrel += 2;
   }
   cal.summary.rms_relative = nrel ? std::sqrt(rel / nrel) : 0.0;
+  if (!d.fluxes.empty()) {
+    std::vector<io::FluxMapPoint> nodes;
+    for (const auto& f : d.fluxes) nodes.push_back({f.id_a, f.iq_a, f.psi_d_wb, f.psi_q_wb});
+    const FluxNodeError e = FluxErrorOverNodes(cal, nodes);
+    cal.summary.flux_nodes = e.nodes;
+    cal.summary.flux_rms_relative = e.rms_relative;
+    cal.summary.flux_max_relative = e.max_relative;
+    cal.summary.flux_rms_wb = e.rms_wb;
+    cal.summary.flux_max_wb = e.max_wb;
+    cal.summary.flux_scale_wb = e.psi_scale_wb;
+  }
   // Points beyond 3 robust scales of their stated sigma (a Huber weight of
   // a third or less at that scale), so a station sees which points did not
   // count fully.

@@ -184,6 +184,12 @@ std::string Verdict(const fit::Calibration& cal, std::optional<double> nominal, 
     return absl::StrFormat("fail: fit residual %.2f %% above %.2f %%", 100 * cal.summary.rms_relative,
                            100 * tol.max_rms_relative);
   }
+  // A map fit (flux nodes, no inductances) is judged by its flux error over
+  // the map's nodes, against the same tolerance.
+  if (cal.summary.flux_nodes > 0 && !(cal.summary.flux_rms_relative <= tol.max_rms_relative)) {
+    return absl::StrFormat("fail: flux error against the map %.2f %% above %.2f %%",
+                           100 * cal.summary.flux_rms_relative, 100 * tol.max_rms_relative);
+  }
   if (nominal_psi_pm_wb > 0 && std::abs(cal.psi_pm_wb() / nominal_psi_pm_wb - 1) > tol.psi_pm_tolerance_relative) {
     return absl::StrFormat("fail: psi_pm %.5g Wb deviates %.1f %% from nominal", cal.psi_pm_wb(),
                            100 * (cal.psi_pm_wb() / nominal_psi_pm_wb - 1));

@@ -69,7 +69,7 @@ absl::StatusOr<IngestRecordingResult> IngestRecording(storage::Store& store, con
 
 // --- Fit and judge.
 struct FitTolerances {
-  double max_rms_relative = 0.02;          // fit residual vs the identified points
+  double max_rms_relative = 0.02;          // fit residual vs the identified points (a map fit: flux error over its nodes)
   double psi_pm_tolerance_relative = 0.10; // vs the nominal magnet flux
 };
 // "pass" or "fail: <reason>" for a fitted calibration, the one place that

@@ -348,7 +348,18 @@ absl::StatusOr<Report> BuildReport(const ReportInputs& in) {
   b += Row("usable", s.usable ? "yes" : "<b>no</b>");
   b += Row("termination", H(s.termination));
   b += Row("observations", absl::StrCat(s.observations));
-  b += Row("RMS relative residual", absl::StrFormat("%.3f %%", 100 * s.rms_relative));
+  // A map fit has no identified inductances for rms_relative to cover: its
+  // figure is the flux error over the map's nodes (FitSummary::flux_*).
+  if (s.flux_nodes == 0 || s.rms_relative > 0) {
+    b += Row("RMS relative residual", absl::StrFormat("%.3f %%", 100 * s.rms_relative));
+  }
+  if (s.flux_nodes > 0) {
+    b += Row("flux error against the map",
+             absl::StrFormat("RMS %.3f %%, max %.3f %% of the largest |psi| %.4g Wb over %d nodes (RMS %.3g Wb, "
+                             "max %.3g Wb)",
+                             100 * s.flux_rms_relative, 100 * s.flux_max_relative, s.flux_scale_wb, s.flux_nodes,
+                             s.flux_rms_wb, s.flux_max_wb));
+  }
   b += Row("chi2 / BIC", absl::StrFormat("%.4g / %.4g", s.chi2, s.bic));
   b += Row("psi_pm", absl::StrFormat("%.6g Wb", cal.psi_pm_wb()));
   b += Row("psi_pm nominal", cal.psi_pm_nominal_wb() ? absl::StrFormat("%.6g Wb", *cal.psi_pm_nominal_wb())

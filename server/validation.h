@@ -29,9 +29,8 @@ inline constexpr long long kMaxTableCells = 65536;
 // Longest message a client gets back (values inside are already escaped
 // and cut); gRPC metadata limits are a few kB.
 inline constexpr size_t kMaxStatusMessageBytes = 1024;
-// Plausible differential inductance of a traction or industrial PMSM.
-inline constexpr double kMinInductanceH = 1e-7;
-inline constexpr double kMaxInductanceH = 1.0;
+// The physical plausibility limits (inductance, current, flux linkage, ...)
+// are io/plausibility.h, shared with the flux-map reader.
 // A recording set as uploaded: at most this many bytes over all files and
 // this many files (a 1000-point set at 10 kHz for 0.2 s a point is ~25 MB in
 // ~1000 files).

@@ -193,7 +193,7 @@ TEST(Cli, FluxMapsInAndOut) {
   const fs::path dir = fs::temp_directory_path() / ("fluxcal_e2e_maps_" + std::to_string(::getpid()));
   fs::remove_all(dir);
   fs::create_directories(dir);
-  const std::string measured = std::string(FLUXCAL_SHARED_DIR) + "/examples/real/baldor_fluxmap_measured.csv";
+  const std::string measured = std::string(FLUXCAL_SOURCE_DIR) + "/data/real/baldor_fluxmap_measured.csv";
   const std::string cal = (dir / "cal.json").string(), map = (dir / "map.csv").string(),
                     inv = (dir / "inv.csv").string();
   auto fit = Json(Fluxcal("fit --map " + measured + " --pole-pairs 2 --serial BALDOR-MAP-1 --out " + cal + " --json"));
