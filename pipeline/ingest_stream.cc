@@ -102,10 +102,12 @@ absl::Status CheckStored(const StreamTotals& sent, const StreamTotals& stored, c
   return absl::OkStatus();
 }
 
-absl::StatusOr<StoredRunDigest> DigestOfStoredRun(storage::Store& store, int64_t run_id) {
-  auto points = store.RunPoints(run_id);
-  if (!points.ok()) return points.status();
-  return StoredRunDigest{static_cast<int64_t>(points->size()), HfPointsSha256(*points)};
+absl::StatusOr<RunDigest> DigestOfIngest(storage::Store& store, int64_t run_id, bool replayed,
+                                         const std::vector<IdentifiedPoint>& points) {
+  if (!replayed) return RunDigest{static_cast<int64_t>(points.size()), HfPointsSha256(points)};
+  auto stored = store.RunPoints(run_id);
+  if (!stored.ok()) return stored.status();
+  return RunDigest{static_cast<int64_t>(stored->size()), HfPointsSha256(*stored)};
 }
 
 }  // namespace fluxcal::pipeline

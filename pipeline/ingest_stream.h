@@ -1,10 +1,10 @@
 // What an ingest stream carried, in one canonical form that the service,
 // `fluxcal eol` and clients/python compute alike (docs/service.md, "Stream
 // rules"). The service answers every ingest with the count and the digest
-// of what it stored (read back after the commit), so a client compares them
-// with what it sent; a client that declares its stream's end (StreamEnd in
-// the last message) has the declaration checked against what arrived
-// before anything is stored.
+// of what it accepted and stored, so a client compares them with what it
+// sent; a client that declares its stream's end (StreamEnd in the last
+// message) has the declaration checked against what arrived before
+// anything is stored.
 #ifndef FLUXCAL_PIPELINE_INGEST_STREAM_H_
 #define FLUXCAL_PIPELINE_INGEST_STREAM_H_
 
@@ -59,13 +59,17 @@ absl::Status CheckStreamEnd(const StreamTotals& declared, const StreamTotals& re
 // `what` ("points", "files").
 absl::Status CheckStored(const StreamTotals& sent, const StreamTotals& stored, const std::string& what);
 
-// What the store holds for one run, read back: its points' count and
-// HfPointsSha256.
-struct StoredRunDigest {
+// The count and HfPointsSha256 of an ingested run, for the reply: for a
+// new run, of the points handed to the store in its transaction (`points`);
+// for a replay (the idempotency key named a run stored before), of that
+// run's points read back from the store -- so a retry whose content differs
+// from the first try does not pass the client's check.
+struct RunDigest {
   int64_t points = 0;
   std::string points_sha256;
 };
-absl::StatusOr<StoredRunDigest> DigestOfStoredRun(storage::Store& store, int64_t run_id);
+absl::StatusOr<RunDigest> DigestOfIngest(storage::Store& store, int64_t run_id, bool replayed,
+                                         const std::vector<IdentifiedPoint>& points);
 
 }  // namespace fluxcal::pipeline
 

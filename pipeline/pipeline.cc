@@ -126,7 +126,9 @@ absl::StatusOr<int64_t> IngestHfRun(storage::Store& store, const std::string& se
     return known.status();
   }
   if (points.empty()) {
-    return absl::InvalidArgumentError(absl::StrCat("points: no valid point in the stream (", rejected, " rejected)"));
+    return absl::InvalidArgumentError(rejected > 0 ? absl::StrCat("points: no valid point in the stream (", rejected,
+                                                                  " rejected)")
+                                                   : std::string("points: the stream carried no point"));
   }
   return store.IngestHfRun(m, station, "hf_run", points, "", {}, 0, idempotency_key, replayed, audit);
 }
@@ -173,26 +175,34 @@ absl::StatusOr<IngestRecordingResult> IngestRecording(storage::Store& store, con
                                static_cast<int64_t>(archive.size()), idempotency_key, &out.replayed, audit);
   if (!run.ok()) return run.status();
   out.run_id = *run;
-  // What the store now holds for this run (for a replay, the run stored
-  // before), read back: the client compares it with what it sent.
-  auto stored_sha = RecordingShaOfRun(store, serial, *run);
-  if (!stored_sha.ok()) return stored_sha.status();
-  auto row = store.GetRecordingRow(*stored_sha);
-  if (!row.ok()) return row.status();
-  auto stored_archive = Inflate(row->zlib_data, kMaxStoredRecordingBytes);
-  if (!stored_archive.ok()) return stored_archive.status();
-  auto stored_files = DecodeRecordingArchive(*stored_archive);
-  if (!stored_files.ok()) return stored_files.status();
-  auto digest = DigestOfStoredRun(store, *run);
+  out.recording_bytes = static_cast<int64_t>(archive.size());
+  out.stored_bytes = static_cast<int64_t>(z->size());
+  const io::RecordingFiles* accepted = &files;
+  io::RecordingFiles stored_files;
+  if (out.replayed) {
+    // The run stored before under this key, read back: a retry whose
+    // content differs from the first try must not pass the client's check.
+    auto stored_sha = RecordingShaOfRun(store, serial, *run);
+    if (!stored_sha.ok()) return stored_sha.status();
+    auto row = store.GetRecordingRow(*stored_sha);
+    if (!row.ok()) return row.status();
+    auto stored_archive = Inflate(row->zlib_data, kMaxStoredRecordingBytes);
+    if (!stored_archive.ok()) return stored_archive.status();
+    auto decoded = DecodeRecordingArchive(*stored_archive);
+    if (!decoded.ok()) return decoded.status();
+    stored_files = std::move(*decoded);
+    accepted = &stored_files;
+    out.sha256 = *stored_sha;
+    out.recording_bytes = static_cast<int64_t>(stored_archive->size());
+    out.stored_bytes = static_cast<int64_t>(row->zlib_data.size());
+  }
+  auto digest = DigestOfIngest(store, *run, out.replayed, ids->points);
   if (!digest.ok()) return digest.status();
-  out.sha256 = *stored_sha;
   out.points = static_cast<int>(digest->points);
   out.points_sha256 = digest->points_sha256;
-  out.recording_bytes = static_cast<int64_t>(stored_archive->size());
-  out.stored_bytes = static_cast<int64_t>(row->zlib_data.size());
-  out.files = static_cast<int>(stored_files->size());
-  out.files_bytes = RecordingFilesBytes(*stored_files);
-  out.files_sha256 = RecordingFilesSha256(*stored_files);
+  out.files = static_cast<int>(accepted->size());
+  out.files_bytes = RecordingFilesBytes(*accepted);
+  out.files_sha256 = RecordingFilesSha256(*accepted);
   return out;
 }
 

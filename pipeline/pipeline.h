@@ -49,9 +49,10 @@ struct IngestRecordingResult {
   std::string sha256;
   int64_t recording_bytes = 0, stored_bytes = 0;
   bool replayed = false;   // the idempotency key named a run stored before
-  // Read back from the store after the commit (for a replay: the run stored
-  // before): the run's points (HfPointsSha256) and the recording's files
-  // (count, data bytes, RecordingFilesSha256; pipeline/ingest_stream.h).
+  // What was accepted and stored (for a replay: the run stored before, read
+  // back from the store): the run's points (HfPointsSha256) and the
+  // recording's files (count, data bytes, RecordingFilesSha256;
+  // pipeline/ingest_stream.h).
   std::string points_sha256;
   int files = 0;
   int64_t files_bytes = 0;

@@ -119,8 +119,8 @@ grpc::Status EndedWithoutEnd(grpc::ServerReader<Message>* reader, Message* scrat
     return ToGrpcStatus(absl::InvalidArgumentError(absl::StrCat(chunks, "[", next, "]: ", why, "; nothing stored")));
   };
   if (reader->Read(scratch)) {
-    return at(absl::StrCat("failed to parse (corrupt, or not a ", Message::descriptor()->name(),
-                           "); the stream went on after it"));
+    return at(absl::StrCat("failed to parse as ", Message::descriptor()->full_name(),
+                           " (corrupt, or another message); the stream went on after it"));
   }
   if (end_follows) {
     return at("end: the stream ended without its end message (declared by end_follows): a message failed to "
@@ -227,9 +227,9 @@ grpc::Status CalibrationServiceImpl::IngestHfResults(grpc::ServerContext* ctx,
   });
   auto run = pipeline::IngestHfRun(*store_, serial, station, m, rows, 0, key, &replayed, &audit);
   if (!run.ok()) return ToGrpcStatus(run.status());
-  // What the store now holds for the run, read back: the client compares it
-  // with what it sent.
-  auto stored = pipeline::DigestOfStoredRun(*store_, *run);
+  // What was accepted and stored (for a replay: the run stored before): the
+  // client compares it with what it sent.
+  auto stored = pipeline::DigestOfIngest(*store_, *run, replayed, rows);
   if (!stored.ok()) return ToGrpcStatus(stored.status());
   response->set_serial(serial);
   response->set_run_id(*run);

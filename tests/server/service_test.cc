@@ -334,9 +334,11 @@ TEST_P(ServiceTest, StreamDifferentFromItsDeclaredEndIsRefused) {
   EXPECT_TRUE(store_->AllRuns()->empty());
 }
 
-// The reply carries what the store holds, read back: the count and the
-// digest equal the client's over what it sent, for a declared end, for an
-// older client, and for a replay by idempotency key.
+// The reply carries the count and digest of what was accepted and stored,
+// equal to the client's over what it sent, for a declared end, for an older
+// client, and for a replay by idempotency key. A replay answers with the
+// run stored before, read back: a retry with other content under the same
+// key gets a digest that is not its own.
 TEST_P(ServiceTest, IngestRepliesWithTheDigestOfWhatWasStored) {
   std::vector<pipeline::IdentifiedPoint> sent;
   for (const auto& p : GridPoints()) sent.push_back(pipeline::FromProto(p));
@@ -351,6 +353,10 @@ TEST_P(ServiceTest, IngestRepliesWithTheDigestOfWhatWasStored) {
   EXPECT_TRUE(c.replayed());
   EXPECT_EQ(c.points_sha256(), sha);
   EXPECT_EQ(c.accepted(), 36);
+  v1::IngestHfResultsResponse d;
+  ASSERT_TRUE(Ingest("IPM-DIG-2", GridPoints(1.01), &d, true, "k-1").ok());
+  EXPECT_TRUE(d.replayed());
+  EXPECT_EQ(d.points_sha256(), sha) << "the stored run's digest, not the retry's";
 }
 
 // A retry with the same idempotency key (the reply was lost, the client
