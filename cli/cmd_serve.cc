@@ -1,6 +1,6 @@
 // fluxcal serve --db PATH|sqlite:PATH|postgresql://... --listen 127.0.0.1:50051
 //   [--tls-cert PEM --tls-key PEM [--client-ca PEM [--require-client-cert]]]
-//   [--auth KEYS] [--signing-key ED25519.key] [--insecure] [--quiet]
+//   [--auth KEYS] [--signing-key ED25519.key] [--anchor-file FILE] [--insecure] [--quiet]
 // Runs the calibration service until SIGINT/SIGTERM. A path is a SQLite
 // file (the embedded default); a postgresql:// URI makes the server
 // stateless, so several may share one database behind a load balancer.
@@ -33,7 +33,7 @@ constexpr char kUsage[] =
     "usage: fluxcal serve --db PATH|postgresql://USER@HOST:PORT/DB --listen HOST:PORT\n"
     "                     [--tls-cert PEM --tls-key PEM [--client-ca PEM]]\n"
     "                     [--require-client-cert] [--auth KEYS.json] [--signing-key ED25519.key] [--insecure]\n"
-    "                     [--quiet]\n";
+    "                     [--anchor-file FILE] [--quiet]\n";
 
 const FlagSpecs kServeFlags = {
     {"db", "URL", "the store (required): a SQLite file PATH or sqlite:PATH, or postgresql://USER@HOST:PORT/DB"},
@@ -44,6 +44,7 @@ const FlagSpecs kServeFlags = {
     {"require-client-cert", "", "refuse clients without a certificate signed by --client-ca"},
     {"auth", "KEYS.json", "identities and roles (fluxcal admin add-key); required off loopback"},
     {"signing-key", "ED25519.key", "sign exported tables (Ed25519 private key PEM)"},
+    {"anchor-file", "FILE", "append the chain heads after every fit and release (fluxcal admin verify-db --anchor)"},
     {"insecure", "", "plaintext off loopback (test networks only)"},
     {"quiet", "", "no per-request log lines on stderr"},
 };
@@ -122,6 +123,7 @@ int RunServe(const std::vector<std::string>& argv) {
   }
   server::CalibrationServiceImpl service(store->get());
   service.set_authorizer(auth.get());
+  if (auto anchor = args->Get("anchor-file")) service.set_anchor_file(*anchor);
   std::string signing_key;
   if (!pem("signing-key", &signing_key)) return 2;
   if (!signing_key.empty()) {
@@ -165,7 +167,7 @@ int RunServe(const std::vector<std::string>& argv) {
 FLUXCAL_REGISTER_COMMAND("serve", "run the gRPC calibration service (SQLite file or PostgreSQL)", RunServe,
                          "fluxcal serve --db PATH|postgresql://USER@HOST:PORT/DB [--listen HOST:PORT]\n"
                          "  [--tls-cert PEM --tls-key PEM [--client-ca PEM [--require-client-cert]]]\n"
-                         "  [--auth KEYS.json] [--signing-key ED25519.key] [--insecure] [--quiet]",
+                         "  [--auth KEYS.json] [--signing-key ED25519.key] [--anchor-file FILE] [--insecure] [--quiet]",
                          kServeFlags);
 
 }  // namespace fluxcal::cli

@@ -12,6 +12,7 @@
 #include "absl/strings/str_join.h"
 #include "absl/strings/str_format.h"
 #include "nlohmann/json.hpp"
+#include "pipeline/ingest_stream.h"
 #include "pipeline/recording_archive.h"
 #include "io/sha256.h"
 
@@ -94,6 +95,21 @@ absl::StatusOr<fit::FitData> FitDataFromSet(const io::RecordingSet& set, const i
 
 // ---------------------------------------------------------------- ingest
 
+namespace {
+
+// The raw recording a run of `serial` was ingested with (NotFound: a run
+// of HF results only).
+absl::StatusOr<std::string> RecordingShaOfRun(storage::Store& store, const std::string& serial, int64_t run_id) {
+  auto history = store.History(serial);
+  if (!history.ok()) return history.status();
+  for (const auto& h : *history) {
+    if (h.run_id == run_id && h.kind == "recording" && !h.detail.empty()) return h.detail;
+  }
+  return absl::NotFoundError(absl::StrCat("run ", run_id, " of '", serial, "' has no raw recording"));
+}
+
+}  // namespace
+
 absl::StatusOr<int64_t> IngestHfRun(storage::Store& store, const std::string& serial, const std::string& station,
                                     const std::optional<MotorNominal>& motor,
                                     const std::vector<IdentifiedPoint>& points, int rejected,
@@ -114,7 +130,9 @@ absl::StatusOr<int64_t> IngestHfRun(storage::Store& store, const std::string& se
     return known.status();
   }
   if (points.empty()) {
-    return absl::InvalidArgumentError(absl::StrCat("points: no valid point in the stream (", rejected, " rejected)"));
+    return absl::InvalidArgumentError(rejected > 0 ? absl::StrCat("points: no valid point in the stream (", rejected,
+                                                                  " rejected)")
+                                                   : std::string("points: the stream carried no point"));
   }
   return store.IngestHfRun(m, station, "hf_run", points, "", {}, 0, idempotency_key, replayed, audit);
 }
@@ -161,9 +179,34 @@ absl::StatusOr<IngestRecordingResult> IngestRecording(storage::Store& store, con
                                static_cast<int64_t>(archive.size()), idempotency_key, &out.replayed, audit);
   if (!run.ok()) return run.status();
   out.run_id = *run;
-  out.points = static_cast<int>(ids->points.size());
   out.recording_bytes = static_cast<int64_t>(archive.size());
   out.stored_bytes = static_cast<int64_t>(z->size());
+  const io::RecordingFiles* accepted = &files;
+  io::RecordingFiles stored_files;
+  if (out.replayed) {
+    // The run stored before under this key, read back: a retry whose
+    // content differs from the first try must not pass the client's check.
+    auto stored_sha = RecordingShaOfRun(store, serial, *run);
+    if (!stored_sha.ok()) return stored_sha.status();
+    auto row = store.GetRecordingRow(*stored_sha);
+    if (!row.ok()) return row.status();
+    auto stored_archive = Inflate(row->zlib_data, kMaxStoredRecordingBytes);
+    if (!stored_archive.ok()) return stored_archive.status();
+    auto decoded = DecodeRecordingArchive(*stored_archive);
+    if (!decoded.ok()) return decoded.status();
+    stored_files = std::move(*decoded);
+    accepted = &stored_files;
+    out.sha256 = *stored_sha;
+    out.recording_bytes = static_cast<int64_t>(stored_archive->size());
+    out.stored_bytes = static_cast<int64_t>(row->zlib_data.size());
+  }
+  auto digest = DigestOfIngest(store, *run, out.replayed, ids->points);
+  if (!digest.ok()) return digest.status();
+  out.points = static_cast<int>(digest->points);
+  out.points_sha256 = digest->points_sha256;
+  out.files = static_cast<int>(accepted->size());
+  out.files_bytes = RecordingFilesBytes(*accepted);
+  out.files_sha256 = RecordingFilesSha256(*accepted);
   return out;
 }
 
@@ -218,15 +261,13 @@ absl::StatusOr<storage::CalibrationRow> FitSerial(storage::Store& store, const s
   // the stored points alone psi_d is pinned only by the magnet-flux prior,
   // and its standard error came out an order of magnitude larger than the
   // local fit's for the same set.
-  std::string recording_sha;
-  auto history = store.History(serial);
-  if (!history.ok()) return history.status();
-  for (const auto& h : *history) {
-    if (h.run_id == run_id && h.kind == "recording" && !h.detail.empty()) recording_sha = h.detail;
+  auto recording_sha = RecordingShaOfRun(store, serial, run_id);
+  if (!recording_sha.ok() && recording_sha.status().code() != absl::StatusCode::kNotFound) {
+    return recording_sha.status();
   }
   fit::FitData d;
-  if (!recording_sha.empty()) {
-    auto set = LoadStoredRecording(store, recording_sha);
+  if (recording_sha.ok()) {
+    auto set = LoadStoredRecording(store, *recording_sha);
     if (!set.ok()) return set.status();
     ident::IdentifyOptions idopt;
     idopt.cancelled = cancelled;
@@ -398,6 +439,20 @@ absl::StatusOr<ExportResult> ExportTable(storage::Store& store, const std::strin
   return r;
 }
 
+absl::StatusOr<int> FlashableVersion(storage::Store& store, const std::string& serial, int version) {
+  if (version == 0) {
+    auto v = store.LatestReleasedVersion(serial);
+    if (!v.ok()) return v.status();
+    if (*v == 0) {
+      return absl::FailedPreconditionError(
+          absl::StrCat("serial '", serial, "' has no released calibration (fluxcal release)"));
+    }
+    version = *v;
+  }
+  if (auto s = storage::VerifyReleasedVersion(store, serial, version); !s.ok()) return s;
+  return version;
+}
+
 absl::StatusOr<std::vector<FleetPoint>> FleetStatistics(storage::Store& store,
                                                         const std::vector<std::pair<double, double>>& points,
                                                         double outlier_sigma, const CancelledFn& cancelled) {
@@ -566,6 +621,13 @@ absl::StatusOr<std::string> ContentHash(storage::Store& store) {
     t(l.serial); absl::StrAppend(&dump, l.version, "\t"); t(l.prev_sha256); t(l.row_sha256);
     dump += "\n";
   }
+  auto release_chain = store.AllReleaseLinks();
+  if (!release_chain.ok()) return release_chain.status();
+  for (const auto& l : *release_chain) {
+    absl::StrAppend(&dump, "release_link\t", l.seq, "\t");
+    t(l.serial); absl::StrAppend(&dump, l.version, "\t"); t(l.calibration_sha256); t(l.prev_sha256); t(l.row_sha256);
+    dump += "\n";
+  }
   return io::Sha256Hex(dump);
 }
 
@@ -613,10 +675,13 @@ absl::StatusOr<MigrateResult> Migrate(storage::Store& from, storage::Store& to) 
   if (!audit.ok()) return audit.status();
   auto chain = from.AllChainRows();
   if (!chain.ok()) return chain.status();
-  if (auto s = to.ImportTrail(*releases, *audit, *chain); !s.ok()) return s;
+  auto release_chain = from.AllReleaseLinks();
+  if (!release_chain.ok()) return release_chain.status();
+  if (auto s = to.ImportTrail(*releases, *audit, *chain, *release_chain); !s.ok()) return s;
   out.releases = static_cast<int>(releases->size());
   out.audit_rows = static_cast<int>(audit->size());
   out.chain_links = static_cast<int>(chain->size());
+  out.release_links = static_cast<int>(release_chain->size());
   auto a = ContentHash(from);
   if (!a.ok()) return a.status();
   auto b = ContentHash(to);

@@ -53,6 +53,14 @@ struct IngestRecordingResult {
   std::string sha256;
   int64_t recording_bytes = 0, stored_bytes = 0;
   bool replayed = false;   // the idempotency key named a run stored before
+  // What was accepted and stored (for a replay: the run stored before, read
+  // back from the store): the run's points (HfPointsSha256) and the
+  // recording's files (count, data bytes, RecordingFilesSha256;
+  // pipeline/ingest_stream.h).
+  std::string points_sha256;
+  int files = 0;
+  int64_t files_bytes = 0;
+  std::string files_sha256;
 };
 // A recording set held in memory (never written to disk): validated with
 // the same reader as `fluxcal`, every file named by the manifest, serial
@@ -124,6 +132,15 @@ absl::StatusOr<ExportResult> ExportTable(storage::Store& store, const std::strin
                                          const tables::TableSpec& spec, const tables::ExportRequest& request,
                                          const std::string& format, const tables::ExportOptions& options = {});
 
+// The version a flashing station gets (ExportTable for the flasher role):
+// version 0 is the newest released one (FailedPrecondition when there is
+// none), an explicit version must be released. Either is re-checked now,
+// at export time, by storage::VerifyReleasedVersion: released and verdict
+// "pass" (FailedPrecondition otherwise), its calibration row and release
+// row still what their chain links say, and the links still chained
+// (DataLoss otherwise: the store was changed behind the service).
+absl::StatusOr<int> FlashableVersion(storage::Store& store, const std::string& serial, int version);
+
 struct FleetPoint {
   double id_a = 0, iq_a = 0;
   int serials = 0;
@@ -161,12 +178,13 @@ absl::StatusOr<diag::DiagnosisReport> DiagnoseStored(storage::Store& store, cons
 // --- Whole stores (fluxcal admin).
 // SHA-256 over a canonical dump of everything stored (motors, runs with
 // their idempotency keys, points, recordings, calibrations, releases, the
-// audit trail, the calibration chain; ids, versions, timestamps and hashes
-// included): equal hashes mean equal content, whatever the backend.
+// audit trail, the calibration and release chains; ids, versions,
+// timestamps and hashes included): equal hashes mean equal content,
+// whatever the backend.
 absl::StatusOr<std::string> ContentHash(storage::Store& store);
 struct MigrateResult {
   int motors = 0, runs = 0, points = 0, recordings = 0, calibrations = 0;
-  int releases = 0, audit_rows = 0, chain_links = 0;
+  int releases = 0, audit_rows = 0, chain_links = 0, release_links = 0;
   std::string content_sha256;   // equal on both sides
 };
 // Copies `from` into the empty store `to` and verifies both content hashes.

@@ -15,6 +15,8 @@
 #include "io/csv.h"
 #include "io/recording_set.h"
 #include "nlohmann/json.hpp"
+#include "pipeline/anchor.h"
+#include "pipeline/ingest_stream.h"
 #include "pipeline/pipeline.h"
 #include "pipeline/report.h"
 #include "server/reflection.h"
@@ -98,6 +100,35 @@ absl::Status StationOf(const Identity& who, const std::string& claimed, std::str
   return absl::OkStatus();
 }
 
+// A stream problem at message `m` (0-based): the status with "message m: "
+// in front and "; nothing stored" after, its code kept.
+grpc::Status AtMessage(int64_t m, const absl::Status& s) {
+  return ToGrpcStatus(absl::Status(s.code(), absl::StrCat("message ", m, ": ", s.message(), "; nothing stored")));
+}
+
+// Read() returned false before the stream's end message: either the client
+// closed its side, or the message at `next` failed to parse (gRPC ends the
+// reads at a message it cannot parse, whatever follows it). One more Read
+// tells the two apart when a message follows the broken one; a stream that
+// declared its end (end_follows) is refused either way.
+template <class Message>
+grpc::Status EndedWithoutEnd(grpc::ServerReader<Message>* reader, Message* scratch, int64_t next, bool end_follows,
+                             const std::string& chunks = "") {
+  auto at = [&](const std::string& why) {
+    if (chunks.empty()) return AtMessage(next, absl::InvalidArgumentError(why));
+    return ToGrpcStatus(absl::InvalidArgumentError(absl::StrCat(chunks, "[", next, "]: ", why, "; nothing stored")));
+  };
+  if (reader->Read(scratch)) {
+    return at(absl::StrCat("failed to parse as ", Message::descriptor()->full_name(),
+                           " (corrupt, or another message); the stream went on after it"));
+  }
+  if (end_follows) {
+    return at("end: the stream ended without its end message (declared by end_follows): a message failed to "
+              "parse or the stream was cut");
+  }
+  return grpc::Status::OK;
+}
+
 }  // namespace
 
 grpc::Status CalibrationServiceImpl::IngestHfResults(grpc::ServerContext* ctx,
@@ -105,63 +136,86 @@ grpc::Status CalibrationServiceImpl::IngestHfResults(grpc::ServerContext* ctx,
                                                      v1::IngestHfResultsResponse* response) {
   auto who = auth_->Authorize(*ctx, Rpc::kIngestHfResults);
   if (!who.ok()) return ToGrpcStatus(who.status());
+  // Stream rules (docs/service.md): any bad message fails the whole stream
+  // with the message's index, and nothing is stored.
   v1::IngestHfResultsRequest msg;
   std::string serial, station, key;
   v1::MotorInfo motor;
-  bool have_motor = false;
+  bool have_motor = false, end_follows = false;
+  std::optional<v1::StreamEnd> end;
+  int64_t end_message = -1;
   std::vector<pipeline::IdentifiedPoint> rows;
   std::set<std::string> point_ids;
   int index = 0;
+  int64_t messages = 0;
   while (reader->Read(&msg)) {
     if (ctx->IsCancelled()) return grpc::Status(grpc::StatusCode::CANCELLED, "client cancelled the stream");
-    if (serial.empty()) {
-      if (auto s = ValidateSerial(msg.serial()); !s.ok()) return ToGrpcStatus(s);
-      if (auto s = ValidateIdentifier(msg.station_id(), "station_id"); !s.ok()) return ToGrpcStatus(s);
-      if (auto s = StationOf(*who, msg.station_id(), &station); !s.ok()) return ToGrpcStatus(s);
-      if (auto s = ValidateIdentifier(msg.idempotency_key(), "idempotency_key"); !s.ok()) return ToGrpcStatus(s);
+    const int64_t m = messages++;
+    if (end) {
+      return AtMessage(m, absl::InvalidArgumentError(
+                              absl::StrCat("end: a message after the stream's end (message ", end_message, ")")));
+    }
+    if (m == 0) {
+      if (auto s = ValidateSerial(msg.serial()); !s.ok()) return AtMessage(m, s);
+      if (auto s = ValidateIdentifier(msg.station_id(), "station_id"); !s.ok()) return AtMessage(m, s);
+      if (auto s = StationOf(*who, msg.station_id(), &station); !s.ok()) return AtMessage(m, s);
+      if (auto s = ValidateIdentifier(msg.idempotency_key(), "idempotency_key"); !s.ok()) return AtMessage(m, s);
       key = msg.idempotency_key();
       serial = msg.serial();
+      end_follows = msg.end_follows();
     } else if (!msg.serial().empty() && msg.serial() != serial) {
-      return ToGrpcStatus(absl::InvalidArgumentError(
-          absl::StrCat("serial: a stream carries one serial; got '", io::Printable(msg.serial().substr(0, 80)), "' after '",
-                       serial, "'")));
+      return AtMessage(m, absl::InvalidArgumentError(absl::StrCat(
+                              "serial: a stream carries one serial; got '", io::Printable(msg.serial().substr(0, 80)),
+                              "' after '", serial, "'")));
+    } else if (msg.end_follows()) {
+      return AtMessage(m, absl::InvalidArgumentError("end_follows: only the first message declares the end"));
     }
     if (msg.has_motor()) {
-      if (auto s = ValidateMotor(msg.motor()); !s.ok()) return ToGrpcStatus(s);
+      if (auto s = ValidateMotor(msg.motor()); !s.ok()) return AtMessage(m, s);
       motor = msg.motor();
       have_motor = true;
     }
     for (const auto& p : msg.points()) {
       if (index >= kMaxPointsPerStream) {
-        return ToGrpcStatus(absl::ResourceExhaustedError(
-            absl::StrCat("points: stream exceeds the limit of ", kMaxPointsPerStream, " points")));
+        return AtMessage(m, absl::ResourceExhaustedError(
+                                absl::StrCat("points: stream exceeds the limit of ", kMaxPointsPerStream, " points")));
       }
       absl::Status s = ValidatePoint(p, index);
       if (s.ok() && !p.point_id().empty() && !point_ids.insert(p.point_id()).second) {
-        s = absl::InvalidArgumentError(absl::StrCat("points[", index, "].point_id: duplicate '", p.point_id(), "'"));
+        s = absl::InvalidArgumentError(absl::StrCat("points[", index, "].point_id: duplicate '",
+                                                    io::Printable(p.point_id().substr(0, kMaxIdentifierBytes)), "'"));
       }
-      if (!s.ok()) {
-        auto* r = response->add_rejects();
-        r->set_index(index);
-        r->set_point_id(io::Printable(p.point_id().substr(0, kMaxIdentifierBytes)));
-        const std::string m(s.message());
-        r->set_field(m.substr(0, m.find(':')));
-        r->set_message(m);
-      } else {
-        rows.push_back(pipeline::FromProto(p));
-      }
+      if (!s.ok()) return AtMessage(m, s);
+      rows.push_back(pipeline::FromProto(p));
       ++index;
     }
+    if (msg.has_end()) {
+      if (!end_follows) {
+        return AtMessage(m, absl::InvalidArgumentError("end: the first message did not declare end_follows"));
+      }
+      if (auto s = ValidateStreamEnd(msg.end(), "end"); !s.ok()) return AtMessage(m, s);
+      end = msg.end();
+      end_message = m;
+    }
   }
-  if (serial.empty()) return ToGrpcStatus(absl::InvalidArgumentError("serial: the stream carried no message"));
   if (ctx->IsCancelled()) return grpc::Status(grpc::StatusCode::CANCELLED, "client cancelled the stream");
+  if (!end) {
+    if (auto s = EndedWithoutEnd(reader, &msg, messages, end_follows); !s.ok()) return s;
+  }
+  if (serial.empty()) return AtMessage(0, absl::InvalidArgumentError("serial: the stream carried no message"));
+  if (end) {
+    const pipeline::StreamTotals declared{end->messages(), end->count(), end->bytes(), end->sha256()};
+    const pipeline::StreamTotals received{messages, static_cast<int64_t>(rows.size()), 0,
+                                          pipeline::HfPointsSha256(rows)};
+    if (auto s = pipeline::CheckStreamEnd(declared, received, "end", "points"); !s.ok()) return AtMessage(end_message, s);
+  }
   {
     std::set<std::pair<double, double>> distinct;
     for (const auto& r : rows) distinct.insert({r.id_a, r.iq_a});
     if (!rows.empty() && static_cast<int>(distinct.size()) < kMinDistinctOperatingPoints) {
       return ToGrpcStatus(absl::InvalidArgumentError(absl::StrCat(
           "points: ", distinct.size(), " distinct operating points (id_a, iq_a); a calibration needs at least ",
-          kMinDistinctOperatingPoints)));
+          kMinDistinctOperatingPoints, "; nothing stored")));
     }
   }
   std::optional<pipeline::MotorNominal> m;
@@ -171,11 +225,16 @@ grpc::Status CalibrationServiceImpl::IngestHfResults(grpc::ServerContext* ctx,
   const auto audit = AuditFor(ctx, *who, Rpc::kIngestHfResults, serial, [n, station](int64_t run, bool again) {
     return absl::StrCat(again ? "replayed run " : "run ", run, ", ", n, " points, station ", station);
   });
-  auto run = pipeline::IngestHfRun(*store_, serial, station, m, rows, response->rejects_size(), key, &replayed, &audit);
+  auto run = pipeline::IngestHfRun(*store_, serial, station, m, rows, 0, key, &replayed, &audit);
   if (!run.ok()) return ToGrpcStatus(run.status());
+  // What was accepted and stored (for a replay: the run stored before): the
+  // client compares it with what it sent.
+  auto stored = pipeline::DigestOfIngest(*store_, *run, replayed, rows);
+  if (!stored.ok()) return ToGrpcStatus(stored.status());
   response->set_serial(serial);
   response->set_run_id(*run);
-  response->set_accepted(static_cast<int>(rows.size()));
+  response->set_accepted(static_cast<int>(stored->points));
+  response->set_points_sha256(stored->points_sha256);
   response->set_replayed(replayed);
   return grpc::Status::OK;
 }
@@ -186,14 +245,23 @@ grpc::Status CalibrationServiceImpl::IngestRecording(grpc::ServerContext* ctx,
   auto who = auth_->Authorize(*ctx, Rpc::kIngestRecording);
   if (!who.ok()) return ToGrpcStatus(who.status());
   // The set is assembled, validated and identified in memory: a file name
-  // from the client never becomes a path on this machine.
+  // from the client never becomes a path on this machine. Stream rules as
+  // IngestHfResults; a chunk's field names say its index.
   v1::RecordingChunk chunk;
   std::string serial, station, key;
   io::RecordingFiles files;
+  bool end_follows = false;
+  std::optional<v1::StreamEnd> end;
+  std::string end_field;
   long long total = 0;
-  int index = 0;
+  int64_t index = 0;
   while (reader->Read(&chunk)) {
+    if (ctx->IsCancelled()) return grpc::Status(grpc::StatusCode::CANCELLED, "client cancelled the stream");
     const std::string field = absl::StrCat("chunks[", index++, "]");
+    if (end) {
+      return ToGrpcStatus(absl::InvalidArgumentError(
+          absl::StrCat(field, ": a chunk after the stream's end (", end_field, "); nothing stored")));
+    }
     if (serial.empty()) {
       if (auto s = ValidateSerial(chunk.serial(), field + ".serial"); !s.ok()) return ToGrpcStatus(s);
       if (auto s = ValidateIdentifier(chunk.station_id(), field + ".station_id"); !s.ok()) return ToGrpcStatus(s);
@@ -203,10 +271,24 @@ grpc::Status CalibrationServiceImpl::IngestRecording(grpc::ServerContext* ctx,
       }
       key = chunk.idempotency_key();
       serial = chunk.serial();
+      end_follows = chunk.end_follows();
     } else if (!chunk.serial().empty() && chunk.serial() != serial) {
       return ToGrpcStatus(absl::InvalidArgumentError(
           absl::StrCat(field, ".serial: a stream carries one serial; got '", io::Printable(chunk.serial().substr(0, 80)),
                        "' after '", serial, "'")));
+    } else if (chunk.end_follows()) {
+      return ToGrpcStatus(absl::InvalidArgumentError(
+          absl::StrCat(field, ".end_follows: only the first chunk declares the end")));
+    }
+    if (chunk.has_end()) {
+      if (!end_follows) {
+        return ToGrpcStatus(absl::InvalidArgumentError(
+            absl::StrCat(field, ".end: the first chunk did not declare end_follows")));
+      }
+      if (auto s = ValidateStreamEnd(chunk.end(), field + ".end"); !s.ok()) return ToGrpcStatus(s);
+      end = chunk.end();
+      end_field = field + ".end";
+      if (chunk.path().empty() && chunk.data().empty()) continue;   // an end-only chunk
     }
     if (auto s = io::ValidateRecordingFileName(chunk.path()); !s.ok()) {
       return ToGrpcStatus(absl::InvalidArgumentError(absl::StrCat(field, ".path: ", s.message())));
@@ -226,8 +308,17 @@ grpc::Status CalibrationServiceImpl::IngestRecording(grpc::ServerContext* ctx,
     }
     it->second += chunk.data();
   }
-  if (serial.empty()) return ToGrpcStatus(absl::InvalidArgumentError("serial: the stream carried no chunk"));
   if (ctx->IsCancelled()) return grpc::Status(grpc::StatusCode::CANCELLED, "client cancelled the stream");
+  if (!end) {
+    if (auto s = EndedWithoutEnd(reader, &chunk, index, end_follows, "chunks"); !s.ok()) return s;
+  }
+  if (serial.empty()) return ToGrpcStatus(absl::InvalidArgumentError("serial: the stream carried no chunk"));
+  if (end) {
+    const pipeline::StreamTotals declared{end->messages(), end->count(), end->bytes(), end->sha256()};
+    const pipeline::StreamTotals received{index, static_cast<int64_t>(files.size()), pipeline::RecordingFilesBytes(files),
+                                          pipeline::RecordingFilesSha256(files)};
+    if (auto s = pipeline::CheckStreamEnd(declared, received, end_field, "files"); !s.ok()) return ToGrpcStatus(s);
+  }
   // The detail names the recording, known only after identification: the
   // store calls this inside the transaction, by then `sha` is set.
   std::string sha;
@@ -243,6 +334,10 @@ grpc::Status CalibrationServiceImpl::IngestRecording(grpc::ServerContext* ctx,
   response->set_recording_bytes(run->recording_bytes);
   response->set_stored_bytes(run->stored_bytes);
   response->set_replayed(run->replayed);
+  response->set_points_sha256(run->points_sha256);
+  response->set_files(run->files);
+  response->set_files_bytes(run->files_bytes);
+  response->set_files_sha256(run->files_sha256);
   return grpc::Status::OK;
 }
 
@@ -269,6 +364,7 @@ grpc::Status CalibrationServiceImpl::Fit(grpc::ServerContext* ctx, const v1::Fit
   const auto audit = AuditFor(ctx, *who, Rpc::kFit, req->serial(), nullptr);
   auto row = pipeline::FitSerial(*store_, req->serial(), req->model(), tol, &audit, CancelledBy(ctx));
   if (!row.ok()) return StoppedOr(ctx, row.status());
+  AnchorAfterWrite(req->serial());
   ToProto(*row, resp->mutable_calibration());
   resp->set_pass(row->verdict == "pass");
   return grpc::Status::OK;
@@ -396,23 +492,13 @@ grpc::Status CalibrationServiceImpl::ExportTable(grpc::ServerContext* ctx, const
   if (req->udc_v() != 0) limits.udc_v = req->udc_v();
   if (req->rs_ohm() != 0) limits.rs_ohm = req->rs_ohm();
   limits.allow_clamped = req->allow_clamped();
-  // Flashers get released calibrations only: version 0 is the newest
-  // released one, an explicit version must be released.
+  // Flashers get released calibrations only (version 0: the newest
+  // released one), re-checked now against verdict and hash chains.
   int version = req->version();
   if (who->role == Role::kFlasher) {
-    if (version == 0) {
-      auto v = store_->LatestReleasedVersion(req->serial());
-      if (!v.ok()) return ToGrpcStatus(v.status());
-      if (*v == 0) {
-        return ToGrpcStatus(absl::FailedPreconditionError(
-            absl::StrCat("serial '", req->serial(), "' has no released calibration (fluxcal release)")));
-      }
-      version = *v;
-    } else if (auto rel = store_->IsReleased(req->serial(), version); !rel.ok() || !*rel) {
-      return ToGrpcStatus(rel.ok() ? absl::FailedPreconditionError(absl::StrCat(
-                                         "version ", version, " of '", req->serial(), "' is not released for flashing"))
-                                   : rel.status());
-    }
+    auto v = pipeline::FlashableVersion(*store_, req->serial(), version);
+    if (!v.ok()) return ToGrpcStatus(v.status());
+    version = *v;
   }
   spec.allow_extrapolation = req->allow_extrapolation();
   tables::ExportOptions options;
@@ -488,6 +574,7 @@ grpc::Status CalibrationServiceImpl::Diagnose(grpc::ServerContext* ctx, const v1
     const auto audit = AuditFor(ctx, *who, Rpc::kDiagnose, req->serial(), nullptr);
     auto row = pipeline::StoreDiagnosedCalibration(*store_, req->serial(), *rep, pipeline::FitTolerances{}, &audit);
     if (!row.ok()) return StoppedOr(ctx, row.status());
+    AnchorAfterWrite(req->serial());
     resp->set_stored_version(row->version);
     resp->set_stored_verdict(row->verdict);
   }
@@ -505,10 +592,21 @@ grpc::Status CalibrationServiceImpl::Release(grpc::ServerContext* ctx, const v1:
   const auto audit = AuditFor(ctx, *who, Rpc::kRelease, req->serial(),
                               [](int64_t version, bool) { return absl::StrCat("released version ", version); });
   if (auto s = store_->Release(req->serial(), req->version(), who->name, &audit); !s.ok()) return ToGrpcStatus(s);
+  AnchorAfterWrite(req->serial());
   resp->set_serial(req->serial());
   resp->set_version(req->version());
   resp->set_released_by(who->name);
   return grpc::Status::OK;
+}
+
+void CalibrationServiceImpl::AnchorAfterWrite(const std::string& serial) {
+  if (anchor_file_.empty()) return;
+  // The write is committed whatever happens here: a failure is logged for
+  // the operator, not returned (a client would retry a write that is done).
+  if (auto s = pipeline::AppendAnchorEvent(*store_, anchor_file_, serial); !s.ok()) {
+    std::fprintf(stderr, "fluxcal serve: anchor after a write of '%s' not written: %s\n", serial.c_str(),
+                 std::string(s.message()).c_str());
+  }
 }
 
 storage::AuditContext CalibrationServiceImpl::AuditFor(grpc::ServerContext* ctx, const Identity& who, Rpc rpc,

@@ -34,6 +34,10 @@ class CalibrationServiceImpl final : public fluxcal::v1::CalibrationService::Ser
   // Ed25519 private key (PEM) that signs every ExportTable reply.
   void set_signing_key(std::string private_pem) { signing_key_pem_ = std::move(private_pem); }
   const Authorizer* authorizer() const { return auth_; }
+  // After every write that moves a chain head (Fit, Diagnose with
+  // store_calibration, Release), append an event line to this anchor file
+  // (pipeline/anchor.h); empty: none.
+  void set_anchor_file(std::string path) { anchor_file_ = std::move(path); }
   // Keeps a service registered beside this one (reflection) alive as long
   // as this one.
   void KeepAlive(std::unique_ptr<grpc::Service> s) { reflection_.push_back(std::move(s)); }
@@ -67,7 +71,10 @@ class CalibrationServiceImpl final : public fluxcal::v1::CalibrationService::Ser
   storage::AuditContext AuditFor(grpc::ServerContext* ctx, const Identity& who, Rpc rpc, const std::string& serial,
                                  std::function<std::string(int64_t, bool)> detail);
 
+  void AnchorAfterWrite(const std::string& serial);
+
   storage::Store* store_;
+  std::string anchor_file_;
   Authorizer open_;
   const Authorizer* auth_ = &open_;
   std::string signing_key_pem_;

@@ -91,6 +91,19 @@ absl::Status ValidateOperatingPoint(const fluxcal::v1::OperatingPoint& p, int i)
   return io::CheckCurrentA(f + ".iq_a", p.iq_a());
 }
 
+absl::Status ValidateStreamEnd(const fluxcal::v1::StreamEnd& e, const std::string& field) {
+  if (e.messages() < 1) return absl::InvalidArgumentError(absl::StrCat(field, ".messages: must be >= 1, got ", e.messages()));
+  if (e.count() < 0) return absl::InvalidArgumentError(absl::StrCat(field, ".count: must be >= 0, got ", e.count()));
+  if (e.bytes() < 0) return absl::InvalidArgumentError(absl::StrCat(field, ".bytes: must be >= 0, got ", e.bytes()));
+  bool hex = e.sha256().size() == 64;
+  for (char c : e.sha256()) hex = hex && ((c >= '0' && c <= '9') || (c >= 'a' && c <= 'f'));
+  if (!hex) {
+    return absl::InvalidArgumentError(absl::StrCat(field, ".sha256: must be 64 lower-case hex digits, got '",
+                                                   io::Printable(e.sha256().substr(0, 80)), "'"));
+  }
+  return absl::OkStatus();
+}
+
 absl::Status ValidateVersion(int version) {
   if (version < 0) return absl::InvalidArgumentError(absl::StrCat("version: must be >= 0 (0 = latest), got ", version));
   return absl::OkStatus();

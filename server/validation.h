@@ -55,6 +55,9 @@ absl::Status ValidateMotor(const fluxcal::v1::MotorInfo& m);
 // `index` is the point's position in the stream.
 absl::Status ValidatePoint(const fluxcal::v1::HfPoint& p, int index);
 absl::Status ValidateOperatingPoint(const fluxcal::v1::OperatingPoint& p, int index);
+// The declared end of an ingest stream: counts >= 0, messages >= 1,
+// sha256 64 lower-case hex digits; `field` names it ("end", "chunks[9].end").
+absl::Status ValidateStreamEnd(const fluxcal::v1::StreamEnd& end, const std::string& field);
 // version: 0 = latest, n > 0 = that version; negative is refused.
 absl::Status ValidateVersion(int version);
 // An optional quantity where 0 means "the default": 0, or finite in

@@ -186,6 +186,37 @@ TEST(Cli, BadInputNamesTheFile) {
   fs::remove_all(dir);
 }
 
+// Issue 24: `fluxcal admin verify-db --db typo.db` created an empty store
+// and printed "intact". The commands that only read a store refuse a path
+// that does not exist (and an empty file), naming the flag and the path,
+// and create nothing.
+TEST(Cli, ReadOnlyAdminCommandsRefuseAMissingStore) {
+  const fs::path dir = fs::temp_directory_path() / ("fluxcal_e2e_typo_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const std::string typo = (dir / "typo.db").string();
+  for (const std::string cmd : {"admin verify-db --db ", "admin verify-db --json --db sqlite:", "admin hash --db ",
+                                "admin anchor --db "}) {
+    const std::string full = std::string(FLUXCAL_BINARY) + " " + cmd + typo + " 2>&1";
+    FILE* p = popen(full.c_str(), "r");
+    std::string out;
+    std::array<char, 4096> buf;
+    size_t n;
+    while ((n = fread(buf.data(), 1, buf.size(), p)) > 0) out.append(buf.data(), n);
+    const int st = pclose(p);
+    EXPECT_EQ(WEXITSTATUS(st), 1) << cmd << ": " << out;
+    EXPECT_NE(out.find("flag --db: sqlite: no store at '" + typo + "': the file does not exist"), std::string::npos)
+        << cmd << ": " << out;
+    EXPECT_EQ(out.find("intact"), std::string::npos) << cmd << ": " << out;
+    EXPECT_FALSE(fs::exists(typo)) << cmd << " created the store it was asked to read";
+  }
+  std::ofstream(typo).close();   // an empty file is not a store either, and stays empty
+  EXPECT_EQ(Fluxcal("admin verify-db --db " + typo).code, 1);
+  EXPECT_EQ(fs::file_size(typo), 0u);
+  EXPECT_EQ(Fluxcal("admin verify-db --db " + typo + " --anchor " + (dir / "none.jsonl").string()).code, 1);
+  fs::remove_all(dir);
+}
+
 // Flux maps in and out: fit a calibration to the published map of a real
 // machine, compare it with that map, export it as a map and an inverse map,
 // and compare it with its own export; each --json output is one document.

@@ -4,8 +4,10 @@
 // content hashes) including through the `fluxcal admin` command.
 #include "pipeline/pipeline.h"
 
+#include <sys/wait.h>
 #include <unistd.h>
 
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -14,9 +16,12 @@
 #include "gtest/gtest.h"
 #include "io/sha256.h"
 #include "nlohmann/json.hpp"
+#include "pipeline/anchor.h"
 #include "pipeline/facts.h"
+#include "pipeline/ingest_stream.h"
 #include "pipeline/report.h"
 #include "simulation/twin.h"
+#include "storage/sqlite.h"
 #include "storage/sqlite_store.h"
 #include "tests/support/pg_cluster.h"
 
@@ -410,6 +415,196 @@ TEST(Pipeline, WireConverterRoundTrips) {
   }
 }
 
+// The stream digests have the form docs/service.md documents: the golden
+// values were computed by an independent implementation (Python's
+// struct.pack(">I"/">Q"/">d") and hashlib, the same bytes clients/python
+// hashes), so a change of the form breaks this test, not only the clients.
+TEST(IngestStream, DigestsHaveTheDocumentedForm) {
+  IdentifiedPoint a;
+  a.point_id = "p0"; a.id_a = -20; a.iq_a = 40; a.speed_rpm = 1500; a.ld_h = 1.8e-4; a.lq_h = 3.6e-4;
+  a.ldq_h = -1.25e-6; a.ld_h_std = 1e-7; a.lq_h_std = 2e-7; a.ldq_h_std = 3e-7; a.temperature_c = 25;
+  a.reliable = true;
+  IdentifiedPoint b;
+  b.point_id = "p1"; b.id_a = 0; b.iq_a = 100; b.speed_rpm = 0; b.ld_h = 2e-4; b.lq_h = 4e-4;
+  b.ld_h_std = b.lq_h_std = b.ldq_h_std = 0; b.temperature_c = 31.5; b.reliable = false;
+  EXPECT_EQ(HfPointsSha256({a, b}), "22e7c253c7ba13bdab6539be3f8fba08288e5e31a45100ad0037a57d316856df");
+  EXPECT_EQ(HfPointsSha256({}), "f376d611f1a11eda516bf01adf882c09d600e292c1b98d6384dcfd475ae6ccfa");
+  // Every bit counts; order counts; an absent Ldq is not Ldq = 0.
+  IdentifiedPoint c = a;
+  c.ld_h = std::nextafter(c.ld_h, 1.0);
+  EXPECT_NE(HfPointsSha256({c, b}), HfPointsSha256({a, b}));
+  EXPECT_NE(HfPointsSha256({b, a}), HfPointsSha256({a, b}));
+  IdentifiedPoint d = b;
+  d.ldq_h = 0.0;
+  EXPECT_NE(HfPointsSha256({a, d}), HfPointsSha256({a, b}));
+  // A zero's sign does not count (SQLite gives -0.0 back as +0.0).
+  IdentifiedPoint e = b;
+  e.id_a = -0.0;
+  EXPECT_EQ(HfPointsSha256({a, e}), HfPointsSha256({a, b}));
+  const io::RecordingFiles files = {
+      {"manifest.json", "{}"}, {"points/p000.csv", "t_s,ia_a\n0,1\n"}, {"empty.csv", ""}};
+  EXPECT_EQ(RecordingFilesSha256(files), "f11252fe1fd7038a64859e532eee696fde5c8288620077ea4fa227a6b75315b3");
+  EXPECT_EQ(RecordingFilesBytes(files), 15);
+  io::RecordingFiles shorter = files;
+  shorter["points/p000.csv"].pop_back();
+  EXPECT_NE(RecordingFilesSha256(shorter), RecordingFilesSha256(files));
+}
+
+TEST(IngestStream, DeclaredAndStoredTotalsAreCompared) {
+  const StreamTotals sent{38, 36, 0, std::string(64, 'a')};
+  EXPECT_TRUE(CheckStreamEnd(sent, sent, "end", "points").ok());
+  StreamTotals got = sent;
+  got.messages = 20;
+  got.count = 18;
+  auto s = CheckStreamEnd(sent, got, "end", "points");
+  EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(s.message().find("end.messages: the stream declares 38 messages, the service received 20 messages"),
+            std::string::npos) << s;
+  got.messages = 38;
+  s = CheckStreamEnd(sent, got, "chunks[9].end", "files");
+  EXPECT_NE(s.message().find("chunks[9].end.count: the stream declares 36 files, the service received 18 files"),
+            std::string::npos) << s;
+  got = sent;
+  got.sha256 = std::string(64, 'b');
+  EXPECT_NE(CheckStreamEnd(sent, got, "end", "points").message().find("end.sha256"), std::string::npos);
+  // The client's side: stored against sent.
+  got = sent;
+  got.messages = 0;   // not compared
+  EXPECT_TRUE(CheckStored(sent, got, "points").ok());
+  got.count = 18;
+  s = CheckStored(sent, got, "points");
+  EXPECT_EQ(s.code(), absl::StatusCode::kDataLoss);
+  EXPECT_NE(s.message().find("the service stored 18 points, this client sent 36"), std::string::npos) << s;
+  got = sent;
+  got.sha256.clear();
+  s = CheckStored(sent, got, "points");
+  EXPECT_NE(s.message().find("missing (a service without stream digests)"), std::string::npos) << s;
+}
+
+// Anchor files: a snapshot and event lines fold into one anchor (per serial
+// the highest version, the highest release); a malformed line is named by
+// file, line and field.
+TEST(Anchor, FileFoldsItsLinesAndNamesAMalformedOne) {
+  const std::string path = Temp("anchor.jsonl");
+  fs::remove(path);
+  EXPECT_EQ(ReadAnchorFile(path).status().code(), absl::StatusCode::kNotFound);
+  storage::ChainHead snap;
+  snap.calibrations = {{"IPM-1", 2, std::string(64, '1')}, {"IPM-2", 5, std::string(64, '2')}};
+  snap.release_seq = 3;
+  snap.release_serial = "IPM-2";
+  snap.release_version = 5;
+  snap.release_sha256 = std::string(64, '3');
+  snap.digest_sha256 = storage::ChainHeadDigest(snap);
+  ASSERT_TRUE(AppendAnchorLine(path, AnchorLine(snap, "snapshot", "sqlite", "2030-01-01T00:00:00Z")).ok());
+  storage::ChainHead event;
+  event.calibrations = {{"IPM-1", 3, std::string(64, '4')}};
+  event.release_seq = 3;
+  event.release_serial = "IPM-2";
+  event.release_version = 5;
+  event.release_sha256 = std::string(64, '3');
+  ASSERT_TRUE(AppendAnchorLine(path, AnchorLine(event, "event", "sqlite", "2030-01-02T00:00:00Z")).ok());
+  auto a = ReadAnchorFile(path);
+  ASSERT_TRUE(a.ok()) << a.status();
+  EXPECT_EQ(a->lines, 2);
+  EXPECT_EQ(a->newest_utc, "2030-01-02T00:00:00Z");
+  ASSERT_EQ(a->head.calibrations.size(), 2u);
+  EXPECT_EQ(a->head.calibrations[0].version, 3);
+  EXPECT_EQ(a->head.calibrations[0].row_sha256, std::string(64, '4'));
+  EXPECT_EQ(a->head.calibrations[1].version, 5);
+  EXPECT_EQ(a->head.release_seq, 3);
+  const auto first = nlohmann::json::parse(AnchorLine(snap, "snapshot", "sqlite", "2030-01-01T00:00:00Z"));
+  EXPECT_EQ(first["format"], "fluxcal.chain-anchor.v1");
+  EXPECT_EQ(first["digest_sha256"], snap.digest_sha256);
+  std::ofstream(path, std::ios::app) << "{\"format\": \"fluxcal.chain-anchor.v1\", \"created_utc\": \"x\", "
+                                        "\"calibrations\": [{\"serial\": \"IPM-1\", \"version\": 4, \"row_sha256\": \"zz\"}]}\n";
+  auto bad = ReadAnchorFile(path);
+  EXPECT_EQ(bad.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(bad.status().message().find(path + ":3: field 'calibrations[0].row_sha256'"), std::string::npos)
+      << bad.status();
+  fs::remove(path);
+  std::ofstream(path).close();
+  EXPECT_EQ(ReadAnchorFile(path).status().code(), absl::StatusCode::kInvalidArgument);
+  fs::remove(path);
+}
+
+// The repros of issue 24 through the commands an operator runs, on a SQLite
+// store edited behind the service:
+//  - the newest version deleted with its chain row: `verify-db` alone says
+//    intact; with the anchor `admin anchor` wrote before, it names the
+//    serial and version;
+//  - a release INSERTed for a failing version: `verify-db` names it, and
+//    the flasher's path (FlashableVersion) refuses it.
+TEST(Admin, AnchorAndVerifyDbFindWhatTheChainsAloneMiss) {
+  const std::string db = Temp("anchor_cli.db"), anchor = Temp("anchor_cli.jsonl");
+  RemoveDb(db);
+  fs::remove(anchor);
+  {
+    auto s = storage::Store::Open(db);
+    ASSERT_TRUE(s.ok());
+    ASSERT_TRUE(IngestHfRun(**s, "IPM-AN-1", "st", kMotor, Grid(1.0)).ok());
+    ASSERT_EQ(FitSerial(**s, "IPM-AN-1", "analytic", {})->verdict, "pass");
+    auto noisy = Grid(1.0);   // 8 % scatter fails the 2 % residual policy
+    for (size_t k = 0; k < noisy.size(); ++k) noisy[k].lq_h *= k % 2 ? 1.08 : 0.92;
+    ASSERT_TRUE(IngestHfRun(**s, "IPM-AN-1", "st", std::nullopt, noisy).ok());
+    const auto v2 = FitSerial(**s, "IPM-AN-1", "analytic", {});
+    ASSERT_TRUE(v2.ok());
+    ASSERT_NE(v2->verdict, "pass");
+    ASSERT_TRUE((*s)->Release("IPM-AN-1", 1, "rel").ok());
+    EXPECT_EQ(*FlashableVersion(**s, "IPM-AN-1", 0), 1);
+  }
+  auto run = [](const std::string& cmd) {
+    std::string out;
+    FILE* p = popen((cmd + " 2>&1").c_str(), "r");
+    char buf[512];
+    while (p && fgets(buf, sizeof buf, p)) out += buf;
+    const int rc = p ? pclose(p) : -1;
+    return std::make_pair(WIFEXITED(rc) ? WEXITSTATUS(rc) : -1, out);
+  };
+  const std::string bin = FLUXCAL_BINARY;
+  auto [arc, aout] = run(bin + " admin anchor --db " + db + " --out " + anchor + " --json");
+  ASSERT_EQ(arc, 0) << aout;
+  const auto doc = nlohmann::json::parse(aout);
+  EXPECT_EQ(doc["calibrations"][0]["version"], 2);
+  EXPECT_EQ(doc["release"]["seq"], 1);
+  EXPECT_EQ(doc["digest_sha256"].get<std::string>().size(), 64u);
+  EXPECT_EQ(run(bin + " admin verify-db --db " + db + " --anchor " + anchor).first, 0);
+  auto raw = [&](const std::string& sql) {
+    auto d = storage::Database::Open(db);
+    return d.ok() && (*d)->Exec(sql).ok();
+  };
+  ASSERT_TRUE(raw("DROP TRIGGER calibrations_no_delete; DROP TRIGGER chain_no_delete; "
+                  "DELETE FROM calibration_chain WHERE serial = 'IPM-AN-1' AND version = 2; "
+                  "DELETE FROM calibrations WHERE serial = 'IPM-AN-1' AND version = 2"));
+  auto [brc, bout] = run(bin + " admin verify-db --db " + db);
+  EXPECT_EQ(brc, 0) << "the chains alone cannot see it: " << bout;
+  auto [vrc, vout] = run(bin + " admin verify-db --db " + db + " --anchor " + anchor + " --json");
+  EXPECT_EQ(vrc, 1) << vout;
+  const auto rep = nlohmann::json::parse(vout);
+  EXPECT_FALSE(rep["intact"].get<bool>());
+  ASSERT_EQ(rep["problems"].size(), 1u) << vout;
+  EXPECT_EQ(rep["problems"][0].get<std::string>().rfind("IPM-AN-1 v2: removed after the anchor in " + anchor, 0), 0u)
+      << vout;
+  // A failing version made flashable behind the service.
+  ASSERT_TRUE(raw("INSERT INTO calibrations SELECT serial, 2, run_id, created_utc, model, psi_pm_wb, rms_relative, "
+                  "'fail: psi_pm', calibration_json FROM calibrations WHERE serial = 'IPM-AN-1' AND version = 1; "
+                  "INSERT INTO releases (serial, version, released_by, released_utc) "
+                  "VALUES ('IPM-AN-1', 2, 'someone', '2030-01-01T00:00:00Z')"));
+  auto [irc, iout] = run(bin + " admin verify-db --db " + db);
+  EXPECT_EQ(irc, 1) << iout;
+  EXPECT_NE(iout.find("IPM-AN-1 v2: release without a chain link (inserted around the service)"), std::string::npos)
+      << iout;
+  EXPECT_NE(iout.find("IPM-AN-1 v2: no chain link (row inserted around the store)"), std::string::npos) << iout;
+  {
+    auto s = storage::Store::Open(db);
+    ASSERT_TRUE(s.ok());
+    auto flash = FlashableVersion(**s, "IPM-AN-1", 0);
+    EXPECT_EQ(flash.status().code(), absl::StatusCode::kDataLoss) << flash.status();
+    EXPECT_EQ(*FlashableVersion(**s, "IPM-AN-1", 1), 1) << "the honest release stays flashable";
+  }
+  RemoveDb(db);
+  fs::remove(anchor);
+}
+
 // A store with everything in it: runs, a raw recording, calibrations.
 void Populate(storage::Store& s) {
   ASSERT_TRUE(IngestHfRun(s, "IPM-M-1", "st1", kMotor, Grid(1.0)).ok());
@@ -457,6 +652,7 @@ TEST(Admin, MigrateSqliteToPostgresKeepsEverything) {
   EXPECT_EQ(r->releases, 1);
   EXPECT_EQ(r->audit_rows, 3);
   EXPECT_EQ(r->chain_links, 3);
+  EXPECT_EQ(r->release_links, 1);
   EXPECT_EQ(*ContentHash(**to), *ContentHash(**from));
   EXPECT_TRUE(*(*to)->IsReleased("IPM-M-3", 1));
   auto trail_from = (*from)->AuditOf("IPM-M-3"), trail_to = (*to)->AuditOf("IPM-M-3");
@@ -466,11 +662,13 @@ TEST(Admin, MigrateSqliteToPostgresKeepsEverything) {
     EXPECT_EQ(trail_to->at(k).utc, trail_from->at(k).utc);
     EXPECT_EQ(trail_to->at(k).detail, trail_from->at(k).detail);
   }
-  auto chain = storage::VerifyCalibrationChain(**to);
+  auto chain = storage::VerifyChains(**to);
   ASSERT_TRUE(chain.ok()) << chain.status();
   EXPECT_EQ(chain->chained, 3);
   EXPECT_EQ(chain->unchained, 0);
+  EXPECT_EQ(chain->releases_chained, 1);
   EXPECT_TRUE(chain->problems.empty());
+  EXPECT_TRUE(storage::VerifyReleasedVersion(**to, "IPM-M-3", 1).ok()) << "the copy is flashable as the source was";
   bool replayed = false;
   auto again = IngestHfRun(**to, "IPM-M-3", "st9", kMotor, Grid(1.0), 0, "key-9", &replayed);
   ASSERT_TRUE(again.ok());
@@ -481,8 +679,8 @@ TEST(Admin, MigrateSqliteToPostgresKeepsEverything) {
   ASSERT_TRUE(v3.ok());
   EXPECT_EQ(v3->version, 3);
   // A change anywhere changes the hash; a second migrate into it is refused.
-  EXPECT_TRUE(storage::VerifyCalibrationChain(**to)->problems.empty());
-  EXPECT_EQ(storage::VerifyCalibrationChain(**to)->chained, 4);
+  EXPECT_TRUE(storage::VerifyChains(**to)->problems.empty());
+  EXPECT_EQ(storage::VerifyChains(**to)->chained, 4);
   EXPECT_NE(*ContentHash(**to), *ContentHash(**from));
   EXPECT_EQ(Migrate(**from, **to).status().code(), absl::StatusCode::kFailedPrecondition);
   // The same through the command an operator runs, checked by `admin hash`.
