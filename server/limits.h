@@ -21,9 +21,10 @@
 namespace fluxcal::server {
 
 // The largest message the service reads (grpc max receive size). The
-// largest legitimate request is a QueryFlux of 100 000 points (about
-// 2.2 MB); recording chunks carry at most 1 MiB of data (`fluxcal eol`
-// sends 1 MiB), so 4 MiB leaves room for both. Before a call is
+// largest legitimate request is a QueryFlux of 100 000 points (about 2 MB:
+// two tagged doubles and a length, 20 bytes a point); recording chunks
+// carry 1 MiB of data (`fluxcal eol` sends 1 MiB), so 4 MiB leaves room
+// for both. Before a call is
 // authenticated no message is read at all (server/auth.h,
 // MakeAuthProcessor), except on --insecure listeners (docs/security.md).
 inline constexpr int kMaxMessageBytes = 4 << 20;
