@@ -13,6 +13,7 @@
 #include "absl/strings/numbers.h"
 #include "cli/args.h"
 #include "io/csv.h"
+#include "io/net.h"
 #include "nlohmann/json.hpp"
 #include "io/sha256.h"
 
@@ -89,16 +90,6 @@ class TokenInterceptorFactory final : public grpc::experimental::ClientIntercept
   std::string header_;
 };
 
-bool IsLoopback(const std::string& address) {
-  std::string host = address;
-  for (const char* scheme : {"dns:///", "ipv4:", "ipv6:"}) {
-    if (host.rfind(scheme, 0) == 0) host = host.substr(std::string(scheme).size());
-  }
-  if (host.rfind("unix:", 0) == 0) return true;
-  if (const auto colon = host.rfind(':'); colon != std::string::npos) host = host.substr(0, colon);
-  return host == "localhost" || host == "[::1]" || host.rfind("127.", 0) == 0;
-}
-
 // The target of the last MakeStub, for the error hints.
 std::string& LastTarget() {
   static std::string target;
@@ -125,7 +116,19 @@ std::unique_ptr<v1::CalibrationService::Stub> MakeStub(const std::string& server
   grpc::ChannelArguments args;
   args.SetMaxReceiveMessageSize(64 << 20);
   std::shared_ptr<grpc::ChannelCredentials> creds;
-  const bool tls = !o.ca_file.empty() || !o.cert_file.empty() || (!o.insecure && !IsLoopback(address));
+  // Loopback by what the name resolves to, every address of it (io/net.h):
+  // a name spelt like 127.x but resolving elsewhere gets TLS.
+  const io::LoopbackCheck where = io::CheckLoopback(address);
+  const bool tls = !o.ca_file.empty() || !o.cert_file.empty() || (!o.insecure && !where.loopback);
+  // A bearer token is a password: never in clear off this machine, not even
+  // with --insecure.
+  if (!tls && !where.loopback && !o.token_file.empty()) {
+    std::fprintf(stderr,
+                 "fluxcal: --token-file: tokens need TLS off loopback; %s %s, so the token is not sent in "
+                 "plaintext (drop --insecure and pass --ca)\n",
+                 address.c_str(), where.why.c_str());
+    return nullptr;
+  }
   if (tls) {
     grpc::SslCredentialsOptions ssl;
     if (!ReadPem(o.ca_file, "--ca", &ssl.pem_root_certs) || !ReadPem(o.cert_file, "--cert", &ssl.pem_cert_chain) ||

@@ -22,6 +22,7 @@
 #include "grpc/reflection/v1alpha/reflection.grpc.pb.h"
 #include "gtest/gtest.h"
 #include "io/csv.h"
+#include "io/net.h"
 #include "server/auth.h"
 #include "io/sha256.h"
 #include "pipeline/anchor.h"
@@ -749,12 +750,19 @@ TEST(Serve, RefusesUnsafeListenSetups) {
   EXPECT_EQ(RunFluxcal("serve --db " + db + " --tls-cert /nonexistent.pem --tls-key x", &err), 2);
   EXPECT_NE(err.find("cannot read"), std::string::npos) << err;
   EXPECT_FALSE(fs::exists(db));
-  EXPECT_TRUE(IsLoopbackAddress("127.0.0.1:50051"));
-  EXPECT_TRUE(IsLoopbackAddress("localhost:1"));
-  EXPECT_TRUE(IsLoopbackAddress("[::1]:1"));
-  EXPECT_FALSE(IsLoopbackAddress("0.0.0.0:50051"));
-  EXPECT_FALSE(IsLoopbackAddress("[::]:50051"));
-  EXPECT_FALSE(IsLoopbackAddress("10.0.0.5:50051"));
+  EXPECT_TRUE(io::IsLoopbackAddress("127.0.0.1:50051"));
+  EXPECT_TRUE(io::IsLoopbackAddress("localhost:1"));
+  EXPECT_TRUE(io::IsLoopbackAddress("[::1]:1"));
+  EXPECT_FALSE(io::IsLoopbackAddress("0.0.0.0:50051"));
+  EXPECT_FALSE(io::IsLoopbackAddress("[::]:50051"));
+  EXPECT_FALSE(io::IsLoopbackAddress("10.0.0.5:50051"));
+  // Spelt like loopback, but a DNS name that does not resolve (or resolves
+  // elsewhere): TLS and --auth needed, like any other address.
+  EXPECT_FALSE(io::IsLoopbackAddress("127.plant.example:50051"));
+  EXPECT_EQ(RunFluxcal("serve --db " + db + " --listen 127.plant.example:0", &err), 2);
+  EXPECT_NE(err.find("not a loopback address: give --tls-cert and --tls-key"), std::string::npos) << err;
+  EXPECT_NE(err.find("127.plant.example:0 does not resolve"), std::string::npos) << err;
+  EXPECT_FALSE(fs::exists(db));
 }
 
 TEST(Keys, AdminCommandsRoundTrip) {
