@@ -17,6 +17,7 @@ fluxcal::fit::FitData MakeData(int side) {
   std::mt19937_64 rng(3);
   std::normal_distribution<double> n(0, 1);
   fluxcal::fit::FitData d;
+  d.pole_pairs = mp.pole_pairs;
   d.psi_pm_prior_wb = mp.sat.psi_pm_wb;
   d.rs_ohm = mp.rs_ohm;
   for (int a = 0; a < side; ++a) {

@@ -40,7 +40,7 @@ int Migrate(const ParsedArgs& a) {
   if (absl::StartsWith(*from, "postgres") || !std::filesystem::exists(src_path)) {
     return Fail("--from: expected an existing SQLite store (sqlite:PATH), got '" + *from + "'");
   }
-  auto src = storage::Store::Open(*from);
+  auto src = storage::Store::Open(*from, {.create = false});
   if (!src.ok()) return Fail(std::string(src.status().message()));
   auto dst = storage::Store::Open(*to);
   if (!dst.ok()) return Fail(std::string(dst.status().message()));
@@ -49,13 +49,14 @@ int Migrate(const ParsedArgs& a) {
   if (!r.ok()) return Fail(std::string(r.status().message()));
   Print({{"motors", r->motors}, {"runs", r->runs}, {"points", r->points}, {"recordings", r->recordings},
          {"calibrations", r->calibrations}, {"releases", r->releases}, {"audit_rows", r->audit_rows},
-         {"chain_links", r->chain_links}, {"content_sha256", r->content_sha256}, {"verified", true}},
+         {"chain_links", r->chain_links}, {"release_links", r->release_links},
+         {"content_sha256", r->content_sha256}, {"verified", true}},
         a.Has("json"),
         "migrated " + std::to_string(r->motors) + " motors, " + std::to_string(r->runs) + " runs, " +
             std::to_string(r->points) + " points, " + std::to_string(r->recordings) + " recordings, " +
             std::to_string(r->calibrations) + " calibrations, " + std::to_string(r->releases) + " releases, " +
-            std::to_string(r->audit_rows) + " audit rows, " + std::to_string(r->chain_links) +
-            " chain links; content sha256 " + r->content_sha256 +
+            std::to_string(r->audit_rows) + " audit rows, " + std::to_string(r->chain_links) + " chain links, " +
+            std::to_string(r->release_links) + " release links; content sha256 " + r->content_sha256 +
             " equal on both sides");
   return 0;
 }
@@ -69,7 +70,7 @@ int Backup(const ParsedArgs& a) {
   if (std::filesystem::exists(*out)) return Fail("--out: '" + *out + "' exists; refusing to overwrite");
   const std::string path = absl::StartsWith(*db, "sqlite:") ? db->substr(7) : *db;
   if (!std::filesystem::exists(path)) return Fail("--db: no SQLite store at '" + path + "'");
-  auto store = storage::SqliteStore::Open(path);
+  auto store = storage::SqliteStore::Open(path, /*create=*/false);
   if (!store.ok()) return Fail(std::string(store.status().message()));
   if (auto st = (*store)->Backup(*out); !st.ok()) return Fail(std::string(st.message()));
   auto copy = storage::Store::Open(*out);
@@ -87,8 +88,9 @@ int Backup(const ParsedArgs& a) {
 int Hash(const ParsedArgs& a) {
   const auto db = a.Get("db");
   if (!db) return Fail("usage: fluxcal admin hash --db URL [--json]", 2);
-  auto store = storage::Store::Open(*db);
-  if (!store.ok()) return Fail(std::string(store.status().message()));
+  // Only reads: a store that does not exist is refused, not created.
+  auto store = storage::Store::Open(*db, {.create = false});
+  if (!store.ok()) return Fail("flag --db: " + std::string(store.status().message()));
   auto h = pipeline::ContentHash(**store);
   if (!h.ok()) return Fail(std::string(h.status().message()));
   Print({{"backend", (*store)->Backend()}, {"content_sha256", *h}}, a.Has("json"), *h);
@@ -105,7 +107,8 @@ const FlagSpecs kAdminFlags = {
 
 int RunAdmin(const std::vector<std::string>& argv) {
   if (argv.empty()) {
-    return Fail("usage: fluxcal admin migrate|backup|hash|add-key|add-cert|revoke|list-keys|keygen ...", 2);
+    return Fail("usage: fluxcal admin migrate|backup|hash|anchor|verify-db|add-key|add-cert|revoke|list-keys|keygen ...",
+                2);
   }
   auto a = ParseArgs(std::vector<std::string>(argv.begin() + 1, argv.end()), kAdminFlags);
   if (!a.ok()) return Fail(std::string(a.status().message()), 2);
@@ -113,7 +116,9 @@ int RunAdmin(const std::vector<std::string>& argv) {
   if (argv[0] == "migrate") return Migrate(*a);
   if (argv[0] == "backup") return Backup(*a);
   if (argv[0] == "hash") return Hash(*a);
-  return Fail("unknown admin command '" + argv[0] + "' (migrate, backup, hash, add-key, add-cert, revoke, list-keys, keygen)", 2);
+  return Fail("unknown admin command '" + argv[0] +
+                  "' (migrate, backup, hash, anchor, verify-db, add-key, add-cert, revoke, list-keys, keygen)",
+              2);
 }
 
 }  // namespace
@@ -123,7 +128,7 @@ FLUXCAL_REGISTER_COMMAND("admin", "store administration: migrate SQLite to Postg
                          "fluxcal admin migrate --from sqlite:PATH --to postgresql://... [--json]\n"
                          "fluxcal admin backup --db PATH --out FILE [--json]\n"
                          "fluxcal admin hash --db URL [--json]\n"
-                         "fluxcal admin keygen|add-key|add-cert|revoke|list-keys|verify-db ...  (fluxcal help admin add-key, ...)",
+                         "fluxcal admin keygen|add-key|add-cert|revoke|list-keys|verify-db|anchor ...  (fluxcal help admin add-key, ...)",
                          kAdminFlags);
 
 }  // namespace fluxcal::cli

@@ -1,7 +1,10 @@
 // fluxcal admin add-key|add-cert|revoke|list-keys --keys KEYS.json ...
 // Manages the identities `fluxcal serve --auth KEYS.json` accepts
 // (server/auth.h). A token is printed once, when it is made; the file keeps
-// only its SHA-256.
+// only its SHA-256. The file is replaced atomically and keeps its owner,
+// group and mode; --group GROUP makes it mode 0640 in that group, so the
+// service user reads it (docs/security.md). A running server picks up the
+// change within a second, or at once on SIGHUP.
 #include <cstdio>
 #include <iostream>
 
@@ -30,22 +33,28 @@ int Fail(const char* cmd, const absl::Status& s) {
   return 1;
 }
 
+constexpr char kGroupHelp[] =
+    "group of the service user (name or number): the keys file becomes mode 0640 in it (default: a new file is "
+    "0600, an existing one keeps its owner, group and mode)";
 const FlagSpecs kAddKeyFlags = {
     {"keys", "KEYS.json", "the keys file of `fluxcal serve --auth` (created if missing)"},
     {"name", "NAME", "identity (unique in the keys file; logged in the audit trail)"},
-    {"role", "ROLE", "station|release|flasher|engineer|admin"},
+    {"role", "ROLE", "station|release|flasher|engineer|admin|health"},
+    {"group", "GROUP", kGroupHelp},
     {"json", "", "print the result as one JSON document"},
 };
 const FlagSpecs kAddCertFlags = {
     {"keys", "KEYS.json", "the keys file of `fluxcal serve --auth` (created if missing)"},
     {"name", "NAME", "identity (unique in the keys file; logged in the audit trail)"},
-    {"role", "ROLE", "station|release|flasher|engineer|admin"},
+    {"role", "ROLE", "station|release|flasher|engineer|admin|health"},
     {"cn", "CN", "the client certificate's subject common name"},
+    {"group", "GROUP", kGroupHelp},
     {"json", "", "print the result as one JSON document"},
 };
 const FlagSpecs kRevokeFlags = {
     {"keys", "KEYS.json", "the keys file of `fluxcal serve --auth`"},
     {"name", "NAME", "identity to remove"},
+    {"group", "GROUP", kGroupHelp},
     {"json", "", "print the result as one JSON document"},
 };
 const FlagSpecs kListKeysFlags = {
@@ -61,12 +70,14 @@ int AddEntry(const std::vector<std::string>& argv, bool cert) {
   const char* cmd = cert ? "add-cert" : "add-key";
   auto args = ParseArgs(argv, cert ? kAddCertFlags : kAddKeyFlags);
   if (!args.ok() || !args->Get("keys") || !args->Get("name") || !args->Get("role") || (cert && !args->Get("cn"))) {
-    std::fprintf(stderr, "usage: fluxcal admin %s --keys KEYS.json --name NAME --role %s%s [--json]\n", cmd,
-                 "station|release|flasher|engineer|admin", cert ? " --cn CERT_COMMON_NAME" : "");
+    std::fprintf(stderr, "usage: fluxcal admin %s --keys KEYS.json --name NAME --role %s%s [--group GROUP] [--json]\n",
+                 cmd, "station|release|flasher|engineer|admin|health", cert ? " --cn CERT_COMMON_NAME" : "");
     return 2;
   }
   auto role = server::ParseRole(*args->Get("role"));
-  if (!role) return Fail(cmd, absl::InvalidArgumentError("--role: one of station, release, flasher, engineer, admin"));
+  if (!role) {
+    return Fail(cmd, absl::InvalidArgumentError("--role: one of station, release, flasher, engineer, admin, health"));
+  }
   const std::string name = *args->Get("name");
   if (!io::IsValidSerial(name)) {
     return Fail(cmd, absl::InvalidArgumentError("--name: 1 to 64 characters of A-Z a-z 0-9 - _ ."));
@@ -89,7 +100,9 @@ int AddEntry(const std::vector<std::string>& argv, bool cert) {
     e.token_sha256 = io::Sha256Hex(token);
   }
   keys->entries.push_back(e);
-  if (auto s = server::SaveKeys(*args->Get("keys"), *keys); !s.ok()) return Fail(cmd, s);
+  if (auto s = server::SaveKeys(*args->Get("keys"), *keys, args->Get("group").value_or("")); !s.ok()) {
+    return Fail(cmd, s);
+  }
   if (args->Has("json")) {
     nlohmann::json j = {{"name", name}, {"role", std::string(server::RoleName(*role))}};
     if (cert) j["cert_cn"] = e.cert_cn; else j["token"] = token;
@@ -111,7 +124,7 @@ int RunAddCert(const std::vector<std::string>& argv) { return AddEntry(argv, tru
 int RunRevoke(const std::vector<std::string>& argv) {
   auto args = ParseArgs(argv, kRevokeFlags);
   if (!args.ok() || !args->Get("keys") || !args->Get("name")) {
-    std::fprintf(stderr, "usage: fluxcal admin revoke --keys KEYS.json --name NAME [--json]\n");
+    std::fprintf(stderr, "usage: fluxcal admin revoke --keys KEYS.json --name NAME [--group GROUP] [--json]\n");
     return 2;
   }
   auto keys = server::LoadKeys(*args->Get("keys"));
@@ -121,11 +134,14 @@ int RunRevoke(const std::vector<std::string>& argv) {
   if (keys->entries.size() == before) {
     return Fail("revoke", absl::NotFoundError("--name: '" + *args->Get("name") + "' is not in the keys"));
   }
-  if (auto s = server::SaveKeys(*args->Get("keys"), *keys); !s.ok()) return Fail("revoke", s);
+  if (auto s = server::SaveKeys(*args->Get("keys"), *keys, args->Get("group").value_or("")); !s.ok()) {
+    return Fail("revoke", s);
+  }
   if (args->Has("json")) {
     std::cout << nlohmann::json{{"revoked", *args->Get("name")}}.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
   } else {
-    std::printf("revoked %s (a running server reads its keys at start: restart it)\n", args->Get("name")->c_str());
+    std::printf("revoked %s (a running server drops it within a second, or at once on SIGHUP)\n",
+                args->Get("name")->c_str());
   }
   return 0;
 }
@@ -183,13 +199,14 @@ FLUXCAL_REGISTER_COMMAND("admin keygen", "make an Ed25519 key pair for signing e
                          kKeygenFlags);
 FLUXCAL_REGISTER_COMMAND("admin add-key", "make a bearer token for an identity with a role (printed once)",
                          RunAddKey,
-                         "fluxcal admin add-key --keys KEYS.json --name NAME --role ROLE [--json]",
+                         "fluxcal admin add-key --keys KEYS.json --name NAME --role ROLE [--group GROUP] [--json]",
                          kAddKeyFlags);
 FLUXCAL_REGISTER_COMMAND("admin add-cert", "accept a client certificate common name with a role", RunAddCert,
-                         "fluxcal admin add-cert --keys KEYS.json --name NAME --role ROLE --cn CERT_COMMON_NAME [--json]",
+                         "fluxcal admin add-cert --keys KEYS.json --name NAME --role ROLE --cn CERT_COMMON_NAME\n"
+                         "  [--group GROUP] [--json]",
                          kAddCertFlags);
 FLUXCAL_REGISTER_COMMAND("admin revoke", "remove an identity from a keys file", RunRevoke,
-                         "fluxcal admin revoke --keys KEYS.json --name NAME [--json]",
+                         "fluxcal admin revoke --keys KEYS.json --name NAME [--group GROUP] [--json]",
                          kRevokeFlags);
 FLUXCAL_REGISTER_COMMAND("admin list-keys", "list identities and roles of a keys file", RunListKeys,
                          "fluxcal admin list-keys --keys KEYS.json [--json]",

@@ -1,10 +1,13 @@
-// fluxcal compare calibration.json map.csv [--region IDMIN:IDMAX,IQMIN:IQMAX] [--sym] [--json]
+// fluxcal compare calibration.json map.csv [--region IDMIN:IDMAX,IQMIN:IQMAX] [--sym]
+//                 [--convention C] [--current S] [--flux-amplitude S] [--units U] [--json]
 // Flux error of a calibration against a flux map's nodes (io/flux_map.h)
 // inside a current region (default: the calibration's measured region):
 // RMS and maximum of |psi_cal - psi_map|, absolute in Wb and relative to the
 // largest |psi| among those nodes, per-axis RMS and the worst node.
 // --sym compares against the publisher's symmetrised columns
-// (psi_d_sym_*, psi_q_sym_*) instead of the raw ones.
+// (psi_d_sym_*, psi_q_sym_*) instead of the raw ones. The map is read in
+// the convention the flags name (cli/support_flux_map.h; default: detected)
+// and refused when implausible (io/flux_map.h).
 #include <cmath>
 #include <cstdio>
 #include <iostream>
@@ -14,6 +17,7 @@
 #include "absl/strings/str_split.h"
 #include "cli/args.h"
 #include "cli/command.h"
+#include "cli/support_flux_map.h"
 #include "fitting/calibration.h"
 #include "io/flux_map.h"
 #include "nlohmann/json.hpp"
@@ -41,19 +45,26 @@ bool ParseRegion(const std::string& s, tables::CurrentRegion* r) {
   return true;
 }
 
-const FlagSpecs kCompareFlags = {
-    {"region", "IDMIN:IDMAX,IQMIN:IQMAX", "current region compared, A (default the calibration's measured region)"},
-    {"sym", "", "compare against the map's symmetrised columns (psi_d_sym_*, psi_q_sym_*) instead of the raw ones"},
-    {"json", "", "print the result as one JSON document"},
-};
+const FlagSpecs kCompareFlags = [] {
+  FlagSpecs f = {
+      {"region", "IDMIN:IDMAX,IQMIN:IQMAX", "current region compared, A (default the calibration's measured region)"},
+      {"sym", "", "compare against the map's symmetrised columns (psi_d_sym_*, psi_q_sym_*) instead of the raw ones"},
+      {"json", "", "print the result as one JSON document"},
+  };
+  for (const auto& c : FluxMapConventionFlags()) f.push_back(c);
+  return f;
+}();
 
 int RunCompare(const std::vector<std::string>& argv) {
   auto args = ParseArgs(argv, kCompareFlags);
   if (!args.ok()) return Fail(std::string(args.status().message()), 2);
   if (args->positional.size() != 2) {
-    return Fail("usage: fluxcal compare calibration.json map.csv [--region IDMIN:IDMAX,IQMIN:IQMAX] [--sym] [--json]",
+    return Fail("usage: fluxcal compare calibration.json map.csv [--region IDMIN:IDMAX,IQMIN:IQMAX] [--sym] "
+                "[--convention C] [--current S] [--flux-amplitude S] [--units U] [--json]",
                 2);
   }
+  auto convention = FluxMapConventionFromArgs(*args);
+  if (!convention.ok()) return Fail(std::string(convention.status().message()), 2);
   tables::CurrentRegion region;
   const bool region_given = args->Get("region").has_value();
   if (region_given && !ParseRegion(*args->Get("region"), &region)) {
@@ -66,8 +77,10 @@ int RunCompare(const std::vector<std::string>& argv) {
   if (!cal.ok()) return Fail(std::string(cal.status().message()));
   io::FluxMapReadOptions ro;
   ro.columns = args->Has("sym") ? io::FluxMapColumns::kSymmetrised : io::FluxMapColumns::kRaw;
+  ro.convention = *convention;
   auto map = io::ReadFluxMapCsv(map_path, ro);
   if (!map.ok()) return Fail(std::string(map.status().message()));
+  std::fprintf(stderr, "compare: map %s: %s\n", map_path.c_str(), map->convention.Describe().c_str());
   if (!region_given) region = tables::MeasuredRegion(*cal);
   std::fprintf(stderr, "compare: map %s, %zu x %zu nodes; region id %g..%g A, iq %g..%g A (%s)\n", map_path.c_str(),
                map->id_a.size(), map->iq_a.size(), region.id_min_a, region.id_max_a, region.iq_min_a,
@@ -82,6 +95,7 @@ int RunCompare(const std::vector<std::string>& argv) {
         {"model", cal->family().Name()},
         {"map", map_path},
         {"columns", args->Has("sym") ? "sym" : "raw"},
+        {"convention", FluxMapConventionJson(map->convention)},
         {"region",
          {{"id_min_a", region.id_min_a}, {"id_max_a", region.id_max_a}, {"iq_min_a", region.iq_min_a},
           {"iq_max_a", region.iq_max_a}, {"source", region_given ? "flag" : "measured"}}},
@@ -116,7 +130,8 @@ int RunCompare(const std::vector<std::string>& argv) {
 
 FLUXCAL_REGISTER_COMMAND("compare", "flux error of a calibration against a flux map (CSV grid) in a current region",
                          RunCompare,
-                         "fluxcal compare calibration.json map.csv [--region IDMIN:IDMAX,IQMIN:IQMAX] [--sym] [--json]",
+                         "fluxcal compare calibration.json map.csv [--region IDMIN:IDMAX,IQMIN:IQMAX] [--sym] "
+                         "[--convention C] [--current S] [--flux-amplitude S] [--units U] [--json]",
                          kCompareFlags);
 
 }  // namespace fluxcal::cli

@@ -2,7 +2,10 @@
 //             [--tables-dir DIR] [--upload-recording] [--json]
 // The EOL station flow: identify every point locally, stream the results
 // for the serial, (with --upload-recording) upload the raw set, ask for a
-// fit and its verdict, fetch the ECU tables.
+// fit and its verdict, fetch the ECU tables. Each stream declares its end
+// (count and SHA-256 of what it carries), and the reply's count and digest
+// of what the service stored must equal what was sent, or eol stops (exit
+// 1) before anything is fitted.
 #include <chrono>
 #include <thread>
 #include <cmath>
@@ -17,6 +20,7 @@
 #include "cli/command.h"
 #include "cli/support_remote.h"
 #include "io/sha256.h"
+#include "pipeline/ingest_stream.h"
 #include "pipeline/points.h"
 #include "io/csv.h"
 #include "io/recording_set.h"
@@ -97,6 +101,8 @@ int RunEol(const std::vector<std::string>& argv) {
   // Stream the per-point results (one message per point, as a station does
   // while the motor is on the bench).
   v1::IngestHfResultsResponse ing;
+  const pipeline::StreamTotals points_sent{0, static_cast<int64_t>(ids->points.size()), 0,
+                                           pipeline::HfPointsSha256(ids->points)};
   {
     for (const auto& f : ids->failures) std::fprintf(stderr, "eol %s: point not identified: %s\n", serial.c_str(), f.c_str());
     std::vector<v1::IngestHfResultsRequest> msgs;
@@ -111,6 +117,9 @@ int RunEol(const std::vector<std::string>& argv) {
     auto& first = msgs.front();
     first.set_serial(serial);
     first.set_station_id(args->Get("station").value_or("eol"));
+    // The stream declares its end: the service refuses it whole when a
+    // message is lost, cut or fails to parse (docs/service.md).
+    first.set_end_follows(true);
     auto* mo = first.mutable_motor();
     mo->set_pole_pairs(set->manifest.motor.pole_pairs);
     mo->set_rs_ohm(set->manifest.motor.rs_ohm.value_or(0));
@@ -118,6 +127,13 @@ int RunEol(const std::vector<std::string>& argv) {
     // The run's idempotency key is its content: a retry after a lost reply
     // (UNAVAILABLE, DEADLINE_EXCEEDED) stores nothing twice.
     first.set_idempotency_key("eol-" + io::Sha256Hex(content).substr(0, 40));
+    {
+      v1::IngestHfResultsRequest last;
+      last.mutable_end()->set_messages(static_cast<int64_t>(msgs.size()) + 1);
+      last.mutable_end()->set_count(static_cast<int64_t>(ids->points.size()));
+      last.mutable_end()->set_sha256(points_sent.sha256);
+      msgs.push_back(std::move(last));
+    }
     const grpc::Status s = WithRetries(serial, "run", [&] {
       grpc::ClientContext ctx;
       ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
@@ -131,8 +147,15 @@ int RunEol(const std::vector<std::string>& argv) {
     });
     if (!s.ok()) return ReportRpcError("eol", s);
   }
-  std::fprintf(stderr, "eol %s: %d points stored (run %lld, %d rejected)\n", serial.c_str(), ing.accepted(),
-               static_cast<long long>(ing.run_id()), ing.rejects_size());
+  // What the service stored must be what this station sent: count and digest.
+  if (auto st = pipeline::CheckStored(points_sent, {0, ing.accepted(), 0, ing.points_sha256()}, "points");
+      !st.ok()) {
+    std::fprintf(stderr, "fluxcal eol: %s: run %lld: %s\n", serial.c_str(), static_cast<long long>(ing.run_id()),
+                 std::string(st.message()).c_str());
+    return 1;
+  }
+  std::fprintf(stderr, "eol %s: %d points stored (run %lld, sha256 %s, as sent)\n", serial.c_str(), ing.accepted(),
+               static_cast<long long>(ing.run_id()), ing.points_sha256().substr(0, 16).c_str());
   // The raw set, so that the service can diagnose this serial (Diagnose
   // reads the latest stored recording) and fit it from everything the set
   // holds, as `fluxcal fit SET` does. Uploaded before the fit: a failed
@@ -148,6 +171,8 @@ int RunEol(const std::vector<std::string>& argv) {
     std::string content;
     for (const auto& [name, data] : *files) content += name + '\n' + std::to_string(data.size()) + '\n' + data;
     const std::string key = "eolrec-" + io::Sha256Hex(content).substr(0, 40);
+    const pipeline::StreamTotals files_sent{0, static_cast<int64_t>(files->size()), pipeline::RecordingFilesBytes(*files),
+                                            pipeline::RecordingFilesSha256(*files)};
     std::fprintf(stderr, "eol %s: uploading the recording (%zu files, %zu bytes)\n", serial.c_str(), files->size(),
                  content.size());
     rec.emplace();
@@ -159,6 +184,7 @@ int RunEol(const std::vector<std::string>& argv) {
       // serial, the station and the key.
       constexpr size_t kChunk = 1 << 20;
       bool first = true, open = true;
+      int64_t chunks = 0;
       for (auto it = files->begin(); open && it != files->end(); ++it) {
         const auto& [name, data] = *it;
         // An empty file still goes out as one chunk, so the set is complete.
@@ -168,17 +194,35 @@ int RunEol(const std::vector<std::string>& argv) {
             c.set_serial(serial);
             c.set_station_id(args->Get("station").value_or("eol"));
             c.set_idempotency_key(key);
+            c.set_end_follows(true);
             first = false;
           }
           c.set_path(name);
           c.set_data(data.substr(off, kChunk));
           open = writer->Write(c);   // false: the stream broke; Finish says why
+          ++chunks;
         }
+      }
+      if (open) {
+        // The declared end: what was sent, checked by the service before
+        // anything is stored.
+        v1::RecordingChunk last;
+        last.mutable_end()->set_messages(chunks + 1);
+        last.mutable_end()->set_count(files_sent.count);
+        last.mutable_end()->set_bytes(files_sent.bytes);
+        last.mutable_end()->set_sha256(files_sent.sha256);
+        writer->Write(last);
       }
       writer->WritesDone();
       return writer->Finish();
     });
     if (!s.ok()) return ReportRpcError("eol", s);
+    if (auto st = pipeline::CheckStored(files_sent, {0, rec->files(), rec->files_bytes(), rec->files_sha256()}, "files");
+        !st.ok()) {
+      std::fprintf(stderr, "fluxcal eol: %s: recording run %lld: %s\n", serial.c_str(),
+                   static_cast<long long>(rec->run_id()), std::string(st.message()).c_str());
+      return 1;
+    }
     std::fprintf(stderr, "eol %s: recording %s stored (run %lld, %d points%s)\n", serial.c_str(),
                  rec->recording_sha256().substr(0, 16).c_str(), static_cast<long long>(rec->run_id()), rec->points(),
                  rec->replayed() ? ", replayed" : "");
@@ -195,13 +239,15 @@ int RunEol(const std::vector<std::string>& argv) {
     if (!s.ok()) return ReportRpcError("eol", s);
   }
   nlohmann::json out = {{"serial", serial}, {"run_id", ing.run_id()}, {"accepted", ing.accepted()},
-                        {"rejected", ing.rejects_size()}, {"version", fit.calibration().version()},
+                        {"rejected", ing.rejects_size()} /* always 0: a bad point fails the stream */,
+                        {"points_sha256", ing.points_sha256()}, {"version", fit.calibration().version()},
                         {"model", fit.calibration().model()}, {"verdict", fit.calibration().verdict()},
                         {"pass", fit.pass()}, {"psi_pm_wb", fit.calibration().psi_pm_wb()},
                         {"rms_relative", fit.calibration().rms_relative()}, {"tables", nlohmann::json::array()}};
   if (rec) {
     out["recording"] = {{"run_id", rec->run_id()}, {"points", rec->points()}, {"sha256", rec->recording_sha256()},
-                        {"bytes", rec->recording_bytes()}, {"replayed", rec->replayed()}};
+                        {"bytes", rec->recording_bytes()}, {"replayed", rec->replayed()}, {"files", rec->files()},
+                        {"files_sha256", rec->files_sha256()}};
   }
   if (auto dir = args->Get("tables-dir"); dir && fit.pass()) {
     std::filesystem::create_directories(*dir);
@@ -211,6 +257,9 @@ int RunEol(const std::vector<std::string>& argv) {
       er.set_version(fit.calibration().version());
       er.set_table(table);
       er.set_format(format);
+      // The drive's Udc as the set states it (a run of HF results does not
+      // carry it into the store); without one the service asks for it.
+      if (set->manifest.drive.udc_v) er.set_udc_v(*set->manifest.drive.udc_v);
       v1::ExportTableResponse resp;
       grpc::ClientContext ctx;
       ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(120));

@@ -1,6 +1,6 @@
 // fluxcal export calibration.json --table mtpa|mtpv|fw --format csv|json|h|cdfx|dcm
 //                [--points N] [--speed-points M] [--speed-max-rpm R] [--i-max-a A]
-//                [--udc-v V] [--ctype double|float] [--allow-extrapolation]
+//                [--udc-v V] [--rs-ohm R] [--allow-clamped] [--ctype double|float] [--allow-extrapolation]
 //                [--svg FILE] [--sign-key ED25519.key] --out FILE [--json]
 // With --sign-key, FILE.sig holds a detached Ed25519 signature
 // (tables/signature.h; `fluxcal verify FILE --pubkey KEY.pub`).
@@ -12,7 +12,9 @@
 #include <cstdio>
 #include <iostream>
 
+#include "absl/status/status.h"
 #include "absl/strings/numbers.h"
+#include "absl/strings/str_format.h"
 #include "cli/args.h"
 #include "cli/command.h"
 #include "cli/support_remote.h"
@@ -20,6 +22,7 @@
 #include "io/csv.h"
 #include "nlohmann/json.hpp"
 #include "io/sha256.h"
+#include "tables/export_rule.h"
 #include "tables/signature.h"
 #include "tables/tables.h"
 
@@ -37,11 +40,13 @@ const FlagSpecs kExportFlags = {
     {"out", "FILE", "table file to write (required; - for stdout)"},
     {"table", "T", "mtpa|mtpv|fw (default mtpa)"},
     {"format", "F", "csv|json|h|cdfx|dcm (default csv)"},
-    {"points", "N", "rows of a curve / torque axis of the fw map (default 64)"},
-    {"speed-points", "N", "fw: points on the speed axis (default 32)"},
+    {"points", "N", "at most N rows of a curve / torque axis of the fw map, round breakpoints (default 64)"},
+    {"speed-points", "N", "fw: at most N round speeds on the speed axis (default 32)"},
     {"speed-max-rpm", "RPM", "fw: speed axis range 0..RPM, mechanical rpm (default 6000)"},
     {"i-max-a", "A", "current limit, A peak (default the measured limit of the calibration)"},
-    {"udc-v", "V", "DC-link voltage, V (default 50)"},
+    {"udc-v", "V", "DC-link voltage, V (default the calibration's; fw and mtpv refuse without one)"},
+    {"rs-ohm", "R", "stator resistance, ohm (default the calibration's; fw refuses without one)"},
+    {"allow-clamped", "", "export a table with more than half of its cells clamped (refused otherwise)"},
     {"ctype", "T", "C element type of --format h: double|float (default double)"},
     {"allow-extrapolation", "", "compute beyond the measured current region (cells flagged extrapolated)"},
     {"svg", "FILE", "local only: also plot the curves / map (SVG)"},
@@ -81,14 +86,7 @@ int RunExport(const std::vector<std::string>& argv) {
   // the store, fluxcal release): say so in the file rather than guess.
   spec.verdict = tables::kVerdictUnknown;
   spec.release_state = tables::kReleaseUnknown;
-  spec.measured_current_limit_a = cal->MeasuredCurrentLimitA();
   spec.allow_extrapolation = args->Has("allow-extrapolation");
-  tables::MachineLimits lim;
-  lim.pole_pairs = cal->pole_pairs();
-  lim.rs_ohm = cal->rs_ohm();
-  // Default current limit: what the measurements cover, so that a table does
-  // not rest on extrapolated magnetics unless asked to (--i-max-a).
-  if (cal->MeasuredCurrentLimitA() > 0) lim.i_max_a = cal->MeasuredCurrentLimitA();
   auto get_int = [&](const char* flag, int* v) {
     if (auto s = args->Get(flag)) return absl::SimpleAtoi(*s, v);
     return true;
@@ -96,16 +94,40 @@ int RunExport(const std::vector<std::string>& argv) {
   if (!get_int("points", &spec.points) || !get_int("speed-points", &spec.speed_points)) {
     return Fail("flags --points/--speed-points: expected integers", 2);
   }
-  for (auto [flag, dst] : {std::pair<const char*, double*>{"speed-max-rpm", &spec.speed_max_rpm},
-                           {"i-max-a", &lim.i_max_a}, {"udc-v", &lim.udc_v}}) {
+  // Limits: the flags', else the calibration's, under the one export rule
+  // (tables/export_rule.h) the service applies too.
+  tables::ExportRequest request;
+  request.allow_clamped = args->Has("allow-clamped");
+  if (auto v = args->GetDouble("speed-max-rpm"); !v.ok()) {
+    return Fail(std::string(v.status().message()), 2);
+  } else if (v->has_value()) {
+    spec.speed_max_rpm = **v;
+  }
+  for (auto [flag, dst] : {std::pair<const char*, std::optional<double>*>{"i-max-a", &request.i_max_a},
+                           {"udc-v", &request.udc_v}, {"rs-ohm", &request.rs_ohm}}) {
     auto v = args->GetDouble(flag);
     if (!v.ok()) return Fail(std::string(v.status().message()), 2);
-    if (v->has_value()) *dst = **v;
+    *dst = *v;
   }
-  std::fprintf(stderr, "export: building %s table (%d points) for %s\n", spec.kind.c_str(), spec.points,
+  std::fprintf(stderr, "export: building %s table (at most %d points) for %s\n", spec.kind.c_str(), spec.points,
                spec.serial.c_str());
-  auto table = tables::BuildTable(*cal, lim, spec);
-  if (!table.ok()) return Fail(std::string(table.status().message()), 2);
+  auto built = tables::BuildExportTable(*cal, spec, request);
+  if (!built.ok()) {
+    // A flag to give or correct is a usage error; a table refused for what
+    // it would contain (mostly clamped, no MTPV point inside) is not.
+    return Fail(std::string(built.status().message()), absl::IsInvalidArgument(built.status()) ? 2 : 1);
+  }
+  const tables::Table* table = &built->table;
+  const tables::MachineLimits& lim = built->limits.limits;
+  if (!built->limits.overridden.empty()) {
+    std::fprintf(stderr, "export: note: %s\n", built->limits.overridden.c_str());
+  }
+  const tables::ClampSummary& clamp = built->clamped;
+  if (clamp.clamped > 0) {
+    std::fprintf(stderr, "export: warning: %zu of %zu cells (%.1f %%) clamped: %s%s\n", clamp.clamped, clamp.cells,
+                 100 * clamp.share, clamp.why.c_str(),
+                 clamp.share > tables::kMaxClampedShare ? " (exported on --allow-clamped)" : "");
+  }
   tables::ExportOptions options;
   options.ctype = *ctype;
   auto out = tables::Export(*table, *fmt, options);
@@ -126,6 +148,7 @@ int RunExport(const std::vector<std::string>& argv) {
       text = tables::PlotMapSvg(*table, "id_a");
     } else {
       tables::TableSpec ms = spec;
+      ms.measured_current_limit_a = table->measured_current_limit_a;   // as the export rule set it
       ms.kind = "mtpa";
       auto mtpa = spec.kind == "mtpa" ? absl::StatusOr<tables::Table>(*table) : tables::BuildTable(*cal, lim, ms);
       if (spec.kind == "mtpv") {
@@ -139,8 +162,7 @@ int RunExport(const std::vector<std::string>& argv) {
     }
     if (auto st = io::WriteFileAtomically(*svg, text); !st.ok()) return Fail(std::string(st.message()));
   }
-  size_t clamped = 0, extrapolated = 0;
-  for (auto c : table->clamped) clamped += c;
+  size_t extrapolated = 0;
   for (auto c : table->extrapolated) extrapolated += c;
   char crc[16];
   std::snprintf(crc, sizeof crc, "%08x", out->payload_crc32);
@@ -150,21 +172,28 @@ int RunExport(const std::vector<std::string>& argv) {
   if (!written.ok()) return Fail(std::string(written.status().message()));
   const std::string file_sha256 = io::Sha256Hex(*written);
   if (args->Has("json")) {
-    std::cout << nlohmann::json{{"out", *args->Get("out")}, {"table", spec.kind}, {"format", args->Get("format").value_or("csv")},
-                                {"serial", spec.serial}, {"calibration_version", spec.calibration_version},
-                                {"rows", table->clamped.size()}, {"clamped_rows", clamped},
-                                {"extrapolated_cells", extrapolated},
-                                {"i_max_a", lim.i_max_a}, {"udc_v", lim.udc_v}, {"u_max_v", lim.UMaxV()},
-                                {"verdict", table->verdict}, {"release_state", table->release_state},
-                                {"sha256", file_sha256}, {"payload_crc32", crc}, {"payload_sha256", out->payload_sha256},
-                                {"bytes", written->size()}, {"signature", sig_path}}
-                     .dump(2, ' ', false, nlohmann::json::error_handler_t::replace)
-              << "\n";
+    // Unknown limits are null, with where each known one came from.
+    auto opt = [](const std::optional<double>& v) { return v ? nlohmann::json(*v) : nlohmann::json(); };
+    nlohmann::json j = {{"out", *args->Get("out")}, {"table", spec.kind}, {"format", args->Get("format").value_or("csv")},
+                        {"serial", spec.serial}, {"calibration_version", spec.calibration_version},
+                        {"rows", clamp.cells}, {"cells", clamp.cells}, {"clamped_rows", clamp.clamped},
+                        {"clamped_cells", clamp.clamped}, {"clamped_share", clamp.share},
+                        {"extrapolated_cells", extrapolated},
+                        {"i_max_a", lim.i_max_a}, {"udc_v", opt(lim.udc_v)}, {"rs_ohm", opt(lim.rs_ohm)},
+                        {"u_max_v", lim.udc_v ? nlohmann::json(lim.UMaxV()) : nlohmann::json()},
+                        {"verdict", table->verdict}, {"release_state", table->release_state},
+                        {"sha256", file_sha256}, {"payload_crc32", crc}, {"payload_sha256", out->payload_sha256},
+                        {"bytes", written->size()}, {"signature", sig_path}};
+    auto src = [](const std::string& v) { return v.empty() ? nlohmann::json() : nlohmann::json(v); };
+    j["sources"] = {{"i_max_a", src(built->limits.i_max_source)}, {"udc_v", src(built->limits.udc_source)},
+                    {"rs_ohm", src(built->limits.rs_source)}};
+    std::cout << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
   } else {
-    std::fprintf(to_stdout ? stderr : stdout, "%s: %s table, %zu cells (%zu clamped at limits, %zu extrapolated), i_max %.6g A, u_max %.6g V\n"
+    const std::string u_max = lim.udc_v ? absl::StrFormat("u_max %.6g V", lim.UMaxV()) : "no voltage limit (Udc not known)";
+    std::fprintf(to_stdout ? stderr : stdout, "%s: %s table, %zu cells (%zu clamped at limits, %zu extrapolated), i_max %.6g A, %s\n"
                 "  sha256 %s (file)\n  payload_crc32 %s payload_sha256 %s (values, docs/tables.md)\n",
-                args->Get("out")->c_str(), spec.kind.c_str(), table->clamped.size(), clamped, extrapolated,
-                lim.i_max_a, lim.UMaxV(), file_sha256.c_str(), crc, out->payload_sha256.c_str());
+                args->Get("out")->c_str(), spec.kind.c_str(), clamp.cells, clamp.clamped, extrapolated,
+                lim.i_max_a, u_max.c_str(), file_sha256.c_str(), crc, out->payload_sha256.c_str());
   }
   return 0;
 }

@@ -1,9 +1,16 @@
-// fluxcal fit <recording-set | hf_results.csv> [--model auto|analytic|spline|splineR|poly|polyN]
-//             --out calibration.json [--svg PLOT.svg] [--json] [--serial S --pole-pairs P]
-// fluxcal fit --map map.csv --pole-pairs P [--psi-std-wb S] [--rs-ohm R] [--serial S] --out calibration.json
+// fluxcal fit <recording-set> [--model auto|analytic|spline|splineR|poly|polyN]
+//             --out calibration.json [--svg PLOT.svg] [--json] [machine-fact flags]
+// fluxcal fit hf_results.csv --serial S --pole-pairs P --psi-pm-wb WB [--rs-ohm R] [--udc-v V] ...
+// fluxcal fit --map map.csv --pole-pairs P [--psi-std-wb S] [--rs-ohm R] [--udc-v V] [--serial S]
+//             [--convention C] [--current S] [--flux-amplitude S] [--units U] --out calibration.json
+// Machine facts (serial, pole pairs, psi_pm, Rs, Udc) come from the set's
+// manifest or these flags, never from a default (pipeline/facts.h).
 // Identifies every waveform point (least squares), then fits the
 // flux-linkage surfaces jointly with hf_results and steady-state rows; or
-// fits them to a flux map's nodes (io/flux_map.h, fit::FitDataFromFluxMap).
+// fits them to a flux map's nodes (io/flux_map.h, fit::FitDataFromFluxMap),
+// read in the convention the flags name (cli/support_flux_map.h) and
+// refused when implausible; the fit's summary reports its flux error over
+// the nodes (FitSummary::flux_*).
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -11,16 +18,19 @@
 #include <optional>
 
 #include "absl/strings/numbers.h"
+#include "absl/strings/str_cat.h"
 #include "cli/args.h"
 #include "cli/command.h"
+#include "cli/support_flux_map.h"
 #include "fitting/fit.h"
 #include "fitting/plot.h"
 #include "io/csv.h"
 #include "io/flux_map.h"
+#include "io/plausibility.h"
 #include "identification/identify.h"
+#include "pipeline/facts.h"
 #include "pipeline/points.h"
 #include "nlohmann/json.hpp"
-#include "tables/flux_map_export.h"
 
 namespace fluxcal::cli {
 namespace {
@@ -42,17 +52,26 @@ bool KnownModel(const std::string& m) {
   return false;
 }
 
-const FlagSpecs kFitFlags = {
+const FlagSpecs kFitFlags = [] {
+  FlagSpecs f = {
     {"out", "FILE", "calibration JSON to write (required; - for stdout)"},
     {"model", "M", "auto|analytic|poly|polyN (N 2..10)|spline|splineN (N 1..8)|smooth|smooth-asym (default auto: best by BIC)"},
     {"svg", "FILE", "also plot the fit against the identified inductances (SVG; not with --map)"},
     {"map", "CSV", "fit a flux map psi(id, iq) instead of a recording set (no positional argument)"},
-    {"pole-pairs", "P", "with --map: pole pairs, integer 1..100 (required: a map does not say)"},
+    {"pole-pairs", "P", "pole pairs, integer 1..100 (required for hf_results.csv and --map: they do not say)"},
+    {"serial", "S", "motor serial (required for hf_results.csv; --map: default the map file's name)"},
+    {"psi-pm-wb", "WB", "nominal magnet flux, Wb (required for hf_results.csv: not observable from inductances)"},
+    {"rs-ohm", "R", "nominal stator resistance, ohm (optional; unknown if no one states it)"},
+    {"udc-v", "V", "DC-link voltage of the drive, V (optional; fw/mtpv exports need it)"},
     {"psi-std-wb", "S", "with --map: flux standard deviation per component, Wb (default 0.2 % of the largest |psi|)"},
-    {"rs-ohm", "R", "with --map: stator resistance, ohm (default 0)"},
-    {"serial", "S", "with --map: motor serial (default the map file's name)"},
     {"json", "", "print the calibration and fit summary as one JSON document"},
-};
+  };
+  for (auto c : FluxMapConventionFlags()) {
+    c.help = "with --map: " + c.help;
+    f.push_back(c);
+  }
+  return f;
+}();
 
 int RunFit(const std::vector<std::string>& argv) {
   auto args = ParseArgs(argv, kFitFlags);
@@ -67,14 +86,34 @@ int RunFit(const std::vector<std::string>& argv) {
   }
   const bool from_map = args->Get("map").has_value();
   if (args->positional.size() != (from_map ? 0u : 1u) || !args->Get("out")) {
-    return Fail("usage: fluxcal fit <recording-set | hf_results.csv> [--model M] "
-                "--out calibration.json [--svg PLOT.svg] [--json]\n"
-                "       fluxcal fit --map map.csv --pole-pairs P [--psi-std-wb S] [--rs-ohm R] [--serial S] "
-                "[--model M] --out calibration.json [--json]", 2);
+    return Fail("usage: fluxcal fit <recording-set> [--model M] --out calibration.json [--svg PLOT.svg] [--json]\n"
+                "       fluxcal fit hf_results.csv --serial S --pole-pairs P --psi-pm-wb WB [--rs-ohm R] [--udc-v V] "
+                "[--model M] --out calibration.json [--json]\n"
+                "       fluxcal fit --map map.csv --pole-pairs P [--psi-std-wb S] [--rs-ohm R] [--udc-v V] [--serial S] "
+                "[--convention C] [--current S] [--flux-amplitude S] [--units U] [--model M] --out calibration.json "
+                "[--json]", 2);
   }
-  if (!from_map && (args->Get("psi-std-wb") || args->Get("rs-ohm"))) {
-    return Fail("flags --psi-std-wb and --rs-ohm need --map", 2);
+  if (!from_map && args->Get("psi-std-wb")) return Fail("flag --psi-std-wb needs --map", 2);
+  // The machine facts the flags state (pipeline/facts.h merges them).
+  pipeline::StatedFacts stated;
+  if (auto v = args->Get("serial")) stated.serial = *v;
+  if (auto v = args->Get("pole-pairs")) {
+    int pp = 0;
+    if (!absl::SimpleAtoi(*v, &pp)) return Fail("flag --pole-pairs: expected an integer 1..100", 2);
+    stated.pole_pairs = pp;
   }
+  for (auto [flag, dst] : {std::pair<const char*, std::optional<double>*>{"psi-pm-wb", &stated.psi_pm_wb},
+                           {"rs-ohm", &stated.rs_ohm}, {"udc-v", &stated.udc_v}}) {
+    auto v = args->GetDouble(flag);
+    if (!v.ok()) return Fail(std::string(v.status().message()), 2);
+    *dst = *v;
+  }
+  pipeline::FactSource source = pipeline::FactSource::kRecordingSet;
+  if (!from_map && HasFluxMapConventionFlag(*args)) {
+    return Fail("flags --convention, --current, --flux-amplitude and --units describe a flux map: they need --map", 2);
+  }
+  auto convention = FluxMapConventionFromArgs(*args);
+  if (!convention.ok()) return Fail(std::string(convention.status().message()), 2);
   if (from_map && args->Get("svg")) {
     // The plot draws the fit against identified inductances; a map has none.
     return Fail("--svg plots identified inductances, which a flux map does not have; check a map fit with "
@@ -86,28 +125,26 @@ int RunFit(const std::vector<std::string>& argv) {
   if (from_map) {
     int pole_pairs = 0;
     auto pp = args->Get("pole-pairs");
-    if (!pp || !absl::SimpleAtoi(*pp, &pole_pairs) || pole_pairs < 1 || pole_pairs > 100) {
-      return Fail("--map needs --pole-pairs P (an integer 1..100): a flux map does not say", 2);
+    if (!pp || !absl::SimpleAtoi(*pp, &pole_pairs) || !io::CheckPolePairs("pole_pairs", pole_pairs).ok()) {
+      return Fail(absl::StrCat("--map needs --pole-pairs P (an integer 1..", io::kMaxPolePairs,
+                               "): a flux map does not say"), 2);
     }
     auto std_wb = args->GetDouble("psi-std-wb");
-    auto rs = args->GetDouble("rs-ohm");
     if (!std_wb.ok()) return Fail(std::string(std_wb.status().message()), 2);
-    if (!rs.ok()) return Fail(std::string(rs.status().message()), 2);
     if (std_wb->has_value() && !(**std_wb > 0)) return Fail("flag --psi-std-wb: must be positive", 2);
-    if (rs->has_value() && !(**rs >= 0)) return Fail("flag --rs-ohm: must not be negative", 2);
     const std::string serial = args->Get("serial").value_or(std::filesystem::path(input).stem().string());
     if (!io::IsValidSerial(serial)) {
       return Fail("serial '" + io::Printable(serial) + "' (from " + (args->Get("serial") ? "--serial" : "the file name") +
                       ") is not 1 to 64 characters of A-Z a-z 0-9 - _ .; give --serial", 2);
     }
-    auto m = io::ReadFluxMapCsv(input);
+    io::FluxMapReadOptions ro;
+    ro.convention = *convention;
+    auto m = io::ReadFluxMapCsv(input, ro);
     if (!m.ok()) return Fail(std::string(m.status().message()));
-    double scale = 0;
-    for (const auto& p : m->Points()) scale = std::max(scale, std::hypot(p.psi_d_wb, p.psi_q_wb));
-    if (!(scale > 0)) return Fail(input + ": field 'psi_d': the map's flux is zero at every node");
+    std::fprintf(stderr, "fit: map %s: %s\n", input.c_str(), m->convention.Describe().c_str());
     data = fit::FitDataFromFluxMap(*m, pole_pairs, std_wb->value_or(0.0));
     data.serial = serial;
-    data.rs_ohm = rs->value_or(0.0);
+    source = pipeline::FactSource::kFluxMap;   // Rs and Udc: the flags', below
     std::fprintf(stderr, "fit: map %s, %zu x %zu nodes, sigma %.3g Wb per component%s\n", input.c_str(),
                  m->id_a.size(), m->iq_a.size(), data.fluxes.front().psi_std_wb,
                  data.psi_pm_prior_wb ? ", psi_pm prior from the node at (0, 0)" : "");
@@ -115,6 +152,10 @@ int RunFit(const std::vector<std::string>& argv) {
   } else if (std::filesystem::is_directory(input)) {
     auto set = io::ReadRecordingSet(input);
     if (!set.ok()) return Fail(std::string(set.status().message()));
+    // The facts before the (slow) identification: a conflict or a missing
+    // fact costs nothing. Identified points do not change them.
+    fit::FitData probe = fit::FitDataFromRecording(*set, {});
+    if (auto st = pipeline::ApplyStatedFacts(stated, source, &probe); !st.ok()) return Fail(std::string(st.message()), 2);
     ident::IdentifyOptions opt;
     opt.progress = [](size_t k, size_t n) {
       std::fprintf(stderr, "\rfit: identifying point %zu/%zu", k + 1, n);
@@ -127,13 +168,13 @@ int RunFit(const std::vector<std::string>& argv) {
     auto rows = io::ReadHfResultsCsv(input);
     if (!rows.ok()) return Fail(std::string(rows.status().message()));
     data = fit::FitDataFromHfRows(nullptr, *rows);
-    data.serial = args->Get("serial").value_or("UNKNOWN");
-    if (auto pp = args->Get("pole-pairs")) {
-      if (!absl::SimpleAtoi(*pp, &data.pole_pairs) || data.pole_pairs < 1) {
-        return Fail("flag --pole-pairs: expected a positive integer", 2);
-      }
-    }
+    source = pipeline::FactSource::kHfResults;
   }
+  std::vector<std::string> notes;
+  if (auto st = pipeline::ApplyStatedFacts(stated, source, &data, &notes); !st.ok()) {
+    return Fail(std::string(st.message()), 2);
+  }
+  for (const auto& n : notes) std::fprintf(stderr, "fit: %s\n", n.c_str());
   fit::FitOptions fo;
   fo.model = args->Get("model").value_or("auto");
   std::fprintf(stderr, "fit: %zu inductance points, %zu steady-state rows, %zu flux nodes, model %s\n",
@@ -152,32 +193,33 @@ int RunFit(const std::vector<std::string>& argv) {
     }
     std::fprintf(stderr, "fit: plot %s\n", svg->c_str());
   }
-  // The fit's own rms_relative covers inductances; against a map the
-  // figure that matters is the flux error over all of its nodes.
-  std::optional<tables::FluxMapComparison> vs_map;
-  if (map) {
-    auto c = tables::CompareWithFluxMap(*cal, *map, {map->id_a.front(), map->id_a.back(), map->iq_a.front(),
-                                                     map->iq_a.back()});
-    if (!c.ok()) return Fail(std::string(c.status().message()));
-    vs_map = *c;
-  }
+  // A map fit's figure is its flux error over the map's nodes (the fit's
+  // summary, FitSummary::flux_*); rms_relative covers inductances.
+  const auto& sum = cal->summary;
   if (args->Has("json")) {
     nlohmann::json j = cal->ToJson();
     j["out"] = *args->Get("out");
-    if (vs_map) {
-      j["map"] = {{"path", input}, {"nodes", vs_map->nodes}, {"rms_relative", vs_map->rms_relative},
-                  {"max_relative", vs_map->max_relative}, {"rms_wb", vs_map->rms_wb}, {"max_wb", vs_map->max_wb}};
+    if (map) {
+      j["map"] = {{"path", input},
+                  {"nodes", sum.flux_nodes},
+                  {"rms_relative", sum.flux_rms_relative},
+                  {"max_relative", sum.flux_max_relative},
+                  {"rms_wb", sum.flux_rms_wb},
+                  {"max_wb", sum.flux_max_wb},
+                  {"psi_scale_wb", sum.flux_scale_wb},
+                  {"convention", FluxMapConventionJson(map->convention)}};
     }
     std::cout << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
-  } else if (vs_map) {
-    std::fprintf(to_stdout ? stderr : stdout, "serial %s: model %s, %d observations, flux error against the map RMS %.3f %% max %.3f %%, "
-                "psi_pm %.6g Wb -> %s\n",
-                cal->serial().c_str(), cal->family().Name().c_str(), cal->summary.observations,
-                100 * vs_map->rms_relative, 100 * vs_map->max_relative, cal->psi_pm_wb(), args->Get("out")->c_str());
+  } else if (map) {
+    std::fprintf(to_stdout ? stderr : stdout, "serial %s: model %s, %d observations, flux error against the map's %d nodes "
+                "RMS %.3f %% max %.3f %% (of %.4g Wb), psi_pm %.6g Wb -> %s\n",
+                cal->serial().c_str(), cal->family().Name().c_str(), sum.observations, sum.flux_nodes,
+                100 * sum.flux_rms_relative, 100 * sum.flux_max_relative, sum.flux_scale_wb, cal->psi_pm_wb(),
+                args->Get("out")->c_str());
   } else {
     std::fprintf(to_stdout ? stderr : stdout, "serial %s: model %s, %d observations, rms %.3f %%, psi_pm %.6g Wb -> %s\n",
-                cal->serial().c_str(), cal->family().Name().c_str(), cal->summary.observations,
-                100 * cal->summary.rms_relative, cal->psi_pm_wb(), args->Get("out")->c_str());
+                cal->serial().c_str(), cal->family().Name().c_str(), sum.observations,
+                100 * sum.rms_relative, cal->psi_pm_wb(), args->Get("out")->c_str());
   }
   return 0;
 }
@@ -186,8 +228,10 @@ int RunFit(const std::vector<std::string>& argv) {
 
 FLUXCAL_REGISTER_COMMAND("fit", "fit flux-linkage surfaces (Ceres) to a recording set or hf_results.csv",
                          RunFit,
-                         "fluxcal fit <recording-set | hf_results.csv> --out calibration.json [--model M] [--svg PLOT.svg] [--json]\n"
-                         "fluxcal fit --map map.csv --pole-pairs P [--psi-std-wb S] [--rs-ohm R] [--serial S] [--model M] --out calibration.json [--json]",
+                         "fluxcal fit <recording-set> --out calibration.json [--model M] [--svg PLOT.svg] [--udc-v V] [--rs-ohm R] [--json]\n"
+                         "fluxcal fit hf_results.csv --serial S --pole-pairs P --psi-pm-wb WB [--rs-ohm R] [--udc-v V] --out calibration.json [--json]\n"
+                         "fluxcal fit --map map.csv --pole-pairs P [--psi-std-wb S] [--rs-ohm R] [--udc-v V] [--serial S] [--convention C] "
+                         "[--current S] [--flux-amplitude S] [--units U] [--model M] --out calibration.json [--json]",
                          kFitFlags);
 
 }  // namespace fluxcal::cli

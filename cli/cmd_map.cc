@@ -3,11 +3,13 @@
 // Writes a calibration as a flux map the field's tools read
 // (tables/flux_map_export.h):
 //   default    psi(id, iq) on a current grid, `id_A,iq_A,psi_d_Vs,psi_q_Vs`
-//              (default grid: the measured region, 21 x 21 nodes);
+//              (default grid: the measured region, 21 x 21 nodes), in
+//              fluxcal's convention (d = magnet axis, peak currents, Vs);
 //   --inverse  i(psi_d, psi_q) on a flux grid, `psi_d_Vs,psi_q_Vs,id_A,iq_A,valid`
 //              (default grid: the flux range over the measured region,
 //              21 x 21; nodes without a solution there are valid = 0).
 // Never overwrites an existing file unless --force.
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
@@ -117,6 +119,15 @@ int RunMapExport(const std::vector<std::string>& argv) {
     rows = m->map.size();
     summary["grid"] = {{"id_a", AxisJson(a)}, {"iq_a", AxisJson(b)}};
     summary["extrapolated"] = m->extrapolated;
+    // What the file is in (io/flux_map.h): readers of other tools need it;
+    // fluxcal's own reader detects it from the node at zero current.
+    summary["convention"] = {{"axes", "fluxcal"}, {"current", "peak"}, {"flux_unit", "Vs"}};
+    const auto& ids = m->map.id_a;
+    const auto& iqs = m->map.iq_a;
+    if (std::find(ids.begin(), ids.end(), 0.0) == ids.end() || std::find(iqs.begin(), iqs.end(), 0.0) == iqs.end()) {
+      std::fprintf(stderr, "map export: the grid has no node at zero current: read the file back with "
+                           "--convention fluxcal (the axes cannot be detected without it)\n");
+    }
   }
   if (auto st = WriteOutput(out, text); !st.ok()) return Fail(std::string(st.message()));
   const std::string sha = io::Sha256Hex(text);

@@ -55,7 +55,7 @@ int RunReplay(const std::vector<std::string>& argv) {
   auto cal = fit::LoadCalibrationFile(*args->Get("calibration"));
   if (!cal.ok()) return Fail(std::string(cal.status().message()));
   // The calibration's resistance if it has one, else the manifest's.
-  const double rs = cal->rs_ohm() > 0 ? cal->rs_ohm() : set->manifest.motor.rs_ohm.value_or(0.0);
+  const double rs = cal->rs_ohm().value_or(set->manifest.motor.rs_ohm.value_or(0.0));
   std::fprintf(stderr, "replay: %zu points of %s through the twin (%s loop), calibration %s v%d\n",
                set->waveforms.size(), set->manifest.serial.c_str(), closed ? "closed" : "open",
                cal->family().Name().c_str(), cal->version);

@@ -6,7 +6,8 @@
 // docs/report.md). With --set the set is identified again so that the
 // page shows the identified points against the fitted surfaces, the
 // verdict is judged as the EOL flow judges it, and the manifest's DC-link
-// voltage sets the voltage limit. With --server the service builds the
+// voltage sets the voltage limit (else the calibration's Udc; with none the
+// page says that the voltage limit cannot be drawn). With --server the service builds the
 // page from what only the store knows (when the version was created, its
 // stored verdict, whether it is released for flashing, the fleet) with its
 // GetReport, and the page is written as it arrived: one page per stored
@@ -195,7 +196,8 @@ const FlagSpecs kReportFlags = {
      "(with --server: page built here)"},
     {"diagnosis", "FILE", "a `fluxcal diagnose --json` document to include (with --server: page built here)"},
     {"speed-rpm", "RPM", "speed of the voltage-limit curve, mechanical rpm (default 1.5 x base speed)"},
-    {"udc-v", "V", "DC-link voltage, V (default the set's manifest drive.udc_v, else 50 as export)"},
+    {"udc-v", "V", "DC-link voltage, V (default the set's manifest drive.udc_v, else the calibration's; none: no "
+                   "voltage limit or field weakening drawn)"},
     {"json", "", "print a summary (verdict, figures, bytes, sha256) as one JSON document"},
 };
 
@@ -271,7 +273,7 @@ int RunReport(const std::vector<std::string>& argv) {
   in.ellipse_speed_rpm = speed->value_or(0.0);
   if (*udc) {
     in.udc_v = **udc;
-    in.udc_source = "--udc-v";
+    in.udc_source = pipeline::kUdcFromRequest;
   }
 
   // Verdict: as the EOL flow judges it when the set is here (nominal
@@ -309,8 +311,8 @@ int RunReport(const std::vector<std::string>& argv) {
       in.udc_v = *set->manifest.drive.udc_v;
       in.udc_source = *set_dir + "/manifest.json drive.udc_v";
     }
-    const double nominal = set->manifest.motor.psi_pm_wb.value_or(0.0);
-    in.verdict = pipeline::Verdict(*cal, nominal, identified.inductances.size(), unreliable, tol);
+    // The manifest's nominal psi_pm, else the calibration's (Verdict).
+    in.verdict = pipeline::Verdict(*cal, set->manifest.motor.psi_pm_wb, identified.inductances.size(), unreliable, tol);
     in.verdict_basis = "judged as the EOL flow does: fit, psi_pm against the manifest's nominal, point flags";
   }
   if (auto d = args->Get("diagnosis")) {

@@ -1,24 +1,32 @@
 // fluxcal serve --db PATH|sqlite:PATH|postgresql://... --listen 127.0.0.1:50051
 //   [--tls-cert PEM --tls-key PEM [--client-ca PEM [--require-client-cert]]]
-//   [--auth KEYS] [--signing-key ED25519.key] [--insecure] [--quiet]
-// Runs the calibration service until SIGINT/SIGTERM. A path is a SQLite
-// file (the embedded default); a postgresql:// URI makes the server
+//   [--auth KEYS] [--signing-key ED25519.key] [--anchor-file FILE] [--insecure] [--quiet]
+//   [--max-streams-per-identity N] [--max-inflight-bytes-per-identity BYTES]
+// Runs the calibration service until SIGINT/SIGTERM; SIGHUP re-reads the
+// keys file (so does a change of the file, within a second). A path is a
+// SQLite file (the embedded default); a postgresql:// URI makes the server
 // stateless, so several may share one database behind a load balancer.
 //
 // Transport and identity (docs/security.md): off loopback the service needs
 // TLS (or an explicit --insecure) and a keys file (--auth): deny by
 // default. On loopback without --auth it runs open, for a bench PC or
-// development, and says so.
+// development, and says so. Loopback is what the listen address resolves
+// to (io/net.h), every address of it, not how it is spelt.
 #include <csignal>
 #include <cstdio>
 #include <thread>
+#include <type_traits>
+
+#include "absl/strings/numbers.h"
 
 #include <grpcpp/grpcpp.h>
 
 #include "cli/args.h"
 #include "cli/command.h"
 #include "io/csv.h"
+#include "io/net.h"
 #include "server/auth.h"
+#include "server/limits.h"
 #include "server/service.h"
 #include "storage/store.h"
 #include "tables/signature.h"
@@ -27,13 +35,16 @@ namespace fluxcal::cli {
 namespace {
 
 volatile std::sig_atomic_t g_stop = 0;
+volatile std::sig_atomic_t g_reload = 0;
 void OnSignal(int) { g_stop = 1; }
+void OnHangup(int) { g_reload = 1; }
 
 constexpr char kUsage[] =
     "usage: fluxcal serve --db PATH|postgresql://USER@HOST:PORT/DB --listen HOST:PORT\n"
     "                     [--tls-cert PEM --tls-key PEM [--client-ca PEM]]\n"
     "                     [--require-client-cert] [--auth KEYS.json] [--signing-key ED25519.key] [--insecure]\n"
-    "                     [--quiet]\n";
+    "                     [--anchor-file FILE] [--quiet] [--max-streams-per-identity N]\n"
+    "                     [--max-inflight-bytes-per-identity BYTES]\n";
 
 const FlagSpecs kServeFlags = {
     {"db", "URL", "the store (required): a SQLite file PATH or sqlite:PATH, or postgresql://USER@HOST:PORT/DB"},
@@ -44,8 +55,12 @@ const FlagSpecs kServeFlags = {
     {"require-client-cert", "", "refuse clients without a certificate signed by --client-ca"},
     {"auth", "KEYS.json", "identities and roles (fluxcal admin add-key); required off loopback"},
     {"signing-key", "ED25519.key", "sign exported tables (Ed25519 private key PEM)"},
+    {"anchor-file", "FILE", "append the chain heads after every fit and release (fluxcal admin verify-db --anchor)"},
     {"insecure", "", "plaintext off loopback (test networks only)"},
     {"quiet", "", "no per-request log lines on stderr"},
+    {"max-streams-per-identity", "N", "open calls one identity may have at once (default 16)"},
+    {"max-inflight-bytes-per-identity", "BYTES",
+     "request bytes one identity's open calls may hold (default 536870912, 512 MiB)"},
 };
 
 int RunServe(const std::vector<std::string>& argv) {
@@ -91,28 +106,54 @@ int RunServe(const std::vector<std::string>& argv) {
     std::fprintf(stderr, "fluxcal serve: --require-client-cert needs --client-ca\n");
     return 2;
   }
-  const bool loopback = server::IsLoopbackAddress(listen);
+  server::IdentityLimits limits;
+  // A positive whole number up to `max` from --flag, or the default kept.
+  auto whole = [&](const char* flag, long long max, auto* out) {
+    auto v = args->Get(flag);
+    if (!v) return true;
+    long long n = 0;
+    if (!absl::SimpleAtoi(*v, &n) || n < 1 || n > max) {
+      std::fprintf(stderr, "fluxcal serve: flag --%s: expected a whole number from 1 to %lld, got '%s'\n", flag, max,
+                   io::Printable(*v).c_str());
+      return false;
+    }
+    *out = static_cast<std::remove_pointer_t<decltype(out)>>(n);
+    return true;
+  };
+  if (!whole("max-streams-per-identity", 100000, &limits.max_streams) ||
+      !whole("max-inflight-bytes-per-identity", int64_t{1} << 50, &limits.max_inflight_bytes)) {
+    return 2;
+  }
+  // SIGHUP re-reads the keys; it must never end the server, not even
+  // while it starts.
+  std::signal(SIGHUP, OnHangup);
+  const io::LoopbackCheck where = io::CheckLoopback(listen);
+  const bool loopback = where.loopback;
   const bool tls = !opt.tls_cert_pem.empty();
   if (!loopback && !tls && !args->Has("insecure")) {
     std::fprintf(stderr,
                  "fluxcal serve: %s is not a loopback address: give --tls-cert and --tls-key (or --insecure to "
-                 "serve plaintext on purpose)\n",
-                 listen.c_str());
+                 "serve plaintext on purpose) [%s %s]\n",
+                 listen.c_str(), listen.c_str(), where.why.c_str());
     return 2;
   }
+  auto log = [](const std::string& m) {
+    std::fprintf(stderr, "fluxcal serve: %s\n", m.c_str());
+    std::fflush(stderr);
+  };
   std::unique_ptr<server::Authorizer> auth;
   if (auto keys_path = args->Get("auth")) {
-    auto keys = server::LoadKeys(*keys_path);
-    if (!keys.ok()) {
-      std::fprintf(stderr, "fluxcal serve: %s\n", std::string(keys.status().message()).c_str());
+    auto loaded = server::Authorizer::FromFile(*keys_path, log);
+    if (!loaded.ok()) {
+      std::fprintf(stderr, "fluxcal serve: %s\n", std::string(loaded.status().message()).c_str());
       return 1;
     }
-    auth = std::make_unique<server::Authorizer>(std::move(*keys));
+    auth = std::move(*loaded);
   } else if (!loopback) {
     std::fprintf(stderr,
                  "fluxcal serve: %s is not a loopback address: give --auth KEYS.json (fluxcal admin add-key); "
-                 "the service denies by default\n",
-                 listen.c_str());
+                 "the service denies by default [%s %s]\n",
+                 listen.c_str(), listen.c_str(), where.why.c_str());
     return 2;
   }
   auto store = storage::Store::Open(db);
@@ -122,6 +163,8 @@ int RunServe(const std::vector<std::string>& argv) {
   }
   server::CalibrationServiceImpl service(store->get());
   service.set_authorizer(auth.get());
+  if (auto anchor = args->Get("anchor-file")) service.set_anchor_file(*anchor);
+  service.set_limits(limits);
   std::string signing_key;
   if (!pem("signing-key", &signing_key)) return 2;
   if (!signing_key.empty()) {
@@ -150,10 +193,22 @@ int RunServe(const std::vector<std::string>& argv) {
   std::fprintf(stderr, "fluxcal serve: listening on %s (port %d, %s%s), store %s\n", listen.c_str(), port,
                tls ? "TLS" : "plaintext", tls && !opt.client_ca_pem.empty() ? " with client certificates" : "",
                shown.c_str());
-  if (!auth) std::fprintf(stderr, "fluxcal serve: no --auth: open on loopback, every caller is admin\n");
+  if (!auth) std::fprintf(stderr, "fluxcal serve: no --auth: open on loopback (%s %s), every caller is admin\n", listen.c_str(), where.why.c_str());
+  std::fprintf(stderr, "fluxcal serve: per identity at most %d open calls and %lld request bytes in flight\n",
+               limits.max_streams, static_cast<long long>(limits.max_inflight_bytes));
   std::fflush(stderr);
   std::thread waiter([&] { srv->Wait(); });
-  while (!g_stop) std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  while (!g_stop) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    if (g_reload) {
+      g_reload = 0;
+      if (auth) {
+        (void)auth->Reload();   // logs the outcome; a broken file keeps the keys before
+      } else {
+        log("SIGHUP: no --auth keys file to re-read (open mode)");
+      }
+    }
+  }
   std::fprintf(stderr, "fluxcal serve: shutting down\n");
   srv->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(5));
   waiter.join();
@@ -165,7 +220,8 @@ int RunServe(const std::vector<std::string>& argv) {
 FLUXCAL_REGISTER_COMMAND("serve", "run the gRPC calibration service (SQLite file or PostgreSQL)", RunServe,
                          "fluxcal serve --db PATH|postgresql://USER@HOST:PORT/DB [--listen HOST:PORT]\n"
                          "  [--tls-cert PEM --tls-key PEM [--client-ca PEM [--require-client-cert]]]\n"
-                         "  [--auth KEYS.json] [--signing-key ED25519.key] [--insecure] [--quiet]",
+                         "  [--auth KEYS.json] [--signing-key ED25519.key] [--anchor-file FILE] [--insecure] [--quiet]\n"
+                         "  [--max-streams-per-identity N] [--max-inflight-bytes-per-identity BYTES]",
                          kServeFlags);
 
 }  // namespace fluxcal::cli

@@ -13,6 +13,7 @@
 #include "absl/strings/numbers.h"
 #include "cli/args.h"
 #include "io/csv.h"
+#include "io/net.h"
 #include "nlohmann/json.hpp"
 #include "io/sha256.h"
 
@@ -89,16 +90,6 @@ class TokenInterceptorFactory final : public grpc::experimental::ClientIntercept
   std::string header_;
 };
 
-bool IsLoopback(const std::string& address) {
-  std::string host = address;
-  for (const char* scheme : {"dns:///", "ipv4:", "ipv6:"}) {
-    if (host.rfind(scheme, 0) == 0) host = host.substr(std::string(scheme).size());
-  }
-  if (host.rfind("unix:", 0) == 0) return true;
-  if (const auto colon = host.rfind(':'); colon != std::string::npos) host = host.substr(0, colon);
-  return host == "localhost" || host == "[::1]" || host.rfind("127.", 0) == 0;
-}
-
 // The target of the last MakeStub, for the error hints.
 std::string& LastTarget() {
   static std::string target;
@@ -125,7 +116,19 @@ std::unique_ptr<v1::CalibrationService::Stub> MakeStub(const std::string& server
   grpc::ChannelArguments args;
   args.SetMaxReceiveMessageSize(64 << 20);
   std::shared_ptr<grpc::ChannelCredentials> creds;
-  const bool tls = !o.ca_file.empty() || !o.cert_file.empty() || (!o.insecure && !IsLoopback(address));
+  // Loopback by what the name resolves to, every address of it (io/net.h):
+  // a name spelt like 127.x but resolving elsewhere gets TLS.
+  const io::LoopbackCheck where = io::CheckLoopback(address);
+  const bool tls = !o.ca_file.empty() || !o.cert_file.empty() || (!o.insecure && !where.loopback);
+  // A bearer token is a password: never in clear off this machine, not even
+  // with --insecure.
+  if (!tls && !where.loopback && !o.token_file.empty()) {
+    std::fprintf(stderr,
+                 "fluxcal: --token-file: tokens need TLS off loopback; %s %s, so the token is not sent in "
+                 "plaintext (drop --insecure and pass --ca)\n",
+                 address.c_str(), where.why.c_str());
+    return nullptr;
+  }
   if (tls) {
     grpc::SslCredentialsOptions ssl;
     if (!ReadPem(o.ca_file, "--ca", &ssl.pem_root_certs) || !ReadPem(o.cert_file, "--cert", &ssl.pem_cert_chain) ||
@@ -281,6 +284,7 @@ int RunRemoteExport(const std::vector<std::string>& argv, const FlagSpecs& flags
   req.set_format(args->Get("format").value_or("csv"));
   req.set_ctype(args->Get("ctype").value_or(""));
   req.set_allow_extrapolation(args->Has("allow-extrapolation"));
+  req.set_allow_clamped(args->Has("allow-clamped"));
   int n = 0;
   if (auto v = args->Get("points")) { if (!absl::SimpleAtoi(*v, &n)) return 2; req.set_points(n); }
   if (auto v = args->Get("speed-points")) { if (!absl::SimpleAtoi(*v, &n)) return 2; req.set_speed_points(n); }
@@ -288,7 +292,8 @@ int RunRemoteExport(const std::vector<std::string>& argv, const FlagSpecs& flags
   for (auto [flag, setter] : {std::pair<const char*, void (v1::ExportTableRequest::*)(double)>{
                                   "speed-max-rpm", &v1::ExportTableRequest::set_speed_max_rpm},
                               {"i-max-a", &v1::ExportTableRequest::set_i_max_a},
-                              {"udc-v", &v1::ExportTableRequest::set_udc_v}}) {
+                              {"udc-v", &v1::ExportTableRequest::set_udc_v},
+                              {"rs-ohm", &v1::ExportTableRequest::set_rs_ohm}}) {
     auto d = args->GetDouble(flag);
     if (!d.ok()) { std::fprintf(stderr, "%s\n", std::string(d.status().message()).c_str()); return 2; }
     if (d->has_value()) (req.*setter)(**d);
@@ -315,11 +320,17 @@ int RunRemoteExport(const std::vector<std::string>& argv, const FlagSpecs& flags
   // sha256: of the bytes written (= sha256sum FILE); the reply's crc32 and
   // sha256 are over the values (payload) and printed under those names.
   const std::string file_sha256 = io::Sha256Hex(resp.data());
+  const double clamped_share = resp.cells() > 0 ? static_cast<double>(resp.clamped_cells()) / resp.cells() : 0.0;
+  if (resp.clamped_cells() > 0) {
+    std::fprintf(stderr, "fluxcal export: warning: %d of %d cells (%.1f %%) clamped (requests beyond the limits)\n",
+                 resp.clamped_cells(), resp.cells(), 100 * clamped_share);
+  }
   if (args->Has("json")) {
     std::cout << nlohmann::json{{"out", *args->Get("out")}, {"serial", resp.serial()}, {"version", resp.version()},
                                 {"table", req.table()}, {"format", req.format()}, {"sha256", file_sha256},
                                 {"payload_crc32", resp.crc32()}, {"payload_sha256", resp.sha256()},
-                                {"clamped_cells", resp.clamped_cells()}, {"verdict", resp.verdict()},
+                                {"cells", resp.cells()}, {"clamped_cells", resp.clamped_cells()},
+                                {"clamped_share", clamped_share}, {"verdict", resp.verdict()},
                                 {"released", resp.released()}, {"bytes", resp.data().size()}}
                      .dump(2, ' ', false, nlohmann::json::error_handler_t::replace)
               << "\n";

@@ -17,10 +17,12 @@ namespace fluxcal::cli {
 //   --ca PEM          trust these roots (TLS); else the system's roots
 //   --cert PEM --key PEM   client certificate (mutual TLS)
 //   --token-file F    send 'authorization: Bearer <first line of F>'
-//   --insecure        plaintext even to a non-loopback address
+//   --insecure        plaintext even to a non-loopback address (never with a
+//                     token: tokens need TLS off loopback)
 // The environment gives defaults: FLUXCAL_CA, FLUXCAL_CERT, FLUXCAL_KEY,
 // FLUXCAL_TOKEN_FILE. Plaintext is used for loopback addresses unless --ca
-// is given; every other address uses TLS unless --insecure.
+// is given; every other address uses TLS unless --insecure. Loopback is
+// what the address resolves to (io/net.h), every address of it.
 struct ClientOptions {
   std::string ca_file, cert_file, key_file, token_file;
   bool insecure = false;
@@ -31,8 +33,9 @@ ClientOptions& GlobalClientOptions();
 std::string TakeClientFlags(std::vector<std::string>* args);
 
 // A stub for `address` (--server: HOST means HOST:50051, see ServerTarget)
-// with GlobalClientOptions(). On a bad option (an unreadable file) prints the
-// reason and returns nullptr.
+// with GlobalClientOptions(). On a bad option (an unreadable file, a token
+// that would go in plaintext off loopback) prints the reason and returns
+// nullptr.
 std::unique_ptr<v1::CalibrationService::Stub> MakeStub(const std::string& address);
 // Prints "fluxcal <cmd>: <code>: <message>" to stderr, with a hint for the
 // codes a setup mistake gives (server unreachable, TLS, token, role), and

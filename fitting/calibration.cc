@@ -14,7 +14,7 @@
 namespace fluxcal::fit {
 
 Calibration::Calibration(std::string serial, Family family, std::vector<double> params,
-                         std::vector<double> covariance, int pole_pairs, double rs_ohm,
+                         std::vector<double> covariance, int pole_pairs, std::optional<double> rs_ohm,
                          double id_min_a, double id_max_a, double iq_min_a, double iq_max_a)
     : serial_(std::move(serial)), family_(family), params_(std::move(params)),
       covariance_(std::move(covariance)), pole_pairs_(pole_pairs), rs_ohm_(rs_ohm),
@@ -117,8 +117,11 @@ nlohmann::json Calibration::ToJson() const {
     }
   }
   j["pole_pairs"] = pole_pairs_;
-  j["rs_ohm"] = rs_ohm_;
+  // Facts as stated; an unknown one is left out (never written as 0).
+  if (rs_ohm_) j["rs_ohm"] = *rs_ohm_;
   j["psi_pm_wb"] = psi_pm_wb();
+  if (psi_pm_nominal_wb_) j["psi_pm_nominal_wb"] = *psi_pm_nominal_wb_;
+  if (udc_v_) j["udc_v"] = *udc_v_;
   j["params"] = params_;
   j["covariance"] = covariance_;
   j["region"] = {{"id_min_a", id_min_a_}, {"id_max_a", id_max_a_},
@@ -129,6 +132,15 @@ nlohmann::json Calibration::ToJson() const {
               {"excluded", summary.excluded}};
   j["fit"]["effective_parameters"] = summary.effective_parameters;
   if (summary.smoothing_lambda > 0) j["fit"]["smoothing_lambda"] = summary.smoothing_lambda;
+  if (summary.flux_nodes > 0) {
+    auto& f = j["fit"];
+    f["flux_nodes"] = summary.flux_nodes;
+    f["flux_rms_relative"] = summary.flux_rms_relative;
+    f["flux_max_relative"] = summary.flux_max_relative;
+    f["flux_rms_wb"] = summary.flux_rms_wb;
+    f["flux_max_wb"] = summary.flux_max_wb;
+    f["flux_scale_wb"] = summary.flux_scale_wb;
+  }
   return j;
 }
 
@@ -190,10 +202,35 @@ absl::StatusOr<Calibration> Calibration::FromJson(const nlohmann::json& j) {
       return absl::InvalidArgumentError("field 'covariance': wrong size");
     }
     const auto& r = j.at("region");
-    Calibration c(j.at("serial").get<std::string>(), fam, params, cov, j.at("pole_pairs").get<int>(),
-                  j.at("rs_ohm").get<double>(), r.at("id_min_a").get<double>(),
+    const int pole_pairs = j.at("pole_pairs").get<int>();
+    if (pole_pairs < 1 || pole_pairs > 100) {
+      return absl::InvalidArgumentError(absl::StrCat("field 'pole_pairs': expected 1..100, got ", pole_pairs));
+    }
+    // An optional fact: absent or null is unknown. Files written before
+    // the facts were optional wrote rs_ohm 0 for an Rs nobody stated (no
+    // machine has Rs = 0): read as unknown.
+    auto fact = [&](const char* key, bool zero_is_unknown) -> absl::StatusOr<std::optional<double>> {
+      if (!j.contains(key) || j[key].is_null()) return std::optional<double>();
+      const double v = j[key].get<double>();
+      if (zero_is_unknown && v == 0.0) return std::optional<double>();
+      if (!std::isfinite(v) || v < 0 || (v == 0.0 && std::string(key) == "udc_v")) {
+        return absl::InvalidArgumentError(absl::StrCat("field '", key, "': expected a ",
+                                                       std::string(key) == "udc_v" ? "positive" : "non-negative",
+                                                       " number, got ", v));
+      }
+      return std::optional<double>(v);
+    };
+    auto rs = fact("rs_ohm", true);
+    if (!rs.ok()) return rs.status();
+    auto psi_nom = fact("psi_pm_nominal_wb", false);
+    if (!psi_nom.ok()) return psi_nom.status();
+    auto udc = fact("udc_v", false);
+    if (!udc.ok()) return udc.status();
+    Calibration c(j.at("serial").get<std::string>(), fam, params, cov, pole_pairs, *rs, r.at("id_min_a").get<double>(),
                   r.at("id_max_a").get<double>(), r.at("iq_min_a").get<double>(),
                   r.at("iq_max_a").get<double>());
+    c.psi_pm_nominal_wb_ = *psi_nom;
+    c.udc_v_ = *udc;
     c.version = j.value("version", 0);
     if (j.contains("fit")) {
       const auto& f = j["fit"];
@@ -207,6 +244,13 @@ absl::StatusOr<Calibration> Calibration::FromJson(const nlohmann::json& j) {
       c.summary.excluded = f.value("excluded", std::vector<std::string>{});
       c.summary.effective_parameters = f.value("effective_parameters", 0.0);
       c.summary.smoothing_lambda = f.value("smoothing_lambda", 0.0);
+      // Absent before map fits reported them (and for fits without flux nodes).
+      c.summary.flux_nodes = f.value("flux_nodes", 0);
+      c.summary.flux_rms_relative = f.value("flux_rms_relative", 0.0);
+      c.summary.flux_max_relative = f.value("flux_max_relative", 0.0);
+      c.summary.flux_rms_wb = f.value("flux_rms_wb", 0.0);
+      c.summary.flux_max_wb = f.value("flux_max_wb", 0.0);
+      c.summary.flux_scale_wb = f.value("flux_scale_wb", 0.0);
     }
     return c;
   } catch (const nlohmann::json::exception& e) {

@@ -3,9 +3,16 @@
 // Implements sim::MagneticModel, so the twin can replay it and the table
 // generators can use it directly. Serialises to JSON and back exactly
 // (format "fluxcal.calibration.v1"; doubles written with 17 digits).
+//
+// It carries what the set (or the flags of `fluxcal fit`) stated about the
+// machine and drive: pole pairs (always known: a fit refuses without
+// them), and where stated the nominal Rs, the nominal psi_pm and the
+// DC-link voltage. A fact not stated is absent (nullopt; absent from the
+// JSON), never another machine's default; docs/fitting.md.
 #ifndef FLUXCAL_FITTING_CALIBRATION_H_
 #define FLUXCAL_FITTING_CALIBRATION_H_
 
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -39,13 +46,20 @@ struct FitSummary {
   // Observations the fit left out or the robust loss down-weighted, each
   // with its point and reason ("hf point 31 (id 0 A, iq 0 A): ldd_h ...").
   std::vector<std::string> excluded;
+  // A fit to flux nodes (a flux map, FitData::fluxes; rms_relative above
+  // covers identified inductances, which a map has none of): the flux
+  // error over those nodes, fitting/flux_error.h. flux_nodes = 0: no flux
+  // nodes were fitted and the flux_* fields are 0 (and absent from JSON).
+  int flux_nodes = 0;
+  double flux_rms_relative = 0, flux_max_relative = 0;   // of flux_scale_wb
+  double flux_rms_wb = 0, flux_max_wb = 0, flux_scale_wb = 0;
 };
 
 class Calibration : public sim::MagneticModel {
  public:
   Calibration() = default;
   Calibration(std::string serial, Family family, std::vector<double> params,
-              std::vector<double> covariance, int pole_pairs, double rs_ohm,
+              std::vector<double> covariance, int pole_pairs, std::optional<double> rs_ohm,
               double id_min_a, double id_max_a, double iq_min_a, double iq_max_a);
 
   sim::FluxLinkage Flux(double id_a, double iq_a, double temperature_c = 25.0) const override;
@@ -60,8 +74,19 @@ class Calibration : public sim::MagneticModel {
   const std::vector<double>& params() const { return params_; }
   const std::vector<double>& covariance() const { return covariance_; }
   int pole_pairs() const { return pole_pairs_; }
-  double rs_ohm() const { return rs_ohm_; }
+  // Nominal stator resistance as stated (manifest motor.rs_ohm, --rs-ohm).
+  const std::optional<double>& rs_ohm() const { return rs_ohm_; }
+  // The fitted magnet flux (the model's first parameter).
   double psi_pm_wb() const { return params_.empty() ? 0.0 : params_[0]; }
+  // The magnet flux the data source stated (manifest motor.psi_pm_wb,
+  // --psi-pm-wb, a flux map's node at zero current): the fit's prior and
+  // what the verdict judges psi_pm against.
+  const std::optional<double>& psi_pm_nominal_wb() const { return psi_pm_nominal_wb_; }
+  void set_psi_pm_nominal_wb(std::optional<double> v) { psi_pm_nominal_wb_ = v; }
+  // DC-link voltage of the drive the data came from (manifest drive.udc_v,
+  // --udc-v): the voltage limit of field-weakening and MTPV exports.
+  const std::optional<double>& udc_v() const { return udc_v_; }
+  void set_udc_v(std::optional<double> v) { udc_v_ = v; }
   bool InMeasuredRegion(double id_a, double iq_a) const;
   double id_min_a() const { return id_min_a_; }
   double id_max_a() const { return id_max_a_; }
@@ -92,8 +117,8 @@ class Calibration : public sim::MagneticModel {
   std::string serial_;
   Family family_;
   std::vector<double> params_, covariance_;
-  int pole_pairs_ = 4;
-  double rs_ohm_ = 0;
+  int pole_pairs_ = 0;   // 0: unknown (only a default-constructed calibration)
+  std::optional<double> rs_ohm_, psi_pm_nominal_wb_, udc_v_;
   double id_min_a_ = 0, id_max_a_ = 0, iq_min_a_ = 0, iq_max_a_ = 0;
 };
 

@@ -16,6 +16,7 @@
 #include "ceres/ceres.h"
 #include <Eigen/Dense>
 #include <Eigen/Sparse>
+#include "fitting/flux_error.h"
 #include "identification/identify.h"
 #include "io/flux_map.h"
 #include "fitting/surface.h"
@@ -742,8 +743,9 @@ Solved Solve(const Family& fam, const FitData& d, const FitOptions& o, const Eig
 
 }  // namespace
 
-void SteadyStateFlux(const SteadyStateObservation& s, int pole_pairs, double rs_ohm, double f_pwm_hz,
+void SteadyStateFlux(const SteadyStateObservation& s, int pole_pairs, std::optional<double> rs, double f_pwm_hz,
                      double* psi_d, double* psi_q) {
+  const double rs_ohm = rs.value_or(0.0);   // unknown: the drop Rs i neglected (fit.h)
   const double we = s.speed_rpm * pole_pairs * 2 * kPi / 60.0;
   // steady_state.csv holds the fundamental dq command of a delay-compensated
   // controller (inverse Park at theta + 1.5 w_e Ts); the zero-order hold
@@ -780,9 +782,10 @@ FitData FitDataFromHfRows(const io::Manifest* m, const std::vector<io::HfResultR
   if (m) {
     d.serial = m->serial;
     d.pole_pairs = m->motor.pole_pairs;
-    d.rs_ohm = m->motor.rs_ohm.value_or(0.0);
+    d.rs_ohm = m->motor.rs_ohm;
     d.f_pwm_hz = m->drive.f_pwm_hz.value_or(m->drive.f_sample_hz);
     d.psi_pm_prior_wb = m->motor.psi_pm_wb;
+    d.udc_v = m->drive.udc_v;
   }
   for (const auto& r : rows) {
     InductanceObservation o;
@@ -1147,6 +1150,17 @@ absl::StatusOr<Calibration> FitScreened(const FitData& d, std::vector<std::strin
     nrel += 2;
   }
   cal.summary.rms_relative = nrel ? std::sqrt(rel / nrel) : 0.0;
+  if (!d.fluxes.empty()) {
+    std::vector<io::FluxMapPoint> nodes;
+    for (const auto& f : d.fluxes) nodes.push_back({f.id_a, f.iq_a, f.psi_d_wb, f.psi_q_wb});
+    const FluxNodeError e = FluxErrorOverNodes(cal, nodes);
+    cal.summary.flux_nodes = e.nodes;
+    cal.summary.flux_rms_relative = e.rms_relative;
+    cal.summary.flux_max_relative = e.max_relative;
+    cal.summary.flux_rms_wb = e.rms_wb;
+    cal.summary.flux_max_wb = e.max_wb;
+    cal.summary.flux_scale_wb = e.psi_scale_wb;
+  }
   // Points beyond 3 robust scales of their stated sigma (a Huber weight of
   // a third or less at that scale), so a station sees which points did not
   // count fully.
@@ -1200,6 +1214,11 @@ double RowMisfit(const Calibration& cal, const FitData& d, const SteadyStateObse
 // twice at most. A model error that every row shares (a dead time, an Rs)
 // moves them alike and excludes none.
 absl::StatusOr<Calibration> Fit(const FitData& input, const FitOptions& o) {
+  if (input.pole_pairs < 1 || input.pole_pairs > 100) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "pole_pairs: ", input.pole_pairs == 0 ? std::string("unknown") : absl::StrCat(input.pole_pairs),
+        " (1..100 required: the manifest's motor.pole_pairs or --pole-pairs; torque and speed depend on them)"));
+  }
   std::vector<std::string> excluded;
   std::vector<Calibration::Box> not_pd;
   std::vector<size_t> row_index;
@@ -1267,6 +1286,11 @@ absl::StatusOr<Calibration> Fit(const FitData& input, const FitOptions& o) {
     row_index.erase(row_index.begin() + static_cast<long>(k));
     down_weighted = worst->down_weighted;
     cal = std::move(worst->fit);
+  }
+  // The facts the data source stated about the machine and drive.
+  if (cal.ok()) {
+    cal->set_udc_v(input.udc_v);
+    cal->set_psi_pm_nominal_wb(input.psi_pm_prior_wb);
   }
   return cal;
 }

@@ -47,12 +47,24 @@ struct FluxObservation {
   double id_a = 0, iq_a = 0, psi_d_wb = 0, psi_q_wb = 0, psi_std_wb = 0;
 };
 
+// What the data say about the machine and drive comes from the set's
+// manifest, a flux map's caller or command-line flags; a fact nobody stated
+// stays unknown (0 / nullopt), never a default of some other machine.
 struct FitData {
   std::string serial;
-  int pole_pairs = 4;
-  double rs_ohm = 0.0;                      // nominal, for the steady-state fluxes
+  int pole_pairs = 0;                       // required: Fit refuses 0 (unknown)
+  // Nominal stator resistance, for the steady-state fluxes (unknown: the
+  // resistive drop is neglected there, and the calibration records Rs
+  // unknown).
+  std::optional<double> rs_ohm;
   double f_pwm_hz = 10000.0;                // for the inverter-delay correction
+  // The magnet flux the data source states (manifest motor.psi_pm_wb, a
+  // flag, a flux map's node at zero current): the fit's prior, and the
+  // calibration's nominal psi_pm.
   std::optional<double> psi_pm_prior_wb;
+  // DC-link voltage of the drive (manifest drive.udc_v, or a flag); carried
+  // into the calibration for the voltage limit of its tables.
+  std::optional<double> udc_v;
   std::vector<InductanceObservation> inductances;
   std::vector<SteadyStateObservation> steady_state;
   std::vector<FluxObservation> fluxes;
@@ -75,7 +87,9 @@ struct FitOptions {
   std::function<bool()> cancelled;
 };
 
-// Observations from identification results / a set's hf_results rows.
+// Observations from identification results / a set's hf_results rows;
+// serial, pole pairs, Rs, psi_pm and Udc from the manifest as it states
+// them (without a manifest: all unknown).
 FitData FitDataFromRecording(const io::RecordingSet& set,
                              const std::vector<ident::HfPointResult>& identified);
 FitData FitDataFromHfRows(const io::Manifest* manifest, const std::vector<io::HfResultRow>& rows);
@@ -83,11 +97,12 @@ FitData FitDataFromHfRows(const io::Manifest* manifest, const std::vector<io::Hf
 // FluxObservation with standard deviation psi_std_wb per component (<= 0:
 // 0.2 % of the map's largest |psi|, the relative floor the fit also puts on
 // inductances), and psi_pm's prior from the node at (0, 0) when the map has
-// one with psi_d > 0. Serial stays empty and rs_ohm 0: a map carries
-// neither (nor pole pairs, which the caller gives).
+// one with psi_d > 0. Serial, Rs and Udc stay unknown: a map carries none
+// of them (nor pole pairs, which the caller gives).
 FitData FitDataFromFluxMap(const io::FluxMap& map, int pole_pairs, double psi_std_wb = 0.0);
 
-// The calibration of `data`: observations that are not data screened out
+// The calibration of `data` (InvalidArgument naming 'pole_pairs' when they
+// are unknown: torque and speed need them): observations that are not data screened out
 // (non-finite or non-positive values, rows outside the measured region or
 // not a steady state), every candidate family fitted, the physical one with
 // the lowest cross-validation score kept; what was left out or
@@ -95,8 +110,9 @@ FitData FitDataFromFluxMap(const io::FluxMap& map, int pole_pairs, double psi_st
 absl::StatusOr<Calibration> Fit(const FitData& data, const FitOptions& options = {});
 
 // Flux linkage measured by a steady-state row: psi_d = (uq' - Rs iq)/w,
-// psi_q = -(ud' - Rs id)/w with u' the command corrected for the delay.
-void SteadyStateFlux(const SteadyStateObservation& s, int pole_pairs, double rs_ohm,
+// psi_q = -(ud' - Rs id)/w with u' the command corrected for the delay
+// (Rs unknown: the resistive drop is neglected).
+void SteadyStateFlux(const SteadyStateObservation& s, int pole_pairs, std::optional<double> rs_ohm,
                      double f_pwm_hz, double* psi_d_wb, double* psi_q_wb);
 
 }  // namespace fluxcal::fit

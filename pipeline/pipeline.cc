@@ -12,6 +12,7 @@
 #include "absl/strings/str_join.h"
 #include "absl/strings/str_format.h"
 #include "nlohmann/json.hpp"
+#include "pipeline/ingest_stream.h"
 #include "pipeline/recording_archive.h"
 #include "io/sha256.h"
 
@@ -79,7 +80,8 @@ fit::FitData FitDataFromPoints(const storage::MotorRow& motor, const std::vector
   fit::FitData d;
   d.serial = motor.serial;
   d.pole_pairs = motor.pole_pairs;
-  d.rs_ohm = motor.rs_ohm;
+  // The store keeps 0 for a value the station did not state (the wire's unset).
+  if (motor.rs_ohm > 0) d.rs_ohm = motor.rs_ohm;
   if (motor.psi_pm_wb > 0) d.psi_pm_prior_wb = motor.psi_pm_wb;
   for (const auto& p : points) d.inductances.push_back(ToObservation(p));
   return d;
@@ -93,13 +95,31 @@ absl::StatusOr<fit::FitData> FitDataFromSet(const io::RecordingSet& set, const i
 
 // ---------------------------------------------------------------- ingest
 
+namespace {
+
+// The raw recording a run of `serial` was ingested with (NotFound: a run
+// of HF results only).
+absl::StatusOr<std::string> RecordingShaOfRun(storage::Store& store, const std::string& serial, int64_t run_id) {
+  auto history = store.History(serial);
+  if (!history.ok()) return history.status();
+  for (const auto& h : *history) {
+    if (h.run_id == run_id && h.kind == "recording" && !h.detail.empty()) return h.detail;
+  }
+  return absl::NotFoundError(absl::StrCat("run ", run_id, " of '", serial, "' has no raw recording"));
+}
+
+}  // namespace
+
 absl::StatusOr<int64_t> IngestHfRun(storage::Store& store, const std::string& serial, const std::string& station,
                                     const std::optional<MotorNominal>& motor,
                                     const std::vector<IdentifiedPoint>& points, int rejected,
                                     const std::string& idempotency_key, bool* replayed,
                                     const storage::AuditContext* audit) {
-  storage::MotorRow m{serial, 4, 0.0, 0.0, ""};
+  storage::MotorRow m{serial, 0, 0.0, 0.0, ""};
   if (motor) {
+    if (motor->pole_pairs < 1 || motor->pole_pairs > 100) {
+      return absl::InvalidArgumentError(absl::StrCat("motor.pole_pairs: expected 1..100, got ", motor->pole_pairs));
+    }
     m.pole_pairs = motor->pole_pairs; m.rs_ohm = motor->rs_ohm; m.psi_pm_wb = motor->psi_pm_wb;
   } else if (auto known = store.GetMotor(serial); known.ok()) {
     m = *known;
@@ -110,7 +130,9 @@ absl::StatusOr<int64_t> IngestHfRun(storage::Store& store, const std::string& se
     return known.status();
   }
   if (points.empty()) {
-    return absl::InvalidArgumentError(absl::StrCat("points: no valid point in the stream (", rejected, " rejected)"));
+    return absl::InvalidArgumentError(rejected > 0 ? absl::StrCat("points: no valid point in the stream (", rejected,
+                                                                  " rejected)")
+                                                   : std::string("points: the stream carried no point"));
   }
   return store.IngestHfRun(m, station, "hf_run", points, "", {}, 0, idempotency_key, replayed, audit);
 }
@@ -157,20 +179,59 @@ absl::StatusOr<IngestRecordingResult> IngestRecording(storage::Store& store, con
                                static_cast<int64_t>(archive.size()), idempotency_key, &out.replayed, audit);
   if (!run.ok()) return run.status();
   out.run_id = *run;
-  out.points = static_cast<int>(ids->points.size());
   out.recording_bytes = static_cast<int64_t>(archive.size());
   out.stored_bytes = static_cast<int64_t>(z->size());
+  const io::RecordingFiles* accepted = &files;
+  io::RecordingFiles stored_files;
+  if (out.replayed) {
+    // The run stored before under this key, read back: a retry whose
+    // content differs from the first try must not pass the client's check.
+    auto stored_sha = RecordingShaOfRun(store, serial, *run);
+    if (!stored_sha.ok()) return stored_sha.status();
+    auto row = store.GetRecordingRow(*stored_sha);
+    if (!row.ok()) return row.status();
+    auto stored_archive = Inflate(row->zlib_data, kMaxStoredRecordingBytes);
+    if (!stored_archive.ok()) return stored_archive.status();
+    auto decoded = DecodeRecordingArchive(*stored_archive);
+    if (!decoded.ok()) return decoded.status();
+    stored_files = std::move(*decoded);
+    accepted = &stored_files;
+    out.sha256 = *stored_sha;
+    out.recording_bytes = static_cast<int64_t>(stored_archive->size());
+    out.stored_bytes = static_cast<int64_t>(row->zlib_data.size());
+  }
+  auto digest = DigestOfIngest(store, *run, out.replayed, ids->points);
+  if (!digest.ok()) return digest.status();
+  out.points = static_cast<int>(digest->points);
+  out.points_sha256 = digest->points_sha256;
+  out.files = static_cast<int>(accepted->size());
+  out.files_bytes = RecordingFilesBytes(*accepted);
+  out.files_sha256 = RecordingFilesSha256(*accepted);
   return out;
 }
 
 // ---------------------------------------------------------------- fit
 
-std::string Verdict(const fit::Calibration& cal, double nominal_psi_pm_wb, size_t points, size_t unreliable,
+std::string Verdict(const fit::Calibration& cal, std::optional<double> nominal, size_t points, size_t unreliable,
                     const FitTolerances& tol) {
+  // Facts first: without them no other check means anything.
+  if (cal.pole_pairs() < 1) return "fail: pole pairs unknown";
+  if (!nominal) nominal = cal.psi_pm_nominal_wb();
+  if (!nominal) {
+    return "fail: nominal psi_pm unknown (no motor.psi_pm_wb in the manifest or from the station, no "
+           "--psi-pm-wb): the fitted magnet flux cannot be judged";
+  }
+  const double nominal_psi_pm_wb = *nominal;
   if (!cal.summary.usable) return "fail: fit did not converge";
   if (cal.summary.rms_relative > tol.max_rms_relative) {
     return absl::StrFormat("fail: fit residual %.2f %% above %.2f %%", 100 * cal.summary.rms_relative,
                            100 * tol.max_rms_relative);
+  }
+  // A map fit (flux nodes, no inductances) is judged by its flux error over
+  // the map's nodes, against the same tolerance.
+  if (cal.summary.flux_nodes > 0 && !(cal.summary.flux_rms_relative <= tol.max_rms_relative)) {
+    return absl::StrFormat("fail: flux error against the map %.2f %% above %.2f %%",
+                           100 * cal.summary.flux_rms_relative, 100 * tol.max_rms_relative);
   }
   if (nominal_psi_pm_wb > 0 && std::abs(cal.psi_pm_wb() / nominal_psi_pm_wb - 1) > tol.psi_pm_tolerance_relative) {
     return absl::StrFormat("fail: psi_pm %.5g Wb deviates %.1f %% from nominal", cal.psi_pm_wb(),
@@ -200,15 +261,13 @@ absl::StatusOr<storage::CalibrationRow> FitSerial(storage::Store& store, const s
   // the stored points alone psi_d is pinned only by the magnet-flux prior,
   // and its standard error came out an order of magnitude larger than the
   // local fit's for the same set.
-  std::string recording_sha;
-  auto history = store.History(serial);
-  if (!history.ok()) return history.status();
-  for (const auto& h : *history) {
-    if (h.run_id == run_id && h.kind == "recording" && !h.detail.empty()) recording_sha = h.detail;
+  auto recording_sha = RecordingShaOfRun(store, serial, run_id);
+  if (!recording_sha.ok() && recording_sha.status().code() != absl::StatusCode::kNotFound) {
+    return recording_sha.status();
   }
   fit::FitData d;
-  if (!recording_sha.empty()) {
-    auto set = LoadStoredRecording(store, recording_sha);
+  if (recording_sha.ok()) {
+    auto set = LoadStoredRecording(store, *recording_sha);
     if (!set.ok()) return set.status();
     ident::IdentifyOptions idopt;
     idopt.cancelled = cancelled;
@@ -232,7 +291,8 @@ absl::StatusOr<storage::CalibrationRow> FitSerial(storage::Store& store, const s
   row.model = cal->family().Name();
   row.psi_pm_wb = cal->psi_pm_wb();
   row.rms_relative = cal->summary.rms_relative;
-  row.verdict = Verdict(*cal, motor->psi_pm_wb, pts->size(), unreliable, tol);
+  row.verdict = Verdict(*cal, motor->psi_pm_wb > 0 ? std::optional<double>(motor->psi_pm_wb) : std::nullopt,
+                        pts->size(), unreliable, tol);
   row.calibration_json = cal->ToJson().dump();
   // An audit row without its own detail says what was stored.
   storage::AuditContext fit_audit;
@@ -345,7 +405,7 @@ absl::StatusOr<QueryResult> QueryFlux(storage::Store& store, const std::string& 
 }
 
 absl::StatusOr<ExportResult> ExportTable(storage::Store& store, const std::string& serial, int version,
-                                         const tables::TableSpec& spec_in, const tables::MachineLimits& lim_in,
+                                         const tables::TableSpec& spec_in, const tables::ExportRequest& request,
                                          const std::string& format, const tables::ExportOptions& options) {
   auto fmt = tables::ParseFormat(format);
   if (!fmt.ok()) return fmt.status();
@@ -363,23 +423,34 @@ absl::StatusOr<ExportResult> ExportTable(storage::Store& store, const std::strin
   spec.model = cal->family().Name();
   spec.verdict = row->verdict.empty() ? tables::kVerdictUnknown : row->verdict;
   spec.release_state = *released ? tables::kReleased : tables::kNotReleased;
-  spec.measured_current_limit_a = cal->MeasuredCurrentLimitA();
-  tables::MachineLimits lim = lim_in;
-  if (lim.i_max_a <= 0) lim.i_max_a = cal->MeasuredCurrentLimitA() > 0 ? cal->MeasuredCurrentLimitA() : 150.0;
-  lim.pole_pairs = cal->pole_pairs();
-  lim.rs_ohm = cal->rs_ohm();
-  auto t = tables::BuildTable(*cal, lim, spec);
-  if (!t.ok()) return t.status();
-  auto e = tables::Export(*t, *fmt, options);
+  auto built = tables::BuildExportTable(*cal, spec, request);
+  if (!built.ok()) return built.status();
+  auto e = tables::Export(built->table, *fmt, options);
   if (!e.ok()) return e.status();
   ExportResult r;
   r.exported = *e;
   r.version = cal->version;
   r.verdict = row->verdict;
   r.released = *released;
-  for (auto c : t->clamped) r.clamped_cells += c;
-  for (auto c : t->extrapolated) r.extrapolated_cells += c;
+  r.cells = static_cast<int>(built->clamped.cells);
+  r.clamped_cells = static_cast<int>(built->clamped.clamped);
+  for (auto c : built->table.extrapolated) r.extrapolated_cells += c;
+  r.limits = std::move(built->limits);
   return r;
+}
+
+absl::StatusOr<int> FlashableVersion(storage::Store& store, const std::string& serial, int version) {
+  if (version == 0) {
+    auto v = store.LatestReleasedVersion(serial);
+    if (!v.ok()) return v.status();
+    if (*v == 0) {
+      return absl::FailedPreconditionError(
+          absl::StrCat("serial '", serial, "' has no released calibration (fluxcal release)"));
+    }
+    version = *v;
+  }
+  if (auto s = storage::VerifyReleasedVersion(store, serial, version); !s.ok()) return s;
+  return version;
 }
 
 absl::StatusOr<std::vector<FleetPoint>> FleetStatistics(storage::Store& store,
@@ -457,7 +528,8 @@ absl::StatusOr<storage::CalibrationRow> StoreDiagnosedCalibration(storage::Store
   row.model = cal->family().Name();
   row.psi_pm_wb = cal->psi_pm_wb();
   row.rms_relative = cal->summary.rms_relative;
-  row.verdict = Verdict(*cal, motor->psi_pm_wb, report.corrected_data.inductances.size(), 0, tol);
+  row.verdict = Verdict(*cal, motor->psi_pm_wb > 0 ? std::optional<double>(motor->psi_pm_wb) : std::nullopt,
+                        report.corrected_data.inductances.size(), 0, tol);
   row.calibration_json = diag::MarkedCalibrationJson(report, *cal).dump();
   storage::AuditContext a;
   if (audit != nullptr) {
@@ -549,6 +621,13 @@ absl::StatusOr<std::string> ContentHash(storage::Store& store) {
     t(l.serial); absl::StrAppend(&dump, l.version, "\t"); t(l.prev_sha256); t(l.row_sha256);
     dump += "\n";
   }
+  auto release_chain = store.AllReleaseLinks();
+  if (!release_chain.ok()) return release_chain.status();
+  for (const auto& l : *release_chain) {
+    absl::StrAppend(&dump, "release_link\t", l.seq, "\t");
+    t(l.serial); absl::StrAppend(&dump, l.version, "\t"); t(l.calibration_sha256); t(l.prev_sha256); t(l.row_sha256);
+    dump += "\n";
+  }
   return io::Sha256Hex(dump);
 }
 
@@ -596,10 +675,13 @@ absl::StatusOr<MigrateResult> Migrate(storage::Store& from, storage::Store& to) 
   if (!audit.ok()) return audit.status();
   auto chain = from.AllChainRows();
   if (!chain.ok()) return chain.status();
-  if (auto s = to.ImportTrail(*releases, *audit, *chain); !s.ok()) return s;
+  auto release_chain = from.AllReleaseLinks();
+  if (!release_chain.ok()) return release_chain.status();
+  if (auto s = to.ImportTrail(*releases, *audit, *chain, *release_chain); !s.ok()) return s;
   out.releases = static_cast<int>(releases->size());
   out.audit_rows = static_cast<int>(audit->size());
   out.chain_links = static_cast<int>(chain->size());
+  out.release_links = static_cast<int>(release_chain->size());
   auto a = ContentHash(from);
   if (!a.ok()) return a.status();
   auto b = ContentHash(to);

@@ -17,6 +17,7 @@
 #include "io/recording_set.h"
 #include "pipeline/points.h"
 #include "storage/store.h"
+#include "tables/export_rule.h"
 #include "tables/tables.h"
 
 namespace fluxcal::pipeline {
@@ -31,12 +32,15 @@ using CancelledFn = std::function<bool()>;
 // audit row in the same transaction as the write (storage/store.h).
 
 // --- Ingest.
+// As the wire states it (v1::MotorInfo): pole pairs required (1..100),
+// rs_ohm and psi_pm_wb 0 when not stated.
 struct MotorNominal {
-  int pole_pairs = 4;
+  int pole_pairs = 0;
   double rs_ohm = 0, psi_pm_wb = 0;
 };
 // One durable transaction. Without `motor` the serial must already be
-// known (InvalidArgument otherwise); no point at all is InvalidArgument.
+// known (InvalidArgument otherwise); pole pairs outside 1..100 or no point
+// at all is InvalidArgument.
 absl::StatusOr<int64_t> IngestHfRun(storage::Store& store, const std::string& serial, const std::string& station,
                                     const std::optional<MotorNominal>& motor,
                                     const std::vector<IdentifiedPoint>& points, int rejected = 0,
@@ -49,6 +53,14 @@ struct IngestRecordingResult {
   std::string sha256;
   int64_t recording_bytes = 0, stored_bytes = 0;
   bool replayed = false;   // the idempotency key named a run stored before
+  // What was accepted and stored (for a replay: the run stored before, read
+  // back from the store): the run's points (HfPointsSha256) and the
+  // recording's files (count, data bytes, RecordingFilesSha256;
+  // pipeline/ingest_stream.h).
+  std::string points_sha256;
+  int files = 0;
+  int64_t files_bytes = 0;
+  std::string files_sha256;
 };
 // A recording set held in memory (never written to disk): validated with
 // the same reader as `fluxcal`, every file named by the manifest, serial
@@ -65,12 +77,17 @@ absl::StatusOr<IngestRecordingResult> IngestRecording(storage::Store& store, con
 
 // --- Fit and judge.
 struct FitTolerances {
-  double max_rms_relative = 0.02;          // fit residual vs the identified points
+  double max_rms_relative = 0.02;          // fit residual vs the identified points (a map fit: flux error over its nodes)
   double psi_pm_tolerance_relative = 0.10; // vs the nominal magnet flux
 };
-// "pass" or "fail: <reason>" for a fitted calibration.
-std::string Verdict(const fit::Calibration& cal, double nominal_psi_pm_wb, size_t points, size_t unreliable,
-                    const FitTolerances& tol);
+// "pass" or "fail: <reason>" for a fitted calibration, the one place that
+// judges one. psi_pm is judged against `nominal_psi_pm_wb`, else against
+// the calibration's own nominal (cal.psi_pm_nominal_wb()); with neither
+// the verdict is a fail: a calibration missing a fact its verdict depends
+// on (pole pairs, the nominal magnet flux) never passes. A nominal of 0
+// (a machine without magnets) is not judged relatively.
+std::string Verdict(const fit::Calibration& cal, std::optional<double> nominal_psi_pm_wb, size_t points,
+                    size_t unreliable, const FitTolerances& tol);
 // Fits the latest run of `serial` and stores calibration version n+1. A
 // run ingested with its raw recording (IngestRecording) is fitted from the
 // stored set through FitDataFromSet, the function `fluxcal fit SET` uses,
@@ -99,18 +116,30 @@ absl::StatusOr<QueryResult> QueryFlux(storage::Store& store, const std::string& 
 struct ExportResult {
   tables::Exported exported;
   int version = 0;
+  int cells = 0;
   int clamped_cells = 0;
   int extrapolated_cells = 0;
   std::string verdict;     // the stored verdict of the exported version
   bool released = false;   // the version is released for flashing
+  tables::ExportLimits limits;   // what the table was computed for, and from where
 };
-// lim.i_max_a <= 0: the calibration's measured current limit. The stored
-// verdict and release state of the version, and the measured current limit,
-// are written into the exported file (tables::Table); spec.verdict and
-// spec.release_state are overwritten from the store.
+// The table under the export rule (tables/export_rule.h: limits from the
+// request, else the stored calibration; refused when mostly clamped). The
+// stored verdict and release state of the version, and the measured current
+// limit, are written into the exported file (tables::Table); spec.verdict
+// and spec.release_state are overwritten from the store.
 absl::StatusOr<ExportResult> ExportTable(storage::Store& store, const std::string& serial, int version,
-                                         const tables::TableSpec& spec, const tables::MachineLimits& limits,
+                                         const tables::TableSpec& spec, const tables::ExportRequest& request,
                                          const std::string& format, const tables::ExportOptions& options = {});
+
+// The version a flashing station gets (ExportTable for the flasher role):
+// version 0 is the newest released one (FailedPrecondition when there is
+// none), an explicit version must be released. Either is re-checked now,
+// at export time, by storage::VerifyReleasedVersion: released and verdict
+// "pass" (FailedPrecondition otherwise), its calibration row and release
+// row still what their chain links say, and the links still chained
+// (DataLoss otherwise: the store was changed behind the service).
+absl::StatusOr<int> FlashableVersion(storage::Store& store, const std::string& serial, int version);
 
 struct FleetPoint {
   double id_a = 0, iq_a = 0;
@@ -149,12 +178,13 @@ absl::StatusOr<diag::DiagnosisReport> DiagnoseStored(storage::Store& store, cons
 // --- Whole stores (fluxcal admin).
 // SHA-256 over a canonical dump of everything stored (motors, runs with
 // their idempotency keys, points, recordings, calibrations, releases, the
-// audit trail, the calibration chain; ids, versions, timestamps and hashes
-// included): equal hashes mean equal content, whatever the backend.
+// audit trail, the calibration and release chains; ids, versions,
+// timestamps and hashes included): equal hashes mean equal content,
+// whatever the backend.
 absl::StatusOr<std::string> ContentHash(storage::Store& store);
 struct MigrateResult {
   int motors = 0, runs = 0, points = 0, recordings = 0, calibrations = 0;
-  int releases = 0, audit_rows = 0, chain_links = 0;
+  int releases = 0, audit_rows = 0, chain_links = 0, release_links = 0;
   std::string content_sha256;   // equal on both sides
 };
 // Copies `from` into the empty store `to` and verifies both content hashes.

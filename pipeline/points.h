@@ -37,9 +37,10 @@ struct IdentifiedSet {
 };
 absl::StatusOr<IdentifiedSet> IdentifySet(const io::RecordingSet& set, const ident::IdentifyOptions& options = {});
 
-// Fit input from stored HF points: the motor's nominal data (pole pairs,
-// Rs, magnet flux as the prior when > 0) and one inductance observation per
-// point.
+// Fit input from stored HF points: the motor's nominal data (pole pairs;
+// Rs and the magnet flux, as the prior, when > 0: the store keeps 0 for
+// "not stated"; no Udc, which a run of HF results does not carry) and one
+// inductance observation per point.
 fit::FitData FitDataFromPoints(const storage::MotorRow& motor, const std::vector<IdentifiedPoint>& points);
 
 // The identify-then-fit glue (the only place): every data kind a local set

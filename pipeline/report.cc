@@ -47,8 +47,10 @@ void FillReportInputsFromJson(const fit::Calibration& cal, const nlohmann::json&
     in->verdict = v->get<std::string>();
     in->verdict_basis = "as stored with the calibration";
   } else {
-    in->verdict = Verdict(cal, 0.0, 0, 0, FitTolerances{});
-    in->verdict_basis = "from the fit alone; give --set to also check psi_pm against nominal and the point flags";
+    in->verdict = Verdict(cal, std::nullopt, 0, 0, FitTolerances{});
+    in->verdict_basis = cal.psi_pm_nominal_wb()
+                            ? "from the fit and the calibration's nominal psi_pm; give --set to also check the point flags"
+                            : "from the fit; the calibration states no nominal psi_pm (give --set with a manifest that does)";
   }
   // A diagnosed calibration carries its findings (effect and parameters)
   // but not the rest of the diagnosis (mismatches, residuals): the page
@@ -95,8 +97,8 @@ absl::StatusOr<StoredReport> BuildStoredReport(storage::Store& store, const std:
   if (options.speed_rpm > 0) in.ellipse_speed_rpm = options.speed_rpm;
   if (options.udc_v > 0) {
     in.udc_v = options.udc_v;
-    in.udc_source = "udc_v of the request (fluxcal report --udc-v)";
-  }
+    in.udc_source = kUdcFromRequest;
+  }   // else the calibration's, when it states one (report::BuildReport)
   StoredReport out;
   if (options.include_fleet) {
     const std::vector<std::pair<double, double>> points(std::begin(kDefaultFleetPointsA),

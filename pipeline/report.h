@@ -39,9 +39,14 @@ void MergeStoredProvenance(int version, const std::string& created_utc, const st
 // FleetStatistics' result as the page's fleet section takes it.
 std::vector<report::FleetPoint> ToReportFleet(const std::vector<FleetPoint>& points);
 
+// Where a page's Udc came from when the caller gave it: the same words for
+// the service's page (GetReport's udc_v) and `fluxcal report --udc-v`, so
+// that both pages of one version carry the same limits section.
+inline constexpr char kUdcFromRequest[] = "udc_v of the request (fluxcal report --udc-v)";
+
 struct StoredReportOptions {
   double speed_rpm = 0;        // voltage-limit curve, mechanical rpm; <= 0: 1.5 x base speed
-  double udc_v = 0;            // DC-link voltage; <= 0: the export default
+  double udc_v = 0;            // DC-link voltage; <= 0: the calibration's (none: no voltage limit drawn)
   bool include_fleet = true;   // FleetStatistics at its default points
 };
 

@@ -10,6 +10,7 @@
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
 #include "plot/plot.h"
+#include "tables/export_rule.h"
 #include "tables/tables.h"
 
 namespace fluxcal::report {
@@ -206,20 +207,39 @@ absl::StatusOr<Report> BuildReport(const ReportInputs& in) {
   Report rep;
   Page page;
 
-  // Limits as `fluxcal export` sets them, so the checksums on this page are
-  // the ones an export with the same flags prints.
-  tables::MachineLimits lim;
-  lim.pole_pairs = cal.pole_pairs();
-  lim.rs_ohm = cal.rs_ohm();
-  std::string i_max_source = "fluxcal export default (the calibration has no measured region)";
-  if (cal.MeasuredCurrentLimitA() > 0) {
-    lim.i_max_a = cal.MeasuredCurrentLimitA();
-    i_max_source = "largest current circle inside the measured region";
+  // Limits by the export rule (tables/export_rule.h), so the checksums on
+  // this page are the ones an export with the same Udc prints. Udc: the
+  // caller's (--udc-v, a set's manifest), else the calibration's; none is
+  // ever assumed.
+  if (!(cal.MeasuredCurrentLimitA() > 0)) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "%s: the measured region (id %.4g .. %.4g A, |iq| %.4g .. %.4g A) holds no current circle: the page's tables "
+        "need a current limit (fluxcal export --i-max-a builds them)",
+        in.calibration_path, cal.id_min_a(), cal.id_max_a(), cal.iq_min_a(), cal.iq_max_a()));
   }
-  std::string udc_source = "fluxcal export default (no recording set or --udc-v given)";
-  if (in.udc_v) {
-    lim.udc_v = *in.udc_v;
-    udc_source = in.udc_source;
+  tables::ExportRequest request;
+  request.udc_v = in.udc_v;
+  auto resolved = tables::ResolveExportLimits(cal, "mtpa", request);
+  if (!resolved.ok()) {
+    return absl::InvalidArgumentError(absl::StrCat(in.calibration_path, ": ", resolved.status().message()));
+  }
+  const tables::MachineLimits lim = resolved->limits;
+  const std::string i_max_source = resolved->i_max_source;
+  const std::string udc_source =
+      in.udc_v ? in.udc_source : "the calibration (drive.udc_v of the set it was fitted from)";
+  // The voltage limit needs Udc and Rs; without either the page says so
+  // instead of drawing one at some default.
+  const bool voltage = lim.HasVoltageLimit();
+  std::string no_voltage;
+  if (!voltage) {
+    no_voltage = absl::StrCat(
+        "The voltage limit and the field-weakening map cannot be drawn: ",
+        !lim.udc_v ? "the DC-link voltage Udc is not known (give --udc-v, or --set with a manifest that has "
+                     "drive.udc_v)"
+                   : "",
+        !lim.udc_v && !lim.rs_ohm ? ", and " : "",
+        !lim.rs_ohm ? "the calibration states no stator resistance Rs (its set's manifest has no motor.rs_ohm)" : "",
+        ".");
   }
   tables::TableSpec spec;
   spec.serial = cal.serial();
@@ -229,6 +249,7 @@ absl::StatusOr<Report> BuildReport(const ReportInputs& in) {
   std::map<std::string, tables::Table> tabs;
   std::string mtpv_note;
   for (const char* kind : {"mtpa", "mtpv", "fw"}) {
+    if (std::string(kind) == "fw" && !voltage) continue;
     spec.kind = kind;
     spec.allow_extrapolation = false;
     auto t = tables::BuildTable(cal, lim, spec);
@@ -249,7 +270,6 @@ absl::StatusOr<Report> BuildReport(const ReportInputs& in) {
   }
   const auto& mtpa = tabs["mtpa"];
   const auto& mtpv = tabs["mtpv"];
-  const auto& fw = tabs["fw"];
 
   // Base speed: where the MTPA point of the largest motoring torque meets
   // the voltage limit (bisection; the voltage grows with speed there).
@@ -258,36 +278,39 @@ absl::StatusOr<Report> BuildReport(const ReportInputs& in) {
     if (mtpa.axes[0].values[k] > mtpa.axes[0].values[kmax]) kmax = k;
   }
   const double id_b = mtpa.outputs[0].values[kmax], iq_b = mtpa.outputs[1].values[kmax];
-  double we_lo = 0, we_hi = 1e6;
-  if (tables::VoltageV(cal, lim, id_b, iq_b, we_hi) < lim.UMaxV()) we_lo = we_hi;
-  for (int k = 0; k < 80 && we_lo < we_hi; ++k) {
-    const double mid = 0.5 * (we_lo + we_hi);
-    (tables::VoltageV(cal, lim, id_b, iq_b, mid) < lim.UMaxV() ? we_lo : we_hi) = mid;
-  }
-  const double base_rpm = SpeedRpm(we_lo, lim.pole_pairs);
-  double ell_rpm = in.ellipse_speed_rpm;
-  std::string ell_source = "given (--speed-rpm)";
-  if (!(ell_rpm > 0)) {
-    // 1.5 x base speed, to two significant digits: far enough into field
-    // weakening that the limit cuts the current circle.
-    const double raw = 1.5 * base_rpm;
-    const double mag = std::pow(10.0, std::floor(std::log10(std::max(raw, 1.0))) - 1);
-    ell_rpm = std::round(raw / mag) * mag;
-    ell_source = absl::StrFormat("1.5 x base speed %.0f rpm, rounded", base_rpm);
+  double base_rpm = 0, ell_rpm = 0;
+  std::string ell_source, limits_warning;
+  if (voltage) {
+    double we_lo = 0, we_hi = 1e6;
+    if (tables::VoltageV(cal, lim, id_b, iq_b, we_hi) < lim.UMaxV()) we_lo = we_hi;
+    for (int k = 0; k < 80 && we_lo < we_hi; ++k) {
+      const double mid = 0.5 * (we_lo + we_hi);
+      (tables::VoltageV(cal, lim, id_b, iq_b, mid) < lim.UMaxV() ? we_lo : we_hi) = mid;
+    }
+    base_rpm = SpeedRpm(we_lo, lim.pole_pairs);
+    ell_rpm = in.ellipse_speed_rpm;
+    ell_source = "given (--speed-rpm)";
+    if (!(ell_rpm > 0)) {
+      // 1.5 x base speed, to two significant digits: far enough into field
+      // weakening that the limit cuts the current circle.
+      const double raw = 1.5 * base_rpm;
+      const double mag = std::pow(10.0, std::floor(std::log10(std::max(raw, 1.0))) - 1);
+      ell_rpm = std::round(raw / mag) * mag;
+      ell_source = absl::StrFormat("1.5 x base speed %.0f rpm, rounded", base_rpm);
+    }
+    // At standstill the voltage is Rs |i|: when that alone exceeds u_max the
+    // limits are not the machine's (a wrong Udc) and the field-weakening map
+    // is clamped everywhere. Said at the top.
+    const double standstill_v = tables::VoltageV(cal, lim, id_b, iq_b, 0.0);
+    if (!(base_rpm > 0) || standstill_v >= lim.UMaxV()) {
+      limits_warning = absl::StrFormat(
+          "The voltage limit u_max = %.3g V (Udc %.4g V: %s) is below the resistive drop at full MTPA current "
+          "(%.3g V at standstill): there is no base speed, and the field-weakening table is clamped at every "
+          "speed. Check the machine's DC-link voltage (--udc-v, or a set whose manifest has drive.udc_v).",
+          lim.UMaxV(), *lim.udc_v, udc_source, standstill_v);
+    }
   }
   rep.ellipse_speed_rpm = ell_rpm;
-  // At standstill the voltage is Rs |i|: when that alone exceeds u_max the
-  // limits are not the machine's (usually Udc left at the export default)
-  // and the field-weakening map is clamped everywhere. Said at the top.
-  const double standstill_v = tables::VoltageV(cal, lim, id_b, iq_b, 0.0);
-  std::string limits_warning;
-  if (!(base_rpm > 0) || standstill_v >= lim.UMaxV()) {
-    limits_warning = absl::StrFormat(
-        "The voltage limit u_max = %.3g V (Udc %.4g V: %s) is below the resistive drop at full MTPA current "
-        "(%.3g V at standstill): there is no base speed, and the field-weakening table is clamped at every "
-        "speed. Give the machine's DC-link voltage (--udc-v, or a set whose manifest has drive.udc_v).",
-        lim.UMaxV(), lim.udc_v, udc_source, standstill_v);
-  }
   const double ell_we = ell_rpm * lim.pole_pairs * 2 * kPi / 60;
 
   // ------------------------------------------------------------ identity
@@ -300,6 +323,7 @@ absl::StatusOr<Report> BuildReport(const ReportInputs& in) {
   b += absl::StrFormat("<div class=\"verdict %s\">%s</div></header>\n", pass ? "pass" : "fail",
                        verdict.empty() ? "no verdict" : H(verdict));
   if (!limits_warning.empty()) b += "<p class=\"warn\">" + H(limits_warning) + "</p>\n";
+  if (!no_voltage.empty()) b += "<p class=\"warn\">" + H(no_voltage) + "</p>\n";
   b += "<section><h2>Identity and provenance</h2><table class=\"kv\">\n";
   b += Row("serial", H(cal.serial()));
   b += Row("calibration version", absl::StrCat(cal.version, cal.version == 0 ? " (not stored yet: versions are assigned by the store)" : ""));
@@ -324,10 +348,27 @@ absl::StatusOr<Report> BuildReport(const ReportInputs& in) {
   b += Row("usable", s.usable ? "yes" : "<b>no</b>");
   b += Row("termination", H(s.termination));
   b += Row("observations", absl::StrCat(s.observations));
-  b += Row("RMS relative residual", absl::StrFormat("%.3f %%", 100 * s.rms_relative));
+  // A map fit has no identified inductances for rms_relative to cover: its
+  // figure is the flux error over the map's nodes (FitSummary::flux_*).
+  if (s.flux_nodes == 0 || s.rms_relative > 0) {
+    b += Row("RMS relative residual", absl::StrFormat("%.3f %%", 100 * s.rms_relative));
+  }
+  if (s.flux_nodes > 0) {
+    b += Row("flux error against the map",
+             absl::StrFormat("RMS %.3f %%, max %.3f %% of the largest |psi| %.4g Wb over %d nodes (RMS %.3g Wb, "
+                             "max %.3g Wb)",
+                             100 * s.flux_rms_relative, 100 * s.flux_max_relative, s.flux_scale_wb, s.flux_nodes,
+                             s.flux_rms_wb, s.flux_max_wb));
+  }
   b += Row("chi2 / BIC", absl::StrFormat("%.4g / %.4g", s.chi2, s.bic));
   b += Row("psi_pm", absl::StrFormat("%.6g Wb", cal.psi_pm_wb()));
-  b += Row("Rs (nominal) / pole pairs", absl::StrFormat("%.6g ohm / %d", cal.rs_ohm(), cal.pole_pairs()));
+  b += Row("psi_pm nominal", cal.psi_pm_nominal_wb() ? absl::StrFormat("%.6g Wb", *cal.psi_pm_nominal_wb())
+                                                     : std::string("not known (the data stated none)"));
+  b += Row("Rs (nominal) / pole pairs",
+           absl::StrFormat("%s / %d", cal.rs_ohm() ? absl::StrFormat("%.6g ohm", *cal.rs_ohm()) : "not known",
+                           cal.pole_pairs()));
+  b += Row("DC link Udc (of its data)",
+           cal.udc_v() ? absl::StrFormat("%.4g V", *cal.udc_v()) : std::string("not known (the data stated none)"));
   b += Row("measured region", absl::StrFormat("id %.4g .. %.4g A, |iq| %.4g .. %.4g A", cal.id_min_a(), cal.id_max_a(),
                                               cal.iq_min_a(), cal.iq_max_a()));
   b += Row("positive definite over 1.5 x region", cal.PhysicalOver(1.5) ? "yes" : "<b>no</b>");
@@ -360,7 +401,8 @@ absl::StatusOr<Report> BuildReport(const ReportInputs& in) {
   {
     const double im = lim.i_max_a;
     plot::Figure f("fig-plane", 980, 640);
-    f.SetTitle(absl::StrFormat("MTPA and MTPV on the current plane (voltage limit at %.0f rpm)", ell_rpm));
+    f.SetTitle(voltage ? absl::StrFormat("MTPA and MTPV on the current plane (voltage limit at %.0f rpm)", ell_rpm)
+                       : std::string("MTPA and MTPV on the current plane (no voltage limit: Udc or Rs not known)"));
     f.SetXLabel("id [A]");
     f.SetYLabel("iq [A]");
     // Wide enough for the MTPV points near the current limit (up to
@@ -407,18 +449,25 @@ absl::StatusOr<Report> BuildReport(const ReportInputs& in) {
     };
     curve(mtpa, "#d62728", "MTPA (table)");
     const bool have_mtpv = curve(mtpv, "#1f77b4", "MTPV (table)");
-    page.Figure(f, absl::StrFormat(
+    const std::string voltage_text =
+        voltage ? absl::StrFormat("the voltage limit |u| = %.3g V (m Udc / sqrt 3, Udc %.4g V) at %.0f rpm (%s), ",
+                                  lim.UMaxV(), *lim.udc_v, ell_rpm, H(ell_source))
+                : std::string("no voltage limit (Udc or Rs not known: see above), ");
+    const std::string base_text =
+        voltage ? absl::StrFormat(" Base speed at full MTPA torque: %.0f rpm.", base_rpm) : std::string();
+    page.Figure(f, absl::StrCat(
                        "Constant-torque contours from the fitted flux linkage (T = 1.5 p (psi_d iq - psi_q id)), the "
-                       "current limit, the voltage limit |u| = %.3g V (m Udc / sqrt 3, Udc %.4g V) at %.0f rpm (%s), "
-                       "and the MTPA and MTPV tables' points for motoring. Base speed at full MTPA torque: %.0f rpm.%s",
-                       lim.UMaxV(), lim.udc_v, ell_rpm, H(ell_source), base_rpm,
+                       "current limit, ", voltage_text, "and the MTPA and MTPV tables' points for motoring.", base_text,
                        have_mtpv ? "" : " The MTPV table has no row with positive torque to draw."));
   }
   b += "</section>\n";
 
   // ------------------------------------------------------------ fw maps
   b += "<section><h2>Field-weakening map</h2><div class=\"grid\">\n";
-  {
+  if (!voltage) {
+    b += "<p>" + H(no_voltage) + "</p>\n";
+  } else {
+    const auto& fw = tabs["fw"];
     const auto& tq = fw.axes[0].values;
     const auto& n = fw.axes[1].values;
     for (size_t o = 0; o < fw.outputs.size(); ++o) {
@@ -454,15 +503,25 @@ absl::StatusOr<Report> BuildReport(const ReportInputs& in) {
 
   // ------------------------------------------------------------ tables
   b += "<section><h2>ECU tables: limits and checksums</h2><table class=\"kv\">\n";
-  b += Row("pole pairs / Rs", absl::StrFormat("%d / %.6g ohm", lim.pole_pairs, lim.rs_ohm));
+  b += Row("pole pairs / Rs", absl::StrFormat("%d / %s", lim.pole_pairs,
+                                              lim.rs_ohm ? absl::StrFormat("%.6g ohm", *lim.rs_ohm) : "not known"));
   b += Row("current limit i_max", absl::StrFormat("%.4g A <small>(%s)</small>", lim.i_max_a, H(i_max_source)));
-  b += Row("DC link Udc", absl::StrFormat("%.4g V <small>(%s)</small>", lim.udc_v, H(udc_source)));
-  b += Row("voltage limit u_max", absl::StrFormat("%.4g V (modulation limit %.3g of the linear SVPWM range)", lim.UMaxV(),
-                                                  lim.modulation_limit));
+  b += Row("DC link Udc", lim.udc_v ? absl::StrFormat("%.4g V <small>(%s)</small>", *lim.udc_v, H(udc_source))
+                                    : std::string("not known <small>(no --udc-v, no set's drive.udc_v, none in the "
+                                                  "calibration)</small>"));
+  if (lim.udc_v) {
+    b += Row("voltage limit u_max", absl::StrFormat("%.4g V (modulation limit %.3g of the linear SVPWM range)",
+                                                    lim.UMaxV(), lim.modulation_limit));
+  }
   b += Row("temperature", absl::StrFormat("%.3g degC", lim.temperature_c));
   b += "</table>\n<table class=\"list\"><tr><th>table</th><th>axes</th><th>outputs</th><th>cells</th>"
        "<th>clamped</th><th>CRC-32</th><th>SHA-256</th></tr>\n";
   for (const char* kind : {"mtpa", "mtpv", "fw"}) {
+    if (!tabs.count(kind)) {
+      b += absl::StrFormat("<tr><td>%s</td><td colspan=\"6\">not computed: the voltage limit is not known (Udc or "
+                           "Rs, above)</td></tr>\n", kind);
+      continue;
+    }
     const auto& t = tabs[kind];
     std::vector<std::string> axes, outs;
     for (const auto& a : t.axes) {

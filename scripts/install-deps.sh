@@ -10,7 +10,7 @@ PKGS=(
   libpq-dev postgresql
   nlohmann-json3-dev libtinyxml2-dev libxml2-utils
   libgtest-dev libgmock-dev libbenchmark-dev
-  python3 python3-grpcio python3-protobuf
+  python3 python3-grpcio python3-protobuf python3-yaml
   openssl libssl-dev
   clang libclang-rt-14-dev
   chromium

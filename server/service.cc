@@ -13,8 +13,11 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "io/csv.h"
+#include "io/net.h"
 #include "io/recording_set.h"
 #include "nlohmann/json.hpp"
+#include "pipeline/anchor.h"
+#include "pipeline/ingest_stream.h"
 #include "pipeline/pipeline.h"
 #include "pipeline/report.h"
 #include "server/reflection.h"
@@ -98,70 +101,123 @@ absl::Status StationOf(const Identity& who, const std::string& claimed, std::str
   return absl::OkStatus();
 }
 
+// A stream problem at message `m` (0-based): the status with "message m: "
+// in front and "; nothing stored" after, its code kept.
+grpc::Status AtMessage(int64_t m, const absl::Status& s) {
+  return ToGrpcStatus(absl::Status(s.code(), absl::StrCat("message ", m, ": ", s.message(), "; nothing stored")));
+}
+
+// Read() returned false before the stream's end message: either the client
+// closed its side, or the message at `next` failed to parse (gRPC ends the
+// reads at a message it cannot parse, whatever follows it). One more Read
+// tells the two apart when a message follows the broken one; a stream that
+// declared its end (end_follows) is refused either way.
+template <class Message>
+grpc::Status EndedWithoutEnd(grpc::ServerReader<Message>* reader, Message* scratch, int64_t next, bool end_follows,
+                             const std::string& chunks = "") {
+  auto at = [&](const std::string& why) {
+    if (chunks.empty()) return AtMessage(next, absl::InvalidArgumentError(why));
+    return ToGrpcStatus(absl::InvalidArgumentError(absl::StrCat(chunks, "[", next, "]: ", why, "; nothing stored")));
+  };
+  if (reader->Read(scratch)) {
+    return at(absl::StrCat("failed to parse as ", Message::descriptor()->full_name(),
+                           " (corrupt, or another message); the stream went on after it"));
+  }
+  if (end_follows) {
+    return at("end: the stream ended without its end message (declared by end_follows): a message failed to "
+              "parse or the stream was cut");
+  }
+  return grpc::Status::OK;
+}
+
 }  // namespace
 
 grpc::Status CalibrationServiceImpl::IngestHfResults(grpc::ServerContext* ctx,
                                                      grpc::ServerReader<v1::IngestHfResultsRequest>* reader,
                                                      v1::IngestHfResultsResponse* response) {
-  auto who = auth_->Authorize(*ctx, Rpc::kIngestHfResults);
+  auto who = Admit(ctx, Rpc::kIngestHfResults);
   if (!who.ok()) return ToGrpcStatus(who.status());
+  // Stream rules (docs/service.md): any bad message fails the whole stream
+  // with the message's index, and nothing is stored.
   v1::IngestHfResultsRequest msg;
   std::string serial, station, key;
   v1::MotorInfo motor;
-  bool have_motor = false;
+  bool have_motor = false, end_follows = false;
+  std::optional<v1::StreamEnd> end;
+  int64_t end_message = -1;
   std::vector<pipeline::IdentifiedPoint> rows;
   std::set<std::string> point_ids;
   int index = 0;
+  int64_t messages = 0;
   while (reader->Read(&msg)) {
+    if (auto s = who->lease.Add(static_cast<int64_t>(msg.ByteSizeLong())); !s.ok()) return ToGrpcStatus(s);
     if (ctx->IsCancelled()) return grpc::Status(grpc::StatusCode::CANCELLED, "client cancelled the stream");
-    if (serial.empty()) {
-      if (auto s = ValidateSerial(msg.serial()); !s.ok()) return ToGrpcStatus(s);
-      if (auto s = ValidateIdentifier(msg.station_id(), "station_id"); !s.ok()) return ToGrpcStatus(s);
-      if (auto s = StationOf(*who, msg.station_id(), &station); !s.ok()) return ToGrpcStatus(s);
-      if (auto s = ValidateIdentifier(msg.idempotency_key(), "idempotency_key"); !s.ok()) return ToGrpcStatus(s);
+    const int64_t m = messages++;
+    if (end) {
+      return AtMessage(m, absl::InvalidArgumentError(
+                              absl::StrCat("end: a message after the stream's end (message ", end_message, ")")));
+    }
+    if (m == 0) {
+      if (auto s = ValidateSerial(msg.serial()); !s.ok()) return AtMessage(m, s);
+      if (auto s = ValidateIdentifier(msg.station_id(), "station_id"); !s.ok()) return AtMessage(m, s);
+      if (auto s = StationOf(*who, msg.station_id(), &station); !s.ok()) return AtMessage(m, s);
+      if (auto s = ValidateIdentifier(msg.idempotency_key(), "idempotency_key"); !s.ok()) return AtMessage(m, s);
       key = msg.idempotency_key();
       serial = msg.serial();
+      end_follows = msg.end_follows();
     } else if (!msg.serial().empty() && msg.serial() != serial) {
-      return ToGrpcStatus(absl::InvalidArgumentError(
-          absl::StrCat("serial: a stream carries one serial; got '", io::Printable(msg.serial().substr(0, 80)), "' after '",
-                       serial, "'")));
+      return AtMessage(m, absl::InvalidArgumentError(absl::StrCat(
+                              "serial: a stream carries one serial; got '", io::Printable(msg.serial().substr(0, 80)),
+                              "' after '", serial, "'")));
+    } else if (msg.end_follows()) {
+      return AtMessage(m, absl::InvalidArgumentError("end_follows: only the first message declares the end"));
     }
     if (msg.has_motor()) {
-      if (auto s = ValidateMotor(msg.motor()); !s.ok()) return ToGrpcStatus(s);
+      if (auto s = ValidateMotor(msg.motor()); !s.ok()) return AtMessage(m, s);
       motor = msg.motor();
       have_motor = true;
     }
     for (const auto& p : msg.points()) {
       if (index >= kMaxPointsPerStream) {
-        return ToGrpcStatus(absl::ResourceExhaustedError(
-            absl::StrCat("points: stream exceeds the limit of ", kMaxPointsPerStream, " points")));
+        return AtMessage(m, absl::ResourceExhaustedError(
+                                absl::StrCat("points: stream exceeds the limit of ", kMaxPointsPerStream, " points")));
       }
       absl::Status s = ValidatePoint(p, index);
       if (s.ok() && !p.point_id().empty() && !point_ids.insert(p.point_id()).second) {
-        s = absl::InvalidArgumentError(absl::StrCat("points[", index, "].point_id: duplicate '", p.point_id(), "'"));
+        s = absl::InvalidArgumentError(absl::StrCat("points[", index, "].point_id: duplicate '",
+                                                    io::Printable(p.point_id().substr(0, kMaxIdentifierBytes)), "'"));
       }
-      if (!s.ok()) {
-        auto* r = response->add_rejects();
-        r->set_index(index);
-        r->set_point_id(io::Printable(p.point_id().substr(0, kMaxIdentifierBytes)));
-        const std::string m(s.message());
-        r->set_field(m.substr(0, m.find(':')));
-        r->set_message(m);
-      } else {
-        rows.push_back(pipeline::FromProto(p));
-      }
+      if (!s.ok()) return AtMessage(m, s);
+      rows.push_back(pipeline::FromProto(p));
       ++index;
     }
+    if (msg.has_end()) {
+      if (!end_follows) {
+        return AtMessage(m, absl::InvalidArgumentError("end: the first message did not declare end_follows"));
+      }
+      if (auto s = ValidateStreamEnd(msg.end(), "end"); !s.ok()) return AtMessage(m, s);
+      end = msg.end();
+      end_message = m;
+    }
   }
-  if (serial.empty()) return ToGrpcStatus(absl::InvalidArgumentError("serial: the stream carried no message"));
   if (ctx->IsCancelled()) return grpc::Status(grpc::StatusCode::CANCELLED, "client cancelled the stream");
+  if (!end) {
+    if (auto s = EndedWithoutEnd(reader, &msg, messages, end_follows); !s.ok()) return s;
+  }
+  if (serial.empty()) return AtMessage(0, absl::InvalidArgumentError("serial: the stream carried no message"));
+  if (end) {
+    const pipeline::StreamTotals declared{end->messages(), end->count(), end->bytes(), end->sha256()};
+    const pipeline::StreamTotals received{messages, static_cast<int64_t>(rows.size()), 0,
+                                          pipeline::HfPointsSha256(rows)};
+    if (auto s = pipeline::CheckStreamEnd(declared, received, "end", "points"); !s.ok()) return AtMessage(end_message, s);
+  }
   {
     std::set<std::pair<double, double>> distinct;
     for (const auto& r : rows) distinct.insert({r.id_a, r.iq_a});
     if (!rows.empty() && static_cast<int>(distinct.size()) < kMinDistinctOperatingPoints) {
       return ToGrpcStatus(absl::InvalidArgumentError(absl::StrCat(
           "points: ", distinct.size(), " distinct operating points (id_a, iq_a); a calibration needs at least ",
-          kMinDistinctOperatingPoints)));
+          kMinDistinctOperatingPoints, "; nothing stored")));
     }
   }
   std::optional<pipeline::MotorNominal> m;
@@ -171,11 +227,16 @@ grpc::Status CalibrationServiceImpl::IngestHfResults(grpc::ServerContext* ctx,
   const auto audit = AuditFor(ctx, *who, Rpc::kIngestHfResults, serial, [n, station](int64_t run, bool again) {
     return absl::StrCat(again ? "replayed run " : "run ", run, ", ", n, " points, station ", station);
   });
-  auto run = pipeline::IngestHfRun(*store_, serial, station, m, rows, response->rejects_size(), key, &replayed, &audit);
+  auto run = pipeline::IngestHfRun(*store_, serial, station, m, rows, 0, key, &replayed, &audit);
   if (!run.ok()) return ToGrpcStatus(run.status());
+  // What was accepted and stored (for a replay: the run stored before): the
+  // client compares it with what it sent.
+  auto stored = pipeline::DigestOfIngest(*store_, *run, replayed, rows);
+  if (!stored.ok()) return ToGrpcStatus(stored.status());
   response->set_serial(serial);
   response->set_run_id(*run);
-  response->set_accepted(static_cast<int>(rows.size()));
+  response->set_accepted(static_cast<int>(stored->points));
+  response->set_points_sha256(stored->points_sha256);
   response->set_replayed(replayed);
   return grpc::Status::OK;
 }
@@ -183,17 +244,27 @@ grpc::Status CalibrationServiceImpl::IngestHfResults(grpc::ServerContext* ctx,
 grpc::Status CalibrationServiceImpl::IngestRecording(grpc::ServerContext* ctx,
                                                      grpc::ServerReader<v1::RecordingChunk>* reader,
                                                      v1::IngestRecordingResponse* response) {
-  auto who = auth_->Authorize(*ctx, Rpc::kIngestRecording);
+  auto who = Admit(ctx, Rpc::kIngestRecording);
   if (!who.ok()) return ToGrpcStatus(who.status());
   // The set is assembled, validated and identified in memory: a file name
-  // from the client never becomes a path on this machine.
+  // from the client never becomes a path on this machine. Stream rules as
+  // IngestHfResults; a chunk's field names say its index.
   v1::RecordingChunk chunk;
   std::string serial, station, key;
   io::RecordingFiles files;
+  bool end_follows = false;
+  std::optional<v1::StreamEnd> end;
+  std::string end_field;
   long long total = 0;
-  int index = 0;
+  int64_t index = 0;
   while (reader->Read(&chunk)) {
+    if (ctx->IsCancelled()) return grpc::Status(grpc::StatusCode::CANCELLED, "client cancelled the stream");
+    if (auto s = who->lease.Add(static_cast<int64_t>(chunk.ByteSizeLong())); !s.ok()) return ToGrpcStatus(s);
     const std::string field = absl::StrCat("chunks[", index++, "]");
+    if (end) {
+      return ToGrpcStatus(absl::InvalidArgumentError(
+          absl::StrCat(field, ": a chunk after the stream's end (", end_field, "); nothing stored")));
+    }
     if (serial.empty()) {
       if (auto s = ValidateSerial(chunk.serial(), field + ".serial"); !s.ok()) return ToGrpcStatus(s);
       if (auto s = ValidateIdentifier(chunk.station_id(), field + ".station_id"); !s.ok()) return ToGrpcStatus(s);
@@ -203,10 +274,24 @@ grpc::Status CalibrationServiceImpl::IngestRecording(grpc::ServerContext* ctx,
       }
       key = chunk.idempotency_key();
       serial = chunk.serial();
+      end_follows = chunk.end_follows();
     } else if (!chunk.serial().empty() && chunk.serial() != serial) {
       return ToGrpcStatus(absl::InvalidArgumentError(
           absl::StrCat(field, ".serial: a stream carries one serial; got '", io::Printable(chunk.serial().substr(0, 80)),
                        "' after '", serial, "'")));
+    } else if (chunk.end_follows()) {
+      return ToGrpcStatus(absl::InvalidArgumentError(
+          absl::StrCat(field, ".end_follows: only the first chunk declares the end")));
+    }
+    if (chunk.has_end()) {
+      if (!end_follows) {
+        return ToGrpcStatus(absl::InvalidArgumentError(
+            absl::StrCat(field, ".end: the first chunk did not declare end_follows")));
+      }
+      if (auto s = ValidateStreamEnd(chunk.end(), field + ".end"); !s.ok()) return ToGrpcStatus(s);
+      end = chunk.end();
+      end_field = field + ".end";
+      if (chunk.path().empty() && chunk.data().empty()) continue;   // an end-only chunk
     }
     if (auto s = io::ValidateRecordingFileName(chunk.path()); !s.ok()) {
       return ToGrpcStatus(absl::InvalidArgumentError(absl::StrCat(field, ".path: ", s.message())));
@@ -226,8 +311,17 @@ grpc::Status CalibrationServiceImpl::IngestRecording(grpc::ServerContext* ctx,
     }
     it->second += chunk.data();
   }
-  if (serial.empty()) return ToGrpcStatus(absl::InvalidArgumentError("serial: the stream carried no chunk"));
   if (ctx->IsCancelled()) return grpc::Status(grpc::StatusCode::CANCELLED, "client cancelled the stream");
+  if (!end) {
+    if (auto s = EndedWithoutEnd(reader, &chunk, index, end_follows, "chunks"); !s.ok()) return s;
+  }
+  if (serial.empty()) return ToGrpcStatus(absl::InvalidArgumentError("serial: the stream carried no chunk"));
+  if (end) {
+    const pipeline::StreamTotals declared{end->messages(), end->count(), end->bytes(), end->sha256()};
+    const pipeline::StreamTotals received{index, static_cast<int64_t>(files.size()), pipeline::RecordingFilesBytes(files),
+                                          pipeline::RecordingFilesSha256(files)};
+    if (auto s = pipeline::CheckStreamEnd(declared, received, end_field, "files"); !s.ok()) return ToGrpcStatus(s);
+  }
   // The detail names the recording, known only after identification: the
   // store calls this inside the transaction, by then `sha` is set.
   std::string sha;
@@ -243,11 +337,15 @@ grpc::Status CalibrationServiceImpl::IngestRecording(grpc::ServerContext* ctx,
   response->set_recording_bytes(run->recording_bytes);
   response->set_stored_bytes(run->stored_bytes);
   response->set_replayed(run->replayed);
+  response->set_points_sha256(run->points_sha256);
+  response->set_files(run->files);
+  response->set_files_bytes(run->files_bytes);
+  response->set_files_sha256(run->files_sha256);
   return grpc::Status::OK;
 }
 
 grpc::Status CalibrationServiceImpl::Fit(grpc::ServerContext* ctx, const v1::FitRequest* req, v1::FitResponse* resp) {
-  auto who = auth_->Authorize(*ctx, Rpc::kFit);
+  auto who = Admit(ctx, Rpc::kFit);
   if (!who.ok()) return ToGrpcStatus(who.status());
   if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
   pipeline::FitTolerances tol;
@@ -269,6 +367,7 @@ grpc::Status CalibrationServiceImpl::Fit(grpc::ServerContext* ctx, const v1::Fit
   const auto audit = AuditFor(ctx, *who, Rpc::kFit, req->serial(), nullptr);
   auto row = pipeline::FitSerial(*store_, req->serial(), req->model(), tol, &audit, CancelledBy(ctx));
   if (!row.ok()) return StoppedOr(ctx, row.status());
+  AnchorAfterWrite(req->serial());
   ToProto(*row, resp->mutable_calibration());
   resp->set_pass(row->verdict == "pass");
   return grpc::Status::OK;
@@ -276,7 +375,7 @@ grpc::Status CalibrationServiceImpl::Fit(grpc::ServerContext* ctx, const v1::Fit
 
 grpc::Status CalibrationServiceImpl::GetCalibration(grpc::ServerContext* ctx, const v1::GetCalibrationRequest* req,
                                                     v1::CalibrationRecord* resp) {
-  auto who = auth_->Authorize(*ctx, Rpc::kGetCalibration);
+  auto who = Admit(ctx, Rpc::kGetCalibration);
   if (!who.ok()) return ToGrpcStatus(who.status());
   if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
   if (auto s = ValidateVersion(req->version()); !s.ok()) return ToGrpcStatus(s);
@@ -288,7 +387,7 @@ grpc::Status CalibrationServiceImpl::GetCalibration(grpc::ServerContext* ctx, co
 
 grpc::Status CalibrationServiceImpl::ListMotors(grpc::ServerContext* ctx, const v1::ListMotorsRequest* req,
                                                 v1::ListMotorsResponse* resp) {
-  auto who = auth_->Authorize(*ctx, Rpc::kListMotors);
+  auto who = Admit(ctx, Rpc::kListMotors);
   if (!who.ok()) return ToGrpcStatus(who.status());
   int size = req->page_size() == 0 ? 50 : req->page_size();
   if (size < 0 || size > 1000) return ToGrpcStatus(absl::InvalidArgumentError("page_size: must be 0..1000"));
@@ -298,6 +397,7 @@ grpc::Status CalibrationServiceImpl::ListMotors(grpc::ServerContext* ctx, const 
   if (req->serial_prefix().size() > 64) return ToGrpcStatus(absl::InvalidArgumentError("serial_prefix: at most 64 characters"));
   auto rows = store_->ListMotors(req->serial_prefix(), req->only_failed(), offset, size + 1);
   if (!rows.ok()) return ToGrpcStatus(rows.status());
+  if (who->role == Role::kHealth) return grpc::Status::OK;   // the database answered; no data for a health check
   for (size_t k = 0; k < rows->size() && static_cast<int>(k) < size; ++k) {
     auto* m = resp->add_motors();
     const auto& r = (*rows)[k];
@@ -310,7 +410,7 @@ grpc::Status CalibrationServiceImpl::ListMotors(grpc::ServerContext* ctx, const 
 
 grpc::Status CalibrationServiceImpl::History(grpc::ServerContext* ctx, const v1::HistoryRequest* req,
                                              v1::HistoryResponse* resp) {
-  auto who = auth_->Authorize(*ctx, Rpc::kHistory);
+  auto who = Admit(ctx, Rpc::kHistory);
   if (!who.ok()) return ToGrpcStatus(who.status());
   if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
   auto rows = store_->History(req->serial());
@@ -326,7 +426,7 @@ grpc::Status CalibrationServiceImpl::History(grpc::ServerContext* ctx, const v1:
 
 grpc::Status CalibrationServiceImpl::QueryFlux(grpc::ServerContext* ctx, const v1::QueryFluxRequest* req,
                                                v1::QueryFluxResponse* resp) {
-  auto who = auth_->Authorize(*ctx, Rpc::kQueryFlux);
+  auto who = Admit(ctx, Rpc::kQueryFlux);
   if (!who.ok()) return ToGrpcStatus(who.status());
   if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
   if (auto s = ValidateVersion(req->version()); !s.ok()) return ToGrpcStatus(s);
@@ -360,7 +460,7 @@ grpc::Status CalibrationServiceImpl::QueryFlux(grpc::ServerContext* ctx, const v
 
 grpc::Status CalibrationServiceImpl::ExportTable(grpc::ServerContext* ctx, const v1::ExportTableRequest* req,
                                                  v1::ExportTableResponse* resp) {
-  auto who = auth_->Authorize(*ctx, Rpc::kExportTable);
+  auto who = Admit(ctx, Rpc::kExportTable);
   if (!who.ok()) return ToGrpcStatus(who.status());
   if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
   tables::TableSpec spec;
@@ -380,30 +480,29 @@ grpc::Status CalibrationServiceImpl::ExportTable(grpc::ServerContext* ctx, const
         absl::StrCat("points x speed_points: a field-weakening map has at most ", kMaxTableCells, " cells")));
   }
   if (!(spec.speed_max_rpm > 0 && spec.speed_max_rpm <= 1e5)) return ToGrpcStatus(absl::InvalidArgumentError("speed_max_rpm: must be in (0, 100000]"));
-  tables::MachineLimits lim;
-  lim.i_max_a = req->i_max_a() == 0 ? -1 : req->i_max_a();   // 0: the calibration's measured current limit
-  if (req->udc_v() != 0) lim.udc_v = req->udc_v();
+  // 0 in a limit field: the calibration's (tables/export_rule.h).
+  tables::ExportRequest limits;
+  limits.names_flags = false;
   if (!(req->i_max_a() == 0 || (req->i_max_a() > 0 && req->i_max_a() <= 1e4))) {
     return ToGrpcStatus(absl::InvalidArgumentError("i_max_a: must be in (0, 10000] (0: measured limit)"));
   }
-  if (!(lim.udc_v > 0 && lim.udc_v <= 5000)) return ToGrpcStatus(absl::InvalidArgumentError("udc_v: must be in (0, 5000]"));
-  // Flashers get released calibrations only: version 0 is the newest
-  // released one, an explicit version must be released.
+  if (!(req->udc_v() == 0 || (req->udc_v() > 0 && req->udc_v() <= 5000))) {
+    return ToGrpcStatus(absl::InvalidArgumentError("udc_v: must be in (0, 5000] (0: the calibration's)"));
+  }
+  if (!(req->rs_ohm() == 0 || (req->rs_ohm() > 0 && req->rs_ohm() <= 1e3))) {
+    return ToGrpcStatus(absl::InvalidArgumentError("rs_ohm: must be in (0, 1000] (0: the calibration's)"));
+  }
+  if (req->i_max_a() != 0) limits.i_max_a = req->i_max_a();
+  if (req->udc_v() != 0) limits.udc_v = req->udc_v();
+  if (req->rs_ohm() != 0) limits.rs_ohm = req->rs_ohm();
+  limits.allow_clamped = req->allow_clamped();
+  // Flashers get released calibrations only (version 0: the newest
+  // released one), re-checked now against verdict and hash chains.
   int version = req->version();
   if (who->role == Role::kFlasher) {
-    if (version == 0) {
-      auto v = store_->LatestReleasedVersion(req->serial());
-      if (!v.ok()) return ToGrpcStatus(v.status());
-      if (*v == 0) {
-        return ToGrpcStatus(absl::FailedPreconditionError(
-            absl::StrCat("serial '", req->serial(), "' has no released calibration (fluxcal release)")));
-      }
-      version = *v;
-    } else if (auto rel = store_->IsReleased(req->serial(), version); !rel.ok() || !*rel) {
-      return ToGrpcStatus(rel.ok() ? absl::FailedPreconditionError(absl::StrCat(
-                                         "version ", version, " of '", req->serial(), "' is not released for flashing"))
-                                   : rel.status());
-    }
+    auto v = pipeline::FlashableVersion(*store_, req->serial(), version);
+    if (!v.ok()) return ToGrpcStatus(v.status());
+    version = *v;
   }
   spec.allow_extrapolation = req->allow_extrapolation();
   tables::ExportOptions options;
@@ -412,7 +511,7 @@ grpc::Status CalibrationServiceImpl::ExportTable(grpc::ServerContext* ctx, const
     if (!ct.ok()) return ToGrpcStatus(ct.status());
     options.ctype = *ct;
   }
-  auto r = pipeline::ExportTable(*store_, req->serial(), version, spec, lim,
+  auto r = pipeline::ExportTable(*store_, req->serial(), version, spec, limits,
                                 req->format().empty() ? "csv" : req->format(), options);
   if (!r.ok()) return ToGrpcStatus(r.status());
   resp->set_serial(req->serial());
@@ -421,6 +520,7 @@ grpc::Status CalibrationServiceImpl::ExportTable(grpc::ServerContext* ctx, const
   resp->set_crc32(absl::StrFormat("%08x", r->exported.payload_crc32));
   resp->set_sha256(r->exported.payload_sha256);
   resp->set_clamped_cells(r->clamped_cells);
+  resp->set_cells(r->cells);
   resp->set_verdict(r->verdict);
   resp->set_released(r->released);
   if (!signing_key_pem_.empty()) {
@@ -433,7 +533,7 @@ grpc::Status CalibrationServiceImpl::ExportTable(grpc::ServerContext* ctx, const
 
 grpc::Status CalibrationServiceImpl::FleetStatistics(grpc::ServerContext* ctx, const v1::FleetStatisticsRequest* req,
                                                      v1::FleetStatisticsResponse* resp) {
-  auto who = auth_->Authorize(*ctx, Rpc::kFleetStatistics);
+  auto who = Admit(ctx, Rpc::kFleetStatistics);
   if (!who.ok()) return ToGrpcStatus(who.status());
   std::vector<std::pair<double, double>> pts;
   if (req->points_size() > kMaxFleetPoints) {
@@ -465,7 +565,7 @@ grpc::Status CalibrationServiceImpl::FleetStatistics(grpc::ServerContext* ctx, c
 
 grpc::Status CalibrationServiceImpl::Diagnose(grpc::ServerContext* ctx, const v1::DiagnoseRequest* req,
                                               v1::DiagnoseResponse* resp) {
-  auto who = auth_->Authorize(*ctx, Rpc::kDiagnose);
+  auto who = Admit(ctx, Rpc::kDiagnose);
   if (!who.ok()) return ToGrpcStatus(who.status());
   if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
   auto rep = pipeline::DiagnoseStored(*store_, req->serial(), CancelledBy(ctx));
@@ -478,6 +578,7 @@ grpc::Status CalibrationServiceImpl::Diagnose(grpc::ServerContext* ctx, const v1
     const auto audit = AuditFor(ctx, *who, Rpc::kDiagnose, req->serial(), nullptr);
     auto row = pipeline::StoreDiagnosedCalibration(*store_, req->serial(), *rep, pipeline::FitTolerances{}, &audit);
     if (!row.ok()) return StoppedOr(ctx, row.status());
+    AnchorAfterWrite(req->serial());
     resp->set_stored_version(row->version);
     resp->set_stored_verdict(row->verdict);
   }
@@ -486,7 +587,7 @@ grpc::Status CalibrationServiceImpl::Diagnose(grpc::ServerContext* ctx, const v1
 
 grpc::Status CalibrationServiceImpl::Release(grpc::ServerContext* ctx, const v1::ReleaseRequest* req,
                                              v1::ReleaseResponse* resp) {
-  auto who = auth_->Authorize(*ctx, Rpc::kRelease);
+  auto who = Admit(ctx, Rpc::kRelease);
   if (!who.ok()) return ToGrpcStatus(who.status());
   if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
   if (req->version() <= 0) {
@@ -495,10 +596,32 @@ grpc::Status CalibrationServiceImpl::Release(grpc::ServerContext* ctx, const v1:
   const auto audit = AuditFor(ctx, *who, Rpc::kRelease, req->serial(),
                               [](int64_t version, bool) { return absl::StrCat("released version ", version); });
   if (auto s = store_->Release(req->serial(), req->version(), who->name, &audit); !s.ok()) return ToGrpcStatus(s);
+  AnchorAfterWrite(req->serial());
   resp->set_serial(req->serial());
   resp->set_version(req->version());
   resp->set_released_by(who->name);
   return grpc::Status::OK;
+}
+
+void CalibrationServiceImpl::AnchorAfterWrite(const std::string& serial) {
+  if (anchor_file_.empty()) return;
+  // The write is committed whatever happens here: a failure is logged for
+  // the operator, not returned (a client would retry a write that is done).
+  if (auto s = pipeline::AppendAnchorEvent(*store_, anchor_file_, serial); !s.ok()) {
+    std::fprintf(stderr, "fluxcal serve: anchor after a write of '%s' not written: %s\n", serial.c_str(),
+                 std::string(s.message()).c_str());
+  }
+}
+
+absl::StatusOr<Admission> CalibrationServiceImpl::Admit(grpc::ServerContext* ctx, Rpc rpc) {
+  auto who = auth_->Authorize(*ctx, rpc);
+  if (!who.ok()) return who.status();
+  auto lease = limiter_->Acquire(who->name);
+  if (!lease.ok()) return lease.status();
+  Admission a;
+  static_cast<Identity&>(a) = std::move(*who);
+  a.lease = std::move(*lease);
+  return a;
 }
 
 storage::AuditContext CalibrationServiceImpl::AuditFor(grpc::ServerContext* ctx, const Identity& who, Rpc rpc,
@@ -523,7 +646,7 @@ storage::AuditContext CalibrationServiceImpl::AuditFor(grpc::ServerContext* ctx,
 
 grpc::Status CalibrationServiceImpl::Audit(grpc::ServerContext* ctx, const v1::AuditRequest* req,
                                            v1::AuditResponse* resp) {
-  auto who = auth_->Authorize(*ctx, Rpc::kAudit);
+  auto who = Admit(ctx, Rpc::kAudit);
   if (!who.ok()) return ToGrpcStatus(who.status());
   if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
   auto rows = store_->AuditOf(req->serial());
@@ -539,7 +662,7 @@ grpc::Status CalibrationServiceImpl::Audit(grpc::ServerContext* ctx, const v1::A
 
 grpc::Status CalibrationServiceImpl::GetReport(grpc::ServerContext* ctx, const v1::GetReportRequest* req,
                                                v1::GetReportResponse* resp) {
-  auto who = auth_->Authorize(*ctx, Rpc::kGetReport);
+  auto who = Admit(ctx, Rpc::kGetReport);
   if (!who.ok()) return ToGrpcStatus(who.status());
   if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
   if (auto s = ValidateVersion(req->version()); !s.ok()) return ToGrpcStatus(s);
@@ -613,20 +736,14 @@ class RequestLogFactory final : public grpc::experimental::ServerInterceptorFact
 
 }  // namespace
 
-bool IsLoopbackAddress(const std::string& address) {
-  if (address.rfind("unix:", 0) == 0) return true;
-  std::string host = address;
-  if (const auto colon = host.rfind(':'); colon != std::string::npos) host = host.substr(0, colon);
-  if (host.rfind("ipv4:", 0) == 0) host = host.substr(5);
-  if (host.rfind("ipv6:", 0) == 0) host = host.substr(5);
-  return host == "localhost" || host == "[::1]" || host.rfind("127.", 0) == 0;
-}
-
 std::unique_ptr<grpc::Server> StartServer(CalibrationServiceImpl* service, const std::string& address,
                                           int* bound_port, const ServerOptions& options) {
   grpc::EnableDefaultHealthCheckService(true);
+  ReturnLargeBlocksWhenFreed();
   grpc::ServerBuilder b;
-  std::shared_ptr<grpc::ServerCredentials> creds = grpc::InsecureServerCredentials();
+  const Authorizer* auth = service->authorizer();
+  std::shared_ptr<grpc::ServerCredentials> creds;
+  bool takes_processor = true;
   if (!options.tls_cert_pem.empty()) {
     grpc::SslServerCredentialsOptions ssl(
         options.client_ca_pem.empty() ? GRPC_SSL_DONT_REQUEST_CLIENT_CERTIFICATE
@@ -635,11 +752,30 @@ std::unique_ptr<grpc::Server> StartServer(CalibrationServiceImpl* service, const
     ssl.pem_root_certs = options.client_ca_pem;
     ssl.pem_key_cert_pairs.push_back({options.tls_key_pem, options.tls_cert_pem});
     creds = grpc::SslServerCredentials(ssl);
+  } else if (!auth->open() && io::IsLoopbackAddress(address)) {
+    // Plaintext on the wire as before, but gRPC's local credentials take an
+    // AuthMetadataProcessor (its insecure ones do not) and refuse peers
+    // that are not on this machine.
+    creds = grpc::experimental::LocalServerCredentials(address.rfind("unix", 0) == 0 ? UDS : LOCAL_TCP);
+  } else {
+    creds = grpc::InsecureServerCredentials();
+    takes_processor = false;
+  }
+  if (!auth->open() && takes_processor) {
+    Authorizer::LogFn log;
+    if (options.log_requests) log = [](const std::string& m) { std::fprintf(stderr, "fluxcal serve: %s\n", m.c_str()); };
+    creds->SetAuthMetadataProcessor(MakeAuthProcessor(auth, std::move(log)));
   }
   // No SO_REUSEPORT (gRPC's default on Linux): a second `fluxcal serve` on
   // a port already in use must fail to start, not silently take half of
   // the connections to its own store.
   b.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
+  // HTTP/2 flow control without BDP probing: a stream's window stays at
+  // 64 KiB ahead of what its handler reads (the handler's read of a message
+  // opens the window for that message). With probing, gRPC grows windows
+  // to megabytes, and a whole unauthenticated message reached the server
+  // before the call was refused (measured: tests/server/ops_test, PreAuth).
+  b.AddChannelArgument(GRPC_ARG_HTTP2_BDP_PROBE, 0);
   b.AddListeningPort(address, creds, bound_port);
   b.RegisterService(service);
   if (options.reflection) {
@@ -650,7 +786,8 @@ std::unique_ptr<grpc::Server> StartServer(CalibrationServiceImpl* service, const
       service->KeepAlive(std::move(r));
     }
   }
-  b.SetMaxReceiveMessageSize(64 << 20);
+  // Small messages: no legitimate request is larger (server/limits.h).
+  b.SetMaxReceiveMessageSize(kMaxMessageBytes);
   if (options.log_requests) {
     static const Authorizer kOpen;
     std::vector<std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>> creators;

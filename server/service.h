@@ -15,6 +15,7 @@
 #include "absl/status/status.h"
 #include "fluxcal/v1/calibration.grpc.pb.h"
 #include "server/auth.h"
+#include "server/limits.h"
 #include "storage/store.h"
 
 namespace grpc {
@@ -26,6 +27,12 @@ namespace fluxcal::server {
 
 grpc::Status ToGrpcStatus(const absl::Status& s);
 
+// An authorized call: who makes it, and its place within that identity's
+// limits (server/limits.h), given back when the handler returns.
+struct Admission : Identity {
+  IdentityLimiter::Lease lease;
+};
+
 class CalibrationServiceImpl final : public fluxcal::v1::CalibrationService::Service {
  public:
   explicit CalibrationServiceImpl(storage::Store* store) : store_(store) {}
@@ -34,6 +41,14 @@ class CalibrationServiceImpl final : public fluxcal::v1::CalibrationService::Ser
   // Ed25519 private key (PEM) that signs every ExportTable reply.
   void set_signing_key(std::string private_pem) { signing_key_pem_ = std::move(private_pem); }
   const Authorizer* authorizer() const { return auth_; }
+  // After every write that moves a chain head (Fit, Diagnose with
+  // store_calibration, Release), append an event line to this anchor file
+  // (pipeline/anchor.h); empty: none.
+  void set_anchor_file(std::string path) { anchor_file_ = std::move(path); }
+  // Per-identity limits (server/limits.h); the defaults until set. Call
+  // before the server starts.
+  void set_limits(IdentityLimits limits) { limiter_ = std::make_unique<IdentityLimiter>(limits); }
+  const IdentityLimiter& limiter() const { return *limiter_; }
   // Keeps a service registered beside this one (reflection) alive as long
   // as this one.
   void KeepAlive(std::unique_ptr<grpc::Service> s) { reflection_.push_back(std::move(s)); }
@@ -64,12 +79,19 @@ class CalibrationServiceImpl final : public fluxcal::v1::CalibrationService::Ser
   // The audit row of a write, handed to the store, which inserts it in the
   // write's own transaction (both commit or neither); `detail` forms the
   // text from the run id or version written.
+  // Authorize + a place in the caller's limits: UNAUTHENTICATED,
+  // PERMISSION_DENIED or RESOURCE_EXHAUSTED.
+  absl::StatusOr<Admission> Admit(grpc::ServerContext* ctx, Rpc rpc);
   storage::AuditContext AuditFor(grpc::ServerContext* ctx, const Identity& who, Rpc rpc, const std::string& serial,
                                  std::function<std::string(int64_t, bool)> detail);
 
+  void AnchorAfterWrite(const std::string& serial);
+
   storage::Store* store_;
+  std::string anchor_file_;
   Authorizer open_;
   const Authorizer* auth_ = &open_;
+  std::unique_ptr<IdentityLimiter> limiter_ = std::make_unique<IdentityLimiter>();
   std::string signing_key_pem_;
   // Services registered beside this one by StartServer (this service
   // outlives its server, so they do too).
@@ -96,12 +118,15 @@ struct ServerOptions {
 
 // Builds and starts a server (health checking and reflection on) listening
 // on `address` ("127.0.0.1:50051"; port 0 picks one, returned in
-// *bound_port).
+// *bound_port). Messages up to kMaxMessageBytes (server/limits.h). With
+// identities (the service's authorizer not open) every call is
+// authenticated from its headers before its body is read
+// (MakeAuthProcessor): over TLS, and on a loopback address (io/net.h) over
+// gRPC's local credentials, which a plaintext client reaches as before;
+// only a plaintext listener off loopback (`--insecure`) authenticates in
+// the handler, after gRPC has read the first message.
 std::unique_ptr<grpc::Server> StartServer(CalibrationServiceImpl* service, const std::string& address,
                                           int* bound_port, const ServerOptions& options = {});
-
-// True for 127.0.0.0/8, [::1], localhost and unix: addresses.
-bool IsLoopbackAddress(const std::string& address);
 
 }  // namespace fluxcal::server
 

@@ -6,20 +6,21 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "io/csv.h"
+#include "io/plausibility.h"
 #include "io/recording_set.h"
 
 namespace fluxcal::server {
 namespace {
 
-absl::Status Bad(const std::string& field, const std::string& what, double got) {
-  return absl::InvalidArgumentError(absl::StrFormat("%s: %s, got %.9g", field, what, got));
-}
-
-// Physical plausibility ranges (SI): an EV traction motor's currents stay
-// below 10 kA, speeds below 100 000 rpm, inductances below 1 H.
+// The physical plausibility limits (currents, speeds, flux linkage,
+// inductances, resistance, temperature, pole pairs) live in
+// io/plausibility.h, shared with the flux-map reader; only the bounds of
+// what a request may ask for are here.
 absl::Status Range(const std::string& field, double v, double lo, double hi, const std::string& what) {
-  if (!std::isfinite(v)) return Bad(field, "must be a finite number", v);
-  if (v < lo || v > hi) return Bad(field, what, v);
+  if (!std::isfinite(v) || v < lo || v > hi) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("%s: %s, got %.9g", field, std::isfinite(v) ? what : "must be a finite number", v));
+  }
   return absl::OkStatus();
 }
 
@@ -53,42 +54,54 @@ absl::Status ValidateIdentifier(const std::string& value, const std::string& fie
 }
 
 absl::Status ValidateMotor(const fluxcal::v1::MotorInfo& m) {
-  if (m.pole_pairs() < 1 || m.pole_pairs() > 100) {
-    return Bad("motor.pole_pairs", "must be 1..100", m.pole_pairs());
-  }
-  if (auto s = Range("motor.rs_ohm", m.rs_ohm(), 0, 10, "must be 0..10 Ohm"); !s.ok()) return s;
-  return Range("motor.psi_pm_wb", m.psi_pm_wb(), 0, 10, "must be 0..10 Wb");
+  if (auto s = io::CheckPolePairs("motor.pole_pairs", m.pole_pairs()); !s.ok()) return s;
+  if (auto s = io::CheckRsOhm("motor.rs_ohm", m.rs_ohm()); !s.ok()) return s;
+  return io::CheckPsiPmWb("motor.psi_pm_wb", m.psi_pm_wb());
 }
 
 absl::Status ValidatePoint(const fluxcal::v1::HfPoint& p, int i) {
   const std::string f = absl::StrCat("points[", i, "]");
   if (auto s = ValidateIdentifier(p.point_id(), f + ".point_id"); !s.ok()) return s;
-  if (auto s = Range(f + ".id_a", p.id_a(), -1e4, 1e4, "must be within +-10 kA"); !s.ok()) return s;
-  if (auto s = Range(f + ".iq_a", p.iq_a(), -1e4, 1e4, "must be within +-10 kA"); !s.ok()) return s;
-  if (auto s = Range(f + ".speed_rpm", p.speed_rpm(), -1e5, 1e5, "must be within +-100000 rpm"); !s.ok()) return s;
-  for (auto [name, v] : {std::pair<const char*, double>{".ld_h", p.ld_h()}, {".lq_h", p.lq_h()}}) {
-    if (!std::isfinite(v) || v < kMinInductanceH || v >= kMaxInductanceH) {
-      return Bad(f + name, "must be in [1e-7, 1) H", v);
-    }
-  }
+  if (auto s = io::CheckCurrentA(f + ".id_a", p.id_a()); !s.ok()) return s;
+  if (auto s = io::CheckCurrentA(f + ".iq_a", p.iq_a()); !s.ok()) return s;
+  if (auto s = io::CheckSpeedRpm(f + ".speed_rpm", p.speed_rpm()); !s.ok()) return s;
+  if (auto s = io::CheckInductanceH(f + ".ld_h", p.ld_h()); !s.ok()) return s;
+  if (auto s = io::CheckInductanceH(f + ".lq_h", p.lq_h()); !s.ok()) return s;
   if (p.has_ldq_h()) {
-    if (auto s = Range(f + ".ldq_h", p.ldq_h(), -1, 1, "must be within +-1 H"); !s.ok()) return s;
+    if (auto s = io::CheckCrossInductanceH(f + ".ldq_h", p.ldq_h()); !s.ok()) return s;
   }
   for (auto [name, v] : {std::pair<const char*, double>{".ld_h_std", p.ld_h_std()},
                          {".lq_h_std", p.lq_h_std()}, {".ldq_h_std", p.ldq_h_std()}}) {
-    if (auto s = Range(f + name, v, 0, 1, "must be 0..1 H"); !s.ok()) return s;
+    if (auto s = io::CheckInductanceStdH(f + name, v); !s.ok()) return s;
   }
   // A standard error as large as the value says the point carries no
   // information; such a point is refused, not fitted.
-  if (p.ld_h_std() >= p.ld_h()) return Bad(f + ".ld_h_std", "must be below ld_h", p.ld_h_std());
-  if (p.lq_h_std() >= p.lq_h()) return Bad(f + ".lq_h_std", "must be below lq_h", p.lq_h_std());
-  return Range(f + ".temperature_c", p.temperature_c(), -60, 250, "must be -60..250 degC");
+  if (p.ld_h_std() >= p.ld_h()) {
+    return absl::InvalidArgumentError(absl::StrFormat("%s.ld_h_std: must be below ld_h, got %.9g", f, p.ld_h_std()));
+  }
+  if (p.lq_h_std() >= p.lq_h()) {
+    return absl::InvalidArgumentError(absl::StrFormat("%s.lq_h_std: must be below lq_h, got %.9g", f, p.lq_h_std()));
+  }
+  return io::CheckTemperatureC(f + ".temperature_c", p.temperature_c());
 }
 
 absl::Status ValidateOperatingPoint(const fluxcal::v1::OperatingPoint& p, int i) {
   const std::string f = absl::StrCat("points[", i, "]");
-  if (auto s = Range(f + ".id_a", p.id_a(), -1e4, 1e4, "must be within +-10 kA"); !s.ok()) return s;
-  return Range(f + ".iq_a", p.iq_a(), -1e4, 1e4, "must be within +-10 kA");
+  if (auto s = io::CheckCurrentA(f + ".id_a", p.id_a()); !s.ok()) return s;
+  return io::CheckCurrentA(f + ".iq_a", p.iq_a());
+}
+
+absl::Status ValidateStreamEnd(const fluxcal::v1::StreamEnd& e, const std::string& field) {
+  if (e.messages() < 1) return absl::InvalidArgumentError(absl::StrCat(field, ".messages: must be >= 1, got ", e.messages()));
+  if (e.count() < 0) return absl::InvalidArgumentError(absl::StrCat(field, ".count: must be >= 0, got ", e.count()));
+  if (e.bytes() < 0) return absl::InvalidArgumentError(absl::StrCat(field, ".bytes: must be >= 0, got ", e.bytes()));
+  bool hex = e.sha256().size() == 64;
+  for (char c : e.sha256()) hex = hex && ((c >= '0' && c <= '9') || (c >= 'a' && c <= 'f'));
+  if (!hex) {
+    return absl::InvalidArgumentError(absl::StrCat(field, ".sha256: must be 64 lower-case hex digits, got '",
+                                                   io::Printable(e.sha256().substr(0, 80)), "'"));
+  }
+  return absl::OkStatus();
 }
 
 absl::Status ValidateVersion(int version) {

@@ -29,9 +29,8 @@ inline constexpr long long kMaxTableCells = 65536;
 // Longest message a client gets back (values inside are already escaped
 // and cut); gRPC metadata limits are a few kB.
 inline constexpr size_t kMaxStatusMessageBytes = 1024;
-// Plausible differential inductance of a traction or industrial PMSM.
-inline constexpr double kMinInductanceH = 1e-7;
-inline constexpr double kMaxInductanceH = 1.0;
+// The physical plausibility limits (inductance, current, flux linkage, ...)
+// are io/plausibility.h, shared with the flux-map reader.
 // A recording set as uploaded: at most this many bytes over all files and
 // this many files (a 1000-point set at 10 kHz for 0.2 s a point is ~25 MB in
 // ~1000 files).
@@ -56,6 +55,9 @@ absl::Status ValidateMotor(const fluxcal::v1::MotorInfo& m);
 // `index` is the point's position in the stream.
 absl::Status ValidatePoint(const fluxcal::v1::HfPoint& p, int index);
 absl::Status ValidateOperatingPoint(const fluxcal::v1::OperatingPoint& p, int index);
+// The declared end of an ingest stream: counts >= 0, messages >= 1,
+// sha256 64 lower-case hex digits; `field` names it ("end", "chunks[9].end").
+absl::Status ValidateStreamEnd(const fluxcal::v1::StreamEnd& end, const std::string& field);
 // version: 0 = latest, n > 0 = that version; negative is refused.
 absl::Status ValidateVersion(int version);
 // An optional quantity where 0 means "the default": 0, or finite in

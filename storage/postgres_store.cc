@@ -124,10 +124,39 @@ CREATE TABLE calibration_chain (
 CREATE TRIGGER chain_no_update BEFORE UPDATE OR DELETE ON calibration_chain
   FOR EACH ROW EXECUTE FUNCTION audit_append_only();
 )sql",
+    // v7: a hash chain over releases, one for the whole store in release
+    // order (storage/store.h, ReleaseRowSha256): a release inserted, changed
+    // or removed behind the service is detected by `fluxcal admin
+    // verify-db` and by a flasher's export. Releases stored before v7 are
+    // linked by the migration itself (PostgresStore::Migrate), in time
+    // order. Both chains also refuse TRUNCATE.
+    R"sql(
+CREATE TABLE release_chain (
+  seq BIGINT PRIMARY KEY,
+  serial TEXT NOT NULL,
+  version INTEGER NOT NULL,
+  calibration_sha256 TEXT NOT NULL,
+  prev_sha256 TEXT NOT NULL,
+  row_sha256 TEXT NOT NULL,
+  UNIQUE (serial, version));
+CREATE FUNCTION fluxcal_chain_append_only() RETURNS trigger LANGUAGE plpgsql AS $$
+  BEGIN RAISE EXCEPTION 'hash chains are append-only'; END $$;
+CREATE TRIGGER release_chain_no_update BEFORE UPDATE OR DELETE ON release_chain
+  FOR EACH ROW EXECUTE FUNCTION fluxcal_chain_append_only();
+CREATE TRIGGER release_chain_no_truncate BEFORE TRUNCATE ON release_chain
+  FOR EACH STATEMENT EXECUTE FUNCTION fluxcal_chain_append_only();
+CREATE TRIGGER chain_no_truncate BEFORE TRUNCATE ON calibration_chain
+  FOR EACH STATEMENT EXECUTE FUNCTION fluxcal_chain_append_only();
+)sql",
 };
 
-// Any constant: the advisory lock that serialises migrations across servers.
+// The migration after which releases are chained.
+constexpr int kReleaseChainVersion = 7;
+
+// Any constants: the advisory locks that serialise migrations, and appends
+// to the one release chain, across servers.
 constexpr int64_t kMigrationLock = 0x666c7578;
+constexpr int64_t kReleaseChainLock = 0x666c7572;
 
 struct ResultDeleter {
   void operator()(PGresult* r) const { PQclear(r); }
@@ -276,11 +305,46 @@ absl::Status InsertAudit(PGconn* c, const AuditContext* audit, int64_t written_i
       .status();
 }
 
+// Appends the link of release `r` to the release chain inside the caller's
+// transaction on `c`, which holds kReleaseChainLock (Release, and the v7
+// migration for releases stored before it).
+absl::Status AppendReleaseLink(PGconn* c, const ReleaseRow& r) {
+  // The released version's hash: its chain link, or its content for a
+  // version from before the chain.
+  auto l = Exec(c, "SELECT row_sha256 FROM calibration_chain WHERE serial = $1 AND version = $2",
+                {T(r.serial), I(r.version)});
+  if (!l.ok()) return l.status();
+  std::string calibration_sha;
+  if (PQntuples(l->get()) > 0) {
+    calibration_sha = Text(l->get(), 0, 0);
+  } else {
+    const std::string sql = absl::StrCat(kCalCols, "WHERE serial = $1 AND version = $2");
+    auto q = Exec(c, sql.c_str(), {T(r.serial), I(r.version)});
+    if (!q.ok()) return q.status();
+    if (PQntuples(q->get()) == 0) {
+      return absl::NotFoundError(absl::StrCat("serial '", r.serial, "' has no calibration version ", r.version));
+    }
+    calibration_sha = VersionSha256(ReadCal(q->get(), 0), nullptr);
+  }
+  auto last = Exec(c, "SELECT seq, row_sha256 FROM release_chain ORDER BY seq DESC LIMIT 1");
+  if (!last.ok()) return last.status();
+  const bool any = PQntuples(last->get()) > 0;
+  const int64_t seq = any ? Int(last->get(), 0, 0) + 1 : 1;
+  const std::string prev = any ? Text(last->get(), 0, 1) : std::string();
+  return Exec(c,
+              "INSERT INTO release_chain (seq, serial, version, calibration_sha256, prev_sha256, row_sha256) "
+              "VALUES ($1,$2,$3,$4,$5,$6)",
+              {I(seq), T(r.serial), I(r.version), T(calibration_sha), T(prev),
+               T(ReleaseRowSha256(prev, seq, r, calibration_sha))})
+      .status();
+}
+
 }  // namespace
 
 const std::vector<std::string>& PostgresMigrations() { return kPostgresMigrations; }
 
-absl::StatusOr<std::unique_ptr<PostgresStore>> PostgresStore::Open(const std::string& url_in, int max_connections) {
+absl::StatusOr<std::unique_ptr<PostgresStore>> PostgresStore::Open(const std::string& url_in, int max_connections,
+                                                                   bool create) {
   // A database that does not answer must fail a call, not hang it: bound
   // the connect unless the URI says otherwise.
   std::string url = url_in;
@@ -288,7 +352,7 @@ absl::StatusOr<std::unique_ptr<PostgresStore>> PostgresStore::Open(const std::st
     url += url.find('?') == std::string::npos ? "?connect_timeout=5" : "&connect_timeout=5";
   }
   std::unique_ptr<PostgresStore> s(new PostgresStore(url, std::max(1, max_connections)));
-  if (auto st = s->Migrate(); !st.ok()) return st;
+  if (auto st = s->Migrate(create); !st.ok()) return st;
   return s;
 }
 
@@ -353,9 +417,17 @@ absl::Status PostgresStore::WithTransaction(const std::function<absl::Status(PGc
   });
 }
 
-absl::Status PostgresStore::Migrate() {
+absl::Status PostgresStore::Migrate(bool create) {
   return WithTransaction([&](PGconn* c) -> absl::Status {
     if (auto r = Exec(c, "SELECT pg_advisory_xact_lock($1)", {I(kMigrationLock)}); !r.ok()) return r.status();
+    if (!create) {
+      // A database without fluxcal's tables is refused, not turned into a store.
+      auto q = Exec(c, "SELECT to_regclass('schema_version') IS NOT NULL");
+      if (!q.ok()) return q.status();
+      if (Text(q->get(), 0, 0) != "t") {
+        return absl::NotFoundError("postgresql: the database holds no fluxcal store (no schema_version table)");
+      }
+    }
     if (auto r = Exec(c, "CREATE TABLE IF NOT EXISTS schema_version (version INTEGER NOT NULL)"); !r.ok()) {
       return r.status();
     }
@@ -368,6 +440,17 @@ absl::Status PostgresStore::Migrate() {
     }
     for (; v < kSchemaVersion; ++v) {
       if (auto r = Exec(c, kPostgresMigrations[v].c_str()); !r.ok()) return r.status();
+      if (v + 1 == kReleaseChainVersion) {
+        // Releases stored before the chain join it now, oldest first.
+        auto q = Exec(c, "SELECT serial, version, released_by, released_utc FROM releases "
+                         "ORDER BY released_utc, serial COLLATE \"C\", version");
+        if (!q.ok()) return q.status();
+        for (int i = 0; i < PQntuples(q->get()); ++i) {
+          const ReleaseRow row{Text(q->get(), i, 0), static_cast<int>(Int(q->get(), i, 1)), Text(q->get(), i, 2),
+                               Text(q->get(), i, 3)};
+          if (auto st = AppendReleaseLink(c, row); !st.ok()) return st;
+        }
+      }
       if (auto r = Exec(c, "INSERT INTO schema_version (version) VALUES ($1)", {I(v + 1)}); !r.ok()) return r.status();
     }
     return absl::OkStatus();
@@ -440,6 +523,8 @@ absl::StatusOr<int64_t> PostgresStore::IngestHfRun(const MotorRow& m, const std:
 absl::Status PostgresStore::Release(const std::string& serial, int version, const std::string& by,
                                     const AuditContext* audit) {
   return WithTransaction([&](PGconn* c) -> absl::Status {
+    // One release chain for the store: appends from every server in turn.
+    if (auto r = Exec(c, "SELECT pg_advisory_xact_lock($1)", {I(kReleaseChainLock)}); !r.ok()) return r.status();
     // FOR SHARE: the calibration row cannot change anyway (immutable), but
     // the lock orders concurrent releases of one version.
     auto q = Exec(c, "SELECT verdict FROM calibrations WHERE serial = $1 AND version = $2 FOR SHARE",
@@ -453,14 +538,16 @@ absl::Status PostgresStore::Release(const std::string& serial, int version, cons
       return absl::FailedPreconditionError(
           absl::StrCat("version ", version, " of '", serial, "' has verdict '", verdict, "'; only 'pass' can be released"));
     }
+    const ReleaseRow row{serial, version, by, NowUtc()};
     auto ins = Exec(c,
                     "INSERT INTO releases (serial, version, released_by, released_utc) VALUES ($1,$2,$3,$4) "
                     "ON CONFLICT DO NOTHING RETURNING version",
-                    {T(serial), I(version), T(by), T(NowUtc())});
+                    {T(row.serial), I(row.version), T(row.released_by), T(row.released_utc)});
     if (!ins.ok()) return ins.status();
     if (PQntuples(ins->get()) == 0) {
       return absl::AlreadyExistsError(absl::StrCat("version ", version, " of '", serial, "' is released already"));
     }
+    if (auto st = AppendReleaseLink(c, row); !st.ok()) return st;
     return InsertAudit(c, audit, version, false);
   });
 }
@@ -487,6 +574,60 @@ absl::StatusOr<bool> PostgresStore::IsReleased(const std::string& serial, int ve
   });
   if (!st.ok()) return st;
   return out;
+}
+
+absl::StatusOr<ReleaseRow> PostgresStore::GetRelease(const std::string& serial, int version) {
+  ReleaseRow out;
+  auto st = WithConn([&](PGconn* c) -> absl::Status {
+    auto q = Exec(c, "SELECT serial, version, released_by, released_utc FROM releases WHERE serial = $1 AND version = $2",
+                  {T(serial), I(version)});
+    if (!q.ok()) return q.status();
+    if (PQntuples(q->get()) == 0) {
+      return absl::NotFoundError(absl::StrCat("version ", version, " of '", serial, "' is not released"));
+    }
+    out = {Text(q->get(), 0, 0), static_cast<int>(Int(q->get(), 0, 1)), Text(q->get(), 0, 2), Text(q->get(), 0, 3)};
+    return absl::OkStatus();
+  });
+  if (!st.ok()) return st;
+  return out;
+}
+
+absl::StatusOr<std::vector<ReleaseLinkRow>> PostgresStore::ReleaseLinks(const std::string& where,
+                                                                        const std::vector<std::string>& args) {
+  std::vector<ReleaseLinkRow> out;
+  auto st = WithConn([&](PGconn* c) -> absl::Status {
+    const std::string sql = absl::StrCat(
+        "SELECT seq, serial, version, calibration_sha256, prev_sha256, row_sha256 FROM release_chain ", where);
+    std::vector<Param> params;
+    for (const auto& a : args) params.push_back(T(a));
+    auto q = Exec(c, sql.c_str(), params);
+    if (!q.ok()) return q.status();
+    const PGresult* r = q->get();
+    for (int i = 0; i < PQntuples(r); ++i) {
+      out.push_back({Int(r, i, 0), Text(r, i, 1), static_cast<int>(Int(r, i, 2)), Text(r, i, 3), Text(r, i, 4),
+                     Text(r, i, 5)});
+    }
+    return absl::OkStatus();
+  });
+  if (!st.ok()) return st;
+  return out;
+}
+
+absl::StatusOr<std::vector<ReleaseLinkRow>> PostgresStore::AllReleaseLinks() { return ReleaseLinks("ORDER BY seq", {}); }
+
+absl::StatusOr<ReleaseLinkRow> PostgresStore::ReleaseLink(const std::string& serial, int version) {
+  auto v = ReleaseLinks("WHERE serial = $1 AND version = $2::int", {serial, std::to_string(version)});
+  if (!v.ok()) return v.status();
+  if (v->empty()) return absl::NotFoundError(absl::StrCat(serial, " v", version, ": no release chain link"));
+  return v->front();
+}
+
+absl::StatusOr<ReleaseLinkRow> PostgresStore::ReleaseLinkAt(int64_t seq) {
+  auto v = seq > 0 ? ReleaseLinks("WHERE seq = $1::bigint", {std::to_string(seq)})
+                   : ReleaseLinks("ORDER BY seq DESC LIMIT 1", {});
+  if (!v.ok()) return v.status();
+  if (v->empty()) return absl::NotFoundError(absl::StrCat("release chain: no link #", seq));
+  return v->front();
 }
 
 absl::Status PostgresStore::AppendAudit(const AuditRow& a) {
@@ -873,7 +1014,8 @@ absl::StatusOr<std::vector<AuditRow>> PostgresStore::AllAudit() {
 }
 
 absl::Status PostgresStore::ImportTrail(const std::vector<ReleaseRow>& releases, const std::vector<AuditRow>& audit,
-                                        const std::vector<ChainRow>& chain) {
+                                        const std::vector<ChainRow>& chain,
+                                        const std::vector<ReleaseLinkRow>& release_chain) {
   return WithTransaction([&](PGconn* c) -> absl::Status {
     for (const auto& r : releases) {
       if (auto x = Exec(c, "INSERT INTO releases (serial, version, released_by, released_utc) VALUES ($1,$2,$3,$4)",
@@ -904,6 +1046,16 @@ absl::Status PostgresStore::ImportTrail(const std::vector<ReleaseRow>& releases,
                         "INSERT INTO calibration_chain (serial, version, prev_sha256, row_sha256) "
                         "VALUES ($1,$2,$3,$4)",
                         {T(l.serial), I(l.version), T(l.prev_sha256), T(l.row_sha256)});
+          !x.ok()) {
+        return x.status();
+      }
+    }
+    for (const auto& l : release_chain) {
+      if (auto x = Exec(c,
+                        "INSERT INTO release_chain (seq, serial, version, calibration_sha256, prev_sha256, row_sha256) "
+                        "VALUES ($1,$2,$3,$4,$5,$6)",
+                        {I(l.seq), T(l.serial), I(l.version), T(l.calibration_sha256), T(l.prev_sha256),
+                         T(l.row_sha256)});
           !x.ok()) {
         return x.status();
       }

@@ -29,7 +29,10 @@ namespace fluxcal::storage {
 class PostgresStore final : public Store {
  public:
   // `url`: a libpq connection URI ("postgresql://user@host:port/db").
-  static absl::StatusOr<std::unique_ptr<PostgresStore>> Open(const std::string& url, int max_connections = 16);
+  // `create` false: the database must hold a fluxcal store already
+  // (Store::OpenOptions).
+  static absl::StatusOr<std::unique_ptr<PostgresStore>> Open(const std::string& url, int max_connections = 16,
+                                                             bool create = true);
   ~PostgresStore() override;
 
   std::string Backend() const override { return "postgresql"; }
@@ -44,6 +47,10 @@ class PostgresStore final : public Store {
                        const AuditContext* audit = nullptr) override;
   absl::StatusOr<int> LatestReleasedVersion(const std::string& serial) override;
   absl::StatusOr<bool> IsReleased(const std::string& serial, int version) override;
+  absl::StatusOr<ReleaseRow> GetRelease(const std::string& serial, int version) override;
+  absl::StatusOr<std::vector<ReleaseLinkRow>> AllReleaseLinks() override;
+  absl::StatusOr<ReleaseLinkRow> ReleaseLink(const std::string& serial, int version) override;
+  absl::StatusOr<ReleaseLinkRow> ReleaseLinkAt(int64_t seq) override;
   absl::Status AppendAudit(const AuditRow& row) override;
   absl::StatusOr<std::vector<AuditRow>> AuditOf(const std::string& serial) override;
   absl::StatusOr<std::vector<ChainRow>> AllChainRows() override;
@@ -70,7 +77,8 @@ class PostgresStore final : public Store {
                          const RecordingRow* recording) override;
   absl::Status ImportCalibration(const CalibrationRow& row) override;
   absl::Status ImportTrail(const std::vector<ReleaseRow>& releases, const std::vector<AuditRow>& audit,
-                           const std::vector<ChainRow>& chain) override;
+                           const std::vector<ChainRow>& chain,
+                           const std::vector<ReleaseLinkRow>& release_chain) override;
 
  private:
   PostgresStore(std::string url, int max_connections) : url_(std::move(url)), max_(max_connections) {}
@@ -80,7 +88,8 @@ class PostgresStore final : public Store {
   absl::Status WithConn(const std::function<absl::Status(PGconn*)>& fn);
   // BEGIN ... COMMIT around fn; ROLLBACK when fn fails.
   absl::Status WithTransaction(const std::function<absl::Status(PGconn*)>& fn);
-  absl::Status Migrate();
+  absl::Status Migrate(bool create);
+  absl::StatusOr<std::vector<ReleaseLinkRow>> ReleaseLinks(const std::string& where, const std::vector<std::string>& args);
 
   std::string url_;
   int max_;

@@ -2,6 +2,8 @@
 
 #include <sqlite3.h>
 
+#include <filesystem>
+
 #include "absl/strings/str_cat.h"
 
 namespace fluxcal::storage {
@@ -62,10 +64,15 @@ std::vector<uint8_t> Statement::Blob(int c) const {
   return p ? std::vector<uint8_t>(p, p + sqlite3_column_bytes(s_, c)) : std::vector<uint8_t>();
 }
 
-absl::StatusOr<std::unique_ptr<Database>> Database::Open(const std::string& path) {
+absl::StatusOr<std::unique_ptr<Database>> Database::Open(const std::string& path, bool create,
+                                                         const std::string& required_table) {
+  if (!create && path != ":memory:" && !std::filesystem::exists(path)) {
+    return absl::NotFoundError(absl::StrCat("sqlite: no store at '", path, "': the file does not exist"));
+  }
   sqlite3* db = nullptr;
   const int rc = sqlite3_open_v2(path.c_str(), &db,
-                                 SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE | SQLITE_OPEN_FULLMUTEX, nullptr);
+                                 SQLITE_OPEN_READWRITE | (create ? SQLITE_OPEN_CREATE : 0) | SQLITE_OPEN_FULLMUTEX,
+                                 nullptr);
   if (rc != SQLITE_OK) {
     const std::string msg = db ? sqlite3_errmsg(db) : "out of memory";
     if (db) sqlite3_close(db);
@@ -73,6 +80,18 @@ absl::StatusOr<std::unique_ptr<Database>> Database::Open(const std::string& path
   }
   std::unique_ptr<Database> d(new Database(db));
   sqlite3_busy_timeout(db, 5000);
+  if (!required_table.empty()) {
+    // A read only: a file that is not what the caller expects (an empty
+    // file, another database) is left exactly as it was.
+    auto q = d->Prepare("SELECT COUNT(*) FROM sqlite_master WHERE type = 'table' AND name = ?");
+    if (!q.ok()) return absl::NotFoundError(absl::StrCat("sqlite: '", path, "': ", q.status().message()));
+    if (auto b = q->Bind(1, required_table); !b.ok()) return b;
+    auto r = q->Step();
+    if (!r.ok()) return absl::NotFoundError(absl::StrCat("sqlite: '", path, "': ", r.status().message()));
+    if (q->Int(0) == 0) {
+      return absl::NotFoundError(absl::StrCat("sqlite: '", path, "' has no table '", required_table, "'"));
+    }
+  }
   for (const char* p : {"PRAGMA journal_mode=WAL", "PRAGMA synchronous=FULL", "PRAGMA foreign_keys=ON"}) {
     if (auto st = d->Exec(p); !st.ok()) return st;
   }

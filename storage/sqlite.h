@@ -48,10 +48,14 @@ class Statement {
 
 class Database {
  public:
-  // Opens (creating) a database file or ":memory:". WAL journal,
-  // synchronous=FULL (a commit is durable when it returns), foreign keys on,
-  // a bounded busy timeout.
-  static absl::StatusOr<std::unique_ptr<Database>> Open(const std::string& path);
+  // Opens (creating, unless `create` is false) a database file or
+  // ":memory:". WAL journal, synchronous=FULL (a commit is durable when it
+  // returns), foreign keys on, a bounded busy timeout. Without `create` a
+  // path that does not exist is NotFound and no file is made; a non-empty
+  // `required_table` must exist (NotFound otherwise), checked before
+  // anything is written to the file.
+  static absl::StatusOr<std::unique_ptr<Database>> Open(const std::string& path, bool create = true,
+                                                        const std::string& required_table = "");
   ~Database();
 
   absl::StatusOr<Statement> Prepare(std::string_view sql);

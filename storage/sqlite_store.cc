@@ -111,14 +111,41 @@ CREATE TRIGGER chain_no_update BEFORE UPDATE ON calibration_chain
 CREATE TRIGGER chain_no_delete BEFORE DELETE ON calibration_chain
   BEGIN SELECT RAISE(ABORT, 'the calibration chain is append-only'); END;
 )sql",
+    // v7: a hash chain over releases, one for the whole store in release
+    // order (storage/store.h, ReleaseRowSha256): a release inserted, changed
+    // or removed behind the service is detected by `fluxcal admin
+    // verify-db` and by a flasher's export. Releases stored before v7 are
+    // linked by the migration itself (SqliteStore::Migrate), in time order.
+    R"sql(
+CREATE TABLE release_chain (
+  seq INTEGER PRIMARY KEY,
+  serial TEXT NOT NULL,
+  version INTEGER NOT NULL,
+  calibration_sha256 TEXT NOT NULL,
+  prev_sha256 TEXT NOT NULL,
+  row_sha256 TEXT NOT NULL,
+  UNIQUE (serial, version));
+CREATE TRIGGER release_chain_no_update BEFORE UPDATE ON release_chain
+  BEGIN SELECT RAISE(ABORT, 'the release chain is append-only'); END;
+CREATE TRIGGER release_chain_no_delete BEFORE DELETE ON release_chain
+  BEGIN SELECT RAISE(ABORT, 'the release chain is append-only'); END;
+)sql",
 };
+
+// The migration after which releases are chained.
+constexpr int kReleaseChainVersion = 7;
 
 }  // namespace
 
 const std::vector<std::string>& SqliteMigrations() { return kSqliteMigrations; }
 
-absl::StatusOr<std::unique_ptr<SqliteStore>> SqliteStore::Open(const std::string& path) {
-  auto db = Database::Open(path);
+absl::StatusOr<std::unique_ptr<SqliteStore>> SqliteStore::Open(const std::string& path, bool create) {
+  // A read-only caller's path must already be a fluxcal store.
+  auto db = Database::Open(path, create, create ? "" : "schema_version");
+  if (!db.ok() && !create && db.status().code() == absl::StatusCode::kNotFound &&
+      db.status().message().find("has no table") != std::string_view::npos) {
+    return absl::NotFoundError(absl::StrCat("sqlite: '", path, "' holds no fluxcal store (no schema_version table)"));
+  }
   if (!db.ok()) return db.status();
   std::unique_ptr<SqliteStore> s(new SqliteStore(path, std::move(*db)));
   if (auto st = s->Migrate(); !st.ok()) return st;
@@ -140,6 +167,22 @@ absl::Status SqliteStore::Migrate() {
     }
     for (; v < kSchemaVersion; ++v) {
       if (auto st = writer_->Exec(kSqliteMigrations[v]); !st.ok()) return st;
+      if (v + 1 == kReleaseChainVersion) {
+        // Releases stored before the chain join it now, oldest first.
+        auto rel = writer_->Prepare(
+            "SELECT serial, version, released_by, released_utc FROM releases ORDER BY released_utc, serial, version");
+        if (!rel.ok()) return rel.status();
+        std::vector<ReleaseRow> existing;
+        while (true) {
+          auto r = rel->Step();
+          if (!r.ok()) return r.status();
+          if (!*r) break;
+          existing.push_back({rel->Text(0), static_cast<int>(rel->Int(1)), rel->Text(2), rel->Text(3)});
+        }
+        for (const auto& r : existing) {
+          if (auto st = AppendReleaseLinkLocked(r); !st.ok()) return st;
+        }
+      }
       auto ins = writer_->Prepare("INSERT INTO schema_version (version) VALUES (?)");
       if (!ins.ok()) return ins.status();
       if (auto st = ins->Bind(1, int64_t{v + 1}); !st.ok()) return st;
@@ -228,12 +271,110 @@ absl::Status SqliteStore::Release(const std::string& serial, int version, const 
     auto er = e->Step();
     if (!er.ok()) return er.status();
     if (*er) return absl::AlreadyExistsError(absl::StrCat("version ", version, " of '", serial, "' is released already"));
+    const ReleaseRow row{serial, version, by, NowUtc()};
     auto ins = writer_->Prepare("INSERT INTO releases (serial, version, released_by, released_utc) VALUES (?,?,?,?)");
     if (!ins.ok()) return ins.status();
-    if (auto s = ins->BindAll({serial, int64_t{version}, by, NowUtc()}); !s.ok()) return s;
+    if (auto s = ins->BindAll({row.serial, int64_t{row.version}, row.released_by, row.released_utc}); !s.ok()) return s;
     if (auto ir = ins->Step(); !ir.ok()) return ir.status();
+    if (auto s = AppendReleaseLinkLocked(row); !s.ok()) return s;
     return InsertAuditLocked(audit, version, false);
   });
+}
+
+absl::Status SqliteStore::AppendReleaseLinkLocked(const ReleaseRow& r) {
+  // The released version's hash: its chain link, or its content for a
+  // version from before the chain.
+  auto l = writer_->Prepare("SELECT row_sha256 FROM calibration_chain WHERE serial = ? AND version = ?");
+  if (!l.ok()) return l.status();
+  if (auto s = l->BindAll({r.serial, int64_t{r.version}}); !s.ok()) return s;
+  auto lr = l->Step();
+  if (!lr.ok()) return lr.status();
+  std::string calibration_sha;
+  if (*lr) {
+    calibration_sha = l->Text(0);
+  } else {
+    auto c = writer_->Prepare(
+        "SELECT serial, version, COALESCE(run_id, 0), created_utc, model, psi_pm_wb, rms_relative, verdict, "
+        "calibration_json FROM calibrations WHERE serial = ? AND version = ?");
+    if (!c.ok()) return c.status();
+    if (auto s = c->BindAll({r.serial, int64_t{r.version}}); !s.ok()) return s;
+    auto cr = c->Step();
+    if (!cr.ok()) return cr.status();
+    if (!*cr) return absl::NotFoundError(absl::StrCat("serial '", r.serial, "' has no calibration version ", r.version));
+    CalibrationRow row;
+    row.serial = c->Text(0); row.version = static_cast<int>(c->Int(1)); row.run_id = c->Int(2);
+    row.created_utc = c->Text(3); row.model = c->Text(4); row.psi_pm_wb = c->Double(5);
+    row.rms_relative = c->Double(6); row.verdict = c->Text(7); row.calibration_json = c->Text(8);
+    calibration_sha = VersionSha256(row, nullptr);
+  }
+  // BEGIN IMMEDIATE holds the file's write lock: the newest link cannot
+  // move under us, also across processes.
+  auto last = writer_->Prepare("SELECT seq, row_sha256 FROM release_chain ORDER BY seq DESC LIMIT 1");
+  if (!last.ok()) return last.status();
+  auto lastr = last->Step();
+  if (!lastr.ok()) return lastr.status();
+  const int64_t seq = *lastr ? last->Int(0) + 1 : 1;
+  const std::string prev = *lastr ? last->Text(1) : std::string();
+  auto ins = writer_->Prepare(
+      "INSERT INTO release_chain (seq, serial, version, calibration_sha256, prev_sha256, row_sha256) "
+      "VALUES (?,?,?,?,?,?)");
+  if (!ins.ok()) return ins.status();
+  if (auto s = ins->BindAll({seq, r.serial, int64_t{r.version}, calibration_sha, prev,
+                             ReleaseRowSha256(prev, seq, r, calibration_sha)});
+      !s.ok()) {
+    return s;
+  }
+  auto ir = ins->Step();
+  return ir.ok() ? absl::OkStatus() : ir.status();
+}
+
+absl::StatusOr<ReleaseRow> SqliteStore::GetRelease(const std::string& serial, int version) {
+  std::lock_guard<std::mutex> lock(write_mu_);
+  auto q = writer_->Prepare(
+      "SELECT serial, version, released_by, released_utc FROM releases WHERE serial = ? AND version = ?");
+  if (!q.ok()) return q.status();
+  if (auto s = q->BindAll({serial, int64_t{version}}); !s.ok()) return s;
+  auto r = q->Step();
+  if (!r.ok()) return r.status();
+  if (!*r) return absl::NotFoundError(absl::StrCat("version ", version, " of '", serial, "' is not released"));
+  return ReleaseRow{q->Text(0), static_cast<int>(q->Int(1)), q->Text(2), q->Text(3)};
+}
+
+absl::StatusOr<std::vector<ReleaseLinkRow>> SqliteStore::ReleaseLinksLocked(const std::string& where,
+                                                                            const std::vector<SqlValue>& args) {
+  auto q = writer_->Prepare(absl::StrCat(
+      "SELECT seq, serial, version, calibration_sha256, prev_sha256, row_sha256 FROM release_chain ", where));
+  if (!q.ok()) return q.status();
+  if (auto s = q->BindAll(args); !s.ok()) return s;
+  std::vector<ReleaseLinkRow> out;
+  while (true) {
+    auto r = q->Step();
+    if (!r.ok()) return r.status();
+    if (!*r) break;
+    out.push_back({q->Int(0), q->Text(1), static_cast<int>(q->Int(2)), q->Text(3), q->Text(4), q->Text(5)});
+  }
+  return out;
+}
+
+absl::StatusOr<std::vector<ReleaseLinkRow>> SqliteStore::AllReleaseLinks() {
+  std::lock_guard<std::mutex> lock(write_mu_);
+  return ReleaseLinksLocked("ORDER BY seq", {});
+}
+
+absl::StatusOr<ReleaseLinkRow> SqliteStore::ReleaseLink(const std::string& serial, int version) {
+  std::lock_guard<std::mutex> lock(write_mu_);
+  auto v = ReleaseLinksLocked("WHERE serial = ? AND version = ?", {serial, int64_t{version}});
+  if (!v.ok()) return v.status();
+  if (v->empty()) return absl::NotFoundError(absl::StrCat(serial, " v", version, ": no release chain link"));
+  return v->front();
+}
+
+absl::StatusOr<ReleaseLinkRow> SqliteStore::ReleaseLinkAt(int64_t seq) {
+  std::lock_guard<std::mutex> lock(write_mu_);
+  auto v = seq > 0 ? ReleaseLinksLocked("WHERE seq = ?", {seq}) : ReleaseLinksLocked("ORDER BY seq DESC LIMIT 1", {});
+  if (!v.ok()) return v.status();
+  if (v->empty()) return absl::NotFoundError(absl::StrCat("release chain: no link #", seq));
+  return v->front();
 }
 
 absl::StatusOr<int> SqliteStore::LatestReleasedVersion(const std::string& serial) {
@@ -690,7 +831,8 @@ absl::StatusOr<std::vector<AuditRow>> SqliteStore::AllAudit() {
 }
 
 absl::Status SqliteStore::ImportTrail(const std::vector<ReleaseRow>& releases, const std::vector<AuditRow>& audit,
-                                      const std::vector<ChainRow>& chain) {
+                                      const std::vector<ChainRow>& chain,
+                                      const std::vector<ReleaseLinkRow>& release_chain) {
   std::lock_guard<std::mutex> lock(write_mu_);
   return writer_->Transaction([&]() -> absl::Status {
     auto rel = writer_->Prepare("INSERT INTO releases (serial, version, released_by, released_utc) VALUES (?,?,?,?)");
@@ -718,6 +860,19 @@ absl::Status SqliteStore::ImportTrail(const std::vector<ReleaseRow>& releases, c
       if (auto s = ch->BindAll({l.serial, int64_t{l.version}, l.prev_sha256, l.row_sha256}); !s.ok()) return s;
       if (auto x = ch->Step(); !x.ok()) return x.status();
       (void)ch->Reset();
+    }
+    auto rc = writer_->Prepare(
+        "INSERT INTO release_chain (seq, serial, version, calibration_sha256, prev_sha256, row_sha256) "
+        "VALUES (?,?,?,?,?,?)");
+    if (!rc.ok()) return rc.status();
+    for (const auto& l : release_chain) {
+      if (auto s = rc->BindAll({l.seq, l.serial, int64_t{l.version}, l.calibration_sha256, l.prev_sha256,
+                                l.row_sha256});
+          !s.ok()) {
+        return s;
+      }
+      if (auto x = rc->Step(); !x.ok()) return x.status();
+      (void)rc->Reset();
     }
     return absl::OkStatus();
   });

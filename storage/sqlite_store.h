@@ -18,7 +18,8 @@ namespace fluxcal::storage {
 
 class SqliteStore final : public Store {
  public:
-  static absl::StatusOr<std::unique_ptr<SqliteStore>> Open(const std::string& path);
+  // `create` false: see Store::OpenOptions.
+  static absl::StatusOr<std::unique_ptr<SqliteStore>> Open(const std::string& path, bool create = true);
 
   std::string Backend() const override { return "sqlite"; }
   absl::StatusOr<int> SchemaVersion() override;
@@ -32,6 +33,10 @@ class SqliteStore final : public Store {
                        const AuditContext* audit = nullptr) override;
   absl::StatusOr<int> LatestReleasedVersion(const std::string& serial) override;
   absl::StatusOr<bool> IsReleased(const std::string& serial, int version) override;
+  absl::StatusOr<ReleaseRow> GetRelease(const std::string& serial, int version) override;
+  absl::StatusOr<std::vector<ReleaseLinkRow>> AllReleaseLinks() override;
+  absl::StatusOr<ReleaseLinkRow> ReleaseLink(const std::string& serial, int version) override;
+  absl::StatusOr<ReleaseLinkRow> ReleaseLinkAt(int64_t seq) override;
   absl::Status AppendAudit(const AuditRow& row) override;
   absl::StatusOr<std::vector<AuditRow>> AuditOf(const std::string& serial) override;
   absl::StatusOr<std::vector<ChainRow>> AllChainRows() override;
@@ -58,7 +63,8 @@ class SqliteStore final : public Store {
                          const RecordingRow* recording) override;
   absl::Status ImportCalibration(const CalibrationRow& row) override;
   absl::Status ImportTrail(const std::vector<ReleaseRow>& releases, const std::vector<AuditRow>& audit,
-                           const std::vector<ChainRow>& chain) override;
+                           const std::vector<ChainRow>& chain,
+                           const std::vector<ReleaseLinkRow>& release_chain) override;
 
   // Online backup (sqlite3_backup_*) into a new file at `dest_path`: a
   // consistent copy while the store keeps serving.
@@ -67,6 +73,12 @@ class SqliteStore final : public Store {
  private:
   SqliteStore(std::string path, std::unique_ptr<Database> writer) : path_(std::move(path)), writer_(std::move(writer)) {}
   absl::Status Migrate();
+  // Appends the link of release `r` to the release chain, inside the
+  // caller's transaction (Release, and the v7 migration for releases
+  // stored before it).
+  absl::Status AppendReleaseLinkLocked(const ReleaseRow& r);
+  absl::StatusOr<std::vector<ReleaseLinkRow>> ReleaseLinksLocked(const std::string& where,
+                                                                 const std::vector<SqlValue>& args);
   absl::StatusOr<std::vector<HfPointRow>> PointsLocked(int64_t run_id);
   absl::Status InsertPointsLocked(int64_t run_id, const std::vector<HfPointRow>& points);
   // Inserts `audit` (if any) inside the caller's transaction.

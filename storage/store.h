@@ -10,6 +10,9 @@
 // Both apply the same ordered migrations (version table `schema_version`),
 // refuse UPDATE/DELETE of calibration versions with triggers, and make
 // every write one transaction that is durable when the call returns.
+// Calibration versions (per serial) and releases (one chain for the store)
+// are hash-chained; VerifyChains recomputes both, and compares with a chain
+// head kept outside the database (an anchor) to find removed newest rows.
 // Calibration versions per serial are unique and gap-free also under
 // concurrent AddCalibration calls from different processes.
 //
@@ -29,12 +32,12 @@
 
 namespace fluxcal::storage {
 
-inline constexpr int kSchemaVersion = 6;
+inline constexpr int kSchemaVersion = 7;
 
 struct MotorRow {
   std::string serial;
-  int pole_pairs = 4;
-  double rs_ohm = 0, psi_pm_wb = 0;
+  int pole_pairs = 0;                 // always stated by the station (1..100)
+  double rs_ohm = 0, psi_pm_wb = 0;   // 0: not stated
   std::string created_utc;   // set by the store
 };
 
@@ -104,6 +107,16 @@ struct ChainRow {
   std::string prev_sha256, row_sha256;
 };
 
+// One link of the chain over releases (schema v7): one chain for the whole
+// store, in release order (seq 1, 2, ...). `calibration_sha256` is the
+// released version's hash (VersionSha256) when it was released.
+struct ReleaseLinkRow {
+  int64_t seq = 0;
+  std::string serial;
+  int version = 0;
+  std::string calibration_sha256, prev_sha256, row_sha256;
+};
+
 struct HistoryRow {
   std::string created_utc, kind, detail;
   int64_t run_id = 0;
@@ -114,10 +127,19 @@ class Store {
  public:
   virtual ~Store() = default;
 
-  // Opens (creating) a store and applies pending migrations in order:
+  struct OpenOptions {
+    // false: the store must exist already (commands that only read): a
+    // SQLite path that does not exist, or a file or database without
+    // fluxcal's schema_version table, is NotFound naming it, and nothing
+    // is created. An existing store is still migrated to kSchemaVersion.
+    bool create = true;
+  };
+  // Opens (creating, unless options.create is false) a store and applies
+  // pending migrations in order:
   //   "postgresql://..." or "postgres://..."  -> PostgreSQL (libpq URI);
   //   "sqlite:PATH", a file path or ":memory:" -> SQLite.
-  static absl::StatusOr<std::unique_ptr<Store>> Open(const std::string& url);
+  static absl::StatusOr<std::unique_ptr<Store>> Open(const std::string& url, const OpenOptions& options);
+  static absl::StatusOr<std::unique_ptr<Store>> Open(const std::string& url) { return Open(url, OpenOptions{}); }
 
   virtual std::string Backend() const = 0;   // "sqlite" | "postgresql"
   virtual absl::StatusOr<int> SchemaVersion() = 0;
@@ -149,13 +171,22 @@ class Store {
   // Releases (immutable rows): a calibration version approved for
   // flashing. Release: NotFound (no such version), FailedPrecondition (its
   // verdict is not "pass"), AlreadyExists (released before). The verdict is
-  // checked inside the same transaction as the insert, and so is the audit
-  // row when `audit` is given.
+  // checked inside the same transaction as the insert, and so are the
+  // release's chain link (ReleaseRowSha256, appended to the store's one
+  // release chain; concurrent releases from several servers are serialised)
+  // and the audit row when `audit` is given.
   virtual absl::Status Release(const std::string& serial, int version, const std::string& released_by,
                                const AuditContext* audit = nullptr) = 0;
   // The newest released version, 0 when none.
   virtual absl::StatusOr<int> LatestReleasedVersion(const std::string& serial) = 0;
   virtual absl::StatusOr<bool> IsReleased(const std::string& serial, int version) = 0;
+  // The release row of a version; NotFound when it is not released.
+  virtual absl::StatusOr<ReleaseRow> GetRelease(const std::string& serial, int version) = 0;
+  // Release chain links: all by seq; the link of one released version; the
+  // link at `seq` (0: the newest). NotFound when there is none.
+  virtual absl::StatusOr<std::vector<ReleaseLinkRow>> AllReleaseLinks() = 0;
+  virtual absl::StatusOr<ReleaseLinkRow> ReleaseLink(const std::string& serial, int version) = 0;
+  virtual absl::StatusOr<ReleaseLinkRow> ReleaseLinkAt(int64_t seq) = 0;
 
   // Audit trail (append-only): Append sets utc and writes a row on its own
   // (a write passes its row as AuditContext instead, into its transaction);
@@ -189,11 +220,12 @@ class Store {
   virtual absl::Status ImportRun(const RunRow& run, const std::vector<HfPointRow>& points,
                                  const RecordingRow* recording) = 0;
   virtual absl::Status ImportCalibration(const CalibrationRow& row) = 0;
-  // Releases, audit rows (ids and times kept) and chain links (hashes kept,
-  // so verify-db checks the copy as it checked the source): one transaction,
-  // after the calibrations they name.
+  // Releases, audit rows (ids and times kept) and the links of both chains
+  // (hashes kept, so verify-db checks the copy as it checked the source):
+  // one transaction, after the calibrations they name.
   virtual absl::Status ImportTrail(const std::vector<ReleaseRow>& releases, const std::vector<AuditRow>& audit,
-                                   const std::vector<ChainRow>& chain) = 0;
+                                   const std::vector<ChainRow>& chain,
+                                   const std::vector<ReleaseLinkRow>& release_chain) = 0;
 };
 
 std::string NowUtc();
@@ -202,15 +234,68 @@ std::string NowUtc();
 // and every stored field, each length-prefixed, doubles as %.17g. Version 1
 // (or the first version written with schema v6) has prev_sha256 "".
 std::string CalibrationRowSha256(const std::string& prev_sha256, const CalibrationRow& row);
+// The hash that stands for one stored calibration version (a release and
+// an anchor name it): its chain link's row_sha256, or, for a version
+// stored before the chain (schema < 6, no link), CalibrationRowSha256("",
+// row).
+std::string VersionSha256(const CalibrationRow& row, const ChainRow* link);
+// The chain hash of a release: SHA-256 over `prev_sha256` (the previous
+// link's row_sha256, "" for seq 1), seq, serial, version, released_by,
+// released_utc and the released version's VersionSha256, each
+// length-prefixed as in CalibrationRowSha256.
+std::string ReleaseRowSha256(const std::string& prev_sha256, int64_t seq, const ReleaseRow& release,
+                             const std::string& calibration_sha256);
+
+// The head of the store's chains: what an operator keeps outside the
+// database (`fluxcal admin anchor`) to find rows removed later together
+// with their links, which the chains alone cannot show.
+struct ChainHead {
+  struct Head {
+    std::string serial;
+    int version = 0;            // the serial's newest calibration version
+    std::string row_sha256;     // its VersionSha256
+  };
+  std::vector<Head> calibrations;   // by serial (bytewise)
+  int64_t release_seq = 0;          // the newest release link (0: none)
+  std::string release_serial;
+  int release_version = 0;
+  std::string release_sha256;
+  // SHA-256 over all of the above (ChainHeadDigest): one value to compare.
+  std::string digest_sha256;
+};
+absl::StatusOr<ChainHead> CurrentChainHead(Store& store);
+// The newest version of one serial as a head entry (NotFound: none).
+absl::StatusOr<ChainHead::Head> SerialHead(Store& store, const std::string& serial);
+// SHA-256 over "serial\tversion\trow_sha256\n" per calibration head (in
+// the order given) and "release\tseq\tserial\tversion\trow_sha256\n".
+std::string ChainHeadDigest(const ChainHead& head);
 
 struct ChainReport {
   int chained = 0;                     // versions whose link checks
   int unchained = 0;                   // versions stored before the chain existed (schema < 6)
+  int releases_chained = 0;            // releases whose link checks
+  // Compared with an anchor: the calibration heads and release head it
+  // names that were found as anchored.
+  int anchored = 0;
   std::vector<std::string> problems;   // "IPM-1 v3: row changed after it was stored", ...
 };
-// Recomputes every link: a changed, removed or reordered calibration row
-// shows up as a problem naming serial and version.
-absl::StatusOr<ChainReport> VerifyCalibrationChain(Store& store);
+// Recomputes every link of both chains: a calibration row or release
+// changed, removed, reordered or inserted around the service shows up as a
+// problem naming serial and version (a release also by its seq). A release
+// of a version whose verdict is not "pass" is a problem too. With `anchor`
+// (a head recorded earlier), each anchored newest version and the anchored
+// release head must still be there with the same hash: a row removed
+// together with its link after the anchor is named ("IPM-1 v3: removed
+// after the anchor"); `anchor_name` says which anchor in the message.
+absl::StatusOr<ChainReport> VerifyChains(Store& store, const ChainHead* anchor = nullptr,
+                                         const std::string& anchor_name = "the anchor");
+
+// The checks VerifyChains makes, for one version a flasher is about to
+// get: released (FailedPrecondition otherwise), verdict "pass"
+// (FailedPrecondition), its calibration link and its release link verify
+// against the rows and the links before them (DataLoss naming what does
+// not: the store was changed behind the service).
+absl::Status VerifyReleasedVersion(Store& store, const std::string& serial, int version);
 
 // The migrations of each backend, in order (index k: version k -> k + 1).
 const std::vector<std::string>& SqliteMigrations();

@@ -6,6 +6,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "fitting/flux_error.h"
 
 namespace fluxcal::tables {
 namespace {
@@ -237,42 +238,30 @@ absl::StatusOr<FluxMapComparison> CompareWithFluxMap(const sim::MagneticModel& m
                                                      const CurrentRegion& region) {
   FluxMapComparison c;
   c.region = region;
-  double sum = 0, sum_d = 0, sum_q = 0;
+  std::vector<io::FluxMapPoint> inside;
   for (const auto& p : map.Points()) {
-    if (!region.Contains(p.id_a, p.iq_a)) continue;
-    const auto f = model.Flux(p.id_a, p.iq_a);
-    const double ed = f.psi_d_wb - p.psi_d_wb, eq = f.psi_q_wb - p.psi_q_wb;
-    const double e = std::hypot(ed, eq);
-    sum += ed * ed + eq * eq;
-    sum_d += ed * ed;
-    sum_q += eq * eq;
-    c.psi_scale_wb = std::max(c.psi_scale_wb, std::hypot(p.psi_d_wb, p.psi_q_wb));
-    if (c.nodes == 0 || e > c.max_wb) {
-      c.max_wb = e;
-      c.worst = p;
-      c.worst_error_d_wb = ed;
-      c.worst_error_q_wb = eq;
-    }
-    ++c.nodes;
+    if (region.Contains(p.id_a, p.iq_a)) inside.push_back(p);
   }
-  if (c.nodes == 0) {
+  if (inside.empty()) {
     return absl::InvalidArgumentError(absl::StrFormat(
         "%s: field 'region': no node of the map lies in id %g..%g A, iq %g..%g A (map: id %g..%g A, iq %g..%g A)",
         map.source.empty() ? "flux map" : map.source, region.id_min_a, region.id_max_a, region.iq_min_a,
         region.iq_max_a, map.id_a.empty() ? 0.0 : map.id_a.front(), map.id_a.empty() ? 0.0 : map.id_a.back(),
         map.iq_a.empty() ? 0.0 : map.iq_a.front(), map.iq_a.empty() ? 0.0 : map.iq_a.back()));
   }
-  c.rms_wb = std::sqrt(sum / c.nodes);
-  c.rms_d_wb = std::sqrt(sum_d / c.nodes);
-  c.rms_q_wb = std::sqrt(sum_q / c.nodes);
-  // A map whose nodes in the region are all zero flux has no scale to be
-  // relative to; the relative figures are then reported as infinite unless
-  // the error is zero too.
-  auto rel = [&](double x) {
-    return c.psi_scale_wb > 0 ? x / c.psi_scale_wb : (x == 0 ? 0.0 : std::numeric_limits<double>::infinity());
-  };
-  c.rms_relative = rel(c.rms_wb);
-  c.max_relative = rel(c.max_wb);
+  // The error itself is computed where a map fit's summary computes it.
+  const fit::FluxNodeError e = fit::FluxErrorOverNodes(model, inside);
+  c.nodes = e.nodes;
+  c.psi_scale_wb = e.psi_scale_wb;
+  c.rms_wb = e.rms_wb;
+  c.max_wb = e.max_wb;
+  c.rms_relative = e.rms_relative;
+  c.max_relative = e.max_relative;
+  c.rms_d_wb = e.rms_d_wb;
+  c.rms_q_wb = e.rms_q_wb;
+  c.worst = inside[e.worst];
+  c.worst_error_d_wb = e.worst_error_d_wb;
+  c.worst_error_q_wb = e.worst_error_q_wb;
   return c;
 }
 

@@ -109,8 +109,9 @@ struct FluxMapComparison {
   double worst_error_d_wb = 0, worst_error_q_wb = 0;   // model - map there
 };
 
-// InvalidArgument naming the map's source and field 'region' when no node
-// lies inside the region.
+// The map's nodes inside the region through fit::FluxErrorOverNodes (the
+// one home of the error, fitting/flux_error.h). InvalidArgument naming the
+// map's source and field 'region' when no node lies inside the region.
 absl::StatusOr<FluxMapComparison> CompareWithFluxMap(const sim::MagneticModel& model, const io::FluxMap& map,
                                                      const CurrentRegion& region);
 

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstring>
 #include <ctime>
+#include <limits>
 #include <numbers>
 
 #include "absl/strings/ascii.h"
@@ -93,7 +94,9 @@ std::vector<double> Linspace(double a, double b, int n) {
 
 }  // namespace
 
-double MachineLimits::UMaxV() const { return modulation_limit * udc_v / std::sqrt(3.0); }
+double MachineLimits::UMaxV() const {
+  return udc_v ? modulation_limit * *udc_v / std::sqrt(3.0) : std::numeric_limits<double>::quiet_NaN();
+}
 
 double TorqueNm(const sim::MagneticModel& m, int pp, double id, double iq, double temperature_c) {
   const auto f = m.Flux(id, iq, temperature_c);
@@ -101,8 +104,10 @@ double TorqueNm(const sim::MagneticModel& m, int pp, double id, double iq, doubl
 }
 
 double VoltageV(const sim::MagneticModel& m, const MachineLimits& lim, double id, double iq, double we) {
+  if (!lim.rs_ohm) return std::numeric_limits<double>::quiet_NaN();
+  const double rs = *lim.rs_ohm;
   const auto f = m.Flux(id, iq, lim.temperature_c);
-  return std::hypot(lim.rs_ohm * id - we * f.psi_q_wb, lim.rs_ohm * iq + we * f.psi_d_wb);
+  return std::hypot(rs * id - we * f.psi_q_wb, rs * iq + we * f.psi_d_wb);
 }
 
 namespace {
@@ -228,13 +233,73 @@ double MaxTorqueNm(const sim::MagneticModel& m, const MachineLimits& lim, double
   return lo;
 }
 
+absl::StatusOr<std::vector<double>> RoundBreakpoints(double lo, double hi, int max_points, const std::string& flag) {
+  if (!std::isfinite(lo) || !std::isfinite(hi) || !(hi > lo)) {
+    return absl::InvalidArgumentError(absl::StrFormat("%s: no range to put breakpoints in ([%.6g, %.6g])", flag, lo, hi));
+  }
+  if (max_points < 2) return absl::InvalidArgumentError(absl::StrCat(flag, ": at least 2 breakpoints"));
+  // Steps m 10^e, m in {1, 2, 5}, upwards from a tenth of the even spacing
+  // (a step below (hi - lo) / (max_points - 1) never fits): the first whose
+  // multiples in [lo, hi] number at most max_points. The multiples are
+  // counted in integers; a range end within 1e-9 of its size of a multiple
+  // counts as that multiple (6000 rpm is on the 200 rpm grid).
+  const double eps = 1e-9;
+  const double raw = (hi - lo) / (max_points - 1);
+  int e = static_cast<int>(std::floor(std::log10(raw))) - 1;
+  for (int tries = 0; tries < 12; ++tries, ++e) {
+    for (int mant : {1, 2, 5}) {
+      // 10^|e| is exact in a double up to 10^22; so is k m (|k m| < 2^53).
+      double p10 = 1.0;
+      for (int k = 0; k < std::abs(e); ++k) p10 *= 10.0;
+      const double step = e >= 0 ? mant * p10 : mant / p10;
+      const double span = (hi - lo) / step;
+      const double k_lo = std::ceil(lo / step - eps * std::max(1.0, span));
+      const double k_hi = std::floor(hi / step + eps * std::max(1.0, span));
+      const double count = k_hi - k_lo + 1;
+      if (count > max_points) continue;
+      if (count < 2) {
+        return absl::InvalidArgumentError(absl::StrFormat(
+            "%s: %d breakpoints cannot hold round steps (1, 2, 5 x 10^k) over [%.6g, %.6g]; give more", flag,
+            max_points, lo, hi));
+      }
+      std::vector<double> v;
+      v.reserve(static_cast<size_t>(count));
+      for (double k = k_lo; k <= k_hi; ++k) {
+        const double km = k * mant;   // an integer, exact
+        const double x = e >= 0 ? km * p10 : km / p10;
+        v.push_back(x == 0 ? 0.0 : x);   // no -0 in a table
+      }
+      return v;
+    }
+  }
+  return absl::InternalError(absl::StrCat(flag, ": no round step found"));
+}
+
 absl::StatusOr<Table> BuildTable(const sim::MagneticModel& m, const MachineLimits& lim,
                                  const TableSpec& spec) {
   if (spec.points < 2 || spec.points > 4096) {
     return absl::InvalidArgumentError(absl::StrCat("flag --points: must be 2..4096, got ", spec.points));
   }
-  if (!(lim.i_max_a > 0) || !(lim.udc_v > 0)) {
-    return absl::InvalidArgumentError("limits: i_max_a and udc_v must be positive");
+  if (lim.pole_pairs < 1 || lim.pole_pairs > 100) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "limits: pole_pairs ", lim.pole_pairs == 0 ? std::string("unknown") : absl::StrCat(lim.pole_pairs),
+        " (1..100 required: the calibration's)"));
+  }
+  if (!(lim.i_max_a > 0) || !std::isfinite(lim.i_max_a)) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "limits: i_max_a %.6g A: a current limit must be given and positive (the calibration's measured limit or "
+        "--i-max-a)", lim.i_max_a));
+  }
+  if ((lim.udc_v && !(*lim.udc_v > 0 && std::isfinite(*lim.udc_v))) ||
+      (lim.rs_ohm && !(*lim.rs_ohm >= 0 && std::isfinite(*lim.rs_ohm)))) {
+    return absl::InvalidArgumentError("limits: udc_v must be positive and rs_ohm non-negative when given");
+  }
+  if (spec.kind == "fw" && !lim.HasVoltageLimit()) {
+    // u = Rs i + w J psi against m Udc / sqrt(3): neither may be assumed.
+    return absl::InvalidArgumentError(absl::StrCat(
+        "table fw: the field-weakening map needs the voltage limit: ",
+        !lim.udc_v ? "the DC-link voltage udc_v (--udc-v)" : "", !lim.udc_v && !lim.rs_ohm ? " and " : "",
+        !lim.rs_ohm ? "the stator resistance rs_ohm (--rs-ohm)" : "", " not known"));
   }
   const double meas = spec.measured_current_limit_a;
   if (meas > 0 && !spec.allow_extrapolation && lim.i_max_a > meas * (1 + 1e-9)) {
@@ -261,7 +326,9 @@ absl::StatusOr<Table> BuildTable(const sim::MagneticModel& m, const MachineLimit
   t.allow_extrapolation = spec.allow_extrapolation;
   const double tmax = MaxTorqueNm(m, lim, 0.0);
   if (spec.kind == "mtpa") {
-    const auto tq = spec.include_generating ? Linspace(-tmax, tmax, spec.points) : Linspace(0, tmax, spec.points);
+    auto axis = RoundBreakpoints(spec.include_generating ? -tmax : 0.0, tmax, spec.points);
+    if (!axis.ok()) return axis.status();
+    const auto& tq = *axis;
     Output id{"id_a", {}}, iq{"iq_a", {}};
     for (double x : tq) {
       const auto op = SolveWithMax(m, lim, x, 0.0, tmax);
@@ -352,7 +419,9 @@ absl::StatusOr<Table> BuildTable(const sim::MagneticModel& m, const MachineLimit
       lmin = a;
       lmax = b;
     }
-    const auto lam = Linspace(lmin, lmax, spec.points);
+    auto axis = RoundBreakpoints(lmin, lmax, spec.points);
+    if (!axis.ok()) return axis.status();
+    const auto& lam = *axis;
     Output id{"id_a", {}}, iq{"iq_a", {}}, tq{"torque_nm", {}};
     for (double l : lam) {
       const auto p = solve(l);
@@ -364,8 +433,16 @@ absl::StatusOr<Table> BuildTable(const sim::MagneticModel& m, const MachineLimit
     t.axes = {{"psi_wb", lam}};
     t.outputs = {id, iq, tq};
   } else if (spec.kind == "fw") {
-    const auto tq = spec.include_generating ? Linspace(-tmax, tmax, spec.points) : Linspace(0, tmax, spec.points);
-    const auto n = Linspace(0, spec.speed_max_rpm, spec.speed_points);
+    if (!(spec.speed_max_rpm > 0) || !std::isfinite(spec.speed_max_rpm)) {
+      return absl::InvalidArgumentError("flag --speed-max-rpm: must be positive");
+    }
+    auto tq_axis = RoundBreakpoints(spec.include_generating ? -tmax : 0.0, tmax, spec.points);
+    if (!tq_axis.ok()) return tq_axis.status();
+    auto n_axis = RoundBreakpoints(0.0, spec.speed_max_rpm, spec.speed_points, "--speed-points");
+    if (!n_axis.ok()) return n_axis.status();
+    const auto& tq = *tq_axis;
+    const auto& n = *n_axis;
+    t.speed_max_rpm = n.back();   // the axis' top: the last round speed within the range
     Output id{"id_a", {}}, iq{"iq_a", {}};
     // Limit torque per speed, motoring and generating (they differ at speed:
     // the resistive drop subtracts from the voltage when generating).
@@ -403,6 +480,34 @@ absl::StatusOr<Table> BuildTable(const sim::MagneticModel& m, const MachineLimit
   }
   Seal(&t);
   return t;
+}
+
+ClampSummary SummariseClamped(const Table& t) {
+  ClampSummary c;
+  c.cells = t.clamped.size();
+  for (auto x : t.clamped) c.clamped += x;
+  c.share = c.cells > 0 ? static_cast<double>(c.clamped) / c.cells : 0.0;
+  if (c.clamped == 0) return c;
+  const auto& l = t.limits;
+  if (t.kind == "fw" && t.axes.size() == 2) {
+    // The torque axis stays within the limit torque at standstill, so a
+    // clamped cell is a speed at which the voltage limit leaves less.
+    const auto& n = t.axes[1].values;
+    size_t first = n.size();
+    for (size_t k = 0; k < t.clamped.size(); ++k) {
+      if (t.clamped[k]) first = std::min(first, k % n.size());
+    }
+    c.why = absl::StrFormat(
+        "the voltage limit u_max %.4g V (Udc %.4g V, Rs %.4g ohm) leaves less torque than requested from %.0f rpm "
+        "on (%zu of %zu speeds up to %.0f rpm; current limit %.4g A)",
+        l.UMaxV(), l.udc_v.value_or(0.0), l.rs_ohm.value_or(0.0), n[first], n.size() - first, n.size(), n.back(),
+        l.i_max_a);
+  } else if (t.kind == "mtpv") {
+    c.why = absl::StrFormat("the MTPV points of those fluxes lie beyond the current limit %.4g A", l.i_max_a);
+  } else {
+    c.why = absl::StrFormat("the torque requested exceeds the limit torque at the current limit %.4g A", l.i_max_a);
+  }
+  return c;
 }
 
 const char* FluxcalVersion() { return FLUXCAL_VERSION; }
@@ -717,16 +822,19 @@ std::string Dcm(const Table& t) {
 
 std::vector<Scalar> Scalars(const Table& t) {
   const auto& l = t.limits;
+  // Rs, Udc and u_max only when they were given: an MTPA table computed
+  // without them does not state a voltage it never used.
   std::vector<Scalar> s = {
-      {"pole_pairs", static_cast<double>(l.pole_pairs), "-", "pole pairs p of the calibration", true},
-      {"rs_ohm", l.rs_ohm, "Ohm", "phase resistance Rs used for the steady-state voltage", false},
-      {"psi_pm_wb", t.psi_pm_wb, "Wb", "permanent-magnet flux linkage psi_d(0, 0) of the fitted model", false},
-      {"i_max_a", l.i_max_a, "A", "current limit the table was computed for (peak, amplitude-invariant)", false},
-      {"udc_v", l.udc_v, "V", "DC-link voltage the table was computed for", false},
-      {"modulation_limit", l.modulation_limit, "-", "fraction of the linear SVPWM range used", false},
-      {"u_max_v", l.UMaxV(), "V", "voltage limit m Udc / sqrt(3) (peak phase, amplitude-invariant)", false},
-      {"temperature_c", l.temperature_c, "degC", "temperature the flux model was evaluated at", false},
-  };
+      {"pole_pairs", static_cast<double>(l.pole_pairs), "-", "pole pairs p of the calibration", true}};
+  if (l.rs_ohm) s.push_back({"rs_ohm", *l.rs_ohm, "Ohm", "phase resistance Rs used for the steady-state voltage", false});
+  s.push_back({"psi_pm_wb", t.psi_pm_wb, "Wb", "permanent-magnet flux linkage psi_d(0, 0) of the fitted model", false});
+  s.push_back({"i_max_a", l.i_max_a, "A", "current limit the table was computed for (peak, amplitude-invariant)", false});
+  if (l.udc_v) {
+    s.push_back({"udc_v", *l.udc_v, "V", "DC-link voltage the table was computed for", false});
+    s.push_back({"modulation_limit", l.modulation_limit, "-", "fraction of the linear SVPWM range used", false});
+    s.push_back({"u_max_v", l.UMaxV(), "V", "voltage limit m Udc / sqrt(3) (peak phase, amplitude-invariant)", false});
+  }
+  s.push_back({"temperature_c", l.temperature_c, "degC", "temperature the flux model was evaluated at", false});
   if (t.measured_current_limit_a > 0) {
     s.push_back({"measured_current_limit_a", t.measured_current_limit_a, "A",
                  "current limit the identified points cover; beyond it cells are flagged extrapolated", false});
@@ -915,8 +1023,12 @@ std::string CurvesFigure(const sim::MagneticModel& m, const MachineLimits& lim, 
   // begins, where the limit passes through the MTPV row of largest current
   // within the current limit (its point on the circle, if it reaches it).
   double rpm = 0;
-  std::string why, no_voltage;
-  if (!mtpv_subject) {
+  std::string why, no_voltage, unknown_voltage;
+  if (!lim.HasVoltageLimit()) {
+    unknown_voltage = absl::StrCat("no voltage limit drawn: ", !lim.udc_v ? "the DC-link voltage (--udc-v)" : "",
+                                   !lim.udc_v && !lim.rs_ohm ? " and " : "", !lim.rs_ohm ? "Rs (--rs-ohm)" : "",
+                                   " not known");
+  } else if (!mtpv_subject) {
     const double we_base = BaseSpeedRadS(m, lim, *mtpa);
     if (we_base > 0) {
       const double raw = 1.5 * RpmOf(we_base, lim.pole_pairs);
@@ -965,6 +1077,8 @@ std::string CurvesFigure(const sim::MagneticModel& m, const MachineLimits& lim, 
   }
   if (rpm > 0) {
     // drawn with the plane (DrawCurrentPlane)
+  } else if (!unknown_voltage.empty()) {
+    f.Note(unknown_voltage);
   } else if (!no_voltage.empty()) {
     f.Note(absl::StrFormat("no voltage limit drawn: u_max %.3g V is %s", lim.UMaxV(), no_voltage));
   } else {
@@ -1030,6 +1144,7 @@ std::string CurvesFigure(const sim::MagneticModel& m, const MachineLimits& lim, 
 PlaneCircle DrawCurrentPlane(plot::Figure* f, const sim::MagneticModel& m, const MachineLimits& lim, double id_lo_a,
                              double iq_hi_a, double we_rad_s, const std::string& voltage_label) {
   const double im = lim.i_max_a;
+  if (!lim.HasVoltageLimit()) we_rad_s = 0;   // no voltage limit without Udc and Rs
   const auto xs = Linspace(id_lo_a, 0.6 * im, 161);
   const auto ys = Linspace(-0.2 * im, iq_hi_a, 121);
   std::vector<double> tz, uz;

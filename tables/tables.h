@@ -9,6 +9,7 @@
 #define FLUXCAL_TABLES_TABLES_H_
 
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -21,14 +22,22 @@ class Figure;
 
 namespace fluxcal::tables {
 
+// The machine and drive a table is computed for. Nothing here has a
+// default of some machine: pole pairs and the current limit must be given
+// (BuildTable refuses 0), Rs and Udc where a voltage is computed (the
+// field-weakening map; tables/export_rule.h says where each comes from).
 struct MachineLimits {
-  int pole_pairs = 4;
-  double rs_ohm = 0.011;
-  double i_max_a = 150.0;           // current limit (peak, amplitude-invariant)
-  double udc_v = 50.0;
+  int pole_pairs = 0;               // required, 1..100
+  std::optional<double> rs_ohm;     // nominal Rs; needed for voltages
+  double i_max_a = 0;               // current limit (peak, amplitude-invariant); required > 0
+  std::optional<double> udc_v;      // DC-link voltage; needed for the voltage limit
   double modulation_limit = 1.0;    // fraction of the linear SVPWM range
   double temperature_c = 25.0;
-  // u_max = m Udc / sqrt(3): the linear range of space-vector PWM.
+  // Both Udc and Rs known: the steady-state voltage and its limit can be
+  // computed (VoltageV, UMaxV).
+  bool HasVoltageLimit() const { return udc_v.has_value() && rs_ohm.has_value(); }
+  // u_max = m Udc / sqrt(3): the linear range of space-vector PWM. NaN when
+  // Udc is unknown (callers check HasVoltageLimit first).
   double UMaxV() const;
 };
 
@@ -98,10 +107,19 @@ std::vector<std::pair<std::string, std::string>> TextFields(const Table& t);
 // {"extrapolated", ...}, both 0/1 with the outputs' shape.
 std::vector<std::pair<std::string, const std::vector<uint8_t>*>> Flags(const Table& t);
 
+// Breakpoints (docs/tables.md): every axis is the multiples of a round
+// step, 1, 2 or 5 x 10^k, within its range: the torque axes (MTPA rows, the
+// FW map's first axis) within +-T_max (the limit torque at standstill,
+// 0 included exactly), the FW speed axis within [0, speed_max_rpm], the
+// MTPV flux axis within the fluxes it covers. The step is the smallest
+// that gives at most `points` (`speed_points`) breakpoints: a count is a
+// budget, "at most N", and the axis ends at the last multiple inside its
+// range (the torque axis a step or less short of T_max, so that no row asks
+// for more than the machine gives).
 struct TableSpec {
   std::string kind = "mtpa";        // mtpa | mtpv | fw
-  int points = 64;                  // rows of a curve / torque axis of the map
-  int speed_points = 32;            // fw: speed axis
+  int points = 64;                  // at most this many rows of a curve / torque axis of the map
+  int speed_points = 32;            // fw: at most this many speeds
   double speed_max_rpm = 6000.0;    // fw: speed axis range [0, max]
   bool include_generating = true;   // negative torque rows (mtpa, fw)
   std::string serial;
@@ -122,7 +140,8 @@ struct TableSpec {
 
 double TorqueNm(const sim::MagneticModel& m, int pole_pairs, double id_a, double iq_a,
                 double temperature_c = 25.0);
-// Steady-state voltage magnitude at electrical speed w_e.
+// Steady-state voltage magnitude at electrical speed w_e (NaN when Rs is
+// unknown: callers check lim.HasVoltageLimit()).
 double VoltageV(const sim::MagneticModel& m, const MachineLimits& lim, double id_a, double iq_a,
                 double we_rad_s);
 
@@ -142,7 +161,8 @@ double MaxTorqueNm(const sim::MagneticModel& m, const MachineLimits& lim, double
 // The current plane behind an MTPA / MTPV figure (the export's and the
 // report's: one drawing of it): torque contours at round values up to the
 // torque at the current limit, the current-limit circle, and for
-// we_rad_s > 0 the voltage limit |u| = u_max at that speed, labelled
+// we_rad_s > 0 and a known voltage limit (lim.HasVoltageLimit()) the
+// voltage limit |u| = u_max at that speed, labelled
 // `voltage_label`. The fields are sampled over [id_lo_a, 0.6 i_max] x
 // [-0.2 i_max, iq_hi_a], beyond the view (equal scaling widens one axis;
 // the figure clips at its frame). Returns the circle's points (for a
@@ -153,11 +173,36 @@ struct PlaneCircle {
 PlaneCircle DrawCurrentPlane(plot::Figure* f, const sim::MagneticModel& m, const MachineLimits& lim, double id_lo_a,
                              double iq_hi_a, double we_rad_s, const std::string& voltage_label);
 
-// Errors: InvalidArgument (points, limits, kind; a current limit above the
+// The breakpoints of an axis over [lo_value, hi_value]: the multiples of
+// the smallest round step (1, 2 or 5 x 10^k) that gives at most
+// `max_points` of them, at least 2; 0 among them whenever the range holds
+// it. Each value is the double nearest its decimal (k m / 10^e, one
+// rounding). InvalidArgument naming `flag` when the range is empty or no
+// round step puts 2..max_points breakpoints into it.
+absl::StatusOr<std::vector<double>> RoundBreakpoints(double lo_value, double hi_value, int max_points,
+                                                     const std::string& flag = "--points");
+
+// Errors: InvalidArgument (points, limits, kind; pole pairs or current
+// limit not given; fw without Udc or Rs; a current limit above the
 // measured one without allow_extrapolation), FailedPrecondition (mtpv: no
 // MTPV point inside the current limit and allow_extrapolation not set).
+// MTPA and MTPV need no Udc (their points do not depend on it); the file
+// states Udc, Rs and u_max only when they were given.
 absl::StatusOr<Table> BuildTable(const sim::MagneticModel& m, const MachineLimits& lim,
                                  const TableSpec& spec);
+
+// Clamped cells of a table: how many of how many, and why, in words that
+// name the limit that binds (the voltage limit at its Udc from some speed
+// on, the current limit). A table with more than kMaxClampedShare of its
+// cells clamped is refused by the export rule (tables/export_rule.h) unless
+// asked for: it would tell an ECU mostly what the machine cannot do.
+inline constexpr double kMaxClampedShare = 0.5;
+struct ClampSummary {
+  size_t cells = 0, clamped = 0;
+  double share = 0;   // clamped / cells
+  std::string why;    // empty when nothing is clamped
+};
+ClampSummary SummariseClamped(const Table& t);
 
 // Canonical payload: for each axis then each output, its values as IEEE-754
 // float64 little endian, in declaration order (docs/tables.md).
@@ -187,7 +232,8 @@ absl::StatusOr<Exported> Export(const Table& t, Format f, const ExportOptions& o
 // legend states, and the tables' motoring rows; rows flagged clamped or
 // extrapolated get their own markers.
 // The MTPA table's figure: MTPA bold with a dot per row, the voltage limit
-// at 1.5 x base speed; the MTPV table (if given) thin, for reference.
+// at 1.5 x base speed (without Udc or Rs: none, and a note says why); the
+// MTPV table (if given) thin, for reference.
 std::string PlotCurvesSvg(const sim::MagneticModel& m, const MachineLimits& lim, const Table& mtpa,
                           const Table* mtpv);
 // The MTPV table's figure: MTPV bold with a dot per row, the voltage limit

@@ -19,7 +19,7 @@ import os
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from fluxcal_client import Client, FluxcalError, verify_table_json  # noqa: E402
+from fluxcal_client import Client, FluxcalError, StoredNotSentError, verify_table_json  # noqa: E402
 
 # Nominal data of the synthetic motor: 4 pole pairs, Rs 11 mOhm, magnet flux
 # 11.4 mWb; Ldd 0.18 mH; Lqq 0.372 mH at zero current, halved near 280 A.
@@ -70,7 +70,7 @@ def main():
             ing = c.ingest_hf_results(a.serial, points, motor=MOTOR, station_id="python-example",
                                       idempotency_key=key)
             log(f"{ing.accepted} points stored (run {ing.run_id}{', replayed' if ing.replayed else ''}, "
-                f"{len(ing.rejects)} rejected)")
+                f"sha256 {ing.points_sha256[:16]}, as sent)")
             fit = c.fit(a.serial)
             cal = fit.calibration
             log(f"calibration v{cal.version} ({cal.model}): {cal.verdict}")
@@ -81,11 +81,12 @@ def main():
             crc, sha = verify_table_json(table.data)
             write_atomically(a.out, table.data)
             log(f"table {a.out}: crc32 {crc}, sha256 {sha[:16]}...")
-    except (FluxcalError, RuntimeError, ValueError) as e:
+    except (FluxcalError, StoredNotSentError, RuntimeError, ValueError) as e:
         print(f"example: {e}", file=sys.stderr)
         return 1
     out = {
         "serial": a.serial, "run_id": ing.run_id, "accepted": ing.accepted, "replayed": ing.replayed,
+        "points_sha256": ing.points_sha256,
         "version": cal.version, "model": cal.model, "verdict": cal.verdict, "pass": getattr(fit, "pass"),
         "psi_pm_wb": cal.psi_pm_wb, "rms_relative": cal.rms_relative,
         "query": [{"id_a": v.id_a, "iq_a": v.iq_a, "psi_d_wb": v.psi_d_wb, "psi_d_wb_std": v.psi_d_wb_std,

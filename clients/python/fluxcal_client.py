@@ -36,6 +36,34 @@ DEFAULT_PROTO_DIR = os.path.normpath(os.path.join(HERE, "..", "..", "proto"))
 GRPC_PYTHON_PLUGIN = "/usr/bin/grpc_python_plugin"
 
 
+def hf_points_sha256(points):
+    """SHA-256 (hex) of HfPoint messages in the canonical form of
+    docs/service.md ("Stream rules"; pipeline::HfPointsSha256 in C++):
+    b"fluxcal.hf-points.v1\n", then per point its point_id (4-byte
+    big-endian length and UTF-8 bytes), id_a, iq_a, speed_rpm, ld_h, lq_h as
+    big-endian binary64, a byte 1 and ldq_h when present (else a byte 0),
+    ld_h_std, lq_h_std, ldq_h_std, temperature_c, and a byte `reliable`. A
+    zero is hashed as +0.0 (x + 0.0 turns -0.0 into +0.0)."""
+    h = hashlib.sha256(b"fluxcal.hf-points.v1\n")
+
+    def f64(*values):
+        return struct.pack(f">{len(values)}d", *(v + 0.0 for v in values))
+
+    for p in points:
+        pid = p.point_id.encode("utf-8")
+        h.update(struct.pack(">I", len(pid)) + pid)
+        h.update(f64(p.id_a, p.iq_a, p.speed_rpm, p.ld_h, p.lq_h))
+        h.update(b"\x01" + f64(p.ldq_h) if p.HasField("ldq_h") else b"\x00")
+        h.update(f64(p.ld_h_std, p.lq_h_std, p.ldq_h_std, p.temperature_c))
+        h.update(b"\x01" if p.reliable else b"\x00")
+    return h.hexdigest()
+
+
+class StoredNotSentError(Exception):
+    """The service acknowledged an ingest, but what it says it stored (count
+    or SHA-256) is not what this client sent: nothing may be built on it."""
+
+
 class FluxcalError(Exception):
     """An RPC failed: `code` is the grpc.StatusCode, the message names the
     RPC, the serial and the server's field-level reason."""
@@ -174,18 +202,39 @@ class Client:
         iq_a, ld_h, lq_h, optional ldq_h, *_std, temperature_c, reliable).
         `motor` ({pole_pairs, rs_ohm, psi_pm_wb}) is required for a serial the
         store does not know yet. Returns IngestHfResultsResponse (accepted,
-        rejects with index and field, run_id, replayed)."""
+        points_sha256, run_id, replayed).
+
+        The stream declares its end (end_follows, then a last message with
+        the count and hf_points_sha256 of the points), so the service refuses
+        it whole if a message is lost or corrupted on the way; and the
+        reply's count and digest of what the service stored must equal what
+        was sent, or StoredNotSentError is raised. An invalid point fails the
+        whole stream (FluxcalError, INVALID_ARGUMENT naming message, point
+        and field); nothing is stored then."""
         pb = self.pb
-        first = pb.IngestHfResultsRequest(serial=serial, station_id=station_id, idempotency_key=idempotency_key)
+        sent = [pb.HfPoint(**p) for p in points]
+        first = pb.IngestHfResultsRequest(serial=serial, station_id=station_id, idempotency_key=idempotency_key,
+                                          end_follows=True)
         if motor is not None:
             first.motor.CopyFrom(pb.MotorInfo(**motor))
+        digest = hf_points_sha256(sent)
+        end = pb.IngestHfResultsRequest(end=pb.StreamEnd(messages=len(sent) + 2, count=len(sent), sha256=digest))
 
         def messages():
             yield first
-            for p in points:
-                yield pb.IngestHfResultsRequest(points=[pb.HfPoint(**p)])
+            for p in sent:
+                yield pb.IngestHfResultsRequest(points=[p])
+            yield end
 
-        return self._call("IngestHfResults", serial, self.stub.IngestHfResults, messages())
+        r = self._call("IngestHfResults", serial, self.stub.IngestHfResults, messages())
+        if r.accepted != len(sent):
+            raise StoredNotSentError(f"IngestHfResults {serial}: the service stored {r.accepted} points, "
+                                     f"this client sent {len(sent)} (run {r.run_id})")
+        if r.points_sha256 != digest:
+            raise StoredNotSentError(f"IngestHfResults {serial}: SHA-256 of the points: the service's over what it "
+                                     f"stored is {r.points_sha256 or 'missing'}, this client's over what it sent is "
+                                     f"{digest} (run {r.run_id})")
+        return r
 
     def fit(self, serial, model="auto"):
         """Fits the serial's latest run; returns FitResponse (calibration, pass)."""
@@ -206,8 +255,9 @@ class Client:
 
     def export_table(self, serial, table="mtpa", fmt="csv", points=0, version=0, **limits):
         """ExportTableResponse: data (the file's bytes), crc32, sha256, version,
-        verdict. `limits`: speed_points, speed_max_rpm, i_max_a, udc_v (0 or
-        absent: the server's defaults)."""
+        verdict, cells, clamped_cells. `limits`: speed_points, speed_max_rpm,
+        i_max_a, udc_v, rs_ohm (0 or absent: the calibration's; fw and mtpv
+        need a Udc from somewhere), allow_clamped."""
         req = self.pb.ExportTableRequest(serial=serial, version=version, table=table, format=fmt, points=points,
                                          **limits)
         return self._call("ExportTable", serial, self.stub.ExportTable, req)

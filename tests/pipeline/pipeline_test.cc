@@ -4,8 +4,10 @@
 // content hashes) including through the `fluxcal admin` command.
 #include "pipeline/pipeline.h"
 
+#include <sys/wait.h>
 #include <unistd.h>
 
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -14,8 +16,12 @@
 #include "gtest/gtest.h"
 #include "io/sha256.h"
 #include "nlohmann/json.hpp"
+#include "pipeline/anchor.h"
+#include "pipeline/facts.h"
+#include "pipeline/ingest_stream.h"
 #include "pipeline/report.h"
 #include "simulation/twin.h"
+#include "storage/sqlite.h"
 #include "storage/sqlite_store.h"
 #include "tests/support/pg_cluster.h"
 
@@ -142,9 +148,7 @@ TEST(Pipeline, FitJudgeQueryExport) {
   EXPECT_NEAR(q->values[1].lqq_h / (1.02 * truth.Inductance(-20, 40).lqq_h), 1.0, 0.005);
   tables::TableSpec spec;
   spec.points = 16;
-  tables::MachineLimits lim;
-  lim.i_max_a = -1;
-  auto e = ExportTable(**store, "IPM-F", 0, spec, lim, "csv");
+  auto e = ExportTable(**store, "IPM-F", 0, spec, tables::ExportRequest{}, "csv");
   ASSERT_TRUE(e.ok()) << e.status();
   EXPECT_EQ(e->version, 2);
   EXPECT_EQ(e->exported.payload_sha256.size(), 64u);
@@ -154,6 +158,136 @@ TEST(Pipeline, FitJudgeQueryExport) {
   EXPECT_NE(e->exported.bytes.find("# release_state: not released\n"), std::string::npos);
   EXPECT_NE(e->exported.bytes.find("# serial: IPM-F\n"), std::string::npos);
   EXPECT_EQ(QueryFlux(**store, "NOPE", 0, {{0, 0}}).status().code(), absl::StatusCode::kNotFound);
+}
+
+// The service's export under the one export rule (tables/export_rule.h):
+// a run of HF results stores no DC-link voltage, so a field-weakening or
+// MTPV table needs udc_v in the request (before: 50 V, silently); a mostly
+// clamped table is FAILED_PRECONDITION unless allow_clamped; a calibration
+// without a measured current circle needs i_max_a (before: 150 A).
+TEST(Pipeline, ExportTakesTheCalibrationsFactsOrTheRequests) {
+  auto store = storage::Store::Open(":memory:");
+  ASSERT_TRUE(store.ok());
+  ASSERT_TRUE(IngestHfRun(**store, "IPM-X", "st", kMotor, Grid(1.0)).ok());
+  ASSERT_TRUE(FitSerial(**store, "IPM-X", "analytic", {}).ok());
+  tables::ExportRequest rpc;
+  rpc.names_flags = false;
+  tables::TableSpec spec;
+  spec.points = 9;
+  spec.speed_points = 8;
+  for (const char* kind : {"fw", "mtpv"}) {
+    spec.kind = kind;
+    auto e = ExportTable(**store, "IPM-X", 0, spec, rpc, "csv");
+    ASSERT_EQ(e.status().code(), absl::StatusCode::kInvalidArgument) << kind << ": " << e.status();
+    EXPECT_EQ(e.status().message().rfind("udc_v: ", 0), 0u) << e.status();
+  }
+  spec.kind = "fw";
+  rpc.udc_v = 50;
+  auto e = ExportTable(**store, "IPM-X", 0, spec, rpc, "csv");
+  ASSERT_TRUE(e.ok()) << e.status();
+  EXPECT_GT(e->cells, 0);
+  EXPECT_LE(e->cells, 9 * 8) << "at most --points x --speed-points cells";
+  EXPECT_NE(e->exported.bytes.find("# udc_v: 50 V"), std::string::npos);
+  EXPECT_EQ(e->limits.udc_source, "udc_v");
+  EXPECT_LE(e->clamped_cells * 2, e->cells);
+  rpc.udc_v = 8;
+  auto clamped = ExportTable(**store, "IPM-X", 0, spec, rpc, "csv");
+  ASSERT_EQ(clamped.status().code(), absl::StatusCode::kFailedPrecondition) << clamped.status();
+  EXPECT_NE(clamped.status().message().find("give allow_clamped"), std::string::npos) << clamped.status();
+  rpc.allow_clamped = true;
+  clamped = ExportTable(**store, "IPM-X", 0, spec, rpc, "csv");
+  ASSERT_TRUE(clamped.ok()) << clamped.status();
+  EXPECT_GT(clamped->clamped_cells * 2, clamped->cells);
+
+  // A stored calibration whose measured region holds no current circle.
+  auto cal = LoadCalibration(**store, "IPM-X", 1);
+  ASSERT_TRUE(cal.ok());
+  const fit::Calibration no_circle(cal->serial(), cal->family(), cal->params(), cal->covariance(), cal->pole_pairs(),
+                                   cal->rs_ohm(), 0.0, 20.0, 0.0, 100.0);
+  storage::CalibrationRow row;
+  row.serial = "IPM-X";
+  row.run_id = 1;
+  row.model = no_circle.family().Name();
+  row.verdict = "fail: test";
+  row.calibration_json = no_circle.ToJson().dump();
+  ASSERT_TRUE((*store)->AddCalibration(row).ok());
+  spec.kind = "mtpa";
+  rpc = tables::ExportRequest{};
+  rpc.names_flags = false;
+  auto i_max = ExportTable(**store, "IPM-X", 2, spec, rpc, "csv");
+  ASSERT_EQ(i_max.status().code(), absl::StatusCode::kInvalidArgument) << i_max.status();
+  EXPECT_EQ(i_max.status().message().rfind("i_max_a: ", 0), 0u) << i_max.status();
+}
+
+// The verdict never passes a calibration missing a fact it depends on: a
+// station that stated no nominal psi_pm gets a fail that says so (before:
+// pass, judged from the fit alone), and pole pairs are required at ingest.
+TEST(Pipeline, VerdictNeedsTheNominalMagnetFlux) {
+  auto store = storage::Store::Open(":memory:");
+  ASSERT_TRUE(store.ok());
+  EXPECT_EQ(IngestHfRun(**store, "IPM-V", "st", MotorNominal{0, 0.011, 0.0114}, Grid(1.0)).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  ASSERT_TRUE(IngestHfRun(**store, "IPM-V", "st", MotorNominal{4, 0.011, 0.0}, Grid(1.0)).ok());
+  auto row = FitSerial(**store, "IPM-V", "analytic", {});
+  ASSERT_TRUE(row.ok()) << row.status();
+  EXPECT_EQ(row->verdict.rfind("fail: nominal psi_pm unknown", 0), 0u) << row->verdict;
+  auto cal = LoadCalibration(**store, "IPM-V", 0);
+  ASSERT_TRUE(cal.ok());
+  EXPECT_FALSE(cal->psi_pm_nominal_wb().has_value());
+  EXPECT_FALSE(cal->udc_v().has_value()) << "an HF run states no Udc; none is invented";
+  // The page of a calibration file without the nominal psi_pm: no pass.
+  report::ReportInputs in;
+  FillReportInputsFromJson(*cal, cal->ToJson(), &in);
+  EXPECT_EQ(in.verdict.rfind("fail: nominal psi_pm unknown", 0), 0u) << in.verdict;
+  // A nominal given to the verdict (the manifest's, with --set) is judged:
+  // here the fit had no prior, and inductances alone do not observe psi_pm
+  // (it stayed near the fit's start value), which the verdict then shows.
+  EXPECT_EQ(Verdict(*cal, 0.0114, 36, 0, {}).rfind("fail: psi_pm", 0), 0u) << Verdict(*cal, 0.0114, 36, 0, {});
+}
+
+// Machine facts for a fit (pipeline/facts.h): the source's, a flag's where
+// the source says nothing, a contradiction refused, what a calibration
+// cannot do without named by its flag.
+TEST(Facts, StatedMergedOrRefused) {
+  fit::FitData bare;
+  bare.inductances.push_back(ToObservation(Grid(1.0)[7]));
+  fit::FitData d = bare;
+  auto st = ApplyStatedFacts({}, FactSource::kHfResults, &d);
+  ASSERT_EQ(st.code(), absl::StatusCode::kInvalidArgument);
+  for (const char* flag : {"--serial", "--pole-pairs", "--psi-pm-wb", "not observable"}) {
+    EXPECT_NE(st.message().find(flag), std::string::npos) << flag << " in " << st;
+  }
+  StatedFacts flags;
+  flags.serial = "IPM-S-1";
+  flags.pole_pairs = 4;
+  flags.psi_pm_wb = 0.0114;
+  std::vector<std::string> notes;
+  ASSERT_TRUE(ApplyStatedFacts(flags, FactSource::kHfResults, &d, &notes).ok());
+  EXPECT_EQ(d.serial, "IPM-S-1");
+  EXPECT_EQ(d.pole_pairs, 4);
+  EXPECT_EQ(*d.psi_pm_prior_wb, 0.0114);
+  EXPECT_FALSE(d.rs_ohm || d.udc_v) << "not stated: unknown";
+  EXPECT_EQ(notes.size(), 3u);
+  // Steady-state rows at speed observe psi_pm: no --psi-pm-wb needed.
+  fit::FitData with_rows = bare;
+  with_rows.steady_state.push_back({-20, 40, 2000, -3, 9, std::nullopt});
+  flags.psi_pm_wb.reset();
+  EXPECT_TRUE(ApplyStatedFacts(flags, FactSource::kRecordingSet, &with_rows).ok());
+  // A set's facts: an equal flag is fine, a different one refused, naming both.
+  fit::FitData set = d;
+  flags = {};
+  flags.pole_pairs = 4;
+  flags.udc_v = 48;
+  ASSERT_TRUE(ApplyStatedFacts(flags, FactSource::kRecordingSet, &set).ok());
+  EXPECT_EQ(*set.udc_v, 48.0) << "fills what the set does not state";
+  flags.udc_v = 50;
+  st = ApplyStatedFacts(flags, FactSource::kRecordingSet, &set);
+  ASSERT_EQ(st.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(st.message().find("flag --udc-v: 50 differs from the set's manifest's udc_v 48"), std::string::npos) << st;
+  flags = {};
+  flags.pole_pairs = 101;
+  EXPECT_NE(ApplyStatedFacts(flags, FactSource::kRecordingSet, &set).message().find("flag --pole-pairs"),
+            std::string::npos);
 }
 
 // The stored version's page: the store's provenance on it, the fleet at
@@ -214,8 +348,8 @@ TEST(Pipeline, ReportInputsFromTheCalibrationJson) {
   report::ReportInputs in;
   FillReportInputsFromJson(*cal, j, &in);
   EXPECT_EQ(in.calibration, &*cal);
-  EXPECT_EQ(in.verdict, Verdict(*cal, 0, 0, 0, {}));
-  EXPECT_EQ(in.verdict_basis.rfind("from the fit alone", 0), 0u) << in.verdict_basis;
+  EXPECT_EQ(in.verdict, Verdict(*cal, std::nullopt, 0, 0, {}));
+  EXPECT_EQ(in.verdict_basis.rfind("from the fit and the calibration's nominal psi_pm", 0), 0u) << in.verdict_basis;
   EXPECT_FALSE(in.diagnosis.has_value());
   EXPECT_FALSE(in.software_version.empty());
   j["verdict"] = "fail: stored reason";
@@ -281,6 +415,196 @@ TEST(Pipeline, WireConverterRoundTrips) {
   }
 }
 
+// The stream digests have the form docs/service.md documents: the golden
+// values were computed by an independent implementation (Python's
+// struct.pack(">I"/">Q"/">d") and hashlib, the same bytes clients/python
+// hashes), so a change of the form breaks this test, not only the clients.
+TEST(IngestStream, DigestsHaveTheDocumentedForm) {
+  IdentifiedPoint a;
+  a.point_id = "p0"; a.id_a = -20; a.iq_a = 40; a.speed_rpm = 1500; a.ld_h = 1.8e-4; a.lq_h = 3.6e-4;
+  a.ldq_h = -1.25e-6; a.ld_h_std = 1e-7; a.lq_h_std = 2e-7; a.ldq_h_std = 3e-7; a.temperature_c = 25;
+  a.reliable = true;
+  IdentifiedPoint b;
+  b.point_id = "p1"; b.id_a = 0; b.iq_a = 100; b.speed_rpm = 0; b.ld_h = 2e-4; b.lq_h = 4e-4;
+  b.ld_h_std = b.lq_h_std = b.ldq_h_std = 0; b.temperature_c = 31.5; b.reliable = false;
+  EXPECT_EQ(HfPointsSha256({a, b}), "22e7c253c7ba13bdab6539be3f8fba08288e5e31a45100ad0037a57d316856df");
+  EXPECT_EQ(HfPointsSha256({}), "f376d611f1a11eda516bf01adf882c09d600e292c1b98d6384dcfd475ae6ccfa");
+  // Every bit counts; order counts; an absent Ldq is not Ldq = 0.
+  IdentifiedPoint c = a;
+  c.ld_h = std::nextafter(c.ld_h, 1.0);
+  EXPECT_NE(HfPointsSha256({c, b}), HfPointsSha256({a, b}));
+  EXPECT_NE(HfPointsSha256({b, a}), HfPointsSha256({a, b}));
+  IdentifiedPoint d = b;
+  d.ldq_h = 0.0;
+  EXPECT_NE(HfPointsSha256({a, d}), HfPointsSha256({a, b}));
+  // A zero's sign does not count (SQLite gives -0.0 back as +0.0).
+  IdentifiedPoint e = b;
+  e.id_a = -0.0;
+  EXPECT_EQ(HfPointsSha256({a, e}), HfPointsSha256({a, b}));
+  const io::RecordingFiles files = {
+      {"manifest.json", "{}"}, {"points/p000.csv", "t_s,ia_a\n0,1\n"}, {"empty.csv", ""}};
+  EXPECT_EQ(RecordingFilesSha256(files), "f11252fe1fd7038a64859e532eee696fde5c8288620077ea4fa227a6b75315b3");
+  EXPECT_EQ(RecordingFilesBytes(files), 15);
+  io::RecordingFiles shorter = files;
+  shorter["points/p000.csv"].pop_back();
+  EXPECT_NE(RecordingFilesSha256(shorter), RecordingFilesSha256(files));
+}
+
+TEST(IngestStream, DeclaredAndStoredTotalsAreCompared) {
+  const StreamTotals sent{38, 36, 0, std::string(64, 'a')};
+  EXPECT_TRUE(CheckStreamEnd(sent, sent, "end", "points").ok());
+  StreamTotals got = sent;
+  got.messages = 20;
+  got.count = 18;
+  auto s = CheckStreamEnd(sent, got, "end", "points");
+  EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(s.message().find("end.messages: the stream declares 38 messages, the service received 20 messages"),
+            std::string::npos) << s;
+  got.messages = 38;
+  s = CheckStreamEnd(sent, got, "chunks[9].end", "files");
+  EXPECT_NE(s.message().find("chunks[9].end.count: the stream declares 36 files, the service received 18 files"),
+            std::string::npos) << s;
+  got = sent;
+  got.sha256 = std::string(64, 'b');
+  EXPECT_NE(CheckStreamEnd(sent, got, "end", "points").message().find("end.sha256"), std::string::npos);
+  // The client's side: stored against sent.
+  got = sent;
+  got.messages = 0;   // not compared
+  EXPECT_TRUE(CheckStored(sent, got, "points").ok());
+  got.count = 18;
+  s = CheckStored(sent, got, "points");
+  EXPECT_EQ(s.code(), absl::StatusCode::kDataLoss);
+  EXPECT_NE(s.message().find("the service stored 18 points, this client sent 36"), std::string::npos) << s;
+  got = sent;
+  got.sha256.clear();
+  s = CheckStored(sent, got, "points");
+  EXPECT_NE(s.message().find("missing (a service without stream digests)"), std::string::npos) << s;
+}
+
+// Anchor files: a snapshot and event lines fold into one anchor (per serial
+// the highest version, the highest release); a malformed line is named by
+// file, line and field.
+TEST(Anchor, FileFoldsItsLinesAndNamesAMalformedOne) {
+  const std::string path = Temp("anchor.jsonl");
+  fs::remove(path);
+  EXPECT_EQ(ReadAnchorFile(path).status().code(), absl::StatusCode::kNotFound);
+  storage::ChainHead snap;
+  snap.calibrations = {{"IPM-1", 2, std::string(64, '1')}, {"IPM-2", 5, std::string(64, '2')}};
+  snap.release_seq = 3;
+  snap.release_serial = "IPM-2";
+  snap.release_version = 5;
+  snap.release_sha256 = std::string(64, '3');
+  snap.digest_sha256 = storage::ChainHeadDigest(snap);
+  ASSERT_TRUE(AppendAnchorLine(path, AnchorLine(snap, "snapshot", "sqlite", "2030-01-01T00:00:00Z")).ok());
+  storage::ChainHead event;
+  event.calibrations = {{"IPM-1", 3, std::string(64, '4')}};
+  event.release_seq = 3;
+  event.release_serial = "IPM-2";
+  event.release_version = 5;
+  event.release_sha256 = std::string(64, '3');
+  ASSERT_TRUE(AppendAnchorLine(path, AnchorLine(event, "event", "sqlite", "2030-01-02T00:00:00Z")).ok());
+  auto a = ReadAnchorFile(path);
+  ASSERT_TRUE(a.ok()) << a.status();
+  EXPECT_EQ(a->lines, 2);
+  EXPECT_EQ(a->newest_utc, "2030-01-02T00:00:00Z");
+  ASSERT_EQ(a->head.calibrations.size(), 2u);
+  EXPECT_EQ(a->head.calibrations[0].version, 3);
+  EXPECT_EQ(a->head.calibrations[0].row_sha256, std::string(64, '4'));
+  EXPECT_EQ(a->head.calibrations[1].version, 5);
+  EXPECT_EQ(a->head.release_seq, 3);
+  const auto first = nlohmann::json::parse(AnchorLine(snap, "snapshot", "sqlite", "2030-01-01T00:00:00Z"));
+  EXPECT_EQ(first["format"], "fluxcal.chain-anchor.v1");
+  EXPECT_EQ(first["digest_sha256"], snap.digest_sha256);
+  std::ofstream(path, std::ios::app) << "{\"format\": \"fluxcal.chain-anchor.v1\", \"created_utc\": \"x\", "
+                                        "\"calibrations\": [{\"serial\": \"IPM-1\", \"version\": 4, \"row_sha256\": \"zz\"}]}\n";
+  auto bad = ReadAnchorFile(path);
+  EXPECT_EQ(bad.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(bad.status().message().find(path + ":3: field 'calibrations[0].row_sha256'"), std::string::npos)
+      << bad.status();
+  fs::remove(path);
+  std::ofstream(path).close();
+  EXPECT_EQ(ReadAnchorFile(path).status().code(), absl::StatusCode::kInvalidArgument);
+  fs::remove(path);
+}
+
+// The repros of issue 24 through the commands an operator runs, on a SQLite
+// store edited behind the service:
+//  - the newest version deleted with its chain row: `verify-db` alone says
+//    intact; with the anchor `admin anchor` wrote before, it names the
+//    serial and version;
+//  - a release INSERTed for a failing version: `verify-db` names it, and
+//    the flasher's path (FlashableVersion) refuses it.
+TEST(Admin, AnchorAndVerifyDbFindWhatTheChainsAloneMiss) {
+  const std::string db = Temp("anchor_cli.db"), anchor = Temp("anchor_cli.jsonl");
+  RemoveDb(db);
+  fs::remove(anchor);
+  {
+    auto s = storage::Store::Open(db);
+    ASSERT_TRUE(s.ok());
+    ASSERT_TRUE(IngestHfRun(**s, "IPM-AN-1", "st", kMotor, Grid(1.0)).ok());
+    ASSERT_EQ(FitSerial(**s, "IPM-AN-1", "analytic", {})->verdict, "pass");
+    auto noisy = Grid(1.0);   // 8 % scatter fails the 2 % residual policy
+    for (size_t k = 0; k < noisy.size(); ++k) noisy[k].lq_h *= k % 2 ? 1.08 : 0.92;
+    ASSERT_TRUE(IngestHfRun(**s, "IPM-AN-1", "st", std::nullopt, noisy).ok());
+    const auto v2 = FitSerial(**s, "IPM-AN-1", "analytic", {});
+    ASSERT_TRUE(v2.ok());
+    ASSERT_NE(v2->verdict, "pass");
+    ASSERT_TRUE((*s)->Release("IPM-AN-1", 1, "rel").ok());
+    EXPECT_EQ(*FlashableVersion(**s, "IPM-AN-1", 0), 1);
+  }
+  auto run = [](const std::string& cmd) {
+    std::string out;
+    FILE* p = popen((cmd + " 2>&1").c_str(), "r");
+    char buf[512];
+    while (p && fgets(buf, sizeof buf, p)) out += buf;
+    const int rc = p ? pclose(p) : -1;
+    return std::make_pair(WIFEXITED(rc) ? WEXITSTATUS(rc) : -1, out);
+  };
+  const std::string bin = FLUXCAL_BINARY;
+  auto [arc, aout] = run(bin + " admin anchor --db " + db + " --out " + anchor + " --json");
+  ASSERT_EQ(arc, 0) << aout;
+  const auto doc = nlohmann::json::parse(aout);
+  EXPECT_EQ(doc["calibrations"][0]["version"], 2);
+  EXPECT_EQ(doc["release"]["seq"], 1);
+  EXPECT_EQ(doc["digest_sha256"].get<std::string>().size(), 64u);
+  EXPECT_EQ(run(bin + " admin verify-db --db " + db + " --anchor " + anchor).first, 0);
+  auto raw = [&](const std::string& sql) {
+    auto d = storage::Database::Open(db);
+    return d.ok() && (*d)->Exec(sql).ok();
+  };
+  ASSERT_TRUE(raw("DROP TRIGGER calibrations_no_delete; DROP TRIGGER chain_no_delete; "
+                  "DELETE FROM calibration_chain WHERE serial = 'IPM-AN-1' AND version = 2; "
+                  "DELETE FROM calibrations WHERE serial = 'IPM-AN-1' AND version = 2"));
+  auto [brc, bout] = run(bin + " admin verify-db --db " + db);
+  EXPECT_EQ(brc, 0) << "the chains alone cannot see it: " << bout;
+  auto [vrc, vout] = run(bin + " admin verify-db --db " + db + " --anchor " + anchor + " --json");
+  EXPECT_EQ(vrc, 1) << vout;
+  const auto rep = nlohmann::json::parse(vout);
+  EXPECT_FALSE(rep["intact"].get<bool>());
+  ASSERT_EQ(rep["problems"].size(), 1u) << vout;
+  EXPECT_EQ(rep["problems"][0].get<std::string>().rfind("IPM-AN-1 v2: removed after the anchor in " + anchor, 0), 0u)
+      << vout;
+  // A failing version made flashable behind the service.
+  ASSERT_TRUE(raw("INSERT INTO calibrations SELECT serial, 2, run_id, created_utc, model, psi_pm_wb, rms_relative, "
+                  "'fail: psi_pm', calibration_json FROM calibrations WHERE serial = 'IPM-AN-1' AND version = 1; "
+                  "INSERT INTO releases (serial, version, released_by, released_utc) "
+                  "VALUES ('IPM-AN-1', 2, 'someone', '2030-01-01T00:00:00Z')"));
+  auto [irc, iout] = run(bin + " admin verify-db --db " + db);
+  EXPECT_EQ(irc, 1) << iout;
+  EXPECT_NE(iout.find("IPM-AN-1 v2: release without a chain link (inserted around the service)"), std::string::npos)
+      << iout;
+  EXPECT_NE(iout.find("IPM-AN-1 v2: no chain link (row inserted around the store)"), std::string::npos) << iout;
+  {
+    auto s = storage::Store::Open(db);
+    ASSERT_TRUE(s.ok());
+    auto flash = FlashableVersion(**s, "IPM-AN-1", 0);
+    EXPECT_EQ(flash.status().code(), absl::StatusCode::kDataLoss) << flash.status();
+    EXPECT_EQ(*FlashableVersion(**s, "IPM-AN-1", 1), 1) << "the honest release stays flashable";
+  }
+  RemoveDb(db);
+  fs::remove(anchor);
+}
+
 // A store with everything in it: runs, a raw recording, calibrations.
 void Populate(storage::Store& s) {
   ASSERT_TRUE(IngestHfRun(s, "IPM-M-1", "st1", kMotor, Grid(1.0)).ok());
@@ -328,6 +652,7 @@ TEST(Admin, MigrateSqliteToPostgresKeepsEverything) {
   EXPECT_EQ(r->releases, 1);
   EXPECT_EQ(r->audit_rows, 3);
   EXPECT_EQ(r->chain_links, 3);
+  EXPECT_EQ(r->release_links, 1);
   EXPECT_EQ(*ContentHash(**to), *ContentHash(**from));
   EXPECT_TRUE(*(*to)->IsReleased("IPM-M-3", 1));
   auto trail_from = (*from)->AuditOf("IPM-M-3"), trail_to = (*to)->AuditOf("IPM-M-3");
@@ -337,11 +662,13 @@ TEST(Admin, MigrateSqliteToPostgresKeepsEverything) {
     EXPECT_EQ(trail_to->at(k).utc, trail_from->at(k).utc);
     EXPECT_EQ(trail_to->at(k).detail, trail_from->at(k).detail);
   }
-  auto chain = storage::VerifyCalibrationChain(**to);
+  auto chain = storage::VerifyChains(**to);
   ASSERT_TRUE(chain.ok()) << chain.status();
   EXPECT_EQ(chain->chained, 3);
   EXPECT_EQ(chain->unchained, 0);
+  EXPECT_EQ(chain->releases_chained, 1);
   EXPECT_TRUE(chain->problems.empty());
+  EXPECT_TRUE(storage::VerifyReleasedVersion(**to, "IPM-M-3", 1).ok()) << "the copy is flashable as the source was";
   bool replayed = false;
   auto again = IngestHfRun(**to, "IPM-M-3", "st9", kMotor, Grid(1.0), 0, "key-9", &replayed);
   ASSERT_TRUE(again.ok());
@@ -352,8 +679,8 @@ TEST(Admin, MigrateSqliteToPostgresKeepsEverything) {
   ASSERT_TRUE(v3.ok());
   EXPECT_EQ(v3->version, 3);
   // A change anywhere changes the hash; a second migrate into it is refused.
-  EXPECT_TRUE(storage::VerifyCalibrationChain(**to)->problems.empty());
-  EXPECT_EQ(storage::VerifyCalibrationChain(**to)->chained, 4);
+  EXPECT_TRUE(storage::VerifyChains(**to)->problems.empty());
+  EXPECT_EQ(storage::VerifyChains(**to)->chained, 4);
   EXPECT_NE(*ContentHash(**to), *ContentHash(**from));
   EXPECT_EQ(Migrate(**from, **to).status().code(), absl::StatusCode::kFailedPrecondition);
   // The same through the command an operator runs, checked by `admin hash`.

@@ -82,13 +82,60 @@ TEST_F(ReportTest, ChecksumsAreTheTablesLibrarys) {
   EXPECT_GT(rep->ellipse_speed_rpm, 0.0);
 }
 
-TEST_F(ReportTest, DefaultUdcBelowResistiveDropIsWarned) {
-  // Rs 3.6 ohm x 18 A is far above 50 V / sqrt 3: the export default does
-  // not fit this machine, and the page has to say so.
-  auto rep = BuildReport(Inputs());
+TEST_F(ReportTest, UdcBelowResistiveDropIsWarned) {
+  // Rs 3.6 ohm x 18 A is far above 50 V / sqrt 3: a Udc that does not fit
+  // this machine, and the page has to say so and where it came from.
+  ReportInputs in = Inputs();
+  in.udc_v = 50.0;
+  in.udc_source = "test: 50 V";
+  auto rep = BuildReport(in);
   ASSERT_TRUE(rep.ok()) << rep.status();
   EXPECT_NE(rep->html.find("class=\"warn\""), std::string::npos);
-  EXPECT_NE(rep->html.find("fluxcal export default"), std::string::npos);
+  EXPECT_NE(rep->html.find("below the resistive drop"), std::string::npos);
+  EXPECT_NE(rep->html.find("test: 50 V"), std::string::npos);
+}
+
+// Without --udc-v or a set, Udc is the calibration's (the Baldor set's
+// manifest says 540 V); never a default of some other drive.
+TEST_F(ReportTest, UdcFromTheCalibration) {
+  ASSERT_TRUE(cal_->udc_v().has_value());
+  EXPECT_EQ(*cal_->udc_v(), 540.0);
+  auto rep = BuildReport(Inputs());
+  ASSERT_TRUE(rep.ok()) << rep.status();
+  EXPECT_EQ(rep->figures, 8);
+  EXPECT_NE(rep->html.find("540 V <small>(the calibration"), std::string::npos) << "Udc and its source on the page";
+  EXPECT_EQ(rep->html.find("class=\"warn\""), std::string::npos) << "540 V fits this machine";
+  EXPECT_GT(rep->ellipse_speed_rpm, 0.0);
+}
+
+// Udc known nowhere: the page says the voltage limit and field weakening
+// cannot be drawn instead of drawing them at an assumed voltage (before,
+// 50 V: a map clamped everywhere on a page that said pass). MTPA and MTPV
+// need no Udc and are still there, checksums as the tables library's.
+TEST_F(ReportTest, UnknownUdcDrawsNoVoltageLimit) {
+  fit::Calibration cal = *cal_;
+  cal.set_udc_v(std::nullopt);
+  ReportInputs in = Inputs();
+  in.calibration = &cal;
+  in.calibration_json = cal.ToJson();
+  auto rep = BuildReport(in);
+  ASSERT_TRUE(rep.ok()) << rep.status();
+  EXPECT_NE(rep->html.find("The voltage limit and the field-weakening map cannot be drawn"), std::string::npos);
+  EXPECT_NE(rep->html.find("the DC-link voltage Udc is not known"), std::string::npos);
+  EXPECT_EQ(rep->html.find("id=\"fig-fw-"), std::string::npos) << "no field-weakening figure without Udc";
+  EXPECT_EQ(rep->figures, 6) << "five surfaces and the current plane";
+  EXPECT_EQ(rep->ellipse_speed_rpm, 0.0);
+  EXPECT_EQ(rep->html.find("|u| ="), std::string::npos) << "no voltage-limit curve";
+  EXPECT_NE(rep->html.find("<tr><td>fw</td><td colspan=\"6\">not computed"), std::string::npos);
+  tables::MachineLimits lim;
+  lim.pole_pairs = cal.pole_pairs();
+  lim.rs_ohm = cal.rs_ohm();
+  lim.i_max_a = cal.MeasuredCurrentLimitA();
+  tables::TableSpec spec;
+  spec.measured_current_limit_a = cal.MeasuredCurrentLimitA();
+  auto mtpa = tables::BuildTable(cal, lim, spec);
+  ASSERT_TRUE(mtpa.ok()) << mtpa.status();
+  EXPECT_NE(rep->html.find(mtpa->sha256), std::string::npos) << "the MTPA table needs no Udc";
 }
 
 TEST_F(ReportTest, IdentifiedPointsAreDrawn) {

@@ -22,8 +22,10 @@
 #include "grpc/reflection/v1alpha/reflection.grpc.pb.h"
 #include "gtest/gtest.h"
 #include "io/csv.h"
+#include "io/net.h"
 #include "server/auth.h"
 #include "io/sha256.h"
+#include "pipeline/anchor.h"
 #include "server/service.h"
 #include "simulation/twin.h"
 #include "storage/store.h"
@@ -410,48 +412,52 @@ TEST(Roles, GetReportReadsLikeGetCalibrationAndTheFleetStaysWithEngineers) {
 // Release and flashing: a failed calibration cannot be released; flashers
 // see nothing before a release and then exactly the released version, even
 // after a newer (unreleased) fit; a station cannot release.
+// A run of the twin's analytic motor for `serial` (`scatter` alternates
+// Lqq by that fraction point to point: 0.15 fails the 2 % residual policy).
+void IngestTwinGrid(v1::CalibrationService::Stub* stub, const std::string& serial, double scatter) {
+  sim::MotorParams mp;
+  sim::AnalyticMotor m(mp);
+  grpc::ClientContext ctx;
+  v1::IngestHfResultsResponse r;
+  auto w = stub->IngestHfResults(&ctx, &r);
+  v1::IngestHfResultsRequest msg;
+  msg.set_serial(serial);
+  msg.mutable_motor()->set_pole_pairs(4);
+  msg.mutable_motor()->set_psi_pm_wb(mp.sat.psi_pm_wb);
+  for (int a = 0; a < 6; ++a) {
+    for (int b = 0; b < 6; ++b) {
+      auto* p = msg.add_points();
+      p->set_point_id("p" + std::to_string(6 * a + b));
+      p->set_id_a(-100 + 20 * a); p->set_iq_a(20 * b);
+      const auto L = m.Inductance(p->id_a(), p->iq_a());
+      p->set_ld_h(L.ldd_h); p->set_lq_h(L.lqq_h * (1 + ((a + b) % 2 ? scatter : -scatter)));
+      p->set_ldq_h(L.ldq_h);
+      p->set_temperature_c(25); p->set_reliable(true);
+    }
+  }
+  w->Write(msg);
+  w->WritesDone();
+  EXPECT_TRUE(w->Finish().ok());
+}
+
+v1::FitResponse FitAs(v1::CalibrationService::Stub* stub, const std::string& serial, double max_rms) {
+  grpc::ClientContext c;
+  v1::FitRequest q;
+  q.set_serial(serial);
+  q.set_max_rms_relative(max_rms);
+  v1::FitResponse r;
+  EXPECT_TRUE(stub->Fit(&c, q, &r).ok());
+  return r;
+}
+
 TEST(Roles, OnlyAReleasedPassingCalibrationIsFlashed) {
   Fixture f("release");
   auto as = [&](Role r) {
     return v1::CalibrationService::NewStub(Channel(f.addr(), grpc::InsecureChannelCredentials(), f.tokens[r]));
   };
   auto admin = as(Role::kAdmin), release = as(Role::kRelease), flasher = as(Role::kFlasher), station = as(Role::kStation);
-  // A run of the twin's analytic motor (`scatter` alternates Lqq by that
-  // fraction point to point) and its fit.
-  auto ingest = [&](double scatter) {
-    sim::MotorParams mp;
-    sim::AnalyticMotor m(mp);
-    grpc::ClientContext ctx;
-    v1::IngestHfResultsResponse r;
-    auto w = admin->IngestHfResults(&ctx, &r);
-    v1::IngestHfResultsRequest msg;
-    msg.set_serial("IPM-REL-1");
-    msg.mutable_motor()->set_pole_pairs(4);
-    msg.mutable_motor()->set_psi_pm_wb(mp.sat.psi_pm_wb);
-    for (int a = 0; a < 6; ++a) {
-      for (int b = 0; b < 6; ++b) {
-        auto* p = msg.add_points();
-        p->set_point_id("p" + std::to_string(6 * a + b));
-        p->set_id_a(-100 + 20 * a); p->set_iq_a(20 * b);
-        const auto L = m.Inductance(p->id_a(), p->iq_a());
-        p->set_ld_h(L.ldd_h); p->set_lq_h(L.lqq_h * (1 + ((a + b) % 2 ? scatter : -scatter)));
-        p->set_ldq_h(L.ldq_h);
-        p->set_temperature_c(25); p->set_reliable(true);
-      }
-    }
-    w->Write(msg);
-    w->WritesDone();
-    EXPECT_TRUE(w->Finish().ok());
-  };
-  auto fit = [&](double max_rms) {
-    grpc::ClientContext c;
-    v1::FitRequest q;
-    q.set_serial("IPM-REL-1");
-    q.set_max_rms_relative(max_rms);
-    v1::FitResponse r;
-    EXPECT_TRUE(admin->Fit(&c, q, &r).ok());
-    return r;
-  };
+  auto ingest = [&](double scatter) { IngestTwinGrid(admin.get(), "IPM-REL-1", scatter); };
+  auto fit = [&](double max_rms) { return FitAs(admin.get(), "IPM-REL-1", max_rms); };
   auto release_v = [&](v1::CalibrationService::Stub* st, int v) {
     grpc::ClientContext c;
     v1::ReleaseRequest q;
@@ -532,6 +538,87 @@ TEST(Roles, OnlyAReleasedPassingCalibrationIsFlashed) {
   rq.set_version(1);
   v1::ReleaseResponse rr;
   EXPECT_EQ(release->Release(&rc, rq, &rr).error_code(), grpc::StatusCode::ALREADY_EXISTS);
+}
+
+// Issue 24: a release INSERTed into the SQLite file behind the service
+// made a failing calibration flashable. The flasher's export now re-checks
+// verdict and chains at export time: the unlinked release is DATA_LOSS; one
+// with a well-formed link forged beside it is still FAILED_PRECONDITION by
+// its verdict; the honest release keeps flashing; `verify-db` names both.
+// With an anchor file the service appends the chain heads after every fit
+// and release.
+TEST(Roles, AReleaseMadeBehindTheServiceIsNotFlashed) {
+  Fixture f("forged");
+  const std::string anchor = TempPath("forged.anchor");
+  fs::remove(anchor);
+  f.service->set_anchor_file(anchor);
+  auto as = [&](Role r) {
+    return v1::CalibrationService::NewStub(Channel(f.addr(), grpc::InsecureChannelCredentials(), f.tokens[r]));
+  };
+  auto admin = as(Role::kAdmin), release = as(Role::kRelease), flasher = as(Role::kFlasher);
+  IngestTwinGrid(admin.get(), "IPM-FORGE", 0.0);
+  ASSERT_TRUE(FitAs(admin.get(), "IPM-FORGE", 0).pass());
+  IngestTwinGrid(admin.get(), "IPM-FORGE", 0.15);
+  ASSERT_FALSE(FitAs(admin.get(), "IPM-FORGE", 0).pass());
+  {
+    grpc::ClientContext c;
+    v1::ReleaseRequest q;
+    q.set_serial("IPM-FORGE");
+    q.set_version(1);
+    v1::ReleaseResponse r;
+    ASSERT_TRUE(release->Release(&c, q, &r).ok());
+  }
+  auto flash = [&](int v, v1::ExportTableResponse* r) {
+    grpc::ClientContext c;
+    v1::ExportTableRequest q;
+    q.set_serial("IPM-FORGE");
+    q.set_version(v);
+    q.set_points(8);
+    return flasher->ExportTable(&c, q, r);
+  };
+  v1::ExportTableResponse e;
+  ASSERT_TRUE(flash(0, &e).ok());
+  EXPECT_EQ(e.version(), 1);
+  // Two fits and a release, each followed by an anchor line.
+  auto a = pipeline::ReadAnchorFile(anchor);
+  ASSERT_TRUE(a.ok()) << a.status();
+  EXPECT_EQ(a->lines, 3);
+  ASSERT_EQ(a->head.calibrations.size(), 1u);
+  EXPECT_EQ(a->head.calibrations[0].version, 2);
+  EXPECT_EQ(a->head.calibrations[0].row_sha256, f.store->ChainLink("IPM-FORGE", 2)->row_sha256);
+  EXPECT_EQ(a->head.release_seq, 1);
+  // Behind the service: the failing version 2 released by an INSERT.
+  sqlite3* h = nullptr;
+  ASSERT_EQ(sqlite3_open(f.db.c_str(), &h), SQLITE_OK);
+  auto sql = [&](const std::string& q) { return sqlite3_exec(h, q.c_str(), nullptr, nullptr, nullptr) == SQLITE_OK; };
+  ASSERT_TRUE(sql("INSERT INTO releases (serial, version, released_by, released_utc) "
+                  "VALUES ('IPM-FORGE', 2, 'release-1', '2030-01-01T00:00:00Z')"));
+  grpc::Status s = flash(0, &e);
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::DATA_LOSS) << s.error_message();
+  EXPECT_NE(s.error_message().find("IPM-FORGE v2: release without a chain link"), std::string::npos)
+      << s.error_message();
+  EXPECT_EQ(flash(2, &e).error_code(), grpc::StatusCode::DATA_LOSS);
+  ASSERT_TRUE(flash(1, &e).ok()) << "the honest release still flashes";
+  // A link forged with the published formula: the chain is satisfied, the
+  // verdict is not.
+  const auto first = f.store->ReleaseLinkAt(1);
+  ASSERT_TRUE(first.ok());
+  const std::string cal_sha = f.store->ChainLink("IPM-FORGE", 2)->row_sha256;
+  const storage::ReleaseRow forged{"IPM-FORGE", 2, "release-1", "2030-01-01T00:00:00Z"};
+  ASSERT_TRUE(sql("INSERT INTO release_chain (seq, serial, version, calibration_sha256, prev_sha256, row_sha256) "
+                  "VALUES (2, 'IPM-FORGE', 2, '" + cal_sha + "', '" + first->row_sha256 + "', '" +
+                  storage::ReleaseRowSha256(first->row_sha256, 2, forged, cal_sha) + "')"));
+  sqlite3_close(h);
+  s = flash(0, &e);
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::FAILED_PRECONDITION) << s.error_message();
+  EXPECT_NE(s.error_message().find("has verdict 'fail"), std::string::npos) << s.error_message();
+  const std::string out = TempPath("forged.out");
+  const int rc = std::system((std::string(FLUXCAL_BINARY) + " admin verify-db --db " + f.db + " > " + out).c_str());
+  const std::string report = io::ReadFileToString(out).value_or("");
+  fs::remove(out);
+  EXPECT_EQ(WEXITSTATUS(rc), 1) << report;
+  EXPECT_NE(report.find("IPM-FORGE v2 (release #2): released with verdict 'fail"), std::string::npos) << report;
+  fs::remove(anchor);
 }
 
 TEST(Audit, RequestIdFromTheClientIsKept) {
@@ -663,12 +750,19 @@ TEST(Serve, RefusesUnsafeListenSetups) {
   EXPECT_EQ(RunFluxcal("serve --db " + db + " --tls-cert /nonexistent.pem --tls-key x", &err), 2);
   EXPECT_NE(err.find("cannot read"), std::string::npos) << err;
   EXPECT_FALSE(fs::exists(db));
-  EXPECT_TRUE(IsLoopbackAddress("127.0.0.1:50051"));
-  EXPECT_TRUE(IsLoopbackAddress("localhost:1"));
-  EXPECT_TRUE(IsLoopbackAddress("[::1]:1"));
-  EXPECT_FALSE(IsLoopbackAddress("0.0.0.0:50051"));
-  EXPECT_FALSE(IsLoopbackAddress("[::]:50051"));
-  EXPECT_FALSE(IsLoopbackAddress("10.0.0.5:50051"));
+  EXPECT_TRUE(io::IsLoopbackAddress("127.0.0.1:50051"));
+  EXPECT_TRUE(io::IsLoopbackAddress("localhost:1"));
+  EXPECT_TRUE(io::IsLoopbackAddress("[::1]:1"));
+  EXPECT_FALSE(io::IsLoopbackAddress("0.0.0.0:50051"));
+  EXPECT_FALSE(io::IsLoopbackAddress("[::]:50051"));
+  EXPECT_FALSE(io::IsLoopbackAddress("10.0.0.5:50051"));
+  // Spelt like loopback, but a DNS name that does not resolve (or resolves
+  // elsewhere): TLS and --auth needed, like any other address.
+  EXPECT_FALSE(io::IsLoopbackAddress("127.plant.example:50051"));
+  EXPECT_EQ(RunFluxcal("serve --db " + db + " --listen 127.plant.example:0", &err), 2);
+  EXPECT_NE(err.find("not a loopback address: give --tls-cert and --tls-key"), std::string::npos) << err;
+  EXPECT_NE(err.find("127.plant.example:0 does not resolve"), std::string::npos) << err;
+  EXPECT_FALSE(fs::exists(db));
 }
 
 TEST(Keys, AdminCommandsRoundTrip) {

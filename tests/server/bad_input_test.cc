@@ -1,8 +1,8 @@
 // The bad-input suite: over 150 malformed, oversized, hostile or physically
 // absurd requests across every RPC, against a store that holds a fitted
 // motor (so refusals are not just NOT_FOUND). None may be accepted
-// silently: each must fail, or (a bad point in a good stream) come back in
-// `rejects`. Every message names a field, is printable and short.
+// silently: each must fail (a bad point in a good stream fails the whole
+// stream). Every message names a field, is printable and short.
 #include <unistd.h>
 
 #include <cmath>
@@ -185,7 +185,7 @@ std::vector<Case> Cases() {
     return Stream(st, {Msg("IPM-A7", pts)}, &r);
   });
 
-  // --- IngestHfResults: one bad point in a good stream must be rejected.
+  // --- IngestHfResults: one bad point in a good stream refuses the whole stream.
   using Setter = std::function<void(v1::HfPoint*, double)>;
   const std::vector<std::pair<std::string, Setter>> fields = {
       {"id_a", [](v1::HfPoint* p, double v) { p->set_id_a(v); }},

@@ -57,6 +57,8 @@ def check_example_output(code, stdout, serial, out, version, replayed):
     doc = json.loads(stdout)   # exactly one JSON document
     check(doc["serial"] == serial, f"{serial}: serial {doc['serial']}")
     check(doc["accepted"] == 36, f"{serial}: accepted {doc['accepted']}")
+    # The client raises unless the reply's digest is its own over what it sent.
+    check(len(doc["points_sha256"]) == 64, f"{serial}: points_sha256 {doc['points_sha256']}")
     check(doc["replayed"] is replayed, f"{serial}: replayed {doc['replayed']}")
     check(doc["version"] == version, f"{serial}: version {doc['version']}")
     check(doc["pass"] is True and doc["verdict"] == "pass", f"{serial}: verdict {doc['verdict']}")
@@ -124,7 +126,23 @@ def check_reflection(addr, metadata, classes):
     channel.close()
 
 
+def check_digest_form():
+    """The client's hf_points_sha256 gives the value pipeline::HfPointsSha256
+    gives for the same points (the golden value of
+    tests/pipeline/pipeline_test.cc, IngestStream.DigestsHaveTheDocumentedForm)."""
+    sys.path.insert(0, CLIENT_DIR)
+    import fluxcal_client
+    pb, _ = fluxcal_client.load_stubs(os.path.join(WORK, "gen"), PROTO_DIR)
+    a = pb.HfPoint(point_id="p0", id_a=-20, iq_a=40, speed_rpm=1500, ld_h=1.8e-4, lq_h=3.6e-4, ldq_h=-1.25e-6,
+                   ld_h_std=1e-7, lq_h_std=2e-7, ldq_h_std=3e-7, temperature_c=25, reliable=True)
+    b = pb.HfPoint(point_id="p1", id_a=-0.0, iq_a=100, ld_h=2e-4, lq_h=4e-4, temperature_c=31.5, reliable=False)
+    got = fluxcal_client.hf_points_sha256([a, b])
+    want = "22e7c253c7ba13bdab6539be3f8fba08288e5e31a45100ad0037a57d316856df"
+    check(got == want, f"hf_points_sha256: {got}, the C++ form gives {want}")
+
+
 def main():
+    check_digest_form()
     classes = reflection_classes()
     # Open server on loopback (no --auth): every caller is admin.
     proc, addr = serve("open")

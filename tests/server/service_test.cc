@@ -12,6 +12,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -20,10 +21,14 @@
 #include <grpcpp/grpcpp.h>
 
 #include "gtest/gtest.h"
+#include "absl/strings/str_cat.h"
+#include "io/csv.h"
 #include "nlohmann/json.hpp"
 #include "server/service.h"
 #include "io/recording_set.h"
 #include "io/sha256.h"
+#include "pipeline/ingest_stream.h"
+#include "pipeline/points.h"
 #include "simulation/twin.h"
 #include "storage/store.h"
 #include "tables/signature.h"
@@ -84,8 +89,8 @@ class ServiceTest : public ::testing::TestWithParam<bool> {
     int port = 0;
     server_ = StartServer(service_.get(), "127.0.0.1:0", &port);
     ASSERT_GT(port, 0);
-    stub_ = v1::CalibrationService::NewStub(
-        grpc::CreateChannel("127.0.0.1:" + std::to_string(port), grpc::InsecureChannelCredentials()));
+    channel_ = grpc::CreateChannel("127.0.0.1:" + std::to_string(port), grpc::InsecureChannelCredentials());
+    stub_ = v1::CalibrationService::NewStub(channel_);
   }
   void TearDown() override {
     if (server_) server_->Shutdown();
@@ -117,6 +122,7 @@ class ServiceTest : public ::testing::TestWithParam<bool> {
   std::unique_ptr<storage::Store> store_;
   std::unique_ptr<CalibrationServiceImpl> service_;
   std::unique_ptr<grpc::Server> server_;
+  std::shared_ptr<grpc::Channel> channel_;
   std::unique_ptr<v1::CalibrationService::Stub> stub_;
 };
 
@@ -155,38 +161,202 @@ TEST_P(ServiceTest, StreamLevelValidation) {
   }
 }
 
-// Each point rule rejects the point, names field and index, stores the rest.
+// Each point rule fails the whole stream: INVALID_ARGUMENT naming the
+// message (the first carries the serial, point k is message k + 1), the
+// point and the field; nothing of the stream is stored.
 TEST_P(ServiceTest, PointValidationRules) {
   struct Case { std::function<void(v1::HfPoint*)> breakit; std::string field; };
   const std::vector<Case> cases = {
-      {[](v1::HfPoint* p) { p->set_ld_h(std::nan("")); }, "points[3].ld_h"},
-      {[](v1::HfPoint* p) { p->set_lq_h(INFINITY); }, "points[3].lq_h"},
-      {[](v1::HfPoint* p) { p->set_ld_h(-1e-4); }, "points[3].ld_h: must be in [1e-7, 1) H"},
-      {[](v1::HfPoint* p) { p->set_lq_h(2.0); }, "points[3].lq_h: must be in [1e-7, 1) H"},
-      {[](v1::HfPoint* p) { p->set_ld_h(1e-300); }, "points[3].ld_h: must be in [1e-7, 1) H"},
-      {[](v1::HfPoint* p) { p->set_lq_h_std(1000 * p->lq_h()); }, "points[3].lq_h_std: must be below lq_h"},
-      {[](v1::HfPoint* p) { p->set_point_id("p4"); }, "points[4].point_id: duplicate 'p4'"},
-      {[](v1::HfPoint* p) { p->set_point_id(std::string(100, 'x')); }, "points[3].point_id: longer than 64"},
-      {[](v1::HfPoint* p) { p->set_id_a(2e4); }, "points[3].id_a"},
-      {[](v1::HfPoint* p) { p->set_speed_rpm(-2e5); }, "points[3].speed_rpm"},
-      {[](v1::HfPoint* p) { p->set_ld_h_std(-1); }, "points[3].ld_h_std"},
-      {[](v1::HfPoint* p) { p->set_temperature_c(900); }, "points[3].temperature_c"},
+      {[](v1::HfPoint* p) { p->set_ld_h(std::nan("")); }, "message 4: points[3].ld_h"},
+      {[](v1::HfPoint* p) { p->set_lq_h(INFINITY); }, "message 4: points[3].lq_h"},
+      {[](v1::HfPoint* p) { p->set_ld_h(-1e-4); }, "message 4: points[3].ld_h: must be in [1e-7, 1) H"},
+      {[](v1::HfPoint* p) { p->set_lq_h(2.0); }, "message 4: points[3].lq_h: must be in [1e-7, 1) H"},
+      {[](v1::HfPoint* p) { p->set_ld_h(1e-300); }, "message 4: points[3].ld_h: must be in [1e-7, 1) H"},
+      {[](v1::HfPoint* p) { p->set_lq_h_std(1000 * p->lq_h()); }, "message 4: points[3].lq_h_std: must be below lq_h"},
+      {[](v1::HfPoint* p) { p->set_point_id("p4"); }, "message 5: points[4].point_id: duplicate 'p4'"},
+      {[](v1::HfPoint* p) { p->set_point_id(std::string(100, 'x')); }, "message 4: points[3].point_id: longer than 64"},
+      {[](v1::HfPoint* p) { p->set_id_a(2e4); }, "message 4: points[3].id_a"},
+      {[](v1::HfPoint* p) { p->set_speed_rpm(-2e5); }, "message 4: points[3].speed_rpm"},
+      {[](v1::HfPoint* p) { p->set_ld_h_std(-1); }, "message 4: points[3].ld_h_std"},
+      {[](v1::HfPoint* p) { p->set_temperature_c(900); }, "message 4: points[3].temperature_c"},
   };
   for (const auto& c : cases) {
     auto pts = GridPoints();
     c.breakit(&pts[3]);
     v1::IngestHfResultsResponse r;
-    ASSERT_TRUE(Ingest("IPM-V", pts, &r).ok());
-    EXPECT_EQ(r.accepted(), 35);
-    ASSERT_EQ(r.rejects_size(), 1);
-    EXPECT_EQ(r.rejects(0).index(), c.field.rfind("points[4]", 0) == 0 ? 4 : 3);
-    EXPECT_NE(r.rejects(0).message().find(c.field), std::string::npos) << r.rejects(0).message();
+    ExpectStatus(Ingest("IPM-V", pts, &r), grpc::StatusCode::INVALID_ARGUMENT, c.field);
+    EXPECT_EQ(r.rejects_size(), 0);
+    EXPECT_TRUE(store_->AllRuns()->empty()) << c.field << ": nothing of the stream may be stored";
+    EXPECT_EQ(store_->GetMotor("IPM-V").status().code(), absl::StatusCode::kNotFound) << c.field;
   }
-  // A stream with only invalid points is refused whole.
   auto pts = GridPoints();
   for (auto& p : pts) p.set_ld_h(-1);
   v1::IngestHfResultsResponse r;
-  ExpectStatus(Ingest("IPM-V", pts, &r), grpc::StatusCode::INVALID_ARGUMENT, "no valid point");
+  ExpectStatus(Ingest("IPM-V", pts, &r), grpc::StatusCode::INVALID_ARGUMENT, "message 1: points[0].ld_h");
+}
+
+// The messages of an IngestHfResults stream as bytes on the wire: the first
+// carries serial and motor (and, with `declare_end`, end_follows), then one
+// point per message, then (with `declare_end`) the end message with the
+// count and HfPointsSha256 of the points.
+std::vector<std::string> HfStreamBytes(const std::string& serial, const std::vector<v1::HfPoint>& pts,
+                                       bool declare_end) {
+  std::vector<std::string> out;
+  v1::IngestHfResultsRequest first;
+  first.set_serial(serial);
+  first.mutable_motor()->set_pole_pairs(4);
+  first.mutable_motor()->set_rs_ohm(0.011);
+  first.mutable_motor()->set_psi_pm_wb(0.0114);
+  first.set_end_follows(declare_end);
+  out.push_back(first.SerializeAsString());
+  std::vector<pipeline::IdentifiedPoint> sent;
+  for (const auto& p : pts) {
+    v1::IngestHfResultsRequest m;
+    *m.add_points() = p;
+    out.push_back(m.SerializeAsString());
+    sent.push_back(pipeline::FromProto(p));
+  }
+  if (declare_end) {
+    v1::IngestHfResultsRequest end;
+    end.mutable_end()->set_messages(static_cast<int64_t>(out.size()) + 1);
+    end.mutable_end()->set_count(static_cast<int64_t>(pts.size()));
+    end.mutable_end()->set_sha256(pipeline::HfPointsSha256(sent));
+    out.push_back(end.SerializeAsString());
+  }
+  return out;
+}
+
+// Bytes no protobuf parser accepts: a field tag whose varint never ends.
+const std::string kCorrupt("\xff\xff\xff\xff\xff\xff\xff\xff\xff\xff\xff", 11);
+
+// Sends `messages` as raw bytes on a client stream `method` and parses the
+// reply into `resp`: what a client sends when a message is damaged on the
+// way (generated stubs can only send well-formed messages). Uses gRPC's
+// ClientWriterFactory, which generated stubs use, with ByteBuffer messages.
+template <class Response>
+grpc::Status SendRaw(grpc::Channel* channel, const std::string& method, const std::vector<std::string>& messages,
+                     Response* resp) {
+  grpc::ClientContext ctx;
+  ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
+  grpc::ByteBuffer reply;
+  const grpc::internal::RpcMethod rpc(method.c_str(), grpc::internal::RpcMethod::CLIENT_STREAMING);
+  std::unique_ptr<grpc::ClientWriter<grpc::ByteBuffer>> w(
+      grpc::internal::ClientWriterFactory<grpc::ByteBuffer>::Create(channel, rpc, &ctx, &reply));
+  for (const auto& m : messages) {
+    grpc::Slice slice(m);
+    grpc::ByteBuffer b(&slice, 1);
+    if (!w->Write(b)) break;
+  }
+  w->WritesDone();
+  const grpc::Status st = w->Finish();
+  if (st.ok()) {
+    std::vector<grpc::Slice> slices;
+    EXPECT_TRUE(reply.Dump(&slices).ok());
+    std::string bytes;
+    for (const auto& sl : slices) bytes.append(reinterpret_cast<const char*>(sl.begin()), sl.size());
+    EXPECT_TRUE(resp->ParseFromString(bytes));
+  }
+  return st;
+}
+constexpr char kIngestHf[] = "/fluxcal.v1.CalibrationService/IngestHfResults";
+constexpr char kIngestRec[] = "/fluxcal.v1.CalibrationService/IngestRecording";
+
+// Issue 24: a corrupt message in the middle of a stream used to end the
+// stream with status OK and half the run stored (18 of 36). Now the whole
+// RPC fails, naming the message, and nothing is stored -- with a declared
+// end and without one (an older client: the read after the broken message
+// finds the next one). A damaged end message is a stream without its end.
+TEST_P(ServiceTest, CorruptMessageMidStreamFailsTheWholeStream) {
+  for (bool declare_end : {true, false}) {
+    auto msgs = HfStreamBytes("IPM-CORRUPT", GridPoints(), declare_end);
+    msgs[19] = kCorrupt;   // the 18th point
+    v1::IngestHfResultsResponse r;
+    ExpectStatus(SendRaw(channel_.get(), kIngestHf, msgs, &r), grpc::StatusCode::INVALID_ARGUMENT,
+                 "message 19: failed to parse");
+    EXPECT_TRUE(store_->AllRuns()->empty()) << "declare_end " << declare_end << ": nothing may be stored";
+  }
+  auto msgs = HfStreamBytes("IPM-CORRUPT", GridPoints(), true);
+  msgs.back() = kCorrupt;
+  v1::IngestHfResultsResponse r;
+  ExpectStatus(SendRaw(channel_.get(), kIngestHf, msgs, &r), grpc::StatusCode::INVALID_ARGUMENT,
+               "message 37: end: the stream ended without its end message");
+  EXPECT_TRUE(store_->AllRuns()->empty());
+  // An older client's last message damaged: nothing follows it, so the
+  // service cannot tell; its reply says what it stored, and that is not
+  // what was sent (the client's check, as `fluxcal eol` makes it).
+  msgs = HfStreamBytes("IPM-CORRUPT", GridPoints(), false);
+  msgs.back() = kCorrupt;
+  ASSERT_TRUE(SendRaw(channel_.get(), kIngestHf, msgs, &r).ok());
+  std::vector<pipeline::IdentifiedPoint> sent;
+  for (const auto& p : GridPoints()) sent.push_back(pipeline::FromProto(p));
+  EXPECT_EQ(r.accepted(), 35);
+  EXPECT_FALSE(pipeline::CheckStored({0, 36, 0, pipeline::HfPointsSha256(sent)},
+                                     {0, r.accepted(), 0, r.points_sha256()}, "points")
+                   .ok());
+}
+
+// A stream that declared its end and lost messages, or whose points are not
+// the ones its end describes, is refused whole against the declaration.
+TEST_P(ServiceTest, StreamDifferentFromItsDeclaredEndIsRefused) {
+  auto msgs = HfStreamBytes("IPM-TRUNC", GridPoints(), true);
+  auto cut = msgs;
+  cut.erase(cut.begin() + 19, cut.begin() + 37);   // 18 points lost on the way, the end still arrives
+  v1::IngestHfResultsResponse r;
+  ExpectStatus(SendRaw(channel_.get(), kIngestHf, cut, &r), grpc::StatusCode::INVALID_ARGUMENT,
+               "message 19: end.messages: the stream declares 38 messages, the service received 20 messages");
+  auto pts = GridPoints();
+  pts[7].set_ld_h(pts[7].ld_h() * 1.01);   // valid, but not what the end describes
+  auto altered = HfStreamBytes("IPM-TRUNC", pts, false);
+  altered.push_back(msgs.back());
+  v1::IngestHfResultsRequest first;
+  ASSERT_TRUE(first.ParseFromString(altered[0]));
+  first.set_end_follows(true);
+  altered[0] = first.SerializeAsString();
+  ExpectStatus(SendRaw(channel_.get(), kIngestHf, altered, &r), grpc::StatusCode::INVALID_ARGUMENT,
+               "message 37: end.sha256");
+  // An end without end_follows, a message after the end, a malformed end.
+  auto undeclared = HfStreamBytes("IPM-TRUNC", GridPoints(), false);
+  undeclared.push_back(msgs.back());
+  ExpectStatus(SendRaw(channel_.get(), kIngestHf, undeclared, &r), grpc::StatusCode::INVALID_ARGUMENT,
+               "message 37: end: the first message did not declare end_follows");
+  auto after = msgs;
+  after.push_back(msgs[1]);
+  ExpectStatus(SendRaw(channel_.get(), kIngestHf, after, &r), grpc::StatusCode::INVALID_ARGUMENT,
+               "message 38: end: a message after the stream's end (message 37)");
+  v1::IngestHfResultsRequest bad_end;
+  bad_end.mutable_end()->set_messages(38);
+  bad_end.mutable_end()->set_count(36);
+  bad_end.mutable_end()->set_sha256("not hex");
+  auto malformed = msgs;
+  malformed.back() = bad_end.SerializeAsString();
+  ExpectStatus(SendRaw(channel_.get(), kIngestHf, malformed, &r), grpc::StatusCode::INVALID_ARGUMENT,
+               "message 37: end.sha256: must be 64 lower-case hex digits");
+  EXPECT_TRUE(store_->AllRuns()->empty());
+}
+
+// The reply carries the count and digest of what was accepted and stored,
+// equal to the client's over what it sent, for a declared end, for an older
+// client, and for a replay by idempotency key. A replay answers with the
+// run stored before, read back: a retry with other content under the same
+// key gets a digest that is not its own.
+TEST_P(ServiceTest, IngestRepliesWithTheDigestOfWhatWasStored) {
+  std::vector<pipeline::IdentifiedPoint> sent;
+  for (const auto& p : GridPoints()) sent.push_back(pipeline::FromProto(p));
+  const std::string sha = pipeline::HfPointsSha256(sent);
+  v1::IngestHfResultsResponse a, b, c;
+  ASSERT_TRUE(SendRaw(channel_.get(), kIngestHf, HfStreamBytes("IPM-DIG", GridPoints(), true), &a).ok());
+  EXPECT_EQ(a.accepted(), 36);
+  EXPECT_EQ(a.points_sha256(), sha);
+  ASSERT_TRUE(Ingest("IPM-DIG-2", GridPoints(), &b, true, "k-1").ok());
+  EXPECT_EQ(b.points_sha256(), sha);
+  ASSERT_TRUE(Ingest("IPM-DIG-2", GridPoints(), &c, true, "k-1").ok());
+  EXPECT_TRUE(c.replayed());
+  EXPECT_EQ(c.points_sha256(), sha);
+  EXPECT_EQ(c.accepted(), 36);
+  v1::IngestHfResultsResponse d;
+  ASSERT_TRUE(Ingest("IPM-DIG-2", GridPoints(1.01), &d, true, "k-1").ok());
+  EXPECT_TRUE(d.replayed());
+  EXPECT_EQ(d.points_sha256(), sha) << "the stored run's digest, not the retry's";
 }
 
 // A retry with the same idempotency key (the reply was lost, the client
@@ -298,7 +468,14 @@ TEST_P(ServiceTest, EightConcurrentStationsThenFitExportQuery) {
   ASSERT_TRUE(stub_->ExportTable(&ec, e, &er).ok());
   EXPECT_EQ(er.version(), 2);
   EXPECT_EQ(er.sha256().size(), 64u);
-  EXPECT_NE(er.data().find("KENNLINIE FLUXCAL_MTPA_ID_A 16"), std::string::npos);
+  // --points 16: at most 16 rows at round torques, 0 among them (odd).
+  {
+    const size_t at = er.data().find("KENNLINIE FLUXCAL_MTPA_ID_A ");
+    ASSERT_NE(at, std::string::npos);
+    const int rows = std::stoi(er.data().substr(at + 28));
+    EXPECT_LE(rows, 16);
+    EXPECT_EQ(rows % 2, 1);
+  }
   // Verdict, release state, provenance and limits are inside the file, not
   // only in the reply.
   EXPECT_FALSE(er.verdict().empty());
@@ -307,7 +484,29 @@ TEST_P(ServiceTest, EightConcurrentStationsThenFitExportQuery) {
             std::string::npos);
   EXPECT_NE(er.data().find("* serial: IPM-C-3\n"), std::string::npos);
   EXPECT_NE(er.data().find("FESTWERT FLUXCAL_MTPA_I_MAX_A\n"), std::string::npos);
-  EXPECT_NE(er.data().find("FESTWERT FLUXCAL_MTPA_U_MAX_V\n"), std::string::npos);
+  // An HF run states no DC-link voltage and MTPA needs none: the file
+  // states none either (before: 50 V, assumed).
+  EXPECT_EQ(er.data().find("FESTWERT FLUXCAL_MTPA_U_MAX_V\n"), std::string::npos);
+  EXPECT_EQ(er.data().find("FESTWERT FLUXCAL_MTPA_UDC_V\n"), std::string::npos);
+  {
+    // fw: udc_v 0 means the calibration's; it has none: INVALID_ARGUMENT
+    // naming udc_v. Given, the map is computed for it.
+    v1::ExportTableRequest fw = e;
+    fw.set_table("fw");
+    fw.set_points(9);
+    fw.set_speed_points(8);
+    v1::ExportTableResponse fr;
+    grpc::ClientContext c1;
+    const grpc::Status no_udc = stub_->ExportTable(&c1, fw, &fr);
+    EXPECT_EQ(no_udc.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+    EXPECT_EQ(no_udc.error_message().rfind("udc_v: ", 0), 0u) << no_udc.error_message();
+    fw.set_udc_v(50);
+    grpc::ClientContext c2;
+    ASSERT_TRUE(stub_->ExportTable(&c2, fw, &fr).ok());
+    EXPECT_GT(fr.cells(), 0);
+    EXPECT_LE(2 * fr.clamped_cells(), fr.cells());
+    EXPECT_NE(fr.data().find("FESTWERT FLUXCAL_FW_UDC_V\n"), std::string::npos);
+  }
   EXPECT_TRUE(er.signature().empty());
   // With a signing key every reply carries a detached signature of its data.
   auto kp = tables::GenerateEd25519();
@@ -410,6 +609,99 @@ TEST_P(ServiceTest, IngestRecordingThenDiagnose) {
   w2->Write(bad);
   w2->WritesDone();
   ExpectStatus(w2->Finish(), grpc::StatusCode::INVALID_ARGUMENT, "path");
+}
+
+// The files of a short twin recording set for `serial`, as IngestRecording
+// takes them (relative names, bytes as on disk).
+io::RecordingFiles TwinSetFiles(const std::string& serial) {
+  sim::TwinConfig cfg;
+  cfg.serial = serial;
+  sim::Plan plan = sim::DefaultPlan();
+  plan.record_s = 0.05;
+  auto r = sim::Simulate(cfg, plan);
+  EXPECT_TRUE(r.ok());
+  const std::string dir = TempPath("recfiles_" + serial);
+  fs::remove_all(dir);
+  EXPECT_TRUE(io::WriteRecordingSet(dir, r->set).ok());
+  io::RecordingFiles files;
+  for (const auto& e : fs::recursive_directory_iterator(dir)) {
+    if (!e.is_regular_file()) continue;
+    files[fs::relative(e.path(), dir).string()] = *io::ReadFileToString(e.path().string());
+  }
+  fs::remove_all(dir);
+  return files;
+}
+
+// An IngestRecording stream as bytes: one chunk per file (`send`), the first
+// with the serial and the key (and end_follows with `declared`), then with
+// `declared` an end chunk describing those files.
+std::vector<std::string> RecordingStreamBytes(const std::string& serial, const io::RecordingFiles& send,
+                                              const io::RecordingFiles* declared, const std::string& key = "") {
+  std::vector<std::string> out;
+  for (const auto& [name, data] : send) {
+    v1::RecordingChunk c;
+    if (out.empty()) {
+      c.set_serial(serial);
+      c.set_idempotency_key(key);
+      c.set_end_follows(declared != nullptr);
+    }
+    c.set_path(name);
+    c.set_data(data);
+    out.push_back(c.SerializeAsString());
+  }
+  if (declared != nullptr) {
+    v1::RecordingChunk end;
+    end.mutable_end()->set_messages(static_cast<int64_t>(out.size()) + 1);
+    end.mutable_end()->set_count(static_cast<int64_t>(declared->size()));
+    end.mutable_end()->set_bytes(pipeline::RecordingFilesBytes(*declared));
+    end.mutable_end()->set_sha256(pipeline::RecordingFilesSha256(*declared));
+    out.push_back(end.SerializeAsString());
+  }
+  return out;
+}
+
+// IngestRecording under the same stream rules: a corrupt chunk fails the
+// stream naming it; a set short by 33 kB against its declared end is
+// refused (issue 24: it used to be stored); nothing is stored either way.
+// A good upload's reply carries the count, bytes and digest of the stored
+// files, equal to the sender's, also on a replay.
+TEST_P(ServiceTest, RecordingStreamRules) {
+  const io::RecordingFiles files = TwinSetFiles("IPM-REC-S");
+  ASSERT_GT(files.size(), 10u);
+  for (bool declare_end : {true, false}) {
+    auto msgs = RecordingStreamBytes("IPM-REC-S", files, declare_end ? &files : nullptr);
+    msgs[5] = kCorrupt;
+    v1::IngestRecordingResponse r;
+    ExpectStatus(SendRaw(channel_.get(), kIngestRec, msgs, &r), grpc::StatusCode::INVALID_ARGUMENT,
+                 "chunks[5]: failed to parse");
+  }
+  io::RecordingFiles short_set = files;
+  auto largest = short_set.begin();
+  for (auto it = short_set.begin(); it != short_set.end(); ++it) {
+    if (it->second.size() > largest->second.size()) largest = it;
+  }
+  const size_t cut = std::min<size_t>(33000, largest->second.size() / 2);
+  largest->second.resize(largest->second.size() - cut);
+  v1::IngestRecordingResponse r;
+  ExpectStatus(SendRaw(channel_.get(), kIngestRec, RecordingStreamBytes("IPM-REC-S", short_set, &files), &r),
+               grpc::StatusCode::INVALID_ARGUMENT,
+               absl::StrCat("chunks[", files.size(), "].end.bytes: the stream declares ",
+                            pipeline::RecordingFilesBytes(files), " bytes, the service received ",
+                            pipeline::RecordingFilesBytes(files) - static_cast<int64_t>(cut), " bytes"));
+  EXPECT_TRUE(store_->AllRuns()->empty()) << "nothing of a refused recording may be stored";
+  ASSERT_TRUE(SendRaw(channel_.get(), kIngestRec, RecordingStreamBytes("IPM-REC-S", files, &files, "rec-1"), &r).ok());
+  EXPECT_EQ(r.files(), static_cast<int>(files.size()));
+  EXPECT_EQ(r.files_bytes(), pipeline::RecordingFilesBytes(files));
+  EXPECT_EQ(r.files_sha256(), pipeline::RecordingFilesSha256(files));
+  EXPECT_EQ(r.points(), 40);
+  EXPECT_EQ(r.points_sha256(), pipeline::HfPointsSha256(*store_->RunPoints(r.run_id())));
+  v1::IngestRecordingResponse again;
+  ASSERT_TRUE(
+      SendRaw(channel_.get(), kIngestRec, RecordingStreamBytes("IPM-REC-S", files, &files, "rec-1"), &again).ok());
+  EXPECT_TRUE(again.replayed());
+  EXPECT_EQ(again.files_sha256(), r.files_sha256());
+  EXPECT_EQ(again.recording_sha256(), r.recording_sha256());
+  EXPECT_EQ(store_->AllRuns()->size(), 1u);
 }
 
 // The client's deadline reaches the library loops: Fit and Diagnose of a
@@ -527,7 +819,9 @@ TEST_P(ServiceTest, GetReportOfAStoredCalibration) {
   EXPECT_EQ(page.html_sha256(), io::Sha256Hex(html));
   EXPECT_EQ(page.html_sha256().size(), 64u);
   EXPECT_GE(page.figures(), 5);
-  EXPECT_GT(page.voltage_limit_speed_rpm(), 0);
+  // HF runs state no DC-link voltage: no voltage limit drawn, and said so.
+  EXPECT_EQ(page.voltage_limit_speed_rpm(), 0);
+  EXPECT_NE(html.find("The voltage limit and the field-weakening map cannot be drawn"), std::string::npos);
   EXPECT_EQ(html.rfind("<!DOCTYPE html>", 0), 0u) << html.substr(0, 80);
   EXPECT_NE(html.find("Calibration report: IPM-RPT-2 <span class=\"ver\">version 1</span>"), std::string::npos);
   EXPECT_NE(html.find("<th>calibration version</th><td>1</td>"), std::string::npos);
@@ -778,7 +1072,12 @@ TEST(EolFlow, UploadRecordingThenDiagnoseAndTheLocalFitAgrees) {
   auto eol = EolJsonOf(Fluxcal("eol " + set + " --server " + addr + " --upload-recording --json"));
   EXPECT_EQ(eol["serial"], "IPM-EOL-1");
   EXPECT_EQ(eol["version"], 1);
+  // eol checked the replies against what it sent (it exits 1 otherwise):
+  // the digests are in its document.
+  EXPECT_EQ(eol["points_sha256"].get<std::string>().size(), 64u);
   ASSERT_TRUE(eol.contains("recording")) << eol.dump();
+  EXPECT_EQ(eol["recording"]["files_sha256"].get<std::string>().size(), 64u);
+  EXPECT_GT(eol["recording"]["files"].get<int>(), 40);
   EXPECT_EQ(eol["recording"]["points"], eol["accepted"]);
   EXPECT_EQ(eol["recording"]["sha256"].get<std::string>().size(), 64u);
   EXPECT_FALSE(eol["recording"]["replayed"].get<bool>());
@@ -817,6 +1116,70 @@ TEST(EolFlow, UploadRecordingThenDiagnoseAndTheLocalFitAgrees) {
   EXPECT_EQ(runs, 2) << "one HF run and one recording run";
 
   StopServe(serve);
+  fs::remove_all(dir);
+}
+
+// A service that acknowledges an ingest with something other than what it
+// was sent: half the run (what the defect stored: status OK, accepted 18 of
+// 36), every point with one of them altered, or no digest at all (a service
+// from before stream digests). `fluxcal eol` compares the reply with what
+// it sent and stops with exit 1 before asking for any fit.
+class MisreportingService final : public v1::CalibrationService::Service {
+ public:
+  enum class Mode { kHalf, kAltered, kNoDigest };
+  std::atomic<Mode> mode{Mode::kHalf};
+  std::atomic<int> fits{0};
+  grpc::Status IngestHfResults(grpc::ServerContext*, grpc::ServerReader<v1::IngestHfResultsRequest>* reader,
+                               v1::IngestHfResultsResponse* resp) override {
+    v1::IngestHfResultsRequest m;
+    std::vector<pipeline::IdentifiedPoint> pts;
+    while (reader->Read(&m)) {
+      for (const auto& p : m.points()) pts.push_back(pipeline::FromProto(p));
+    }
+    if (mode == Mode::kHalf) pts.resize(pts.size() / 2);
+    if (mode == Mode::kAltered && !pts.empty()) pts[0].ld_h *= 1.001;
+    resp->set_run_id(1);
+    resp->set_accepted(static_cast<int>(pts.size()));
+    if (mode != Mode::kNoDigest) resp->set_points_sha256(pipeline::HfPointsSha256(pts));
+    return grpc::Status::OK;
+  }
+  grpc::Status Fit(grpc::ServerContext*, const v1::FitRequest*, v1::FitResponse*) override {
+    ++fits;
+    return grpc::Status(grpc::StatusCode::UNIMPLEMENTED, "no fits here");
+  }
+};
+
+TEST(EolFlow, AReplyThatIsNotWhatWasSentStopsEol) {
+  const std::string dir = TempPath("eolcheck");
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const std::string set = dir + "/set";
+  JsonOf(Fluxcal("simulate --out " + set + " --seed 12 --serial IPM-EOL-CHK --json"));
+  MisreportingService svc;
+  int port = 0;
+  grpc::ServerBuilder b;
+  b.AddListeningPort("127.0.0.1:0", grpc::InsecureServerCredentials(), &port);
+  b.RegisterService(&svc);
+  auto server = b.BuildAndStart();
+  ASSERT_GT(port, 0);
+  const std::string eol = "eol " + set + " --server 127.0.0.1:" + std::to_string(port) + " 2>&1";
+  svc.mode = MisreportingService::Mode::kHalf;
+  auto [rc, out] = Fluxcal(eol);
+  EXPECT_EQ(rc, 1) << out;
+  EXPECT_NE(out.find("fluxcal eol: IPM-EOL-CHK: run 1: the service stored 20 points, this client sent 40 points: "
+                     "what the service stored is not what this client sent"),
+            std::string::npos)
+      << out;
+  svc.mode = MisreportingService::Mode::kAltered;
+  std::tie(rc, out) = Fluxcal(eol);
+  EXPECT_EQ(rc, 1) << out;
+  EXPECT_NE(out.find("SHA-256 of the points: the service's over what it stored is "), std::string::npos) << out;
+  svc.mode = MisreportingService::Mode::kNoDigest;
+  std::tie(rc, out) = Fluxcal(eol);
+  EXPECT_EQ(rc, 1) << out;
+  EXPECT_NE(out.find("missing (a service without stream digests)"), std::string::npos) << out;
+  EXPECT_EQ(svc.fits.load(), 0) << "nothing may be fitted on a run that is not what was sent";
+  server->Shutdown();
   fs::remove_all(dir);
 }
 
@@ -867,11 +1230,12 @@ TEST(ReportCli, WritesThePageTheServiceBuilt) {
   v1::GetReportRequest req;
   req.set_serial("IPM-CLI-RPT");
   req.set_speed_rpm(3000);
+  req.set_udc_v(50);   // an HF run stores none: the voltage limit needs it
   v1::GetReportResponse served;
   ASSERT_TRUE(GetReport(stub.get(), req, &served).ok());
 
   const std::string out = dir + "/report.html";
-  auto j = JsonOf(Fluxcal("report IPM-CLI-RPT --server " + addr + " --speed-rpm 3000 --out " + out + " --json"));
+  auto j = JsonOf(Fluxcal("report IPM-CLI-RPT --server " + addr + " --speed-rpm 3000 --udc-v 50 --out " + out + " --json"));
   std::ifstream f(out, std::ios::binary);
   const std::string written((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
   ASSERT_FALSE(written.empty());
@@ -887,7 +1251,7 @@ TEST(ReportCli, WritesThePageTheServiceBuilt) {
   EXPECT_NE(WithoutWriteTime(written), written) << "the row the comparison leaves out exists";
 
   // --out -: the page on stdout.
-  const auto to_stdout = Fluxcal("report IPM-CLI-RPT --server " + addr + " --speed-rpm 3000 --out -");
+  const auto to_stdout = Fluxcal("report IPM-CLI-RPT --server " + addr + " --speed-rpm 3000 --udc-v 50 --out -");
   EXPECT_EQ(to_stdout.first, 0);
   EXPECT_EQ(WithoutWriteTime(to_stdout.second), WithoutWriteTime(served.html()));
 
@@ -899,7 +1263,7 @@ TEST(ReportCli, WritesThePageTheServiceBuilt) {
   std::ofstream(diag) << R"({"format": "fluxcal.diagnosis.v1", "serial": "IPM-CLI-RPT", "verdict": "explained",
                              "findings": [{"effect": "local_finding", "parameters": {"x": 1}}]})";
   const std::string local = dir + "/local.html";
-  auto lj = JsonOf(Fluxcal("report IPM-CLI-RPT --server " + addr + " --speed-rpm 3000 --diagnosis " + diag +
+  auto lj = JsonOf(Fluxcal("report IPM-CLI-RPT --server " + addr + " --speed-rpm 3000 --udc-v 50 --diagnosis " + diag +
                            " --out " + local + " --json"));
   std::ifstream lf(local, std::ios::binary);
   const std::string lhtml((std::istreambuf_iterator<char>(lf)), std::istreambuf_iterator<char>());

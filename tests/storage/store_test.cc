@@ -2,13 +2,18 @@
 // a real PostgreSQL server started in a temporary directory: migrations,
 // all-or-nothing runs, exact round trips, immutable calibration versions
 // (refused by the database itself), gap-free versions under concurrent
-// writers on separate connections, listing, history, whole-store access.
+// writers on separate connections, listing, history, whole-store access;
+// the hash chains over calibrations and releases, tampering behind the
+// store found by them and by an anchor, and stores that must exist.
 #include "storage/store.h"
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <filesystem>
+#include <fstream>
+#include <functional>
 #include <set>
 #include <thread>
 
@@ -287,7 +292,7 @@ TEST_P(StoreTest, TamperingWithACalibrationIsDetected) {
   ASSERT_TRUE(store_->AddCalibration(c).ok());
   c.verdict = "pass";
   ASSERT_TRUE(store_->AddCalibration(c).ok());
-  auto ok = VerifyCalibrationChain(*store_);
+  auto ok = VerifyChains(*store_);
   ASSERT_TRUE(ok.ok()) << ok.status();
   EXPECT_EQ(ok->chained, 3);
   EXPECT_TRUE(ok->problems.empty());
@@ -295,17 +300,250 @@ TEST_P(StoreTest, TamperingWithACalibrationIsDetected) {
   const bool pg = GetParam() == Backend::kPostgres;
   ASSERT_TRUE(RawSql(pg ? "ALTER TABLE calibrations DISABLE TRIGGER USER" : "DROP TRIGGER calibrations_no_update"));
   ASSERT_TRUE(RawSql("UPDATE calibrations SET verdict = 'pass' WHERE serial = 'IPM-T' AND version = 2"));
-  auto bad = VerifyCalibrationChain(*store_);
+  auto bad = VerifyChains(*store_);
   ASSERT_TRUE(bad.ok());
   ASSERT_EQ(bad->problems.size(), 1u);
   EXPECT_EQ(bad->problems[0], "IPM-T v2: row changed after it was stored");
   ASSERT_TRUE(RawSql(pg ? "DELETE FROM calibrations WHERE serial = 'IPM-T' AND version = 3"
                         : "DROP TRIGGER calibrations_no_delete"));
-  if (!pg) ASSERT_TRUE(RawSql("DELETE FROM calibrations WHERE serial = 'IPM-T' AND version = 3"));
-  auto gone = VerifyCalibrationChain(*store_);
+  if (!pg) {
+    ASSERT_TRUE(RawSql("DELETE FROM calibrations WHERE serial = 'IPM-T' AND version = 3"));
+  }
+  auto gone = VerifyChains(*store_);
   ASSERT_TRUE(gone.ok());
   EXPECT_EQ(gone->problems.size(), 2u);
   EXPECT_EQ(gone->problems.back(), "IPM-T v3: calibration row removed");
+}
+
+// SQL that lets a test edit rows the triggers protect: per backend, turn
+// the triggers of `tables` off (PostgreSQL) or drop them (SQLite).
+std::string DropGuards(bool pg, const std::vector<std::string>& tables) {
+  std::string sql;
+  for (const auto& t : tables) {
+    if (pg) {
+      sql += "ALTER TABLE " + t + " DISABLE TRIGGER USER; ";
+    } else if (t == "calibrations") {
+      sql += "DROP TRIGGER calibrations_no_update; DROP TRIGGER calibrations_no_delete; ";
+    } else if (t == "calibration_chain") {
+      sql += "DROP TRIGGER chain_no_update; DROP TRIGGER chain_no_delete; ";
+    } else {
+      sql += "DROP TRIGGER " + t + "_no_update; DROP TRIGGER " + t + "_no_delete; ";
+    }
+  }
+  return sql;
+}
+
+CalibrationRow Version(const std::string& serial, const std::string& verdict) {
+  CalibrationRow c;
+  c.serial = serial; c.model = "spline4"; c.psi_pm_wb = 0.0114; c.rms_relative = 0.004;
+  c.calibration_json = "{\"params\": [1, 2]}"; c.verdict = verdict;
+  return c;
+}
+
+// Releases join a hash chain of their own: normal releases verify; a
+// release inserted straight into the table (its version failing, so the
+// service would never release it) is named by VerifyChains, and
+// VerifyReleasedVersion -- what a flasher's export runs -- refuses it while
+// still passing the honest release; a release edited with the triggers
+// dropped is named too.
+TEST_P(StoreTest, ReleasesAreChained) {
+  ASSERT_TRUE(store_->IngestHfRun({"IPM-X", 4, 0.011, 0.0114, ""}, "st", "hf_run", Points(3)).ok());
+  ASSERT_TRUE(store_->IngestHfRun({"IPM-Y", 4, 0.011, 0.0114, ""}, "st", "hf_run", Points(3)).ok());
+  ASSERT_EQ(*store_->AddCalibration(Version("IPM-X", "pass")), 1);
+  ASSERT_EQ(*store_->AddCalibration(Version("IPM-X", "fail: fit residual 3 %")), 2);
+  ASSERT_EQ(*store_->AddCalibration(Version("IPM-Y", "pass")), 1);
+  ASSERT_TRUE(store_->Release("IPM-X", 1, "rel").ok());
+  ASSERT_TRUE(store_->Release("IPM-Y", 1, "rel").ok());
+  auto links = store_->AllReleaseLinks();
+  ASSERT_TRUE(links.ok()) << links.status();
+  ASSERT_EQ(links->size(), 2u);
+  EXPECT_EQ(links->at(0).seq, 1);
+  EXPECT_EQ(links->at(0).prev_sha256, "");
+  EXPECT_EQ(links->at(1).prev_sha256, links->at(0).row_sha256) << "one chain across serials";
+  EXPECT_EQ(links->at(0).calibration_sha256, store_->ChainLink("IPM-X", 1)->row_sha256);
+  EXPECT_EQ(store_->ReleaseLinkAt(0)->serial, "IPM-Y");
+  EXPECT_EQ(store_->ReleaseLink("IPM-X", 1)->seq, 1);
+  EXPECT_EQ(store_->ReleaseLink("IPM-X", 2).status().code(), absl::StatusCode::kNotFound);
+  EXPECT_EQ(store_->GetRelease("IPM-X", 1)->released_by, "rel");
+  EXPECT_EQ(store_->GetRelease("IPM-X", 2).status().code(), absl::StatusCode::kNotFound);
+  auto ok = VerifyChains(*store_);
+  ASSERT_TRUE(ok.ok()) << ok.status();
+  EXPECT_TRUE(ok->problems.empty()) << ok->problems.front();
+  EXPECT_EQ(ok->releases_chained, 2);
+  EXPECT_TRUE(VerifyReleasedVersion(*store_, "IPM-X", 1).ok());
+  EXPECT_EQ(VerifyReleasedVersion(*store_, "IPM-X", 2).code(), absl::StatusCode::kFailedPrecondition)
+      << "not released";
+  if (!SeparateConnections()) return;
+  const bool pg = GetParam() == Backend::kPostgres;
+  // Behind the service: the failing version 2 made flashable by an INSERT
+  // (no trigger guards INSERT on releases).
+  ASSERT_TRUE(RawSql("INSERT INTO releases (serial, version, released_by, released_utc) "
+                     "VALUES ('IPM-X', 2, 'someone', '2030-01-01T00:00:00Z')"));
+  EXPECT_TRUE(*store_->IsReleased("IPM-X", 2)) << "the row is there, as a flasher's lookup sees it";
+  auto bad = VerifyChains(*store_);
+  ASSERT_TRUE(bad.ok());
+  ASSERT_EQ(bad->problems.size(), 2u);
+  EXPECT_EQ(bad->problems[0], "IPM-X v2: release without a chain link (inserted around the service)");
+  EXPECT_EQ(bad->problems[1],
+            "IPM-X v2: released with verdict 'fail: fit residual 3 %' (only 'pass' is ever released by the service)");
+  const absl::Status refused = VerifyReleasedVersion(*store_, "IPM-X", 2);
+  EXPECT_EQ(refused.code(), absl::StatusCode::kDataLoss) << refused;
+  EXPECT_NE(refused.message().find("IPM-X v2: release without a chain link"), std::string::npos) << refused;
+  EXPECT_TRUE(VerifyReleasedVersion(*store_, "IPM-Y", 1).ok()) << "the honest release still passes";
+  // A release edited with its triggers gone.
+  ASSERT_TRUE(RawSql(DropGuards(pg, {"releases"}) +
+                     "UPDATE releases SET released_by = 'admin' WHERE serial = 'IPM-Y' AND version = 1"));
+  auto edited = VerifyChains(*store_);
+  ASSERT_TRUE(edited.ok());
+  EXPECT_NE(std::find(edited->problems.begin(), edited->problems.end(),
+                      "IPM-Y v1 (release #2): release changed after it was stored"),
+            edited->problems.end());
+  EXPECT_EQ(VerifyReleasedVersion(*store_, "IPM-Y", 1).code(), absl::StatusCode::kDataLoss);
+}
+
+// The defect an anchor closes: the newest version deleted together with its
+// chain link leaves a chain that verifies. A head recorded before
+// (CurrentChainHead, what `fluxcal admin anchor` writes) names it, and the
+// newest release removed with its link likewise.
+TEST_P(StoreTest, AnchorNamesARemovedNewestVersionAndRelease) {
+  ASSERT_TRUE(store_->IngestHfRun({"IPM-A", 4, 0.011, 0.0114, ""}, "st", "hf_run", Points(3)).ok());
+  ASSERT_TRUE(store_->IngestHfRun({"IPM-B", 4, 0.011, 0.0114, ""}, "st", "hf_run", Points(3)).ok());
+  for (int k = 0; k < 3; ++k) ASSERT_TRUE(store_->AddCalibration(Version("IPM-A", "pass")).ok());
+  ASSERT_TRUE(store_->AddCalibration(Version("IPM-B", "pass")).ok());
+  ASSERT_TRUE(store_->Release("IPM-A", 2, "rel").ok());
+  ASSERT_TRUE(store_->Release("IPM-A", 3, "rel").ok());
+  auto head = CurrentChainHead(*store_);
+  ASSERT_TRUE(head.ok()) << head.status();
+  ASSERT_EQ(head->calibrations.size(), 2u);
+  EXPECT_EQ(head->calibrations[0].serial, "IPM-A");
+  EXPECT_EQ(head->calibrations[0].version, 3);
+  EXPECT_EQ(head->calibrations[0].row_sha256, store_->ChainLink("IPM-A", 3)->row_sha256);
+  EXPECT_EQ(head->release_seq, 2);
+  EXPECT_EQ(head->digest_sha256, ChainHeadDigest(*head));
+  EXPECT_EQ(head->digest_sha256.size(), 64u);
+  auto same = VerifyChains(*store_, &*head, "the anchor");
+  ASSERT_TRUE(same.ok());
+  EXPECT_TRUE(same->problems.empty());
+  EXPECT_EQ(same->anchored, 3);
+  if (!SeparateConnections()) return;
+  const bool pg = GetParam() == Backend::kPostgres;
+  // The newest release and its link, then the newest version of IPM-A with
+  // its link: every remaining link still verifies.
+  ASSERT_TRUE(RawSql(DropGuards(pg, {"releases", "release_chain", "calibrations", "calibration_chain"}) +
+                     "DELETE FROM release_chain WHERE seq = 2; "
+                     "DELETE FROM releases WHERE serial = 'IPM-A' AND version = 3; "
+                     "DELETE FROM calibration_chain WHERE serial = 'IPM-A' AND version = 3; "
+                     "DELETE FROM calibrations WHERE serial = 'IPM-A' AND version = 3"));
+  auto blind = VerifyChains(*store_);
+  ASSERT_TRUE(blind.ok());
+  EXPECT_TRUE(blind->problems.empty()) << "the chains alone cannot see a removed head: " << blind->problems.front();
+  auto anchored = VerifyChains(*store_, &*head, "the anchor");
+  ASSERT_TRUE(anchored.ok());
+  ASSERT_EQ(anchored->problems.size(), 2u);
+  EXPECT_EQ(anchored->problems[0],
+            "IPM-A v3: removed after the anchor (row and chain link; the newest stored is v2)");
+  EXPECT_EQ(anchored->problems[1], "IPM-A v3 (release #2): removed after the anchor (release chain link)");
+  EXPECT_EQ(anchored->anchored, 1) << "IPM-B v1 is still as anchored";
+}
+
+// Commands that only read open with create = false: a path that does not
+// exist, an empty file and a database without fluxcal's tables are refused
+// and left as they were.
+TEST_P(StoreTest, OpenWithoutCreateRefusesWhatIsNotAStore) {
+  if (GetParam() == Backend::kPostgres) {
+    ASSERT_TRUE(pg_->CreateDatabase(db_ + "_empty"));
+    auto none = Store::Open(pg_->Url(db_ + "_empty"), {.create = false});
+    EXPECT_EQ(none.status().code(), absl::StatusCode::kNotFound) << none.status();
+    EXPECT_NE(none.status().message().find("holds no fluxcal store"), std::string::npos) << none.status();
+    EXPECT_EQ(pg_->Scalar(db_ + "_empty", "SELECT COUNT(*) FROM pg_tables WHERE schemaname = 'public'"), "0");
+  } else {
+    const std::string missing = (fs::temp_directory_path() / ("fluxcal_typo_" + std::to_string(::getpid()) + ".db")).string();
+    fs::remove(missing);
+    auto none = Store::Open(missing, {.create = false});
+    EXPECT_EQ(none.status().code(), absl::StatusCode::kNotFound);
+    EXPECT_NE(none.status().message().find("no store at '" + missing + "'"), std::string::npos) << none.status();
+    EXPECT_FALSE(fs::exists(missing)) << "a read-only open must not create the file";
+    std::ofstream(missing).close();
+    auto empty = Store::Open("sqlite:" + missing, {.create = false});
+    EXPECT_EQ(empty.status().code(), absl::StatusCode::kNotFound);
+    EXPECT_NE(empty.status().message().find("holds no fluxcal store"), std::string::npos) << empty.status();
+    EXPECT_EQ(fs::file_size(missing), 0u) << "the empty file must stay empty";
+    for (auto sfx : {"", "-wal", "-shm"}) fs::remove(missing + sfx);
+  }
+  if (SeparateConnections()) {
+    store_.reset();
+    auto existing = Store::Open(url_, {.create = false});
+    ASSERT_TRUE(existing.ok()) << existing.status();
+    store_ = std::move(*existing);
+  }
+}
+
+// A store written at schema v6 (releases without links) upgrades to v7: the
+// migration links the releases already stored, oldest first, so the chain
+// starts complete and any later unlinked release is a problem.
+TEST_P(StoreTest, MigrationToV7LinksTheReleasesAlreadyStored) {
+  if (!SeparateConnections()) GTEST_SKIP() << "needs a second database";
+  const bool pg = GetParam() == Backend::kPostgres;
+  std::string url;
+  std::function<bool(const std::string&)> raw;
+  std::string old_path;
+  if (pg) {
+    ASSERT_TRUE(pg_->CreateDatabase(db_ + "_v6"));
+    url = pg_->Url(db_ + "_v6");
+    raw = [&](const std::string& sql) { return pg_->Sql(db_ + "_v6", sql); };
+  } else {
+    old_path = path_ + ".v6";
+    for (auto sfx : {"", "-wal", "-shm"}) fs::remove(old_path + sfx);
+    url = old_path;
+    raw = [&](const std::string& sql) {
+      auto db = Database::Open(old_path);
+      return db.ok() && (*db)->Exec(sql).ok();
+    };
+  }
+  const auto& migrations = pg ? PostgresMigrations() : SqliteMigrations();
+  ASSERT_EQ(migrations.size(), static_cast<size_t>(kSchemaVersion));
+  ASSERT_TRUE(raw("CREATE TABLE schema_version (version INTEGER NOT NULL)"));
+  for (int v = 0; v < 6; ++v) {
+    ASSERT_TRUE(raw(migrations[v])) << "migration " << v + 1;
+    ASSERT_TRUE(raw("INSERT INTO schema_version (version) VALUES (" + std::to_string(v + 1) + ")"));
+  }
+  // What a v6 store holds: a motor, two chained versions, two releases.
+  ASSERT_TRUE(raw("INSERT INTO motors (serial, pole_pairs, rs_ohm, psi_pm_wb, created_utc) "
+                  "VALUES ('IPM-OLD', 4, 0.011, 0.0114, '2024-01-01T00:00:00Z')"));
+  std::string prev;
+  for (int v = 1; v <= 2; ++v) {
+    CalibrationRow c = Version("IPM-OLD", "pass");
+    c.version = v;
+    c.created_utc = "2024-01-0" + std::to_string(v + 1) + "T00:00:00Z";
+    const std::string sha = CalibrationRowSha256(prev, c);
+    ASSERT_TRUE(raw("INSERT INTO calibrations (serial, version, run_id, created_utc, model, psi_pm_wb, rms_relative, "
+                    "verdict, calibration_json) VALUES ('IPM-OLD', " + std::to_string(v) + ", NULL, '" +
+                    c.created_utc + "', 'spline4', 0.0114, 0.004, 'pass', '{\"params\": [1, 2]}')"));
+    ASSERT_TRUE(raw("INSERT INTO calibration_chain (serial, version, prev_sha256, row_sha256) VALUES ('IPM-OLD', " +
+                    std::to_string(v) + ", '" + prev + "', '" + sha + "')"));
+    prev = sha;
+  }
+  ASSERT_TRUE(raw("INSERT INTO releases (serial, version, released_by, released_utc) VALUES "
+                  "('IPM-OLD', 2, 'rel', '2024-02-01T00:00:00Z'), ('IPM-OLD', 1, 'rel', '2024-01-15T00:00:00Z')"));
+  // A read-only open (verify-db) of the older store migrates it too.
+  auto upgraded = Store::Open(url, {.create = false});
+  ASSERT_TRUE(upgraded.ok()) << upgraded.status();
+  EXPECT_EQ(*(*upgraded)->SchemaVersion(), kSchemaVersion);
+  auto after = VerifyChains(**upgraded);
+  ASSERT_TRUE(after.ok()) << after.status();
+  EXPECT_TRUE(after->problems.empty()) << after->problems.front();
+  EXPECT_EQ(after->chained, 2);
+  EXPECT_EQ(after->releases_chained, 2);
+  auto links = (*upgraded)->AllReleaseLinks();
+  ASSERT_TRUE(links.ok());
+  ASSERT_EQ(links->size(), 2u);
+  EXPECT_EQ(links->at(0).version, 1) << "linked in release order";
+  EXPECT_EQ(links->at(1).version, 2);
+  EXPECT_TRUE(VerifyReleasedVersion(**upgraded, "IPM-OLD", 2).ok());
+  upgraded->reset();
+  if (!old_path.empty()) {
+    for (auto sfx : {"", "-wal", "-shm"}) fs::remove(old_path + sfx);
+  }
 }
 
 // Writers on separate connections (separate Store objects, as separate
@@ -384,7 +622,7 @@ TEST_P(StoreTest, WholeStoreExportAndImport) {
   EXPECT_EQ(store_->AllMotors()->size(), 1u);
   EXPECT_EQ(store_->AllCalibrations()->size(), 1u);
   // Import keeps ids, versions and timestamps; later runs continue after them.
-  RunRow r{41, "W-2", "old", "hf_run", "", "2020-01-02T03:04:05Z"};
+  RunRow r{41, "W-2", "old", "hf_run", "", "2020-01-02T03:04:05Z", ""};
   ASSERT_TRUE(store_->ImportMotor({"W-2", 3, 0.5, 0.25, "2020-01-01T00:00:00Z"}).ok());
   ASSERT_TRUE(store_->ImportRun(r, Points(4), nullptr).ok());
   CalibrationRow ic = c;
@@ -411,9 +649,14 @@ TEST_P(StoreTest, WholeStoreExportAndImport) {
                   ->ImportTrail({{"W-2", 7, "rel", "2020-01-04T00:00:00Z"}},
                                 {{90, "2020-01-04T00:00:01Z", "rel", "release", "peer", "req", "Release", "W-2",
                                   "released version 7"}},
-                                {{"W-2", 7, "", "abc"}})
+                                {{"W-2", 7, "", "abc"}}, {{1, "W-2", 7, "abc", "", "def"}})
                   .ok());
   EXPECT_TRUE(*store_->IsReleased("W-2", 7));
+  auto rlinks = store_->AllReleaseLinks();
+  ASSERT_TRUE(rlinks.ok()) << rlinks.status();
+  ASSERT_EQ(rlinks->size(), 1u);
+  EXPECT_EQ(rlinks->at(0).row_sha256, "def");
+  EXPECT_EQ(store_->ReleaseLink("W-2", 7)->calibration_sha256, "abc");
   ASSERT_EQ(store_->AllReleases()->size(), 1u);
   EXPECT_EQ(store_->AllReleases()->at(0).released_utc, "2020-01-04T00:00:00Z");
   AuditRow later;

@@ -25,6 +25,7 @@
 #include "simulation/twin.h"
 #include "io/sha256.h"
 #include "tables/tables.h"
+#include "tests/tables/twin_limits.h"
 #include "tinyxml2.h"
 
 namespace fluxcal::tables {
@@ -295,7 +296,7 @@ Table Fw() {
   spec.verdict = "pass";
   spec.release_state = kReleased;
   spec.measured_current_limit_a = 150;
-  auto t = BuildTable(m, MachineLimits{}, spec);
+  auto t = BuildTable(m, TwinLimits(), spec);
   EXPECT_TRUE(t.ok()) << t.status();
   return *t;
 }
@@ -310,7 +311,7 @@ Table MtpvExtrapolated() {
   spec.model = "analytic";
   spec.measured_current_limit_a = 150;
   spec.allow_extrapolation = true;
-  auto t = BuildTable(m, MachineLimits{}, spec);
+  auto t = BuildTable(m, TwinLimits(), spec);
   EXPECT_TRUE(t.ok()) << t.status();
   return *t;
 }
@@ -362,9 +363,14 @@ TEST(ExportRoundTrip, LimitsVerdictAndReleaseAreInTheFiles) {
   EXPECT_GT(p.scalars.at("psi_pm_wb"), 0.0);
   auto dcm = Export(t, Format::kDcm);
   ASSERT_TRUE(dcm.ok());
-  for (const char* block : {"FESTWERT FLUXCAL_FW_PSI_PM_WB\n", "FESTWERT FLUXCAL_FW_RS_OHM\n",
-                            "FESTWERT FLUXCAL_FW_POLE_PAIRS\n", "FESTWERT FLUXCAL_FW_I_MAX_A\n",
-                            "FESTWERT FLUXCAL_FW_U_MAX_V\n", "KENNFELD FLUXCAL_FW_CLAMPED 5 4\n"}) {
+  // The map's shape: round breakpoints, at most 5 torques and 4 speeds.
+  const size_t nt = t.axes[0].values.size(), ns = t.axes[1].values.size();
+  EXPECT_LE(nt, 5u);
+  EXPECT_LE(ns, 4u);
+  const std::string map_block = "KENNFELD FLUXCAL_FW_CLAMPED " + std::to_string(nt) + " " + std::to_string(ns) + "\n";
+  for (const std::string& block : {std::string("FESTWERT FLUXCAL_FW_PSI_PM_WB\n"), std::string("FESTWERT FLUXCAL_FW_RS_OHM\n"),
+                                   std::string("FESTWERT FLUXCAL_FW_POLE_PAIRS\n"), std::string("FESTWERT FLUXCAL_FW_I_MAX_A\n"),
+                                   std::string("FESTWERT FLUXCAL_FW_U_MAX_V\n"), map_block}) {
     EXPECT_NE(dcm->bytes.find(block), std::string::npos) << block;
   }
 }
@@ -466,7 +472,7 @@ TEST(Extrapolation, RefusedByDefaultFlaggedOnRequest) {
   spec.kind = "mtpv";
   spec.points = 9;
   spec.measured_current_limit_a = 150;
-  MachineLimits lim;   // i_max 150 A
+  MachineLimits lim = TwinLimits();   // i_max 150 A
   auto inside = BuildTable(m, lim, spec);
   ASSERT_TRUE(inside.ok()) << inside.status();
   for (size_t k = 0; k < inside->clamped.size(); ++k) {
@@ -480,8 +486,7 @@ TEST(Extrapolation, RefusedByDefaultFlaggedOnRequest) {
   EXPECT_GT(flagged, 0);
   EXPECT_EQ(beyond.extrapolated, beyond.clamped) << "with i_max = the measured limit both flags coincide";
 
-  MachineLimits big;
-  big.i_max_a = 200;
+  MachineLimits big = TwinLimits(200);
   spec.kind = "mtpa";
   auto refused = BuildTable(m, big, spec);
   ASSERT_EQ(refused.status().code(), absl::StatusCode::kInvalidArgument);
@@ -494,8 +499,7 @@ TEST(Extrapolation, RefusedByDefaultFlaggedOnRequest) {
   EXPECT_GT(beyond_meas, 0) << "MTPA rows above 150 A are flagged";
 
   // A measured region the MTPV curve never enters: no MTPV table by default.
-  MachineLimits small;
-  small.i_max_a = 10;
+  MachineLimits small = TwinLimits(10);
   TableSpec s2;
   s2.kind = "mtpv";
   s2.points = 5;

@@ -269,6 +269,7 @@ TEST(FluxMapExport, InverseOfAMapThatFallsNearZeroCurrent) {
   const sim::TraitMotor motor(t);
   fit::FitData d;
   d.serial = "NEG-SLOPE-1";
+  d.pole_pairs = 4;   // the trait motors state none; nothing here uses torque or speed
   for (double id : {-300.0, -225.0, -165.0, -135.0, -60.0, 0.0}) {
     for (double iq : {0.0, 51.0, 126.0, 174.0, 249.0, 300.0}) {
       const auto L = motor.Inductance(id, iq);

@@ -19,6 +19,7 @@
 #include "plot/plot.h"
 #include "tables/signature.h"
 #include "tables/tables.h"
+#include "tests/tables/twin_limits.h"
 #include "tinyxml2.h"
 
 namespace fluxcal::tables {
@@ -58,7 +59,7 @@ TEST(Sha256, NistVectors) {
 
 TEST(Mtpa, WithinPointOnePercentOfBruteForce) {
   const auto m = Motor();
-  MachineLimits lim;
+  MachineLimits lim = TwinLimits();
   TableSpec spec;
   spec.points = 17;
   auto t = BuildTable(m, lim, spec);
@@ -84,7 +85,7 @@ TEST(Mtpa, WithinPointOnePercentOfBruteForce) {
 
 TEST(FieldWeakening, RespectsLimitsAndDeliversTorque) {
   const auto m = Motor();
-  MachineLimits lim;
+  MachineLimits lim = TwinLimits();
   TableSpec spec;
   spec.kind = "fw";
   spec.points = 9;
@@ -113,10 +114,10 @@ TEST(FieldWeakening, RespectsLimitsAndDeliversTorque) {
 // Both within 0.1 % (the tolerance).
 TEST(FieldWeakening, WithinPointOnePercentOfBruteForce) {
   const auto m = Motor();
-  MachineLimits lim;
+  MachineLimits lim = TwinLimits();
   TableSpec spec;
   spec.kind = "fw";
-  spec.points = 9;
+  spec.points = 19;             // round torques (2 N m apart for this motor)
   spec.speed_points = 8;
   spec.speed_max_rpm = 7000;   // well past the MTPV onset of this motor
   auto t = BuildTable(m, lim, spec);
@@ -138,7 +139,7 @@ TEST(FieldWeakening, WithinPointOnePercentOfBruteForce) {
     const double we = rpm[j] * lim.pole_pairs * 2 * kPi / 60;
     std::vector<const GridPoint*> feasible;
     for (const auto& g : grid) {
-      if (std::hypot(lim.rs_ohm * g.id - we * g.psi_q, lim.rs_ohm * g.iq + we * g.psi_d) <=
+      if (std::hypot(*lim.rs_ohm * g.id - we * g.psi_q, *lim.rs_ohm * g.iq + we * g.psi_d) <=
           lim.UMaxV())
         feasible.push_back(&g);
     }
@@ -176,7 +177,7 @@ TEST(FieldWeakening, WithinPointOnePercentOfBruteForce) {
 // largest torque (brute force over id on the circle).
 TEST(Mtpv, MaximumTorquePerFluxByBruteForce) {
   const auto m = Motor();
-  MachineLimits lim;
+  MachineLimits lim = TwinLimits();
   TableSpec spec;
   spec.kind = "mtpv";
   spec.points = 9;
@@ -206,7 +207,7 @@ TEST(Mtpv, MaximumTorquePerFluxByBruteForce) {
 TEST(Mtpa, DifferentialAsApparentIsWorse) {
   const auto m = Motor();
   DifferentialAsApparent wrong(m);
-  MachineLimits lim;
+  MachineLimits lim = TwinLimits();
   TableSpec spec;
   spec.points = 9;
   spec.include_generating = false;
@@ -232,7 +233,7 @@ Table SmallTable(const std::string& kind) {
   spec.serial = "IPM-T-1";
   spec.calibration_version = 3;
   spec.model = "analytic";
-  return *BuildTable(m, MachineLimits{}, spec);
+  return *BuildTable(m, TwinLimits(), spec);
 }
 
 std::vector<double> Numbers(const std::string& s) {
@@ -255,7 +256,9 @@ TEST(Export, CsvRoundTrip) {
     for (auto& c : line) if (c == ',') c = ' ';
     rows.push_back(Numbers(line));
   }
-  ASSERT_EQ(rows.size(), 20u);
+  // One row per cell: at most 5 round torques x 4 round speeds.
+  ASSERT_EQ(rows.size(), t.axes[0].values.size() * t.axes[1].values.size());
+  ASSERT_GE(rows.size(), 6u);
   for (size_t r = 0; r < rows.size(); ++r) {
     EXPECT_EQ(rows[r][2], t.outputs[0].values[r]);
     EXPECT_EQ(rows[r][3], t.outputs[1].values[r]);
@@ -393,7 +396,7 @@ std::vector<std::pair<double, double>> PathPoints(const char* d) {
 // one cross per clamped cell.
 TEST(Plots, SvgParsesAndDrawsTheTables) {
   const auto m = Motor();
-  MachineLimits lim;
+  MachineLimits lim = TwinLimits();
   TableSpec spec;
   spec.points = 9;
   auto mtpa = BuildTable(m, lim, spec);

@@ -1,0 +1,62 @@
+// fluxcal admin anchor --db PATH|postgresql://... [--out FILE] [--json]
+// The head of both hash chains (every serial's newest chained version and
+// its hash, the newest release link, one digest over all of it); with --out
+// appended to FILE as one line (pipeline/anchor.h). Keep FILE outside the
+// database's host: `fluxcal admin verify-db --anchor FILE` then names a
+// newest version or release removed after it (docs/security.md). Only
+// reads: a store that does not exist is refused, never created.
+#include <cstdio>
+#include <iostream>
+
+#include "cli/args.h"
+#include "cli/command.h"
+#include "pipeline/anchor.h"
+#include "storage/store.h"
+
+namespace fluxcal::cli {
+namespace {
+
+const FlagSpecs kAnchorFlags = {
+    {"db", "URL", "the store: SQLite PATH or postgresql://... (required; must exist)"},
+    {"out", "FILE", "append the anchor line to FILE (created if missing)"},
+    {"json", "", "print the anchor as one JSON document"},
+};
+
+int RunAnchor(const std::vector<std::string>& argv) {
+  auto args = ParseArgs(argv, kAnchorFlags);
+  if (!args.ok() || !args->Get("db") || !args->positional.empty()) {
+    if (!args.ok()) std::fprintf(stderr, "fluxcal admin anchor: %s\n", std::string(args.status().message()).c_str());
+    std::fprintf(stderr, "usage: fluxcal admin anchor --db PATH|postgresql://... [--out FILE] [--json]\n");
+    return 2;
+  }
+  auto store = storage::Store::Open(*args->Get("db"), {.create = false});
+  if (!store.ok()) {
+    std::fprintf(stderr, "fluxcal admin anchor: flag --db: %s\n", std::string(store.status().message()).c_str());
+    return 1;
+  }
+  const std::string out = args->Get("out").value_or("");
+  auto head = pipeline::AnchorStore(**store, out);
+  if (!head.ok()) {
+    std::fprintf(stderr, "fluxcal admin anchor: %s%s\n", out.empty() ? "" : "flag --out: ",
+                 std::string(head.status().message()).c_str());
+    return 1;
+  }
+  if (args->Has("json")) {
+    std::cout << pipeline::AnchorLine(*head, "snapshot", (*store)->Backend(), storage::NowUtc()) << "\n";
+  } else {
+    std::printf("anchor %s: %zu serials", head->digest_sha256.c_str(), head->calibrations.size());
+    if (head->release_seq > 0) {
+      std::printf(", newest release #%lld (%s v%d)", static_cast<long long>(head->release_seq),
+                  head->release_serial.c_str(), head->release_version);
+    }
+    std::printf("%s\n", out.empty() ? "" : (", appended to " + out).c_str());
+  }
+  return 0;
+}
+
+}  // namespace
+
+FLUXCAL_REGISTER_COMMAND("admin anchor", "print or append the chain heads to keep outside the database", RunAnchor,
+                         "fluxcal admin anchor --db PATH|postgresql://... [--out FILE] [--json]", kAnchorFlags);
+
+}  // namespace fluxcal::cli
