@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <functional>
+#include <limits>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -10,24 +11,37 @@
 
 namespace fluxcal::diag::detail {
 
-// The fitted surfaces as a twin magnetic model (for waveform replay).
+// The fitted surfaces as a twin magnetic model (for waveform replay): one
+// evaluator for the parameters (fitting/surface.h), and the last point's
+// flux and inductance kept, since the plant's Newton steps ask for both at
+// each point.
 class SurfaceModel : public sim::MagneticModel {
  public:
-  SurfaceModel(const Model& m, const Params& p) : m_(m), p_(p), ptr_(p_.Ptrs()) {}
+  SurfaceModel(const Model& m, const Params& p)
+      : eval_(m.surf, p.b[kBase]), psi_pm_(m.PsiPm(p.Ptrs().data())) {}
   sim::FluxLinkage Flux(double id, double iq, double) const override {
-    sim::FluxLinkage f;
-    m_.Flux(ptr_.data(), id, iq, &f.psi_d_wb, &f.psi_q_wb);
-    return f;
+    Update(id, iq);
+    return {last_.psi_d, last_.psi_q};
   }
   sim::DifferentialInductance Inductance(double id, double iq, double) const override {
-    sim::DifferentialInductance l;
-    m_.Inductance(ptr_.data(), id, iq, &l.ldd_h, &l.lqq_h, &l.ldq_h);
-    return l;
+    Update(id, iq);
+    return {last_.ldd, last_.lqq, last_.ldq};
   }
+
  private:
-  const Model& m_;
-  Params p_;
-  std::vector<const double*> ptr_;
+  struct Point {
+    double id = std::numeric_limits<double>::quiet_NaN(), iq = 0, psi_d = 0, psi_q = 0, ldd = 0, lqq = 0, ldq = 0;
+  };
+  void Update(double id, double iq) const {
+    if (id == last_.id && iq == last_.iq) return;
+    last_.id = id;
+    last_.iq = iq;
+    eval_.Eval(id, iq, &last_.psi_d, &last_.psi_q, &last_.ldd, &last_.lqq, &last_.ldq);
+    last_.psi_d += psi_pm_;   // the family's psi_pm slot is 0 in the model's parameters
+  }
+  fit::SurfaceEvaluator eval_;
+  double psi_pm_;
+  mutable Point last_;
 };
 
 absl::StatusOr<std::vector<sim::ReplayPoint>> ReplayModel(const io::RecordingSet& set, const Model& m,

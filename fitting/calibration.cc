@@ -9,6 +9,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "io/csv.h"
+#include "fitting/surface.h"
 #include "nlohmann/json.hpp"
 
 namespace fluxcal::fit {
@@ -18,17 +19,20 @@ Calibration::Calibration(std::string serial, Family family, std::vector<double> 
                          double id_min_a, double id_max_a, double iq_min_a, double iq_max_a)
     : serial_(std::move(serial)), family_(family), params_(std::move(params)),
       covariance_(std::move(covariance)), pole_pairs_(pole_pairs), rs_ohm_(rs_ohm),
-      id_min_a_(id_min_a), id_max_a_(id_max_a), iq_min_a_(iq_min_a), iq_max_a_(iq_max_a) {}
+      id_min_a_(id_min_a), id_max_a_(id_max_a), iq_min_a_(iq_min_a), iq_max_a_(iq_max_a),
+      eval_(std::make_shared<const SurfaceEvaluator>(family_, params_)) {}
 
 sim::FluxLinkage Calibration::Flux(double id, double iq, double) const {
   sim::FluxLinkage f;
-  FamilyFlux(family_, id, iq, params_.data(), &f.psi_d_wb, &f.psi_q_wb);
+  if (eval_) eval_->Eval(id, iq, &f.psi_d_wb, &f.psi_q_wb, nullptr, nullptr, nullptr);
+  else FamilyFlux(family_, id, iq, params_.data(), &f.psi_d_wb, &f.psi_q_wb);
   return f;
 }
 
 sim::DifferentialInductance Calibration::Inductance(double id, double iq, double) const {
   sim::DifferentialInductance l;
-  FamilyInductance(family_, id, iq, params_.data(), &l.ldd_h, &l.lqq_h, &l.ldq_h);
+  if (eval_) eval_->Eval(id, iq, nullptr, nullptr, &l.ldd_h, &l.lqq_h, &l.ldq_h);
+  else FamilyInductance(family_, id, iq, params_.data(), &l.ldd_h, &l.lqq_h, &l.ldq_h);
   return l;
 }
 

@@ -13,6 +13,7 @@
 #define FLUXCAL_FITTING_CALIBRATION_H_
 
 #include <optional>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -23,6 +24,8 @@
 #include "simulation/magnetic_model.h"
 
 namespace fluxcal::fit {
+
+class SurfaceEvaluator;
 
 struct FluxPrediction {
   double psi_d_wb = 0, psi_q_wb = 0, ldd_h = 0, lqq_h = 0, ldq_h = 0;
@@ -120,6 +123,10 @@ class Calibration : public sim::MagneticModel {
   int pole_pairs_ = 0;   // 0: unknown (only a default-constructed calibration)
   std::optional<double> rs_ohm_, psi_pm_nominal_wb_, udc_v_;
   double id_min_a_ = 0, id_max_a_ = 0, iq_min_a_ = 0, iq_max_a_ = 0;
+  // The surfaces' evaluator for these parameters (fitting/surface.h),
+  // shared by copies: Flux and Inductance are called millions of times by
+  // a replay and a table solver.
+  std::shared_ptr<const SurfaceEvaluator> eval_;
 };
 
 absl::StatusOr<Calibration> LoadCalibrationFile(const std::string& path);

@@ -139,6 +139,63 @@ SurfacePoint SurfaceAt(const Family& f, const double* params, double id_a, doubl
 // constant inductance: where no data pull, the surface continues with the
 // inductance it has at the data's edge, and a strong lambda flattens
 // towards the best constant-inductance model instead of oscillating.
+SurfaceEvaluator::SurfaceEvaluator(const Family& f, std::vector<double> params) : f_(f), p_(std::move(params)) {
+  if (f_.kind != Family::kSpline || p_.empty()) return;
+  const SplineDomain& dom = f_.spline;
+  const int ne = dom.NumEven();
+  const Basis1d b0d = EvalBasis(0.0, dom.id_lo_a, dom.id_hi_a, dom.spans);
+  const Basis1d b0q = EvalBasis(0.0, dom.IqLo(), dom.iq_hi_a, dom.SpansQ());
+  for (int a = 0; a <= kSplineDegree; ++a) {
+    for (int c = 0; c <= kSplineDegree; ++c) {
+      const double coef = p_[1 + (b0d.first + a) * ne + dom.QIndex(b0q.first + c)];
+      slope0_d_ += coef * b0d.d1[a] * b0q.v[c];
+      slope0_q_ += coef * b0d.v[a] * b0q.d1[c];
+    }
+  }
+}
+
+void SurfaceEvaluator::Eval(double id, double iq, double* psi_d, double* psi_q, double* ldd, double* lqq,
+                            double* ldq) const {
+  if (f_.kind != Family::kSpline) {
+    if (psi_d != nullptr) FamilyFlux(f_, id, iq, p_.data(), psi_d, psi_q);
+    if (ldd != nullptr) FamilyInductance(f_, id, iq, p_.data(), ldd, lqq, ldq);
+    return;
+  }
+  if (!std::isfinite(id) || !std::isfinite(iq)) {
+    for (double* out : {psi_d, psi_q, ldd, lqq, ldq}) {
+      if (out != nullptr) *out = std::numeric_limits<double>::quiet_NaN();
+    }
+    return;
+  }
+  // SplineFluxAndInductance's sums, the origin's slope from the
+  // constructor.
+  const SplineDomain& dom = f_.spline;
+  const int ne = dom.NumEven();
+  const double kW = kPolyL0H * kPolyI0A * kPolyI0A;
+  const Basis1d bd = EvalBasis(id, dom.id_lo_a, dom.id_hi_a, dom.spans);
+  const Basis1d bq = EvalBasis(iq, dom.IqLo(), dom.iq_hi_a, dom.SpansQ());
+  double sd = 0, sq = 0, dd = 0, qq = 0, dq = 0;
+  for (int a = 0; a <= kSplineDegree; ++a) {
+    for (int c = 0; c <= kSplineDegree; ++c) {
+      const double coef = p_[1 + (bd.first + a) * ne + dom.QIndex(bq.first + c)];
+      sd += coef * bd.d1[a] * bq.v[c];
+      sq += coef * bd.v[a] * bq.d1[c];
+      dd += coef * bd.d2[a] * bq.v[c];
+      qq += coef * bd.v[a] * bq.d2[c];
+      dq += coef * bd.d1[a] * bq.d1[c];
+    }
+  }
+  if (psi_d != nullptr) {
+    *psi_d = p_[0] + kW * (sd - slope0_d_);
+    *psi_q = kW * (sq - (dom.Folded() ? 0.0 : slope0_q_));
+  }
+  if (ldd != nullptr) {
+    *ldd = kW * dd;
+    *lqq = kW * qq;
+    *ldq = kW * dq;
+  }
+}
+
 Eigen::MatrixXd SmoothingPenalty(const Family& fam) {
   if (fam.kind != Family::kSpline || !fam.spline.smoothing) return Eigen::MatrixXd(0, fam.NumParams());
   const SplineDomain& dom = fam.spline;

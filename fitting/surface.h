@@ -28,6 +28,24 @@ struct SurfacePoint {
 };
 SurfacePoint SurfaceAt(const Family& f, const double* params, double id_a, double iq_a);
 
+// A family's surfaces for fixed parameters, evaluated at many points (a
+// replay's Newton steps, a table's solver): for the spline family the
+// origin's terms (psi_d(0, 0) = psi_pm and, unfolded, psi_q(0, 0) = 0 pin
+// the co-energy's slope there) are computed once, and flux and inductance
+// come from one pair of basis evaluations. The same values as FamilyFlux
+// and FamilyInductance; null pointers skip an output.
+class SurfaceEvaluator {
+ public:
+  SurfaceEvaluator() = default;
+  SurfaceEvaluator(const Family& f, std::vector<double> params);
+  void Eval(double id_a, double iq_a, double* psi_d, double* psi_q, double* ldd, double* lqq, double* ldq) const;
+
+ private:
+  Family f_;
+  std::vector<double> p_;
+  double slope0_d_ = 0, slope0_q_ = 0;   // spline: S's slopes at the origin
+};
+
 // Roughness of a smoothing-spline co-energy (fit.cc, where it is derived):
 // rows of third differences of the coefficients, one column per parameter
 // (column 0, psi_pm, is zero). Empty (0 x NumParams) for other families.
