@@ -269,7 +269,7 @@ int RunRemoteExport(const std::vector<std::string>& argv, const FlagSpecs& flags
   if (!args.ok()) std::fprintf(stderr, "fluxcal export: %s\n", std::string(args.status().message()).c_str());
   if (!args.ok() || args->positional.size() != 1 || !args->Get("out")) {
     std::fprintf(stderr, "usage: fluxcal export SERIAL --server ADDR --table mtpa|mtpv|fw --format "
-                         "csv|json|h|cdfx|dcm [--points N] [--version N] [--ctype double|float] [--allow-extrapolation] "
+                         "csv|json|h|cdfx|dcm|a2l [--points N] [--version N] [--ctype double|float|int16|int32] [--allow-extrapolation] "
                          "--out FILE [--json]\n");
     return 2;
   }
