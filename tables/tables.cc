@@ -1221,25 +1221,31 @@ std::string CurvesFigure(const sim::MagneticModel& m, const MachineLimits& lim, 
 }  // namespace
 
 PlaneCircle DrawCurrentPlane(plot::Figure* f, const sim::MagneticModel& m, const MachineLimits& lim, double id_lo_a,
-                             double iq_hi_a, double we_rad_s, const std::string& voltage_label) {
+                             double iq_hi_a, double we_rad_s, const std::string& voltage_label, bool generating) {
   const double im = lim.i_max_a;
   if (!lim.HasVoltageLimit()) we_rad_s = 0;   // no voltage limit without Udc and Rs
   const auto xs = Linspace(id_lo_a, 0.6 * im, 161);
-  const auto ys = Linspace(-0.2 * im, iq_hi_a, 121);
+  const auto ys = generating ? Linspace(-iq_hi_a, iq_hi_a, 241) : Linspace(-0.2 * im, iq_hi_a, 121);
   std::vector<double> tz, uz;
-  double tmax = 0;
+  double tmax = 0, tmin = 0;
   for (double iq : ys) {
     for (double id : xs) {
       const double t = TorqueNm(m, lim.pole_pairs, id, iq, lim.temperature_c);
       tz.push_back(t);
       if (we_rad_s > 0) uz.push_back(VoltageV(m, lim, id, iq, we_rad_s));
-      if (std::hypot(id, iq) <= im) tmax = std::max(tmax, t);
+      if (std::hypot(id, iq) <= im) tmax = std::max(tmax, t), tmin = std::min(tmin, t);
     }
   }
-  // Torque contours at round values inside the current limit's torque.
+  // Torque contours at round values inside the current limit's torque
+  // (and, generating, the same steps below zero down to its torque there).
   std::vector<double> levels;
-  for (double v : plot::NiceTicks(0, tmax, 6)) {
+  const auto ticks = plot::NiceTicks(0, tmax, 6);
+  for (double v : ticks) {
     if (v > 0 && v <= tmax) levels.push_back(v);
+  }
+  if (generating && ticks.size() > 1) {
+    const double step = ticks[1] - ticks[0];
+    for (double v = -step; v >= tmin - 1e-9 * step; v -= step) levels.push_back(v);
   }
   plot::Style contour;
   contour.colour = "#888888";
@@ -1249,7 +1255,8 @@ PlaneCircle DrawCurrentPlane(plot::Figure* f, const sim::MagneticModel& m, const
   circle.colour = "#000000";
   circle.dash = "6 4";
   PlaneCircle c;
-  for (int k = 0; k <= 120; ++k) {
+  const int n = generating ? 240 : 120;
+  for (int k = 0; k <= n; ++k) {
     const double a = kPi / 2 + kPi / 2 * k / 120;
     c.id_a.push_back(im * std::cos(a));
     c.iq_a.push_back(im * std::sin(a));

@@ -165,13 +165,17 @@ double MaxTorqueNm(const sim::MagneticModel& m, const MachineLimits& lim, double
 // voltage limit |u| = u_max at that speed, labelled
 // `voltage_label`. The fields are sampled over [id_lo_a, 0.6 i_max] x
 // [-0.2 i_max, iq_hi_a], beyond the view (equal scaling widens one axis;
-// the figure clips at its frame). Returns the circle's points (for a
-// second circle drawn to scale).
+// the figure clips at its frame). With `generating` the generating half
+// too: the fields over [-iq_hi_a, iq_hi_a], the circle's whole left half
+// and negative torque levels (the report page draws both directions, as
+// the tables hold both). Returns the circle's points (for a second circle
+// drawn to scale).
 struct PlaneCircle {
   std::vector<double> id_a, iq_a;
 };
 PlaneCircle DrawCurrentPlane(plot::Figure* f, const sim::MagneticModel& m, const MachineLimits& lim, double id_lo_a,
-                             double iq_hi_a, double we_rad_s, const std::string& voltage_label);
+                             double iq_hi_a, double we_rad_s, const std::string& voltage_label,
+                             bool generating = false);
 
 // The breakpoints of an axis over [lo_value, hi_value]: the multiples of
 // the smallest round step (1, 2 or 5 x 10^k) that gives at most
