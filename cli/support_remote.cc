@@ -251,7 +251,9 @@ int RunRemoteQuery(const std::vector<std::string>& argv, const FlagSpecs& flags)
                                 {"ld_app_h", v.ld_app_h()}, {"lq_app_h", v.lq_app_h()}, {"torque_nm", v.torque_nm()},
                                 {"psi_d_wb_std", v.psi_d_wb_std()}, {"ldd_h_std", v.ldd_h_std()},
                                 {"lqq_h_std", v.lqq_h_std()}, {"torque_nm_std", v.torque_nm_std()},
-                                {"extrapolated", v.extrapolated()}}
+                                {"extrapolated", v.extrapolated()},
+                                {"region", v.region().empty() ? (v.extrapolated() ? "extrapolated" : "measured") : v.region()},
+                                {"valid", !v.invalid()}, {"invalid_reason", v.invalid_reason()}}
                      .dump(2, ' ', false, nlohmann::json::error_handler_t::replace)
               << "\n";
   } else {
@@ -259,7 +261,8 @@ int RunRemoteQuery(const std::vector<std::string>& argv, const FlagSpecs& flags)
                 "Ldq %.4g mH, torque %.4g N m%s\n",
                 resp.serial().c_str(), resp.version(), v.id_a(), v.iq_a(), v.psi_d_wb(), v.psi_q_wb(),
                 v.ldd_h() * 1e3, v.lqq_h() * 1e3, v.ldq_h() * 1e3, v.torque_nm(),
-                v.extrapolated() ? " (extrapolated)" : "");
+                v.extrapolated() ? " (extrapolated)" : v.region() == "by_symmetry" ? " (by symmetry)" : "");
+    if (v.invalid()) std::printf("  NOT VALID: %s (differential inductance not positive definite)\n", v.invalid_reason().c_str());
   }
   return 0;
 }

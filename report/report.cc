@@ -862,6 +862,10 @@ absl::StatusOr<Report> BuildReport(const ReportInputs& in) {
                                               Range(cov.id_lo, cov.id_hi, kCurrentA, "A"),
                                               Range(cov.iq_lo, cov.iq_hi, kCurrentA, "A"), H(cov.basis)));
   b += Row("the other half of the current plane", H(cov.OtherHalf()));
+  // What the calibration itself says of the half of the iq axis nothing
+  // measured: "by symmetry" when the model mirrors the measured one,
+  // "extrapolated" otherwise (fit::Region).
+  b += Row("iq halves (calibration)", H(cal.IqRegionText()));
   b += Row("positive definite inductance", H(PdText(pd)));
   b += "</table>\n";
   b += absl::StrFormat("<h3>Model candidates (%zu)</h3>\n", s.candidates.size());
@@ -1262,10 +1266,11 @@ absl::StatusOr<Report> BuildReport(const ReportInputs& in) {
   }
   b += Row("temperature", Num(lim.temperature_c, kTemperatureC, "degC"));
   b += "</table>\n<table class=\"list\"><tr><th>table</th><th>axes</th><th>outputs</th><th>cells</th>"
-       "<th>clamped</th><th>CRC-32</th><th>SHA-256</th></tr>\n";
+       "<th>clamped</th><th>extrapolated</th><th>by symmetry</th><th>not positive definite</th><th>CRC-32</th>"
+       "<th>SHA-256</th></tr>\n";
   for (const char* kind : {"mtpa", "mtpv", "fw"}) {
     if (!tabs.count(kind)) {
-      b += absl::StrFormat("<tr><td>%s</td><td colspan=\"6\">not computed: the voltage limit is not known (Udc or "
+      b += absl::StrFormat("<tr><td>%s</td><td colspan=\"9\">not computed: the voltage limit is not known (Udc or "
                            "Rs, above)</td></tr>\n", kind);
       continue;
     }
@@ -1279,18 +1284,26 @@ absl::StatusOr<Report> BuildReport(const ReportInputs& in) {
       const auto [lo, hi] = std::minmax_element(o.values.begin(), o.values.end());
       outs.push_back(absl::StrFormat("%s: %s", o.name, Range(*lo, *hi, RoundingOf(o.name), UnitOf(o.name))));
     }
-    size_t clamped = 0;
+    size_t clamped = 0, extrapolated = 0, by_symmetry = 0, not_pd = 0;
     for (auto c : t.clamped) clamped += c;
-    b += absl::StrFormat("<tr><td>%s</td><td>%s</td><td>%s</td><td>%zu</td><td>%zu</td><td><code>%08x</code></td>"
-                         "<td><code class=\"sha\">%s</code></td></tr>\n",
+    for (auto c : t.extrapolated) extrapolated += c;
+    for (auto c : t.by_symmetry) by_symmetry += c;
+    for (auto c : t.not_positive_definite) not_pd += c;
+    b += absl::StrFormat("<tr><td>%s</td><td>%s</td><td>%s</td><td>%zu</td><td>%zu</td><td>%zu</td><td>%zu</td>"
+                         "<td>%s</td><td><code>%08x</code></td><td><code class=\"sha\">%s</code></td></tr>\n",
                          kind, absl::StrJoin(axes, "<br>", [](std::string* o, const std::string& a) { o->append(H(a)); }),
                          absl::StrJoin(outs, "<br>", [](std::string* o, const std::string& a) { o->append(H(a)); }),
-                         t.clamped.size(), clamped, t.crc32, t.sha256);
+                         t.clamped.size(), clamped, extrapolated, by_symmetry,
+                         not_pd > 0 ? absl::StrFormat("<b>%zu</b>", not_pd) : std::string("0"), t.crc32, t.sha256);
   }
   b += absl::StrCat("</table><p class=\"note\">Checksums over the canonical payload (docs/tables.md); <code>fluxcal "
                     "export cal.json --table KIND</code> with the same limits prints the same values as "
-                    "<code>payload_crc32</code> / <code>payload_sha256</code>.", mtpv_note.empty() ? "" : " ",
-                    H(mtpv_note), "</p></section>\n");
+                    "<code>payload_crc32</code> / <code>payload_sha256</code>. Cells flagged <i>by symmetry</i> lie "
+                    "on the iq half the data did not measure, where the calibration states the measured half "
+                    "mirrored (", H(cal.IqRegionText()), "); <i>extrapolated</i> ones rest on no measured data; "
+                    "<i>not positive definite</i> ones are no valid operating point of the model (its differential "
+                    "inductance is not positive definite there).", mtpv_note.empty() ? "" : " ", H(mtpv_note),
+                    "</p></section>\n");
 
   // ------------------------------------------------------------ fleet
   if (!in.fleet.empty()) {

@@ -16,6 +16,7 @@
 #include "absl/strings/str_join.h"
 #include "absl/strings/str_replace.h"
 #include "nlohmann/json.hpp"
+#include "fitting/calibration.h"
 #include "io/sha256.h"
 #include "plot/plot.h"
 #include "tables/a2l.h"
@@ -472,12 +473,27 @@ absl::StatusOr<Table> BuildTable(const sim::MagneticModel& m, const MachineLimit
     return absl::InvalidArgumentError(absl::StrCat("flag --table: expected mtpa, mtpv or fw, got '", spec.kind, "'"));
   }
   // Extrapolated: the operating point of the cell lies beyond the measured
-  // current limit (the disc the identified points cover).
+  // current limit (the disc the identified points cover), or outside a
+  // calibration's measured region and its mirror image. By symmetry: on
+  // the mirror image only (a generating row of a motoring-only bench, from
+  // a model symmetric in iq). Not positive definite: the model's
+  // differential inductance there fails Sylvester's test (one test for the
+  // fit, queries and tables: fit::NotPositiveDefiniteReason).
   const auto& idv = t.outputs[0].values;
   const auto& iqv = t.outputs[1].values;
+  const auto* cal = dynamic_cast<const fit::Calibration*>(&m);
   t.extrapolated.assign(idv.size(), 0);
-  if (meas > 0) {
-    for (size_t k = 0; k < idv.size(); ++k) t.extrapolated[k] = std::hypot(idv[k], iqv[k]) > meas * (1 + 1e-9);
+  t.by_symmetry.assign(idv.size(), 0);
+  t.not_positive_definite.assign(idv.size(), 0);
+  for (size_t k = 0; k < idv.size(); ++k) {
+    if (meas > 0) t.extrapolated[k] = std::hypot(idv[k], iqv[k]) > meas * (1 + 1e-9);
+    if (cal != nullptr) {
+      const fit::Region r = cal->RegionOf(idv[k], iqv[k]);
+      t.extrapolated[k] |= r == fit::Region::kExtrapolated;
+      t.by_symmetry[k] = !t.extrapolated[k] && r == fit::Region::kBySymmetry;
+    }
+    const auto L = m.Inductance(idv[k], iqv[k], lim.temperature_c);
+    t.not_positive_definite[k] = !fit::NotPositiveDefiniteReason(L.ldd_h, L.lqq_h, L.ldq_h).empty();
   }
   Seal(&t);
   return t;
@@ -696,8 +712,10 @@ absl::StatusOr<std::string> CHeader(const Table& t, CType ct, const std::vector<
     s += absl::StrCat(" * ", sc.name, ": ", Num(sc.value), " ", sc.unit, " (", OneLine(sc.description), ")\n");
   }
   s += absl::StrCat(" * axis order: ", AxisOrder(t), ".\n");
-  s += absl::StrCat(" * Value arrays are ", type, bits > 0 ? " fixed point (below)" : "", "; ", Label(t, "clamped"),
-                    " / ", Label(t, "extrapolated"), " are 0/1 per cell.\n");
+  std::vector<std::string> flag_names;
+  for (const auto& [name, v] : Flags(t)) flag_names.push_back(Label(t, name));
+  s += absl::StrCat(" * Value arrays are ", type, bits > 0 ? " fixed point (below)" : "", "; ",
+                    absl::StrJoin(flag_names, " / "), " are 0/1 per cell.\n");
   if (bits > 0) {
     // docs/tables.md, "Fixed point": one power-of-two LSB per quantity.
     s += absl::StrCat(" * Fixed point: physical = raw * LSB + offset, raw the ", type,
@@ -909,7 +927,10 @@ std::vector<std::pair<std::string, std::string>> TextFields(const Table& t) {
 }
 
 std::vector<std::pair<std::string, const std::vector<uint8_t>*>> Flags(const Table& t) {
-  return {{"clamped", &t.clamped}, {"extrapolated", &t.extrapolated}};
+  return {{"clamped", &t.clamped},
+          {"extrapolated", &t.extrapolated},
+          {"by_symmetry", &t.by_symmetry},
+          {"not_positive_definite", &t.not_positive_definite}};
 }
 
 absl::StatusOr<CType> ParseCType(const std::string& name) {

@@ -79,7 +79,20 @@ struct Table {
   std::vector<Axis> axes;
   std::vector<Output> outputs;
   std::vector<uint8_t> clamped;        // per cell: 1 where the request exceeded the limits
-  std::vector<uint8_t> extrapolated;   // per cell: 1 where |i| lies beyond the measured current limit
+  // Per cell: 1 where |i| lies beyond the measured current limit, or (the
+  // model a fit::Calibration) the operating point lies outside its measured
+  // region and not on the mirror image of it (fit::Region::kExtrapolated).
+  std::vector<uint8_t> extrapolated;
+  // Per cell (the model a fit::Calibration): 1 where the operating point lies
+  // on the iq half the data did not measure and the model states the
+  // measured half mirrored (fit::Region::kBySymmetry): e.g. the generating
+  // rows of a calibration from a motoring-only bench.
+  std::vector<uint8_t> by_symmetry;
+  // Per cell: 1 where the model's differential inductance at the operating
+  // point is not positive definite (fit::NotPositiveDefiniteReason): the
+  // flux map is not monotone there, the current it yields is not a valid
+  // operating point of the model.
+  std::vector<uint8_t> not_positive_definite;
   // Over the canonical payload (PayloadBytes), NOT over a file: CRC-32 (zlib)
   // and SHA-256 of the values. Exports name them payload_crc32 / payload_sha256.
   uint32_t crc32 = 0;
@@ -103,8 +116,9 @@ std::vector<Scalar> Scalars(const Table& t);
 // Text metadata (serial, model, created_utc, fluxcal_version, verdict,
 // release_state): written as text where the format has text, else comments.
 std::vector<std::pair<std::string, std::string>> TextFields(const Table& t);
-// Per-cell flag arrays exported beside the outputs: {"clamped", ...},
-// {"extrapolated", ...}, both 0/1 with the outputs' shape.
+// Per-cell flag arrays exported beside the outputs, in this order:
+// "clamped", "extrapolated", "by_symmetry", "not_positive_definite", each
+// 0/1 with the outputs' shape.
 std::vector<std::pair<std::string, const std::vector<uint8_t>*>> Flags(const Table& t);
 
 // Breakpoints (docs/tables.md): every axis is the multiples of a round
@@ -186,6 +200,10 @@ PlaneCircle DrawCurrentPlane(plot::Figure* f, const sim::MagneticModel& m, const
 absl::StatusOr<std::vector<double>> RoundBreakpoints(double lo_value, double hi_value, int max_points,
                                                      const std::string& flag = "--points");
 
+// When `m` is a fit::Calibration, each cell's operating point is placed in
+// its measured region (Calibration::RegionOf): `by_symmetry` and
+// `extrapolated` flag what does not rest on measured data. Every cell's
+// `not_positive_definite` comes from m.Inductance at its operating point.
 // Errors: InvalidArgument (points, limits, kind; pole pairs or current
 // limit not given; fw without Udc or Rs; a current limit above the
 // measured one without allow_extrapolation), FailedPrecondition (mtpv: no

@@ -116,7 +116,8 @@ Parsed ParseJson(const std::string& bytes) {
     p.axes.push_back(a.at("values").get<std::vector<double>>());
   }
   for (const auto& o : j.at("outputs")) p.arrays[o.at("name")] = o.at("values").get<std::vector<double>>();
-  for (const char* f : {"clamped", "extrapolated"}) p.arrays[f] = j.at(f).get<std::vector<double>>();
+  // Every flag the exporter writes (tables::Flags names them, in order).
+  for (const auto& [f, v] : Flags(Table{})) p.arrays[f] = j.at(f).get<std::vector<double>>();
   p.payload_crc32 = j.at("payload_crc32");
   p.payload_sha256 = j.at("payload_sha256");
   return p;
