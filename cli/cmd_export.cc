@@ -1,6 +1,6 @@
-// fluxcal export calibration.json --table mtpa|mtpv|fw --format csv|json|h|cdfx|dcm
+// fluxcal export calibration.json --table mtpa|mtpv|fw --format csv|json|h|cdfx|dcm|a2l
 //                [--points N] [--speed-points M] [--speed-max-rpm R] [--i-max-a A]
-//                [--udc-v V] [--rs-ohm R] [--allow-clamped] [--ctype double|float] [--allow-extrapolation]
+//                [--udc-v V] [--rs-ohm R] [--allow-clamped] [--ctype double|float|int16|int32] [--allow-extrapolation]
 //                [--svg FILE] [--sign-key ED25519.key] --out FILE [--json]
 // With --sign-key, FILE.sig holds a detached Ed25519 signature
 // (tables/signature.h; `fluxcal verify FILE --pubkey KEY.pub`).
@@ -15,6 +15,7 @@
 #include "absl/status/status.h"
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_format.h"
+#include "absl/strings/str_join.h"
 #include "cli/args.h"
 #include "cli/command.h"
 #include "cli/support_remote.h"
@@ -39,7 +40,7 @@ int Fail(const std::string& m, int code = 1) {
 const FlagSpecs kExportFlags = {
     {"out", "FILE", "table file to write (required; - for stdout)"},
     {"table", "T", "mtpa|mtpv|fw (default mtpa)"},
-    {"format", "F", "csv|json|h|cdfx|dcm (default csv)"},
+    {"format", "F", "csv|json|h|cdfx|dcm|a2l (default csv)"},
     {"points", "N", "at most N rows of a curve / torque axis of the fw map, round breakpoints (default 64)"},
     {"speed-points", "N", "fw: at most N round speeds on the speed axis (default 32)"},
     {"speed-max-rpm", "RPM", "fw: speed axis range 0..RPM, mechanical rpm (default 6000)"},
@@ -47,7 +48,7 @@ const FlagSpecs kExportFlags = {
     {"udc-v", "V", "DC-link voltage, V (default the calibration's; fw and mtpv refuse without one)"},
     {"rs-ohm", "R", "stator resistance, ohm (default the calibration's; fw refuses without one)"},
     {"allow-clamped", "", "export a table with more than half of its cells clamped (refused otherwise)"},
-    {"ctype", "T", "C element type of --format h: double|float (default double)"},
+    {"ctype", "T", "element type of --format h and a2l: double|float|int16|int32 (fixed point, LSB per quantity; default double)"},
     {"allow-extrapolation", "", "compute beyond the measured current region (cells flagged extrapolated)"},
     {"svg", "FILE", "local only: also plot the curves / map (SVG)"},
     {"sign-key", "KEY", "local only: Ed25519 private key; writes OUT.sig (not with --out -)"},
@@ -69,7 +70,7 @@ int RunExport(const std::vector<std::string>& argv) {
   if (to_stdout && args->Get("sign-key")) return Fail("--sign-key writes OUT.sig: give --out FILE, not --out -", 2);
   if (args->positional.size() != 1 || !args->Get("out")) {
     return Fail("usage: fluxcal export calibration.json --table mtpa|mtpv|fw --format "
-                "csv|json|h|cdfx|dcm [--points N] [--ctype double|float] [--allow-extrapolation] --out FILE", 2);
+                "csv|json|h|cdfx|dcm|a2l [--points N] [--ctype double|float|int16|int32] [--allow-extrapolation] --out FILE", 2);
   }
   auto cal = fit::LoadCalibrationFile(args->positional[0]);
   if (!cal.ok()) return Fail(std::string(cal.status().message()));
@@ -187,6 +188,13 @@ int RunExport(const std::vector<std::string>& argv) {
     auto src = [](const std::string& v) { return v.empty() ? nlohmann::json() : nlohmann::json(v); };
     j["sources"] = {{"i_max_a", src(built->limits.i_max_source)}, {"udc_v", src(built->limits.udc_source)},
                     {"rs_ohm", src(built->limits.rs_source)}};
+    // h and a2l in fixed point: the scale of each quantity as the file states it.
+    j["ctype"] = tables::CTypeName(*ctype);
+    j["fixed_point"] = nlohmann::json::array();
+    for (const auto& q : out->fixed_point) {
+      j["fixed_point"].push_back({{"unit", q.unit}, {"arrays", q.arrays}, {"bits", q.bits}, {"lsb", q.lsb},
+                                  {"offset", q.offset}, {"min_value", q.min_value}, {"max_value", q.max_value}});
+    }
     std::cout << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
   } else {
     const std::string u_max = lim.udc_v ? absl::StrFormat("u_max %.6g V", lim.UMaxV()) : "no voltage limit (Udc not known)";
@@ -194,6 +202,11 @@ int RunExport(const std::vector<std::string>& argv) {
                 "  sha256 %s (file)\n  payload_crc32 %s payload_sha256 %s (values, docs/tables.md)\n",
                 args->Get("out")->c_str(), spec.kind.c_str(), clamp.cells, clamp.clamped, extrapolated,
                 lim.i_max_a, u_max.c_str(), file_sha256.c_str(), crc, out->payload_sha256.c_str());
+    for (const auto& q : out->fixed_point) {
+      std::fprintf(to_stdout ? stderr : stdout, "  %s fixed point: %s LSB %.17g %s, offset %g (%s)\n",
+                   tables::CTypeName(*ctype), q.unit.c_str(), q.lsb, q.unit.c_str(), q.offset,
+                   absl::StrJoin(q.arrays, ", ").c_str());
+    }
   }
   return 0;
 }
@@ -201,7 +214,7 @@ int RunExport(const std::vector<std::string>& argv) {
 }  // namespace
 
 FLUXCAL_REGISTER_COMMAND("export", "export MTPA / MTPV / field-weakening tables for ECU flashing", RunExport,
-                         "fluxcal export calibration.json --out FILE [--table mtpa|mtpv|fw] [--format csv|json|h|cdfx|dcm] [flags]\n"
+                         "fluxcal export calibration.json --out FILE [--table mtpa|mtpv|fw] [--format csv|json|h|cdfx|dcm|a2l] [flags]\n"
                          "fluxcal export SERIAL --server ADDR [--version N] --out FILE [--table T] [--format F] [flags]",
                          kExportFlags);
 

@@ -1,7 +1,9 @@
 // fluxcal query calibration.json --id-a -20 --iq-a 40 [--json]
 // fluxcal query calibration.json --grid ID_MIN:ID_MAX:N,IQ_MIN:IQ_MAX:M  (CSV)
 // Flux linkage, differential and apparent inductance and torque with
-// standard deviations at any (id, iq).
+// standard deviations at any (id, iq), where the point lies (measured, by
+// symmetry, extrapolated) and whether the model is valid there (its
+// differential inductance positive definite).
 #include <cstdio>
 #include <iostream>
 
@@ -28,18 +30,30 @@ nlohmann::json ToJson(double id, double iq, const fit::FluxPrediction& p) {
           {"lq_app_h", p.lq_app_h}, {"torque_nm", p.torque_nm}, {"psi_d_wb_std", p.psi_d_wb_std},
           {"psi_q_wb_std", p.psi_q_wb_std}, {"ldd_h_std", p.ldd_h_std}, {"lqq_h_std", p.lqq_h_std},
           {"ldq_h_std", p.ldq_h_std}, {"ld_app_h_std", p.ld_app_h_std}, {"lq_app_h_std", p.lq_app_h_std},
-          {"torque_nm_std", p.torque_nm_std}, {"extrapolated", p.extrapolated}};
+          {"torque_nm_std", p.torque_nm_std}, {"extrapolated", p.extrapolated},
+          {"region", fit::RegionName(p.region)}, {"valid", p.valid}, {"invalid_reason", p.invalid_reason}};
 }
 
 const char* kCsvHeader =
     "id_a,iq_a,psi_d_wb,psi_q_wb,ldd_h,lqq_h,ldq_h,ld_app_h,lq_app_h,torque_nm,psi_d_wb_std,"
-    "psi_q_wb_std,ldd_h_std,lqq_h_std,ldq_h_std,torque_nm_std,extrapolated\n";
+    "psi_q_wb_std,ldd_h_std,lqq_h_std,ldq_h_std,torque_nm_std,extrapolated,region,valid\n";
 
 std::string CsvRow(double id, double iq, const fit::FluxPrediction& p) {
-  return absl::StrFormat("%g,%g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.3g,%.3g,%.3g,%.3g,%.3g,%.3g,%d\n",
+  return absl::StrFormat("%g,%g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.3g,%.3g,%.3g,%.3g,%.3g,%.3g,%d,%s,%d\n",
                          id, iq, p.psi_d_wb, p.psi_q_wb, p.ldd_h, p.lqq_h, p.ldq_h, p.ld_app_h,
                          p.lq_app_h, p.torque_nm, p.psi_d_wb_std, p.psi_q_wb_std, p.ldd_h_std,
-                         p.lqq_h_std, p.ldq_h_std, p.torque_nm_std, p.extrapolated ? 1 : 0);
+                         p.lqq_h_std, p.ldq_h_std, p.torque_nm_std, p.extrapolated ? 1 : 0,
+                         fit::RegionName(p.region), p.valid ? 1 : 0);
+}
+
+// The text form's note on where the point lies (fit::Region).
+const char* RegionNote(fit::Region r) {
+  switch (r) {
+    case fit::Region::kMeasured: return "";
+    case fit::Region::kBySymmetry: return " (by symmetry: the measured half mirrored, psi_d even, psi_q odd in iq)";
+    case fit::Region::kExtrapolated: return " (extrapolated)";
+  }
+  return "";
 }
 
 bool ParseAxis(const std::string& s, double* lo, double* hi, int* n) {
@@ -105,8 +119,8 @@ int RunQueryLocal(const std::vector<std::string>& argv) {
   } else if (args->Has("csv")) {
     std::cout << kCsvHeader << CsvRow(**id, **iq, p);
   } else {
-    std::printf("serial %s at id = %g A, iq = %g A%s\n", cal->serial().c_str(), **id, **iq,
-                p.extrapolated ? " (extrapolated)" : "");
+    std::printf("serial %s at id = %g A, iq = %g A%s\n", cal->serial().c_str(), **id, **iq, RegionNote(p.region));
+    if (!p.valid) std::printf("  NOT VALID: %s (differential inductance not positive definite)\n", p.invalid_reason.c_str());
     std::printf("  psi_d = %.6g +- %.2g Wb   psi_q = %.6g +- %.2g Wb\n", p.psi_d_wb, p.psi_d_wb_std,
                 p.psi_q_wb, p.psi_q_wb_std);
     std::printf("  Ldd = %.5g mH  Lqq = %.5g mH  Ldq = %.4g mH (differential)\n", p.ldd_h * 1e3,

@@ -1,18 +1,20 @@
-// fluxcal report calibration.json [--set RECORDING_SET_DIR] [--diagnosis report.json]
-//                [--speed-rpm N] [--udc-v V] --out report.html [--json]
+// fluxcal report calibration.json [--set RECORDING_SET_DIR [--diagnose]] [--diagnosis report.json]
+//                [--map MAP.csv [--convention C] ...] [--speed-rpm N] [--udc-v V] --out report.html [--json]
 // fluxcal report SERIAL --server ADDR [--version N] [--speed-rpm N] [--udc-v V]
-//                [--set DIR] [--diagnosis FILE] --out report.html [--json]
+//                [--set DIR [--diagnose]] [--diagnosis FILE] [--map MAP.csv] --out report.html [--json]
 // One self-contained static HTML page per calibration (report/report.h,
 // docs/report.md). With --set the set is identified again so that the
 // page shows the identified points against the fitted surfaces, the
 // verdict is judged as the EOL flow judges it, and the manifest's DC-link
 // voltage sets the voltage limit (else the calibration's Udc; with none the
-// page says that the voltage limit cannot be drawn). With --server the service builds the
+// page says that the voltage limit cannot be drawn); --diagnose runs the
+// diagnosis of the set here and embeds its residual maps and spectrum.
+// --map draws a flux map's nodes over the surfaces. With --server the service builds the
 // page from what only the store knows (when the version was created, its
 // stored verdict, whether it is released for flashing, the fleet) with its
 // GetReport, and the page is written as it arrived: one page per stored
-// version, whoever asks. --set and --diagnosis are local files the service
-// never sees: with them the page is built here, from the stored calibration
+// version, whoever asks. --set, --diagnosis and --map are local files the
+// service never sees: with them the page is built here, from the stored calibration
 // and the same provenance and fleet read over the API, as before GetReport
 // existed (pipeline/report.h holds what both ways share).
 #include <chrono>
@@ -26,6 +28,7 @@
 
 #include "cli/args.h"
 #include "cli/command.h"
+#include "cli/support_flux_map.h"
 #include "cli/support_remote.h"
 #include "fitting/calibration.h"
 #include "fitting/fit.h"
@@ -186,7 +189,8 @@ int RunRemoteReport(const std::string& server, const std::string& serial, int ve
   return 0;
 }
 
-const FlagSpecs kReportFlags = {
+FlagSpecs ReportFlags() {
+  FlagSpecs flags = {
     {"out", "FILE", "HTML page to write (required; - for stdout)"},
     {"server", "ADDR",
      "the positional argument is a SERIAL stored there, HOST[:PORT] (default port 50051); the service builds the page"},
@@ -194,12 +198,21 @@ const FlagSpecs kReportFlags = {
     {"set", "DIR",
      "recording set: draws the identified points, judges the verdict, gives the DC-link voltage "
      "(with --server: page built here)"},
+    {"diagnose", "", "with --set: run the diagnosis of the set here and embed it with its residual maps and spectrum"},
     {"diagnosis", "FILE", "a `fluxcal diagnose --json` document to include (with --server: page built here)"},
+    {"map", "CSV", "a flux map whose nodes are drawn over the fitted surfaces (with --server: page built here)"},
     {"speed-rpm", "RPM", "speed of the voltage-limit curve, mechanical rpm (default 1.5 x base speed)"},
     {"udc-v", "V", "DC-link voltage, V (default the set's manifest drive.udc_v, else the calibration's; none: no "
                    "voltage limit or field weakening drawn)"},
     {"json", "", "print a summary (verdict, figures, bytes, sha256) as one JSON document"},
-};
+  };
+  for (auto c : FluxMapConventionFlags()) {
+    c.help = "with --map: " + c.help;
+    flags.push_back(std::move(c));
+  }
+  return flags;
+}
+const FlagSpecs kReportFlags = ReportFlags();
 
 // A positive finite flag value, or none; InvalidArgument naming the flag.
 absl::StatusOr<std::optional<double>> PositiveFlag(const ParsedArgs& args, const char* flag) {
@@ -216,11 +229,21 @@ int RunReport(const std::vector<std::string>& argv) {
   if (!args.ok()) return Fail(std::string(args.status().message()), 2);
   if (auto e = CheckOutToStdout(*args); !e.empty()) return Fail(e, 2);
   if (args->positional.size() != 1 || !args->Get("out")) {
-    return Fail("usage: fluxcal report calibration.json [--set RECORDING_SET_DIR] [--diagnosis report.json] "
-                "[--speed-rpm N] [--udc-v V] --out report.html [--json]\n"
+    return Fail("usage: fluxcal report calibration.json [--set RECORDING_SET_DIR [--diagnose]] [--diagnosis "
+                "report.json] [--map MAP.csv] [--speed-rpm N] [--udc-v V] --out report.html [--json]\n"
                 "       fluxcal report SERIAL --server ADDR [--version N] [--speed-rpm N] [--udc-v V] "
-                "[--set DIR] [--diagnosis FILE] --out report.html [--json]", 2);
+                "[--set DIR [--diagnose]] [--diagnosis FILE] [--map MAP.csv] --out report.html [--json]", 2);
   }
+  if (args->Has("diagnose") && !args->Get("set")) return Fail("flag --diagnose needs --set (the set to diagnose)", 2);
+  if (args->Has("diagnose") && args->Get("diagnosis")) {
+    return Fail("flags --diagnose and --diagnosis: one diagnosis per page (run here, or the document given)", 2);
+  }
+  if (!args->Get("map") && HasFluxMapConventionFlag(*args)) {
+    return Fail("flags --convention, --current, --flux-amplitude and --units describe a flux map: they need --map", 2);
+  }
+  auto convention = FluxMapConventionFromArgs(*args);
+  if (!convention.ok()) return Fail(std::string(convention.status().message()), 2);
+  const bool local_extras = args->Has("set") || args->Has("diagnosis") || args->Has("map");
   const std::string cal_path = args->positional[0];
   const std::string out = *args->Get("out");
   auto speed = PositiveFlag(*args, "speed-rpm");
@@ -236,10 +259,10 @@ int RunReport(const std::vector<std::string>& argv) {
     if (auto v = args->Get("version"); v && (!absl::SimpleAtoi(*v, &version) || version < 0)) {
       return Fail("flag --version: expected a non-negative integer", 2);
     }
-    if (!args->Has("set") && !args->Has("diagnosis")) {
+    if (!local_extras) {
       return RunRemoteReport(*server, cal_path, version, speed->value_or(0.0), *udc, out, args->Has("json"));
     }
-    std::fprintf(stderr, "report: --set/--diagnosis are local: the page is built here, not by the service\n");
+    std::fprintf(stderr, "report: --set/--diagnosis/--map are local: the page is built here, not by the service\n");
     cal_json = FetchCalibration(*server, cal_path, version);
     if (!cal_json.ok()) return Fail(std::string(cal_json.status().message()));
     source = cal_path + " from the service at " + *server;
@@ -276,50 +299,41 @@ int RunReport(const std::vector<std::string>& argv) {
     in.udc_source = pipeline::kUdcFromRequest;
   }
 
-  // Verdict: as the EOL flow judges it when the set is here (nominal
-  // psi_pm, unreliable points).
-  fit::FitData identified;
-  pipeline::FitTolerances tol;
+  // The set's points, Udc and verdict as the EOL flow judges them, a map's
+  // nodes, a diagnosis: pipeline/report.h, one home each.
+  fit::FitData measured;
+  std::optional<io::RecordingSet> set;
   if (auto set_dir = args->Get("set")) {
-    auto set = io::ReadRecordingSet(*set_dir);
-    if (!set.ok()) return Fail(std::string(set.status().message()));
-    if (!set->manifest.serial.empty() && set->manifest.serial != cal->serial()) {
-      return Fail(*set_dir + "/manifest.json: field 'serial': '" + set->manifest.serial +
-                  "' is not the calibration's serial '" + cal->serial() + "'");
-    }
+    auto read = io::ReadRecordingSet(*set_dir);
+    if (!read.ok()) return Fail(std::string(read.status().message()));
+    set = std::move(*read);
     ident::IdentifyOptions opt;
     opt.progress = [](size_t k, size_t n) {
       std::fprintf(stderr, "\rreport: identifying point %zu/%zu", k + 1, n);
       if (k + 1 == n) std::fprintf(stderr, "\n");
     };
-    auto ids = pipeline::IdentifySet(*set, opt);
-    if (!ids.ok()) return Fail(std::string(ids.status().message()));
-    size_t unreliable = 0;
-    for (const auto& p : ids->points) {
-      if (!p.reliable) ++unreliable;
-      identified.inductances.push_back(pipeline::ToObservation(p));
+    if (auto st = pipeline::AddRecordingSetToReport(*set, *set_dir, opt, &measured, &in); !st.ok()) {
+      return Fail(std::string(st.message()));
     }
-    // A set may carry the bench's own identification (hf_results.csv)
-    // instead of, or besides, waveforms; its points are drawn the same way.
-    if (!set->hf_results.empty()) {
-      const auto hf = fit::FitDataFromHfRows(&set->manifest, set->hf_results);
-      identified.inductances.insert(identified.inductances.end(), hf.inductances.begin(), hf.inductances.end());
+    if (args->Has("diagnose")) {
+      std::fprintf(stderr, "report: diagnosing %s\n", set_dir->c_str());
+      if (auto st = pipeline::AddDiagnosisOfSetToReport(*set, *set_dir, &in); !st.ok()) {
+        return Fail(*set_dir + ": --diagnose: " + std::string(st.message()));
+      }
     }
-    in.identified = &identified;
-    in.set_path = *set_dir;
-    if (!in.udc_v && set->manifest.drive.udc_v) {
-      in.udc_v = *set->manifest.drive.udc_v;
-      in.udc_source = *set_dir + "/manifest.json drive.udc_v";
-    }
-    // The manifest's nominal psi_pm, else the calibration's (Verdict).
-    in.verdict = pipeline::Verdict(*cal, set->manifest.motor.psi_pm_wb, identified.inductances.size(), unreliable, tol);
-    in.verdict_basis = "judged as the EOL flow does: fit, psi_pm against the manifest's nominal, point flags";
+  }
+  if (auto map_path = args->Get("map")) {
+    io::FluxMapReadOptions ro;
+    ro.convention = *convention;
+    auto map = io::ReadFluxMapCsv(*map_path, ro);
+    if (!map.ok()) return Fail(std::string(map.status().message()));
+    std::fprintf(stderr, "report: map %s: %s\n", map_path->c_str(), map->convention.Describe().c_str());
+    pipeline::AddFluxMapToReport(*map, *map_path, &measured, &in);
   }
   if (auto d = args->Get("diagnosis")) {
     auto dj = ReadJson(*d);
     if (!dj.ok()) return Fail(std::string(dj.status().message()));
-    in.diagnosis = *dj;
-    in.diagnosis_path = *d;
+    pipeline::AddDiagnosisDocumentToReport(*dj, *d, &in);
   }
   std::fprintf(stderr, "report: building tables and figures for %s\n", cal->serial().c_str());
   auto rep = report::BuildReport(in);

@@ -251,7 +251,9 @@ int RunRemoteQuery(const std::vector<std::string>& argv, const FlagSpecs& flags)
                                 {"ld_app_h", v.ld_app_h()}, {"lq_app_h", v.lq_app_h()}, {"torque_nm", v.torque_nm()},
                                 {"psi_d_wb_std", v.psi_d_wb_std()}, {"ldd_h_std", v.ldd_h_std()},
                                 {"lqq_h_std", v.lqq_h_std()}, {"torque_nm_std", v.torque_nm_std()},
-                                {"extrapolated", v.extrapolated()}}
+                                {"extrapolated", v.extrapolated()},
+                                {"region", v.region().empty() ? (v.extrapolated() ? "extrapolated" : "measured") : v.region()},
+                                {"valid", !v.invalid()}, {"invalid_reason", v.invalid_reason()}}
                      .dump(2, ' ', false, nlohmann::json::error_handler_t::replace)
               << "\n";
   } else {
@@ -259,7 +261,8 @@ int RunRemoteQuery(const std::vector<std::string>& argv, const FlagSpecs& flags)
                 "Ldq %.4g mH, torque %.4g N m%s\n",
                 resp.serial().c_str(), resp.version(), v.id_a(), v.iq_a(), v.psi_d_wb(), v.psi_q_wb(),
                 v.ldd_h() * 1e3, v.lqq_h() * 1e3, v.ldq_h() * 1e3, v.torque_nm(),
-                v.extrapolated() ? " (extrapolated)" : "");
+                v.extrapolated() ? " (extrapolated)" : v.region() == "by_symmetry" ? " (by symmetry)" : "");
+    if (v.invalid()) std::printf("  NOT VALID: %s (differential inductance not positive definite)\n", v.invalid_reason().c_str());
   }
   return 0;
 }
@@ -269,7 +272,7 @@ int RunRemoteExport(const std::vector<std::string>& argv, const FlagSpecs& flags
   if (!args.ok()) std::fprintf(stderr, "fluxcal export: %s\n", std::string(args.status().message()).c_str());
   if (!args.ok() || args->positional.size() != 1 || !args->Get("out")) {
     std::fprintf(stderr, "usage: fluxcal export SERIAL --server ADDR --table mtpa|mtpv|fw --format "
-                         "csv|json|h|cdfx|dcm [--points N] [--version N] [--ctype double|float] [--allow-extrapolation] "
+                         "csv|json|h|cdfx|dcm|a2l [--points N] [--version N] [--ctype double|float|int16|int32] [--allow-extrapolation] "
                          "--out FILE [--json]\n");
     return 2;
   }

@@ -8,6 +8,7 @@
 #include <Eigen/Dense>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 #include "io/csv.h"
 #include "fitting/surface.h"
 #include "nlohmann/json.hpp"
@@ -36,27 +37,108 @@ sim::DifferentialInductance Calibration::Inductance(double id, double iq, double
   return l;
 }
 
-bool Calibration::InMeasuredRegion(double id, double iq) const {
-  // Measured region: the box spanned by the data, with 2 % margin. The
-  // machine's symmetry psi(id, -iq) = (psi_d, -psi_q) mirrors it to iq < 0.
-  const double mi = 0.02 * (id_max_a_ - id_min_a_ + 1.0), mq = 0.02 * (iq_max_a_ - iq_min_a_ + 1.0);
-  const double aq = iq_min_a_ >= 0 ? std::abs(iq) : iq;
-  return id >= id_min_a_ - mi && id <= id_max_a_ + mi && aq >= iq_min_a_ - mq && aq <= iq_max_a_ + mq;
+const char* RegionName(Region r) {
+  switch (r) {
+    case Region::kMeasured: return "measured";
+    case Region::kBySymmetry: return "by_symmetry";
+    case Region::kExtrapolated: return "extrapolated";
+  }
+  return "extrapolated";
 }
+
+const char* IqHalvesName(IqHalves h) {
+  switch (h) {
+    case IqHalves::kUnknown: return "unknown";
+    case IqHalves::kPositive: return "positive";
+    case IqHalves::kNegative: return "negative";
+    case IqHalves::kBoth: return "both";
+  }
+  return "unknown";
+}
+
+std::string NotPositiveDefiniteReason(double ldd, double lqq, double ldq) {
+  // Sylvester's criterion: a symmetric 2 x 2 matrix is positive definite
+  // iff its leading principal minors Ldd and Ldd Lqq - Ldq^2 are positive
+  // (then Lqq > 0 follows; tested anyway, to name it).
+  if (!(ldd > 0)) return absl::StrFormat("ldd_h = %.6g H is not positive", ldd);
+  if (!(lqq > 0)) return absl::StrFormat("lqq_h = %.6g H is not positive", lqq);
+  const double det = ldd * lqq - ldq * ldq;
+  if (!(det > 0)) {
+    return absl::StrFormat("det = ldd_h lqq_h - ldq_h^2 = %.6g H^2 is not positive (ldq_h = %.6g H)", det, ldq);
+  }
+  return "";
+}
+
+void Calibration::SetMeasuredIq(IqHalves halves, double iq_signed_min_a, double iq_signed_max_a) {
+  iq_halves_ = halves;
+  iq_signed_min_a_ = iq_signed_min_a;
+  iq_signed_max_a_ = iq_signed_max_a;
+}
+
+Region Calibration::RegionOf(double id, double iq) const {
+  // Measured region: the box spanned by the data, with 2 % margin.
+  const double mi = 0.02 * (id_max_a_ - id_min_a_ + 1.0), mq = 0.02 * (iq_max_a_ - iq_min_a_ + 1.0);
+  if (!(id >= id_min_a_ - mi && id <= id_max_a_ + mi)) return Region::kExtrapolated;
+  if (iq_halves_ == IqHalves::kUnknown) {
+    // As before the halves were recorded: the |iq| range mirrored to iq < 0
+    // by the machine's symmetry psi(id, -iq) = (psi_d, -psi_q), all of it
+    // "measured" (a signed range, iq_min_a < 0, is taken as it stands).
+    const double aq = iq_min_a_ >= 0 ? std::abs(iq) : iq;
+    return aq >= iq_min_a_ - mq && aq <= iq_max_a_ + mq ? Region::kMeasured : Region::kExtrapolated;
+  }
+  const double aq = std::abs(iq);
+  if (!(aq >= iq_min_a_ - mq && aq <= iq_max_a_ + mq)) return Region::kExtrapolated;
+  auto on_measured_half = [&](double q) { return q >= iq_signed_min_a_ - mq && q <= iq_signed_max_a_ + mq; };
+  if (on_measured_half(iq)) return Region::kMeasured;
+  // The other half: for a model symmetric in iq it is the measured half
+  // mirrored; a model that is not symmetric says there what nothing
+  // measured.
+  if (family_.SymmetricInIq() && on_measured_half(-iq)) return Region::kBySymmetry;
+  return Region::kExtrapolated;
+}
+
+std::string Calibration::IqRegionText() const {
+  if (iq_halves_ == IqHalves::kUnknown) {
+    return absl::StrFormat("|iq| %.4g .. %.4g A, both halves counted as measured (the calibration does not record "
+                           "which half the data measured)", iq_min_a_, iq_max_a_);
+  }
+  const std::string measured = absl::StrFormat("iq %.4g .. %.4g A measured", iq_signed_min_a_ + 0.0, iq_signed_max_a_ + 0.0);
+  if (iq_halves_ == IqHalves::kBoth) return measured + " (both halves)";
+  const bool pos = iq_halves_ == IqHalves::kPositive;
+  // The other half as a range, or "iq < 0" / "iq > 0" when not mirrored.
+  const std::string other = absl::StrFormat("iq %.4g .. %.4g A", pos ? -iq_signed_max_a_ : -iq_signed_min_a_ + 0.0,
+                                            pos ? -iq_signed_min_a_ + 0.0 : -iq_signed_max_a_);
+  if (family_.SymmetricInIq()) {
+    return absl::StrCat(measured, "; ", other,
+                        " by symmetry (the measured half mirrored: psi_d even, psi_q odd in iq; not measured)");
+  }
+  return absl::StrCat(measured, "; ", pos ? "iq < 0" : "iq > 0", " extrapolated (model ", family_.Name(),
+                      " is not symmetric in iq, and the data measured one half)");
+}
+
+bool Calibration::InMeasuredRegion(double id, double iq) const { return RegionOf(id, iq) != Region::kExtrapolated; }
 
 bool Calibration::PhysicalOver(double factor, const std::vector<Box>& except) const {
   const double lo = std::min(id_min_a_, 0.0) * factor, hi = std::max(id_max_a_, 0.0);
-  const double qmax = std::max(iq_max_a_, 1.0) * factor;
+  // iq range checked: |iq| up to the measured maximum for a symmetric model
+  // (the inductance of the other half is the mirror image: Ldd, Lqq even,
+  // Ldq odd, the same determinant); the signed range measured otherwise.
+  double q_lo = 0, q_hi = std::max(iq_max_a_, 1.0) * factor;
+  if (!family_.SymmetricInIq() && iq_halves_ != IqHalves::kUnknown) {
+    q_lo = iq_halves_ == IqHalves::kPositive ? 0.0 : std::min(iq_signed_min_a_, -1.0) * factor;
+    q_hi = iq_halves_ == IqHalves::kNegative ? 0.0 : std::max(iq_signed_max_a_, 1.0) * factor;
+  }
+  const int nq = q_lo < 0 && q_hi > 0 ? 24 : 12;   // the same node spacing on each measured half
   for (int a = 0; a <= 12; ++a) {
     const double id = lo + (hi - lo) * a / 12;
-    for (int b = 0; b <= 12; ++b) {
-      const double iq = qmax * b / 12;
+    for (int b = 0; b <= nq; ++b) {
+      const double iq = q_lo + (q_hi - q_lo) * b / nq;
       const bool excepted = std::any_of(except.begin(), except.end(), [&](const Box& x) {
-        return id >= x.id_lo_a && id <= x.id_hi_a && iq >= x.abs_iq_lo_a && iq <= x.abs_iq_hi_a;
+        return id >= x.id_lo_a && id <= x.id_hi_a && std::abs(iq) >= x.abs_iq_lo_a && std::abs(iq) <= x.abs_iq_hi_a;
       });
       if (excepted) continue;
       const auto L = Inductance(id, iq);
-      if (!(L.ldd_h > 0) || !(L.lqq_h > 0) || !(L.ldd_h * L.lqq_h - L.ldq_h * L.ldq_h > 0)) return false;
+      if (!NotPositiveDefiniteReason(L.ldd_h, L.lqq_h, L.ldq_h).empty()) return false;
     }
   }
   return true;
@@ -82,7 +164,10 @@ FluxPrediction Calibration::Predict(double id, double iq) const {
   FluxPrediction out;
   out.psi_d_wb = y[0]; out.psi_q_wb = y[1]; out.ldd_h = y[2]; out.lqq_h = y[3]; out.ldq_h = y[4];
   out.ld_app_h = y[5]; out.lq_app_h = y[6]; out.torque_nm = y[7];
-  out.extrapolated = !InMeasuredRegion(id, iq);
+  out.region = RegionOf(id, iq);
+  out.extrapolated = out.region == Region::kExtrapolated;
+  out.invalid_reason = NotPositiveDefiniteReason(out.ldd_h, out.lqq_h, out.ldq_h);
+  out.valid = out.invalid_reason.empty();
   const size_t n = params_.size();
   if (covariance_.size() == n * n) {
     Eigen::MatrixXd J(8, n);
@@ -118,6 +203,8 @@ nlohmann::json Calibration::ToJson() const {
       j["spline_knots"]["iq_lo_a"] = family_.spline.iq_lo_a;
       j["spline_knots"]["spans_id"] = family_.spline.spans;
       j["spline_knots"]["spans_iq"] = family_.spline.spans_q;
+      // "smooth" written without it is the folded layout of older files.
+      if (family_.spline.mirrored) j["spline_knots"]["mirrored"] = true;
     }
   }
   j["pole_pairs"] = pole_pairs_;
@@ -130,6 +217,13 @@ nlohmann::json Calibration::ToJson() const {
   j["covariance"] = covariance_;
   j["region"] = {{"id_min_a", id_min_a_}, {"id_max_a", id_max_a_},
                  {"iq_min_a", iq_min_a_}, {"iq_max_a", iq_max_a_}};
+  if (iq_halves_ != IqHalves::kUnknown) {
+    // A compatible extension of v1 (docs/fitting.md): readers that do not
+    // know these fields ignore them; files without them load as before.
+    j["region"]["iq_halves"] = IqHalvesName(iq_halves_);
+    j["region"]["iq_signed_min_a"] = iq_signed_min_a_;
+    j["region"]["iq_signed_max_a"] = iq_signed_max_a_;
+  }
   j["fit"] = {{"observations", summary.observations}, {"chi2", summary.chi2}, {"bic", summary.bic},
               {"rms_relative", summary.rms_relative}, {"termination", summary.termination},
               {"usable", summary.usable}, {"candidates", summary.candidates},
@@ -172,13 +266,18 @@ absl::StatusOr<Calibration> Calibration::FromJson(const nlohmann::json& j) {
       fam.spline.id_hi_a = k.at("id_hi_a").get<double>();
       fam.spline.iq_lo_a = k.at("iq_lo_a").get<double>();
       fam.spline.iq_hi_a = k.at("iq_hi_a").get<double>();
+      fam.spline.mirrored = fam.spline.symmetric && k.value("mirrored", false);
+      const bool folded = fam.spline.symmetric && !fam.spline.mirrored;
       if (fam.spline.spans < 1 || fam.spline.spans > 32 || fam.spline.spans_q < 1 || fam.spline.spans_q > 64 ||
-          (fam.spline.symmetric && (fam.spline.spans_q % 2 != 0 || fam.spline.iq_lo_a != -fam.spline.iq_hi_a))) {
+          (folded && (fam.spline.spans_q % 2 != 0 || fam.spline.iq_lo_a != -fam.spline.iq_hi_a))) {
         return absl::InvalidArgumentError("field 'spline_knots': spans_id 1..32, spans_iq 1..64 (even and a "
-                                          "symmetric range for 'smooth')");
+                                          "symmetric range for 'smooth' without 'mirrored')");
       }
       if (!(fam.spline.id_hi_a > fam.spline.id_lo_a) || !(fam.spline.iq_hi_a > fam.spline.iq_lo_a)) {
         return absl::InvalidArgumentError("field 'spline_knots': empty knot range");
+      }
+      if (fam.spline.mirrored && !(fam.spline.iq_lo_a < 0 && fam.spline.iq_hi_a > 0)) {
+        return absl::InvalidArgumentError("field 'spline_knots': a mirrored layout needs iq_lo_a < 0 < iq_hi_a");
       }
     } else if (model.rfind("spline", 0) == 0) {
       fam.kind = Family::kSpline;
@@ -235,6 +334,22 @@ absl::StatusOr<Calibration> Calibration::FromJson(const nlohmann::json& j) {
                   r.at("iq_max_a").get<double>());
     c.psi_pm_nominal_wb_ = *psi_nom;
     c.udc_v_ = *udc;
+    if (r.contains("iq_halves")) {
+      const std::string h = r.at("iq_halves").get<std::string>();
+      IqHalves halves = IqHalves::kUnknown;
+      for (IqHalves x : {IqHalves::kPositive, IqHalves::kNegative, IqHalves::kBoth}) {
+        if (h == IqHalvesName(x)) halves = x;
+      }
+      if (halves == IqHalves::kUnknown) {
+        return absl::InvalidArgumentError(absl::StrCat("field 'region.iq_halves': expected positive, negative or both, got '", h, "'"));
+      }
+      const double lo = r.at("iq_signed_min_a").get<double>(), hi = r.at("iq_signed_max_a").get<double>();
+      if (!(lo <= hi) || (halves == IqHalves::kPositive && lo < 0) || (halves == IqHalves::kNegative && hi > 0)) {
+        return absl::InvalidArgumentError(absl::StrFormat(
+            "field 'region.iq_signed_min_a': [%g, %g] A does not fit iq_halves '%s'", lo, hi, h));
+      }
+      c.SetMeasuredIq(halves, lo, hi);
+    }
     c.version = j.value("version", 0);
     if (j.contains("fit")) {
       const auto& f = j["fit"];

@@ -26,13 +26,46 @@
 namespace fluxcal::fit {
 
 class SurfaceEvaluator;
+// Where an operating point lies relative to the data a calibration was
+// fitted to (Calibration::RegionOf):
+//  kMeasured: inside the measured region (the box the observations span,
+//    2 % margin, on the iq half or halves the data measured);
+//  kBySymmetry: the mirror image (id, -iq) of a measured point, on the
+//    half the data did not measure, of a model symmetric in iq (psi_d even,
+//    psi_q odd): what it says there is the measured half mirrored;
+//  kExtrapolated: anything else, including the unmeasured half of a model
+//    that is not symmetric in iq (smooth-asym asked for by name on data
+//    from one half).
+enum class Region { kMeasured, kBySymmetry, kExtrapolated };
+// "measured", "by_symmetry", "extrapolated" (JSON, proto, CSV).
+const char* RegionName(Region r);
+
+// Which halves of the iq axis the data measured (Fit decides: fit.cc,
+// MeasuredIqOf). kUnknown: a calibration written before this was recorded
+// (no `iq_halves` in its JSON) or built without it; its |iq| box counts as
+// measured on both halves, as it always did.
+enum class IqHalves { kUnknown, kPositive, kNegative, kBoth };
+const char* IqHalvesName(IqHalves h);   // "unknown", "positive", "negative", "both"
+
+// Why a differential inductance is not positive definite ("" when it is):
+// Ldd > 0, Lqq > 0 and det = Ldd Lqq - Ldq^2 > 0 (Sylvester's criterion for
+// the symmetric 2 x 2 matrix [[Ldd, Ldq], [Ldq, Lqq]]). A non-finite value
+// is not positive definite. The one test of it: the fit's physical check,
+// queries and the tables' per-cell flag all call this.
+std::string NotPositiveDefiniteReason(double ldd_h, double lqq_h, double ldq_h);
 
 struct FluxPrediction {
   double psi_d_wb = 0, psi_q_wb = 0, ldd_h = 0, lqq_h = 0, ldq_h = 0;
   double ld_app_h = 0, lq_app_h = 0, torque_nm = 0;
   double psi_d_wb_std = 0, psi_q_wb_std = 0, ldd_h_std = 0, lqq_h_std = 0, ldq_h_std = 0;
   double ld_app_h_std = 0, lq_app_h_std = 0, torque_nm_std = 0;
-  bool extrapolated = false;
+  Region region = Region::kMeasured;
+  bool extrapolated = false;   // region == kExtrapolated
+  // false when the differential inductance is not positive definite there
+  // (invalid_reason says which test failed): such a point is never a valid
+  // operating point of the model, whatever its region.
+  bool valid = true;
+  std::string invalid_reason;
 };
 
 struct FitSummary {
@@ -69,7 +102,7 @@ class Calibration : public sim::MagneticModel {
   sim::DifferentialInductance Inductance(double id_a, double iq_a,
                                          double temperature_c = 25.0) const override;
   // Everything at one point with standard deviations from the parameter
-  // covariance (first-order propagation) and an extrapolation flag.
+  // covariance (first-order propagation), its region and its validity.
   FluxPrediction Predict(double id_a, double iq_a) const;
 
   const std::string& serial() const { return serial_; }
@@ -90,15 +123,34 @@ class Calibration : public sim::MagneticModel {
   // --udc-v): the voltage limit of field-weakening and MTPV exports.
   const std::optional<double>& udc_v() const { return udc_v_; }
   void set_udc_v(std::optional<double> v) { udc_v_ = v; }
+  // Measured, by symmetry or extrapolated (Region above).
+  Region RegionOf(double id_a, double iq_a) const;
+  // RegionOf(...) != kExtrapolated: measured, or the mirror image of a
+  // measured point under the symmetry of a symmetric model.
   bool InMeasuredRegion(double id_a, double iq_a) const;
   double id_min_a() const { return id_min_a_; }
   double id_max_a() const { return id_max_a_; }
-  // Fit stores the range of |iq|; InMeasuredRegion mirrors it to iq < 0.
+  // Fit stores the range of |iq| here, and the signed extent of the halves
+  // it measured below.
   double iq_min_a() const { return iq_min_a_; }
   double iq_max_a() const { return iq_max_a_; }
+  // The iq halves the data measured and their signed extent: iq in
+  // [iq_signed_min_a, iq_signed_max_a] (with the 2 % margin) is measured
+  // (a half the data did not measure ends the range at 0). Fit sets them;
+  // without (kUnknown) the |iq| box is measured on both halves.
+  void SetMeasuredIq(IqHalves halves, double iq_signed_min_a, double iq_signed_max_a);
+  IqHalves iq_halves() const { return iq_halves_; }
+  // One sentence on the iq range measured and what the calibration says on
+  // the other half ("iq 0 .. 24 A measured; iq -24 .. 0 A by symmetry
+  // (...)"), for pages and summaries.
+  std::string IqRegionText() const;
+  double iq_signed_min_a() const { return iq_signed_min_a_; }
+  double iq_signed_max_a() const { return iq_signed_max_a_; }
   // Inductance positive definite (Ldd > 0, Lqq > 0, det > 0) on a grid over
   // the measured region widened by `factor` (towards negative id and larger
   // |iq|): the extrapolation a table generator may lean on stays physical.
+  // A model symmetric in iq is checked on iq >= 0 (the other half is its
+  // mirror image); one that is not, over the signed iq range measured.
   // (Saturation beyond the region is guaranteed by the analytic family only.)
   // Grid nodes inside a box of `except` (|iq|) are not checked: Fit passes
   // the cells around a point the bench measured non-positive, where the
@@ -127,6 +179,8 @@ class Calibration : public sim::MagneticModel {
   // shared by copies: Flux and Inductance are called millions of times by
   // a replay and a table solver.
   std::shared_ptr<const SurfaceEvaluator> eval_;
+  IqHalves iq_halves_ = IqHalves::kUnknown;
+  double iq_signed_min_a_ = 0, iq_signed_max_a_ = 0;
 };
 
 absl::StatusOr<Calibration> LoadCalibrationFile(const std::string& path);

@@ -28,6 +28,10 @@ constexpr double kPi = std::numbers::pi;
 // Relative GCV excess accepted for a smoother fit (SolveLinear).
 constexpr double kGcvTolerance = 0.05;
 constexpr double kMinResidualDofShare = 0.10;   // GCV guard: n - tr(H) >= 10 % of n (SolveLinear)
+// Spans of the symmetric smoothing spline's iq knots over the measured |iq|
+// range (FitScreened, `smooth`): docs/fitting.md has what 6, 8, 9, 11, 12
+// and 16 did instead.
+constexpr int kSmoothSpansIqHalf = 10;
 
 
 // An affine form c + sum_j a_j p_j in the parameters. The polynomial and
@@ -996,6 +1000,74 @@ FitData Screen(const FitData& in, std::vector<std::string>* excluded, std::vecto
 }  // namespace
 
 namespace {
+// Which halves of the iq axis the data measured. The machine's symmetry
+// (psi_d even, psi_q odd in iq: a rotor symmetric about its d axis) is the
+// default hypothesis; only observations on both sides of iq = 0 can show
+// that a map departs from it, and only they pin an asymmetric model's
+// other half (fitted to one half, smooth-asym continued its psi_q(id, 0)
+// slope into iq < 0 and was 62 % off the public map there, Ldd -9.5 mH at
+// (-10, -12) A). A half counts as measured when
+//  - it holds at least kHalfMinShare of all observations (HF points,
+//    steady-state rows and flux nodes, one each) and at least three: a stray
+//    row or two cannot set half the map, and
+//  - its observations span at least kHalfMinSpan of the largest |iq|
+//    (0 included when points lie on iq = 0): one iq level does not show how
+//    the half bends;
+// observations within kZeroBand of the largest |iq| of iq = 0 (a set point
+// of 0 A read back as a few mA either way, "-0.0") belong to both halves.
+// If neither half passes, the one with more observations is taken (both
+// empty: the positive). The signed extent of a half not measured ends at 0.
+constexpr double kZeroBand = 0.05, kHalfMinShare = 0.10, kHalfMinSpan = 0.25;
+struct MeasuredIq {
+  IqHalves halves = IqHalves::kPositive;
+  double lo_a = 0, hi_a = 0;   // signed extent of the measured halves
+  int n_pos = 0, n_neg = 0, n = 0;
+};
+MeasuredIq MeasuredIqOf(const FitData& d) {
+  std::vector<double> iq;
+  for (const auto& o : d.inductances) iq.push_back(o.iq_a);
+  for (const auto& o : d.steady_state) iq.push_back(o.iq_a);
+  for (const auto& o : d.fluxes) iq.push_back(o.iq_a);
+  MeasuredIq m;
+  m.n = static_cast<int>(iq.size());
+  if (iq.empty()) return m;
+  double q_max = 0, lo = iq[0], hi = iq[0];
+  for (double q : iq) {
+    q_max = std::max(q_max, std::abs(q));
+    lo = std::min(lo, q);
+    hi = std::max(hi, q);
+  }
+  const double band = kZeroBand * q_max;
+  bool on_zero = false;
+  double pos_lo = 1e300, pos_hi = 0, neg_lo = 1e300, neg_hi = 0;   // |iq| extent per side
+  for (double q : iq) {
+    if (std::abs(q) <= band) {
+      on_zero = true;
+    } else if (q > 0) {
+      ++m.n_pos;
+      pos_lo = std::min(pos_lo, q);
+      pos_hi = std::max(pos_hi, q);
+    } else {
+      ++m.n_neg;
+      neg_lo = std::min(neg_lo, -q);
+      neg_hi = std::max(neg_hi, -q);
+    }
+  }
+  const int need = std::max(3, static_cast<int>(std::ceil(kHalfMinShare * m.n)));
+  auto measured = [&](int count, double a, double b) {
+    if (count < need) return false;
+    const double from = on_zero ? 0.0 : a;
+    return b - from >= kHalfMinSpan * q_max;
+  };
+  bool pos = measured(m.n_pos, pos_lo, pos_hi), neg = measured(m.n_neg, neg_lo, neg_hi);
+  if (!pos && !neg) (m.n_neg > m.n_pos ? neg : pos) = true;
+  m.halves = pos && neg ? IqHalves::kBoth : (pos ? IqHalves::kPositive : IqHalves::kNegative);
+  m.lo_a = neg ? lo : std::max(lo, 0.0);
+  m.hi_a = pos ? hi : std::min(hi, 0.0);
+  if (m.lo_a > m.hi_a) m.lo_a = m.hi_a = 0.0;   // e.g. the only points of the measured half near 0
+  return m;
+}
+
 // The fit of screened data: every candidate family, the physical one with
 // the lowest cross-validation score. `excluded` lists what the screen left
 // out; the down-weighted points are added to it.
@@ -1028,6 +1100,13 @@ absl::StatusOr<Calibration> FitScreened(const FitData& d, std::vector<std::strin
     id_min = std::min(id_min, s.id_a); id_max = std::max(id_max, s.id_a);
     iq_min = std::min(iq_min, std::abs(s.iq_a)); iq_max = std::max(iq_max, std::abs(s.iq_a));
   }
+  const MeasuredIq measured_iq = MeasuredIqOf(d);
+  // A calibration of family f with this data's measured region.
+  auto calibration = [&](const Family& f, const std::vector<double>& params, const std::vector<double>& cov) {
+    Calibration c(d.serial, f, params, cov, d.pole_pairs, d.rs_ohm, id_min, id_max, iq_min, iq_max);
+    c.SetMeasuredIq(measured_iq.halves, measured_iq.lo_a, measured_iq.hi_a);
+    return c;
+  };
   // Spline knots span the measured region (with id = 0, where psi_pm is
   // defined) plus 5 % on each side.
   const double id_lo = std::min(id_min, 0.0), id_hi = std::max(id_max, 0.0);
@@ -1041,21 +1120,44 @@ absl::StatusOr<Calibration> FitScreened(const FitData& d, std::vector<std::strin
     f.spline.iq_hi_a = 1.05 * std::max(iq_max, 10.0);
     return f;
   };
-  // Smoothing splines: 8 spans per axis over the data box (16 over the
-  // mirrored iq range when folded), smoothness chosen by GCV.
+  // Smoothing splines: 8 spans over the id range of the data box, smoothness
+  // chosen by GCV. "smooth" (symmetric) lays kSmoothSpansIqHalf spans over
+  // the measured |iq| range and mirrors it (SplineDomain::mirrored);
+  // "smooth-asym" spans the signed range the data cover with the same knot
+  // width, so that where both halves were measured it has the same
+  // resolution on each. Why not the folded layout (16 spans over [-Q, Q])
+  // any longer: it spent half its knots on the mirror image and has a knot
+  // at iq = 0, where the symmetry fixes W's odd derivatives; on the public
+  // bench set (data/real/baldor_eol, one half) it was 0.58 % RMS off the
+  // measured map over the motoring half, the mirrored layout 0.28 % (the
+  // asymmetric spline, which auto chose there before, 0.29 %, and 62 % off
+  // over the braking half). The folded layout at 32 spans reached 0.27 %
+  // too, but its smoothing spline then interpolated the lone 30 % outlier
+  // of Fit.GrossOutlierMovesNothing; docs/fitting.md has the span counts
+  // tried.
+  auto mirrored_range = [&](Family* f) {
+    const double m = 0.05 * std::max(iq_max - std::min(iq_min, 0.0), 10.0);
+    f->spline.iq_lo_a = std::min(iq_min, 0.0) - m;
+    f->spline.iq_hi_a = iq_max + m;
+    f->spline.spans_q = kSmoothSpansIqHalf;
+  };
   auto smooth = [&](bool symmetric) {
     Family f = spline(8);
     f.spline.smoothing = true;
     f.spline.symmetric = symmetric;
     if (symmetric) {
-      f.spline.spans_q = 16;
-      f.spline.iq_lo_a = -f.spline.iq_hi_a;
+      f.spline.mirrored = true;
+      mirrored_range(&f);
     } else {
+      Family ref = f;
+      mirrored_range(&ref);
+      const double width = (ref.spline.iq_hi_a - ref.spline.iq_lo_a) / ref.spline.spans_q;
       const double lo = std::min(iq_signed_min, 0.0), hi = std::max(iq_signed_max, 0.0);
       const double m = 0.05 * std::max(hi - lo, 10.0);
-      f.spline.spans_q = 8;
       f.spline.iq_lo_a = lo - m;
       f.spline.iq_hi_a = hi + m;
+      const double spans = std::ceil((f.spline.iq_hi_a - f.spline.iq_lo_a) / width - 1e-9);
+      f.spline.spans_q = static_cast<int>(std::clamp(spans, 8.0, 64.0));
     }
     return f;
   };
@@ -1084,11 +1186,16 @@ absl::StatusOr<Calibration> FitScreened(const FitData& d, std::vector<std::strin
   // or flux nodes. Without any of them it is unobservable (any Ldq along
   // iq = 0 fits the Ldd/Lqq data equally): on a 6 x 6 grid of HF results
   // without Ldq, auto once chose it with psi_q(0, 0) = -18 mWb and the
-  // torque and tables followed. Asked for by name it is still fitted.
+  // torque and tables followed. And it is a candidate only when the data
+  // measured both halves of the iq axis (MeasuredIqOf): on one half nothing
+  // can show the map is not symmetric, and the asymmetric model's other
+  // half is an extrapolation. Asked for by name it is still fitted; its
+  // unmeasured half is then `extrapolated` (Calibration::RegionOf).
   bool ldq_seen = false;
   for (const auto& obs : d.inductances) ldq_seen |= obs.ldq_h.has_value();
   const bool psi_q_level_seen = ldq_seen || !d.steady_state.empty() || !d.fluxes.empty();
-  if (o.model == "smooth-asym" || ((o.model == "smooth" || o.model == "auto") && psi_q_level_seen && !std::getenv("FLUXCAL_SYM"))) {
+  const bool both_halves = measured_iq.halves == IqHalves::kBoth;
+  if (o.model == "smooth-asym" || ((o.model == "smooth" || o.model == "auto") && psi_q_level_seen && both_halves)) {
     candidates.push_back(smooth(false));
   }
   if (candidates.empty()) {
@@ -1105,8 +1212,7 @@ absl::StatusOr<Calibration> FitScreened(const FitData& d, std::vector<std::strin
       // May have more coefficients than observations: the penalty decides.
       const Eigen::MatrixXd P = SmoothingPenalty(f);
       const Acceptable pd = [&](const std::vector<double>& params) {
-        return Calibration(d.serial, f, params, {}, d.pole_pairs, d.rs_ohm, id_min, id_max, iq_min, iq_max)
-            .PhysicalOver(1.0, not_pd);
+        return calibration(f, params, {}).PhysicalOver(1.0, not_pd);
       };
       solved.push_back(Solve(f, d, o, &P, &pd));
       continue;
@@ -1128,13 +1234,11 @@ absl::StatusOr<Calibration> FitScreened(const FitData& d, std::vector<std::strin
   const Solved* best = nullptr;
   for (size_t k = 0; k < solved.size(); ++k) {
     const auto& s = solved[k];
-    physical[k] = Calibration(d.serial, s.family, s.params, {}, d.pole_pairs, d.rs_ohm, id_min, id_max,
-                              iq_min, iq_max).PhysicalOver(1.0, not_pd);
+    physical[k] = calibration(s.family, s.params, {}).PhysicalOver(1.0, not_pd);
     if (s.usable && physical[k] && (best == nullptr || s.cv < best->cv)) best = &s;
   }
   if (best == nullptr) return absl::InternalError("no model family converged to a physical surface");
-  Calibration cal(d.serial, best->family, best->params, best->covariance, d.pole_pairs, d.rs_ohm,
-                  id_min, id_max, iq_min, iq_max);
+  Calibration cal = calibration(best->family, best->params, best->covariance);
   cal.summary.observations = best->n_obs;
   cal.summary.chi2 = best->chi2;
   cal.summary.bic = best->bic;

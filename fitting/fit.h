@@ -107,6 +107,10 @@ FitData FitDataFromFluxMap(const io::FluxMap& map, int pole_pairs, double psi_st
 // not a steady state), every candidate family fitted, the physical one with
 // the lowest cross-validation score kept; what was left out or
 // down-weighted is listed in summary.excluded with its reason (fit.cc).
+// The candidates are symmetric in iq (psi_d even, psi_q odd) unless the data
+// measured both halves of the iq axis (then smooth-asym too); the
+// calibration records the halves measured (Calibration::iq_halves), so a
+// prediction on the other half says "by symmetry" or "extrapolated".
 absl::StatusOr<Calibration> Fit(const FitData& data, const FitOptions& options = {});
 
 // Flux linkage measured by a steady-state row: psi_d = (uq' - Rs iq)/w,

@@ -2,8 +2,9 @@
 // Ceres differentiates the same equations the calibration evaluates.
 //
 // Every family is the gradient of a co-energy W'(id, iq), so the
-// differential inductance (the Hessian) is symmetric by construction, and
-// respects the machine's symmetry: psi_q(id, 0) = 0, psi_d(0, 0) = psi_pm.
+// differential inductance (the Hessian) is symmetric by construction, has
+// psi_d(0, 0) = psi_pm, and all but smooth-asym respect the machine's
+// symmetry (psi_d even, psi_q odd in iq, so psi_q(id, 0) = 0).
 //
 //  kAnalytic: the twin's saturation model (simulation/saturation_model.h,
 //    eq. (M1)), 7 parameters with the cross-saturation current scale ix_a
@@ -25,8 +26,9 @@
 //    smoothly instead of oscillating. R is chosen by BIC.
 //  smooth / smooth-asym: the same quartic co-energy spline with ~8 spans per
 //    axis over the data box and a roughness penalty on all third derivatives
-//    of W (fit.cc, SmoothingPenalty); "smooth" folds the iq basis like
-//    spline<R>, "smooth-asym" lets psi_q(id, 0) differ from zero away from
+//    of W (fit.cc, SmoothingPenalty); "smooth" is even in iq (the measured
+//    |iq| range mirrored; older calibrations: the iq basis folded like
+//    spline<R>), "smooth-asym" lets psi_q(id, 0) differ from zero away from
 //    id = 0 (psi_q(0, 0) = 0: d is the magnet axis).
 #ifndef FLUXCAL_FITTING_FLUX_FAMILY_H_
 #define FLUXCAL_FITTING_FLUX_FAMILY_H_
@@ -97,10 +99,20 @@ inline constexpr int kSplineDegree = 4;
 // The knot layout of a spline family. Legacy spline<R>: `spans` uniform
 // spans over [id_lo_a, id_hi_a] and 2R over [-iq_hi_a, iq_hi_a], folded to
 // even functions of iq. Smoothing splines (`smoothing`, name "smooth"):
-// `spans` over id and `spans_q` over [iq_lo_a, iq_hi_a]; `symmetric` folds
-// the iq basis (psi_q(id, 0) = 0, needs iq_lo_a = -iq_hi_a and even
-// spans_q), otherwise psi_q(id, 0) is free: symmetry is a hypothesis the
-// fit weighs by cross-validation (fit.cc), not a constraint.
+// `spans` over id and `spans_q` over [iq_lo_a, iq_hi_a]; `symmetric`
+// makes the co-energy even in iq (psi_d even, psi_q odd: the machine's
+// symmetry), otherwise psi_q(id, 0) is free ("smooth-asym"), a hypothesis
+// the fit weighs by cross-validation only where the data measured both
+// halves of the iq axis (fit.cc).
+// A symmetric smoothing spline has one of two layouts:
+//  - folded (calibrations written before `mirrored` existed): the iq basis
+//    over [-iq_hi_a, iq_hi_a] (iq_lo_a = -iq_hi_a, even spans_q) folded to
+//    even functions, like spline<R>;
+//  - `mirrored`: the basis over the measured |iq| range [iq_lo_a, iq_hi_a]
+//    (iq_lo_a a margin below 0), evaluated at |iq|, its coefficients
+//    constrained so that S_q(id, 0) = 0 (MirrorConstraint): the whole knot
+//    grid on the half the data measured, where the folded layout spent half
+//    of it on the mirror image (docs/fitting.md says what that cost).
 struct SplineDomain {
   int spans = 0;
   double id_lo_a = -100, id_hi_a = 0, iq_hi_a = 100;
@@ -108,14 +120,18 @@ struct SplineDomain {
   int spans_q = 0;            // smoothing only
   double iq_lo_a = -100;      // smoothing only
   bool symmetric = true;
+  bool mirrored = false;      // smoothing && symmetric only
   int SpansQ() const { return smoothing ? spans_q : 2 * spans; }
   double IqLo() const { return smoothing ? iq_lo_a : -iq_hi_a; }
-  bool Folded() const { return !smoothing || symmetric; }
+  bool Folded() const { return !smoothing || (symmetric && !mirrored); }
   int NumD() const { return spans + kSplineDegree; }            // id basis
   int NumQ() const { return SpansQ() + kSplineDegree; }         // iq basis
-  int NumEven() const { return Folded() ? NumQ() / 2 : NumQ(); }  // iq coefficients
+  // iq coefficients: folded pairs share one; the mirrored layout gives up
+  // one to its constraint.
+  int NumEven() const { return Folded() ? NumQ() / 2 : (mirrored ? NumQ() - 1 : NumQ()); }
   int NumCoefficients() const { return NumD() * NumEven(); }
-  // Coefficient index of iq basis j (folded: B_j and B_{NumQ-1-j} share one).
+  // Coefficient index of iq basis j (folded: B_j and B_{NumQ-1-j} share
+  // one). Not for the mirrored layout: MirrorConstraint::Terms.
   int QIndex(int j) const { return Folded() && j >= NumEven() ? NumQ() - 1 - j : j; }
 };
 
@@ -174,9 +190,57 @@ inline Basis1d EvalBasis(double x, double lo, double hi, int spans) {
   return b;
 }
 
+// The mirrored layout's constraint S_q(id, 0) = 0 for every id: for each id
+// basis function i, sum_j c_ij B_j'(0) = 0. One iq coefficient per id row,
+// the pivot (the basis function with the steepest slope at 0), is then the
+// combination c_i,pivot = sum_{j != pivot} w_j c_ij, w_j = -B_j'(0) /
+// B_pivot'(0); the others are the parameters, in order, the pivot left out.
+struct MirrorConstraint {
+  Basis1d b0;                          // iq basis at 0
+  int pivot = 0;
+  double w[kSplineDegree + 1] = {};    // w[c] for iq basis b0.first + c (0 at the pivot)
+  int ne = 0;
+  explicit MirrorConstraint(const SplineDomain& dom)
+      : b0(EvalBasis(0.0, dom.IqLo(), dom.iq_hi_a, dom.SpansQ())), ne(dom.NumEven()) {
+    int best = 0;
+    for (int c = 1; c <= kSplineDegree; ++c) {
+      if (std::abs(b0.d1[c]) > std::abs(b0.d1[best])) best = c;
+    }
+    pivot = b0.first + best;
+    for (int c = 0; c <= kSplineDegree; ++c) w[c] = c == best ? 0.0 : -b0.d1[c] / b0.d1[best];
+  }
+  // Parameter index of free iq coefficient j (j != pivot).
+  int Reduced(int j) const { return j < pivot ? j : j - 1; }
+  // (parameter offset within an id row, weight) of full iq coefficient j.
+  template <typename F>
+  void Terms(int j, F add) const {
+    if (j != pivot) {
+      add(Reduced(j), 1.0);
+      return;
+    }
+    for (int c = 0; c <= kSplineDegree; ++c) {
+      if (w[c] != 0.0) add(Reduced(b0.first + c), w[c]);
+    }
+  }
+  // The full coefficient c_ij from the parameters p (p[0] = psi_pm).
+  template <typename T, typename P>
+  T Coefficient(const P* p, int i, int j) const {
+    T r(0.0);
+    Terms(j, [&](int e, double wt) { r += p[1 + i * ne + e] * wt; });
+    return r;
+  }
+};
+
 // psi (when psi_d is given) and L (when ldd is given) of the spline family.
 // p[0] = psi_pm, p[1 + i * NumEven() + e] = coefficient of B_i(id) E_e(iq),
 // E_e = B_e + B_{NumQ()-1-e}. Only flux needs S's slope at the origin.
+// The mirrored layout: with q = |iq|, s = sign(iq) and S the spline over
+// the measured |iq| range, W'(id, iq) = psi_pm id + L0 I0^2 (S(id, q) -
+// S_d(0, 0) id): even in iq by construction, and, S_q(id, 0) being 0
+// (MirrorConstraint), C2 across iq = 0 (flux and inductance continuous;
+// Lqq's slope may turn there, as a rib saturating from zero current does):
+//   psi_d = psi_pm + kW (S_d(id, q) - S_d(0, 0)),  psi_q = s kW S_q(id, q),
+//   Ldd = kW S_dd(id, q),  Lqq = kW S_qq(id, q),  Ldq = s kW S_dq(id, q).
 template <typename T, typename P>
 void SplineFluxAndInductance(const SplineDomain& dom, double id, double iq, const P* p, T* psi_d,
                              T* psi_q, T* ldd, T* lqq, T* ldq) {
@@ -185,6 +249,31 @@ void SplineFluxAndInductance(const SplineDomain& dom, double id, double iq, cons
     const T nan(std::numeric_limits<double>::quiet_NaN());
     for (T* out : {psi_d, psi_q, ldd, lqq, ldq}) {
       if (out != nullptr) *out = nan;
+    }
+    return;
+  }
+  if (dom.mirrored && dom.smoothing && dom.symmetric) {
+    const double s = iq < 0 ? -1.0 : 1.0, q = std::abs(iq);
+    const MirrorConstraint mc(dom);
+    auto sum = [&](const Basis1d& bd, const Basis1d& bq, auto f) {
+      T r(0.0);
+      for (int a = 0; a <= kSplineDegree; ++a)
+        for (int c = 0; c <= kSplineDegree; ++c) r += mc.Coefficient<T>(p, bd.first + a, bq.first + c) * f(a, c);
+      return r;
+    };
+    const Basis1d bd = EvalBasis(id, dom.id_lo_a, dom.id_hi_a, dom.spans);
+    const Basis1d bq = EvalBasis(q, dom.IqLo(), dom.iq_hi_a, dom.SpansQ());
+    const double kW = kPolyL0H * kPolyI0A * kPolyI0A;
+    if (psi_d != nullptr) {
+      const Basis1d b0d = EvalBasis(0.0, dom.id_lo_a, dom.id_hi_a, dom.spans);
+      const T slope0 = sum(b0d, mc.b0, [&](int a, int c) { return b0d.d1[a] * mc.b0.v[c]; });
+      *psi_d = p[0] + kW * (sum(bd, bq, [&](int a, int c) { return bd.d1[a] * bq.v[c]; }) - slope0);
+      *psi_q = s * kW * sum(bd, bq, [&](int a, int c) { return bd.v[a] * bq.d1[c]; });
+    }
+    if (ldd != nullptr) {
+      *ldd = kW * sum(bd, bq, [&](int a, int c) { return bd.d2[a] * bq.v[c]; });
+      *lqq = kW * sum(bd, bq, [&](int a, int c) { return bd.v[a] * bq.d2[c]; });
+      *ldq = s * kW * sum(bd, bq, [&](int a, int c) { return bd.d1[a] * bq.d1[c]; });
     }
     return;
   }
@@ -237,9 +326,13 @@ struct Family {
     if (kind == kPoly) return 1 + static_cast<int>(PolyTerms(degree).size());
     return 1 + spline.NumCoefficients();
   }
+  // psi_d even and psi_q odd in iq for every parameter value: the analytic
+  // family (eq. (M1) is even in iq for psi_d, odd for psi_q), the
+  // polynomials (b even) and the folded splines. smooth-asym is not.
+  bool SymmetricInIq() const { return kind != kSpline || spline.Folded() || spline.mirrored; }
   // Parameter combinations the surfaces do not depend on (the spline's
   // constant and its slope in id at the origin, removed by construction).
-  int NullDirections() const { return kind == kSpline ? (spline.Folded() ? 2 : 3) : 0; }
+  int NullDirections() const { return kind == kSpline ? (spline.Folded() || spline.mirrored ? 2 : 3) : 0; }
   std::string Name() const {
     if (kind == kAnalytic) return "analytic";
     if (kind == kPoly) return "poly" + std::to_string(degree);

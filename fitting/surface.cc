@@ -142,12 +142,21 @@ SurfacePoint SurfaceAt(const Family& f, const double* params, double id_a, doubl
 SurfaceEvaluator::SurfaceEvaluator(const Family& f, std::vector<double> params) : f_(f), p_(std::move(params)) {
   if (f_.kind != Family::kSpline || p_.empty()) return;
   const SplineDomain& dom = f_.spline;
-  const int ne = dom.NumEven();
+  const int nd = dom.NumD(), ne = dom.NumEven();
+  nq_ = dom.NumQ();
+  c_.assign(static_cast<size_t>(nd) * nq_, 0.0);
+  const bool mirrored = dom.mirrored && dom.smoothing && dom.symmetric;
+  const MirrorConstraint mc(dom);
+  for (int i = 0; i < nd; ++i) {
+    for (int j = 0; j < nq_; ++j) {
+      c_[i * nq_ + j] = mirrored ? mc.Coefficient<double>(p_.data(), i, j) : p_[1 + i * ne + dom.QIndex(j)];
+    }
+  }
   const Basis1d b0d = EvalBasis(0.0, dom.id_lo_a, dom.id_hi_a, dom.spans);
   const Basis1d b0q = EvalBasis(0.0, dom.IqLo(), dom.iq_hi_a, dom.SpansQ());
   for (int a = 0; a <= kSplineDegree; ++a) {
     for (int c = 0; c <= kSplineDegree; ++c) {
-      const double coef = p_[1 + (b0d.first + a) * ne + dom.QIndex(b0q.first + c)];
+      const double coef = c_[(b0d.first + a) * nq_ + b0q.first + c];
       slope0_d_ += coef * b0d.d1[a] * b0q.v[c];
       slope0_q_ += coef * b0d.v[a] * b0q.d1[c];
     }
@@ -167,17 +176,21 @@ void SurfaceEvaluator::Eval(double id, double iq, double* psi_d, double* psi_q, 
     }
     return;
   }
-  // SplineFluxAndInductance's sums, the origin's slope from the
-  // constructor.
+  // SplineFluxAndInductance's sums on the resolved coefficient grid, the
+  // origin's slopes from the constructor. The mirrored layout evaluates S
+  // at |iq| (psi_q, Ldq odd in iq; S_q(id, 0) = 0 by its constraint).
   const SplineDomain& dom = f_.spline;
-  const int ne = dom.NumEven();
+  const bool mirrored = dom.mirrored && dom.smoothing && dom.symmetric;
+  const double sign = mirrored && iq < 0 ? -1.0 : 1.0;
+  const double q = mirrored ? std::abs(iq) : iq;
   const double kW = kPolyL0H * kPolyI0A * kPolyI0A;
   const Basis1d bd = EvalBasis(id, dom.id_lo_a, dom.id_hi_a, dom.spans);
-  const Basis1d bq = EvalBasis(iq, dom.IqLo(), dom.iq_hi_a, dom.SpansQ());
+  const Basis1d bq = EvalBasis(q, dom.IqLo(), dom.iq_hi_a, dom.SpansQ());
   double sd = 0, sq = 0, dd = 0, qq = 0, dq = 0;
   for (int a = 0; a <= kSplineDegree; ++a) {
+    const double* row = &c_[(bd.first + a) * nq_ + bq.first];
     for (int c = 0; c <= kSplineDegree; ++c) {
-      const double coef = p_[1 + (bd.first + a) * ne + dom.QIndex(bq.first + c)];
+      const double coef = row[c];
       sd += coef * bd.d1[a] * bq.v[c];
       sq += coef * bd.v[a] * bq.d1[c];
       dd += coef * bd.d2[a] * bq.v[c];
@@ -187,12 +200,12 @@ void SurfaceEvaluator::Eval(double id, double iq, double* psi_d, double* psi_q, 
   }
   if (psi_d != nullptr) {
     *psi_d = p_[0] + kW * (sd - slope0_d_);
-    *psi_q = kW * (sq - (dom.Folded() ? 0.0 : slope0_q_));
+    *psi_q = sign * kW * (sq - (dom.Folded() || mirrored ? 0.0 : slope0_q_));
   }
   if (ldd != nullptr) {
     *ldd = kW * dd;
     *lqq = kW * qq;
-    *ldq = kW * dq;
+    *ldq = sign * kW * dq;
   }
 }
 
@@ -200,6 +213,9 @@ Eigen::MatrixXd SmoothingPenalty(const Family& fam) {
   if (fam.kind != Family::kSpline || !fam.spline.smoothing) return Eigen::MatrixXd(0, fam.NumParams());
   const SplineDomain& dom = fam.spline;
   const int nd = dom.NumD(), nq = dom.NumQ(), ne = dom.NumEven(), k = fam.NumParams();
+  // The mirrored layout's coefficients are constrained (MirrorConstraint):
+  // the differences are of the full coefficients, expressed in the free ones.
+  const MirrorConstraint mirror(dom);
   const double hd = (dom.id_hi_a - dom.id_lo_a) / dom.spans, hq = (dom.iq_hi_a - dom.IqLo()) / dom.SpansQ();
   // Binomial difference stencils of order 0..3.
   const std::vector<std::vector<double>> stencil = {{1}, {-1, 1}, {1, -2, 1}, {-1, 3, -3, 1}};
@@ -215,7 +231,13 @@ Eigen::MatrixXd SmoothingPenalty(const Family& fam) {
         Eigen::VectorXd row = Eigen::VectorXd::Zero(k);
         for (int u = 0; u <= a; ++u)
           for (int v = 0; v <= bq; ++v)
-            row(1 + (i + u) * ne + dom.QIndex(j + v)) += scale * stencil[a][u] * stencil[bq][v];
+            if (dom.mirrored) {
+              mirror.Terms(j + v, [&](int e, double w) {
+                row(1 + (i + u) * ne + e) += w * scale * stencil[a][u] * stencil[bq][v];
+              });
+            } else {
+              row(1 + (i + u) * ne + dom.QIndex(j + v)) += scale * stencil[a][u] * stencil[bq][v];
+            }
         rows.push_back(row);
       }
     }

@@ -43,7 +43,11 @@ class SurfaceEvaluator {
  private:
   Family f_;
   std::vector<double> p_;
-  double slope0_d_ = 0, slope0_q_ = 0;   // spline: S's slopes at the origin
+  // Spline: the full coefficient grid c[i * NumQ + j] (folded pairs and the
+  // mirrored layout's pivot resolved once) and S's slopes at the origin.
+  std::vector<double> c_;
+  int nq_ = 0;
+  double slope0_d_ = 0, slope0_q_ = 0;
 };
 
 // Roughness of a smoothing-spline co-energy (fit.cc, where it is derived):

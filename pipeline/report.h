@@ -13,6 +13,10 @@
 
 #include "absl/status/statusor.h"
 #include "fitting/calibration.h"
+#include "fitting/fit.h"
+#include "identification/identify.h"
+#include "io/flux_map.h"
+#include "io/recording_set.h"
 #include "pipeline/pipeline.h"
 #include "report/report.h"
 #include "storage/store.h"
@@ -26,6 +30,38 @@ namespace fluxcal::pipeline {
 // software writing the page. `cal` must outlive `in`. A caller that knows
 // more (a recording set, a diagnosis document) overrides fields afterwards.
 void FillReportInputsFromJson(const fit::Calibration& cal, const nlohmann::json& cal_json, report::ReportInputs* in);
+
+// What a recording set adds to a page built here (`fluxcal report cal.json
+// --set DIR`): its points identified again, with its hf_results rows and
+// its steady-state rows (all drawn over the fitted surfaces, and their
+// signed currents say which half of the current plane was measured), the
+// manifest's Udc when the caller gave none, and the verdict as the EOL
+// flow judges it (Verdict: the manifest's nominal psi_pm, point flags).
+// `measured` receives the points; it must outlive `in`. Errors:
+// InvalidArgument when the set's serial is not the calibration's (naming
+// manifest.json's field 'serial'), identification failures.
+absl::Status AddRecordingSetToReport(const io::RecordingSet& set, const std::string& set_dir,
+                                     const ident::IdentifyOptions& options, fit::FitData* measured,
+                                     report::ReportInputs* in);
+
+// A flux map's nodes over the page's surfaces (`--map`), appended to
+// `measured` (which must outlive `in`).
+void AddFluxMapToReport(const io::FluxMap& map, const std::string& path, fit::FitData* measured,
+                        report::ReportInputs* in);
+
+// The diagnosis of a set, run here (`--set DIR --diagnose`), as the page
+// shows it: its fluxcal.diagnosis.v1 document, the residual maps before
+// and after the findings and the replay spectrum (diag::ResidualMapSvg,
+// SpectrumSvg: the figures of `fluxcal diagnose --plots`). Errors: the
+// diagnosis' own (a set without waveforms cannot be diagnosed).
+absl::Status AddDiagnosisOfSetToReport(const io::RecordingSet& set, const std::string& set_dir,
+                                       report::ReportInputs* in);
+
+// A diagnosis document given as a file (`--diagnosis D.json`): its tables,
+// and the replay spectrum drawn from its waveform block. The residual maps
+// need the per-point residuals, which the document does not carry: the
+// page says so and how to get them.
+void AddDiagnosisDocumentToReport(const nlohmann::json& doc, const std::string& path, report::ReportInputs* in);
 
 // What only the store knows about a stored version, merged into its JSON
 // under the keys the page reads: version, created_utc, the stored verdict

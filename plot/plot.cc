@@ -546,11 +546,19 @@ std::string Figure::Render(const std::string& position) const {
   const double pw = std::max(40.0, width_px_ - left - right), ph = std::max(40.0, height_px_ - top - bottom);
   if (equal_aspect_ && !y_log_) {
     // Widen whichever axis has fewer units per pixel, at its end farther
-    // from zero (a quadrant plot stays a quadrant plot).
+    // from zero (a quadrant plot stays a quadrant plot); a range symmetric
+    // about zero on both ends alike (a half plane stays centred).
     const double sx = (xh - xl) / pw, sy = (yh - yl) / ph;
     auto widen = [](double* lo, double* hi, double span) {
       const double extra = span - (*hi - *lo);
-      if (std::abs(*hi) >= std::abs(*lo)) *hi += extra; else *lo -= extra;
+      if (std::abs(*hi + *lo) <= 1e-9 * (*hi - *lo)) {
+        *hi += extra / 2;
+        *lo -= extra / 2;
+      } else if (std::abs(*hi) >= std::abs(*lo)) {
+        *hi += extra;
+      } else {
+        *lo -= extra;
+      }
     };
     if (sx > sy) widen(&yl, &yh, sx * ph); else widen(&xl, &xh, sy * pw);
     xt = NiceTicks(xl, xh, target(pw, 80) + (hug_x ? 2 : 0));
@@ -758,19 +766,25 @@ std::string Figure::Render(const std::string& position) const {
     }
     if (visible.empty()) continue;   // the line is outside the view: no label
     // The contour the label belongs to runs through it (its white outline
-    // interrupts it); every other mark counts.
-    auto own = [&](size_t owner) {
-      const auto& o = marks_[owner];
-      return o.kind == Mark::kContour && o.x == m.x && o.y == m.y;
-    };
+    // interrupts it); every other mark counts. (Found once per label: the
+    // contour mark with the label's own points.)
+    std::vector<bool> own(marks_.size(), false);
+    for (size_t o = 0; o < marks_.size(); ++o) {
+      own[o] = marks_[o].kind == Mark::kContour && marks_[o].x == m.x && marks_[o].y == m.y;
+    }
     size_t best = visible[visible.size() / 2];
     double best_score = -std::numeric_limits<double>::infinity();
     const double mid = visible.size() / 2.0;
-    for (size_t c = 0; c < visible.size(); ++c) {
+    // At most about 60 candidate places along the line (a long contour has
+    // hundreds of vertices a few pixels apart).
+    const size_t stride = std::max<size_t>(1, visible.size() / 60);
+    for (size_t c = 0; c < visible.size(); c += stride) {
       const double px = X(m.x[visible[c]]), py = Y(m.y[visible[c]]);
       double clear = std::numeric_limits<double>::infinity();
       for (const auto& g : segs) {
-        if (!own(g.owner)) clear = std::min(clear, seg_dist(g, px, py) - w / 2);
+        if (own[g.owner]) continue;
+        clear = std::min(clear, seg_dist(g, px, py) - w / 2);
+        if (clear < best_score) break;   // its score (<= clear) cannot win any more
       }
       for (const auto& [dx, dy] : dots) clear = std::min(clear, std::hypot(px - dx, py - dy) - w / 2 - 3);
       for (const auto& p : placed) clear = std::min(clear, std::hypot(px - p.x, py - p.y) - (w + p.w) / 2);

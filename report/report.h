@@ -1,10 +1,15 @@
 // One calibration as one self-contained static HTML page (inline SVG and
 // CSS; no script, no network): identity and provenance, verdict and fit
-// quality, the differential inductances and flux linkages, MTPA / MTPV on
-// the current plane with torque contours and the current and voltage
-// limits, the field-weakening maps, the tables' limits and checksums, and
-// the diagnosis findings when a diagnosis report is given. Every number on
-// the page is computed from the inputs (docs/report.md).
+// quality (with where the inductance is not positive definite), the
+// differential inductances and flux linkages with the measured points over
+// them, MTPA / MTPV on the current plane in both torque directions with
+// torque contours and the current and voltage limits, the torque-speed
+// envelope, the field-weakening maps, the tables' limits and checksums,
+// and the diagnosis (findings, residual maps and spectrum) when one is
+// given. What lies outside the measured region is drawn dashed or dotted
+// and labelled (by symmetry / extrapolated). Every number on the page is
+// computed from the inputs and rounded to its meaning (report/format.h);
+// docs/report.md.
 #ifndef FLUXCAL_REPORT_REPORT_H_
 #define FLUXCAL_REPORT_REPORT_H_
 
@@ -30,6 +35,13 @@ struct FleetPoint {
   std::vector<std::string> outliers;   // serials the service flags at this point
 };
 
+// A figure made elsewhere (an SVG element) and its caption, as the page
+// embeds it: the diagnosis' residual maps and spectrum.
+struct EmbeddedFigure {
+  std::string svg;
+  std::string caption;   // plain text (escaped on the page)
+};
+
 struct ReportInputs {
   // The calibration and the JSON it was read from (provenance fields the
   // calibration type does not keep: created_utc, software_version,
@@ -39,10 +51,13 @@ struct ReportInputs {
   std::string calibration_path;
   // Where the calibration file's modification time is the only time known.
   std::string calibration_file_mtime_utc;
-  // From a recording set (--set): the identified points drawn against the
-  // fitted surfaces, and the manifest's DC-link voltage.
+  // What was measured, drawn over the fitted surfaces and curves: a
+  // recording set's identified inductances and steady-state rows (--set),
+  // a flux map's nodes (--map). Their signed currents also say which half
+  // of the current plane (iq > 0, iq < 0) was measured.
   const fit::FitData* identified = nullptr;
   std::string set_path;
+  std::string map_path;
   std::optional<double> udc_v;
   std::string udc_source;   // where udc_v came from, said on the page
   // "pass" / "fail: ..." and what it was judged against.
@@ -50,6 +65,10 @@ struct ReportInputs {
   // A fluxcal.diagnosis.v1 document (docs/diagnosis-report.md).
   std::optional<nlohmann::json> diagnosis;
   std::string diagnosis_path;
+  // The diagnosis' figures (residual maps, replay spectrum), with a line
+  // that says where they come from or why some are missing.
+  std::vector<EmbeddedFigure> diagnosis_figures;
+  std::string diagnosis_figures_note;
   // Speed for the voltage-limit curve; <= 0: 1.5 x the base speed (where
   // the MTPA point at the current limit reaches the voltage limit).
   double ellipse_speed_rpm = 0;

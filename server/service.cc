@@ -454,6 +454,9 @@ grpc::Status CalibrationServiceImpl::QueryFlux(grpc::ServerContext* ctx, const v
     v->set_psi_d_wb_std(x.psi_d_wb_std); v->set_psi_q_wb_std(x.psi_q_wb_std);
     v->set_ldd_h_std(x.ldd_h_std); v->set_lqq_h_std(x.lqq_h_std); v->set_torque_nm_std(x.torque_nm_std);
     v->set_extrapolated(x.extrapolated);
+    v->set_region(fit::RegionName(x.region));
+    v->set_invalid(!x.valid);
+    v->set_invalid_reason(x.invalid_reason);
   }
   return grpc::Status::OK;
 }

@@ -16,8 +16,10 @@
 #include "absl/strings/str_join.h"
 #include "absl/strings/str_replace.h"
 #include "nlohmann/json.hpp"
+#include "fitting/calibration.h"
 #include "io/sha256.h"
 #include "plot/plot.h"
+#include "tables/a2l.h"
 
 namespace fluxcal::tables {
 namespace {
@@ -471,12 +473,27 @@ absl::StatusOr<Table> BuildTable(const sim::MagneticModel& m, const MachineLimit
     return absl::InvalidArgumentError(absl::StrCat("flag --table: expected mtpa, mtpv or fw, got '", spec.kind, "'"));
   }
   // Extrapolated: the operating point of the cell lies beyond the measured
-  // current limit (the disc the identified points cover).
+  // current limit (the disc the identified points cover), or outside a
+  // calibration's measured region and its mirror image. By symmetry: on
+  // the mirror image only (a generating row of a motoring-only bench, from
+  // a model symmetric in iq). Not positive definite: the model's
+  // differential inductance there fails Sylvester's test (one test for the
+  // fit, queries and tables: fit::NotPositiveDefiniteReason).
   const auto& idv = t.outputs[0].values;
   const auto& iqv = t.outputs[1].values;
+  const auto* cal = dynamic_cast<const fit::Calibration*>(&m);
   t.extrapolated.assign(idv.size(), 0);
-  if (meas > 0) {
-    for (size_t k = 0; k < idv.size(); ++k) t.extrapolated[k] = std::hypot(idv[k], iqv[k]) > meas * (1 + 1e-9);
+  t.by_symmetry.assign(idv.size(), 0);
+  t.not_positive_definite.assign(idv.size(), 0);
+  for (size_t k = 0; k < idv.size(); ++k) {
+    if (meas > 0) t.extrapolated[k] = std::hypot(idv[k], iqv[k]) > meas * (1 + 1e-9);
+    if (cal != nullptr) {
+      const fit::Region r = cal->RegionOf(idv[k], iqv[k]);
+      t.extrapolated[k] |= r == fit::Region::kExtrapolated;
+      t.by_symmetry[k] = !t.extrapolated[k] && r == fit::Region::kBySymmetry;
+    }
+    const auto L = m.Inductance(idv[k], iqv[k], lim.temperature_c);
+    t.not_positive_definite[k] = !fit::NotPositiveDefiniteReason(L.ldd_h, L.lqq_h, L.ldq_h).empty();
   }
   Seal(&t);
   return t;
@@ -539,13 +556,16 @@ absl::StatusOr<Format> ParseFormat(const std::string& name) {
   if (name == "h") return Format::kCHeader;
   if (name == "cdfx") return Format::kCdfx;
   if (name == "dcm") return Format::kDcm;
+  if (name == "a2l") return Format::kA2l;
   return absl::InvalidArgumentError(
-      absl::StrCat("flag --format: expected csv, json, h, cdfx or dcm, got '", name, "'"));
+      absl::StrCat("flag --format: expected csv, json, h, cdfx, dcm or a2l, got '", name, "'"));
 }
 
 namespace {
 
 std::string Num(double v) { return absl::StrFormat("%.17g", v); }
+
+}  // namespace
 
 std::string UnitOf(const std::string& name) {
   auto ends = [&](const char* suf) {
@@ -562,9 +582,11 @@ std::string UnitOf(const std::string& name) {
   return "-";
 }
 
-std::string Ident(const Table& t, const std::string& name) {
+std::string Label(const Table& t, const std::string& name) {
   return absl::AsciiStrToUpper(absl::StrCat("FLUXCAL_", t.kind, "_", name));
 }
+
+std::string CSymbol(const Table& t, const std::string& name) { return absl::AsciiStrToLower(Label(t, name)); }
 
 // One sentence on the axis order, the same in every format (docs/tables.md).
 std::string AxisOrder(const Table& t) {
@@ -578,6 +600,8 @@ std::string OneLine(std::string s) {
   for (auto& c : s) if (c == '\n' || c == '\r') c = ' ';
   return absl::StrReplaceAll(s, {{"*/", "* /"}, {"--", "- -"}});
 }
+
+namespace {
 
 std::string XmlEscape(const std::string& s) {
   return absl::StrReplaceAll(s, {{"&", "&amp;"}, {"<", "&lt;"}, {">", "&gt;"}, {"\"", "&quot;"}});
@@ -657,9 +681,29 @@ std::string CNum(double v, CType ct) {
   return s;
 }
 
-std::string CHeader(const Table& t, CType ct) {
-  const std::string g = Ident(t, "TABLE_H_");
-  const char* type = ct == CType::kFloat ? "float" : "double";
+// The C element type of the value arrays.
+const char* CElementType(CType ct) {
+  switch (ct) {
+    case CType::kFloat: return "float";
+    case CType::kInt16: return "int16_t";
+    case CType::kInt32: return "int32_t";
+    case CType::kDouble: break;
+  }
+  return "double";
+}
+
+// An integer literal of a fixed-point array; the type's minimum is written
+// as (-max - 1): "-2147483648" is the negation of a constant too large for
+// int (C99 6.4.4.1).
+std::string CInt(int64_t raw, int bits) {
+  const int64_t lo = -(int64_t{1} << (bits - 1));
+  return raw == lo ? absl::StrCat("(", lo + 1, " - 1)") : absl::StrCat(raw);
+}
+
+absl::StatusOr<std::string> CHeader(const Table& t, CType ct, const std::vector<QuantityScale>& fixed) {
+  const std::string g = Label(t, "TABLE_H_");
+  const char* type = CElementType(ct);
+  const int bits = FixedPointBits(ct);
   std::string s = absl::StrFormat("/* fluxcal %s table. Units: SI (A, N m, rpm, Wb, V, Ohm, degC).\n", t.kind);
   for (const auto& [k, v] : TextFields(t)) s += absl::StrCat(" * ", k, ": ", OneLine(v), "\n");
   s += absl::StrCat(" * calibration_version: ", t.calibration_version, "\n");
@@ -668,36 +712,64 @@ std::string CHeader(const Table& t, CType ct) {
     s += absl::StrCat(" * ", sc.name, ": ", Num(sc.value), " ", sc.unit, " (", OneLine(sc.description), ")\n");
   }
   s += absl::StrCat(" * axis order: ", AxisOrder(t), ".\n");
-  s += absl::StrCat(" * Value arrays are ", type, "; ", Ident(t, "clamped"), " / ", Ident(t, "extrapolated"),
-                    " are 0/1 per cell.\n");
+  std::vector<std::string> flag_names;
+  for (const auto& [name, v] : Flags(t)) flag_names.push_back(Label(t, name));
+  s += absl::StrCat(" * Value arrays are ", type, bits > 0 ? " fixed point (below)" : "", "; ",
+                    absl::StrJoin(flag_names, " / "), " are 0/1 per cell.\n");
+  if (bits > 0) {
+    // docs/tables.md, "Fixed point": one power-of-two LSB per quantity.
+    s += absl::StrCat(" * Fixed point: physical = raw * LSB + offset, raw the ", type,
+                      " value rounded to the nearest\n * integer (error at most LSB/2); <ARRAY>_LSB states each array's LSB:\n");
+    for (const auto& q : fixed) {
+      s += absl::StrFormat(" *   %s: LSB %s %s (2^%d), offset %s %s, range %s .. %s %s: %s\n", q.unit, Num(q.lsb),
+                           q.unit, static_cast<int>(std::lround(std::log2(q.lsb))), Num(q.offset), q.unit,
+                           Num(q.min_value), Num(q.max_value), q.unit, absl::StrJoin(q.arrays, ", "));
+    }
+  }
   s += " * payload_crc32 / payload_sha256: over the values as IEEE-754 binary64 (fluxcal docs/tables.md),\n"
        " * not over this file";
   if (ct == CType::kFloat) s += "; the float arrays hold those values rounded to binary32";
+  if (bits > 0) s += absl::StrCat("; the ", type, " arrays hold them rounded to the nearest LSB");
   s += ". */\n";
   s += absl::StrFormat("#ifndef %s\n#define %s\n\n#include <stdint.h>\n\n", g, g);
   for (const auto& sc : Scalars(t)) {
-    s += absl::StrFormat("#define %s %s\n", Ident(t, sc.name),
+    s += absl::StrFormat("#define %s %s\n", Label(t, sc.name),
                          sc.integer ? absl::StrCat(static_cast<long long>(sc.value)) : CNum(sc.value, ct));
   }
   s += "\n";
   for (const auto& [k, v] : TextFields(t)) {
-    s += absl::StrFormat("static const char %s[] = %s;\n", absl::AsciiStrToLower(Ident(t, k)), CString(v));
+    s += absl::StrFormat("static const char %s[] = %s;\n", CSymbol(t, k), CString(v));
   }
   s += "\n";
-  auto arr = [&](const std::string& name, const std::vector<double>& v, const char* ty, bool flag) {
-    s += absl::StrFormat("#define %s_LEN %d\n", Ident(t, name), v.size());
-    s += absl::StrFormat("static const %s %s[%d] = {\n", ty, absl::AsciiStrToLower(Ident(t, name)), v.size());
-    for (size_t k = 0; k < v.size(); ++k) {
-      s += absl::StrCat("  ", flag ? (v[k] != 0 ? "1" : "0") : CNum(v[k], ct), k + 1 < v.size() ? ",\n" : "\n");
+  auto arr = [&](const std::string& name, const std::vector<double>& v, const char* ty, bool flag) -> absl::Status {
+    std::vector<std::string> lit(v.size());
+    const QuantityScale* q = flag ? nullptr : ScaleOf(fixed, name);
+    s += absl::StrFormat("#define %s_LEN %d\n", Label(t, name), v.size());
+    if (bits > 0 && q != nullptr) {
+      auto raw = Quantize(v, *q, absl::StrCat("table array '", name, "'"));
+      if (!raw.ok()) return raw.status();
+      for (size_t k = 0; k < v.size(); ++k) lit[k] = CInt((*raw)[k], bits);
+      s += absl::StrFormat("#define %s_LSB %s\n", Label(t, name), CNum(q->lsb, CType::kDouble));
+    } else {
+      for (size_t k = 0; k < v.size(); ++k) lit[k] = flag ? (v[k] != 0 ? "1" : "0") : CNum(v[k], ct);
     }
+    s += absl::StrFormat("static const %s %s[%d] = {\n", ty, CSymbol(t, name), v.size());
+    for (size_t k = 0; k < v.size(); ++k) s += absl::StrCat("  ", lit[k], k + 1 < v.size() ? ",\n" : "\n");
     s += "};\n\n";
+    return absl::OkStatus();
   };
-  for (const auto& a : t.axes) arr(a.name, a.values, type, false);
-  for (const auto& o : t.outputs) arr(o.name, o.values, type, false);
-  for (const auto& [name, v] : Flags(t)) arr(name, AsDoubles(*v), "uint8_t", true);
-  s += absl::StrFormat("static const uint32_t %s = 0x%08xu;\n", absl::AsciiStrToLower(Ident(t, "payload_crc32")), t.crc32);
+  for (const auto& a : t.axes) {
+    if (auto st = arr(a.name, a.values, type, false); !st.ok()) return st;
+  }
+  for (const auto& o : t.outputs) {
+    if (auto st = arr(o.name, o.values, type, false); !st.ok()) return st;
+  }
+  for (const auto& [name, v] : Flags(t)) {
+    if (auto st = arr(name, AsDoubles(*v), "uint8_t", true); !st.ok()) return st;
+  }
+  s += absl::StrFormat("static const uint32_t %s = 0x%08xu;\n", CSymbol(t, "payload_crc32"), t.crc32);
   s += absl::StrFormat("static const char %s[] = \"%s\";\n\n#endif\n",
-                       absl::AsciiStrToLower(Ident(t, "payload_sha256")), t.sha256);
+                       CSymbol(t, "payload_sha256"), t.sha256);
   return s;
 }
 
@@ -719,7 +791,7 @@ std::string Cdfx(const Table& t) {
        "          <CATEGORY>NO_VCD</CATEGORY>\n";
   const std::string in = "          ";
   auto head = [&](const std::string& name, const std::string& long_name, const char* cat) {
-    s += absl::StrCat(in, "<SW-INSTANCE>\n", in, "  <SHORT-NAME>", Ident(t, name), "</SHORT-NAME>\n", in,
+    s += absl::StrCat(in, "<SW-INSTANCE>\n", in, "  <SHORT-NAME>", Label(t, name), "</SHORT-NAME>\n", in,
                       "  <LONG-NAME>", XmlEscape(OneLine(long_name)), "</LONG-NAME>\n", in, "  <CATEGORY>", cat,
                       "</CATEGORY>\n");
   };
@@ -786,7 +858,7 @@ std::string Dcm(const Table& t) {
     }
   };
   for (const auto& sc : Scalars(t)) {
-    s += absl::StrFormat("FESTWERT %s\n   LANGNAME \"%s\"\n   EINHEIT_W \"%s\"\n   WERT %s\nEND\n\n", Ident(t, sc.name),
+    s += absl::StrFormat("FESTWERT %s\n   LANGNAME \"%s\"\n   EINHEIT_W \"%s\"\n   WERT %s\nEND\n\n", Label(t, sc.name),
                          absl::StrReplaceAll(OneLine(sc.description), {{"\"", "'"}}), sc.unit, Num(sc.value));
   }
   const bool map = t.axes.size() > 1;
@@ -794,14 +866,14 @@ std::string Dcm(const Table& t) {
   auto block = [&](const std::string& name, const std::string& unit, const std::vector<double>& vals) {
     if (!map) {
       s += absl::StrFormat("KENNLINIE %s %d\n   LANGNAME \"%s over %s\"\n   EINHEIT_X \"%s\"\n   EINHEIT_W \"%s\"\n",
-                           Ident(t, name), n0, name, t.axes[0].name, UnitOf(t.axes[0].name), unit);
+                           Label(t, name), n0, name, t.axes[0].name, UnitOf(t.axes[0].name), unit);
       line("ST/X", t.axes[0].values);
       line("WERT", vals);
     } else {
       // KENNFELD name nx ny: ST/X the X axis (first axis), then per Y value
       // (second axis) one ST/Y line and the WERT values over X.
       s += absl::StrFormat("KENNFELD %s %d %d\n   LANGNAME \"%s over %s x %s\"\n   EINHEIT_X \"%s\"\n   EINHEIT_Y \"%s\"\n   EINHEIT_W \"%s\"\n",
-                           Ident(t, name), n0, n1, name, t.axes[0].name, t.axes[1].name, UnitOf(t.axes[0].name),
+                           Label(t, name), n0, n1, name, t.axes[0].name, t.axes[1].name, UnitOf(t.axes[0].name),
                            UnitOf(t.axes[1].name), unit);
       line("ST/X", t.axes[0].values);
       for (size_t j = 0; j < n1; ++j) {
@@ -855,14 +927,31 @@ std::vector<std::pair<std::string, std::string>> TextFields(const Table& t) {
 }
 
 std::vector<std::pair<std::string, const std::vector<uint8_t>*>> Flags(const Table& t) {
-  return {{"clamped", &t.clamped}, {"extrapolated", &t.extrapolated}};
+  return {{"clamped", &t.clamped},
+          {"extrapolated", &t.extrapolated},
+          {"by_symmetry", &t.by_symmetry},
+          {"not_positive_definite", &t.not_positive_definite}};
 }
 
 absl::StatusOr<CType> ParseCType(const std::string& name) {
-  if (name == "double") return CType::kDouble;
-  if (name == "float") return CType::kFloat;
-  return absl::InvalidArgumentError(absl::StrCat("flag --ctype: expected float or double, got '", name, "'"));
+  for (CType ct : {CType::kDouble, CType::kFloat, CType::kInt16, CType::kInt32}) {
+    if (name == CTypeName(ct)) return ct;
+  }
+  return absl::InvalidArgumentError(
+      absl::StrCat("flag --ctype: expected double, float, int16 or int32, got '", name, "'"));
 }
+
+const char* CTypeName(CType ct) {
+  switch (ct) {
+    case CType::kFloat: return "float";
+    case CType::kInt16: return "int16";
+    case CType::kInt32: return "int32";
+    case CType::kDouble: break;
+  }
+  return "double";
+}
+
+int FixedPointBits(CType ct) { return ct == CType::kInt16 ? 16 : ct == CType::kInt32 ? 32 : 0; }
 
 absl::StatusOr<Exported> Export(const Table& t, Format f, const ExportOptions& opt) {
   if (t.axes.empty() || t.outputs.empty()) return absl::InvalidArgumentError("table: no axes or no outputs");
@@ -888,12 +977,23 @@ absl::StatusOr<Exported> Export(const Table& t, Format f, const ExportOptions& o
     }
   }
   Exported e;
+  const std::vector<QuantityScale> scales = QuantityScales(t, opt.ctype);
+  if ((f == Format::kCHeader || f == Format::kA2l) && FixedPointBits(opt.ctype) > 0) e.fixed_point = scales;
   switch (f) {
     case Format::kCsv: e.bytes = Csv(t); break;
     case Format::kJson: e.bytes = Json(t); break;
-    case Format::kCHeader: e.bytes = CHeader(t, opt.ctype); break;
+    case Format::kCHeader: {
+      auto h = CHeader(t, opt.ctype, scales);
+      if (!h.ok()) return h.status();
+      e.bytes = *std::move(h);
+      break;
+    }
     case Format::kCdfx: e.bytes = Cdfx(t); break;
     case Format::kDcm: e.bytes = Dcm(t); break;
+    case Format::kA2l: {
+      e.bytes = A2lDescription(t, opt.ctype, scales);
+      break;
+    }
   }
   e.payload_crc32 = t.crc32;
   e.payload_sha256 = t.sha256;
@@ -1142,25 +1242,31 @@ std::string CurvesFigure(const sim::MagneticModel& m, const MachineLimits& lim, 
 }  // namespace
 
 PlaneCircle DrawCurrentPlane(plot::Figure* f, const sim::MagneticModel& m, const MachineLimits& lim, double id_lo_a,
-                             double iq_hi_a, double we_rad_s, const std::string& voltage_label) {
+                             double iq_hi_a, double we_rad_s, const std::string& voltage_label, bool generating) {
   const double im = lim.i_max_a;
   if (!lim.HasVoltageLimit()) we_rad_s = 0;   // no voltage limit without Udc and Rs
   const auto xs = Linspace(id_lo_a, 0.6 * im, 161);
-  const auto ys = Linspace(-0.2 * im, iq_hi_a, 121);
+  const auto ys = generating ? Linspace(-iq_hi_a, iq_hi_a, 241) : Linspace(-0.2 * im, iq_hi_a, 121);
   std::vector<double> tz, uz;
-  double tmax = 0;
+  double tmax = 0, tmin = 0;
   for (double iq : ys) {
     for (double id : xs) {
       const double t = TorqueNm(m, lim.pole_pairs, id, iq, lim.temperature_c);
       tz.push_back(t);
       if (we_rad_s > 0) uz.push_back(VoltageV(m, lim, id, iq, we_rad_s));
-      if (std::hypot(id, iq) <= im) tmax = std::max(tmax, t);
+      if (std::hypot(id, iq) <= im) tmax = std::max(tmax, t), tmin = std::min(tmin, t);
     }
   }
-  // Torque contours at round values inside the current limit's torque.
+  // Torque contours at round values inside the current limit's torque
+  // (and, generating, the same steps below zero down to its torque there).
   std::vector<double> levels;
-  for (double v : plot::NiceTicks(0, tmax, 6)) {
+  const auto ticks = plot::NiceTicks(0, tmax, 6);
+  for (double v : ticks) {
     if (v > 0 && v <= tmax) levels.push_back(v);
+  }
+  if (generating && ticks.size() > 1) {
+    const double step = ticks[1] - ticks[0];
+    for (double v = -step; v >= tmin - 1e-9 * step; v -= step) levels.push_back(v);
   }
   plot::Style contour;
   contour.colour = "#888888";
@@ -1170,7 +1276,8 @@ PlaneCircle DrawCurrentPlane(plot::Figure* f, const sim::MagneticModel& m, const
   circle.colour = "#000000";
   circle.dash = "6 4";
   PlaneCircle c;
-  for (int k = 0; k <= 120; ++k) {
+  const int n = generating ? 240 : 120;
+  for (int k = 0; k <= n; ++k) {
     const double a = kPi / 2 + kPi / 2 * k / 120;
     c.id_a.push_back(im * std::cos(a));
     c.iq_a.push_back(im * std::sin(a));

@@ -79,7 +79,20 @@ struct Table {
   std::vector<Axis> axes;
   std::vector<Output> outputs;
   std::vector<uint8_t> clamped;        // per cell: 1 where the request exceeded the limits
-  std::vector<uint8_t> extrapolated;   // per cell: 1 where |i| lies beyond the measured current limit
+  // Per cell: 1 where |i| lies beyond the measured current limit, or (the
+  // model a fit::Calibration) the operating point lies outside its measured
+  // region and not on the mirror image of it (fit::Region::kExtrapolated).
+  std::vector<uint8_t> extrapolated;
+  // Per cell (the model a fit::Calibration): 1 where the operating point lies
+  // on the iq half the data did not measure and the model states the
+  // measured half mirrored (fit::Region::kBySymmetry): e.g. the generating
+  // rows of a calibration from a motoring-only bench.
+  std::vector<uint8_t> by_symmetry;
+  // Per cell: 1 where the model's differential inductance at the operating
+  // point is not positive definite (fit::NotPositiveDefiniteReason): the
+  // flux map is not monotone there, the current it yields is not a valid
+  // operating point of the model.
+  std::vector<uint8_t> not_positive_definite;
   // Over the canonical payload (PayloadBytes), NOT over a file: CRC-32 (zlib)
   // and SHA-256 of the values. Exports name them payload_crc32 / payload_sha256.
   uint32_t crc32 = 0;
@@ -103,8 +116,9 @@ std::vector<Scalar> Scalars(const Table& t);
 // Text metadata (serial, model, created_utc, fluxcal_version, verdict,
 // release_state): written as text where the format has text, else comments.
 std::vector<std::pair<std::string, std::string>> TextFields(const Table& t);
-// Per-cell flag arrays exported beside the outputs: {"clamped", ...},
-// {"extrapolated", ...}, both 0/1 with the outputs' shape.
+// Per-cell flag arrays exported beside the outputs, in this order:
+// "clamped", "extrapolated", "by_symmetry", "not_positive_definite", each
+// 0/1 with the outputs' shape.
 std::vector<std::pair<std::string, const std::vector<uint8_t>*>> Flags(const Table& t);
 
 // Breakpoints (docs/tables.md): every axis is the multiples of a round
@@ -165,13 +179,17 @@ double MaxTorqueNm(const sim::MagneticModel& m, const MachineLimits& lim, double
 // voltage limit |u| = u_max at that speed, labelled
 // `voltage_label`. The fields are sampled over [id_lo_a, 0.6 i_max] x
 // [-0.2 i_max, iq_hi_a], beyond the view (equal scaling widens one axis;
-// the figure clips at its frame). Returns the circle's points (for a
-// second circle drawn to scale).
+// the figure clips at its frame). With `generating` the generating half
+// too: the fields over [-iq_hi_a, iq_hi_a], the circle's whole left half
+// and negative torque levels (the report page draws both directions, as
+// the tables hold both). Returns the circle's points (for a second circle
+// drawn to scale).
 struct PlaneCircle {
   std::vector<double> id_a, iq_a;
 };
 PlaneCircle DrawCurrentPlane(plot::Figure* f, const sim::MagneticModel& m, const MachineLimits& lim, double id_lo_a,
-                             double iq_hi_a, double we_rad_s, const std::string& voltage_label);
+                             double iq_hi_a, double we_rad_s, const std::string& voltage_label,
+                             bool generating = false);
 
 // The breakpoints of an axis over [lo_value, hi_value]: the multiples of
 // the smallest round step (1, 2 or 5 x 10^k) that gives at most
@@ -182,6 +200,10 @@ PlaneCircle DrawCurrentPlane(plot::Figure* f, const sim::MagneticModel& m, const
 absl::StatusOr<std::vector<double>> RoundBreakpoints(double lo_value, double hi_value, int max_points,
                                                      const std::string& flag = "--points");
 
+// When `m` is a fit::Calibration, each cell's operating point is placed in
+// its measured region (Calibration::RegionOf): `by_symmetry` and
+// `extrapolated` flag what does not rest on measured data. Every cell's
+// `not_positive_definite` comes from m.Inductance at its operating point.
 // Errors: InvalidArgument (points, limits, kind; pole pairs or current
 // limit not given; fw without Udc or Rs; a current limit above the
 // measured one without allow_extrapolation), FailedPrecondition (mtpv: no
@@ -209,21 +231,84 @@ ClampSummary SummariseClamped(const Table& t);
 std::string PayloadBytes(const Table& t);
 void Seal(Table* t);   // fills crc32 and sha256
 
-enum class Format { kCsv, kJson, kCHeader, kCdfx, kDcm };
+// The export formats, the one list of their names (ParseFormat's): csv,
+// json, h (C header), cdfx (ASAM CDF 2.0), dcm (DAMOS DCM 2.0), a2l (ASAM
+// MCD-2 MC 1.71 description of the C header's arrays, tables/a2l.cc).
+enum class Format { kCsv, kJson, kCHeader, kCdfx, kDcm, kA2l };
+// InvalidArgument naming --format and the accepted names otherwise.
 absl::StatusOr<Format> ParseFormat(const std::string& name);
-enum class CType { kDouble, kFloat };
-// "double" | "float"; InvalidArgument naming --ctype otherwise.
+
+// Labels, one home for every format: the DCM / CDFX label and A2L name of a
+// field of a table ("FLUXCAL_FW_ID_A"), its C symbol (the C header's array
+// or text variable, "fluxcal_fw_id_a"; macros are the label), the unit a
+// name's suffix gives ("id_a" -> "A", "torque_nm" -> "Nm", "-" without
+// one), the one sentence on the axis order every file states, and text
+// made safe for a one-line comment.
+std::string Label(const Table& t, const std::string& name);
+std::string CSymbol(const Table& t, const std::string& name);
+std::string UnitOf(const std::string& name);
+std::string AxisOrder(const Table& t);
+std::string OneLine(std::string s);
+
+// Element type of the C header's value arrays (axes and outputs) and of
+// the A2L's RECORD_LAYOUTs: binary64, binary32, or fixed point in a
+// signed 16- or 32-bit integer (docs/tables.md, "Fixed point").
+enum class CType { kDouble, kFloat, kInt16, kInt32 };
+// "double" | "float" | "int16" | "int32"; InvalidArgument naming --ctype otherwise.
 absl::StatusOr<CType> ParseCType(const std::string& name);
+const char* CTypeName(CType ct);   // "double", "float", "int16", "int32"
+int FixedPointBits(CType ct);      // 16, 32; 0 for the floating types
+
+// The scale of one physical quantity (the axes and outputs of one unit) in
+// an export: physical = lsb * raw + offset. The full scale is the smallest
+// power of two that holds every value of the quantity in the table (its
+// axes, outputs and scalars) at most kFixedPointFill of it: headroom for a
+// calibration engineer's edits. Fixed point (bits 16 or 32): lsb =
+// full_scale / 2^(bits - 1), a power of two, so that raw * lsb is exact and
+// a value rounded to the nearest raw is off by at most lsb / 2; offset 0
+// (signed types, ranges around 0); representable [-full_scale, full_scale -
+// lsb]. Floating types (bits 0): lsb 0, the full scale only bounds the A2L
+// limits.
+inline constexpr double kFixedPointFill = 0.8;
+// The smallest power of two f with max_abs <= kFixedPointFill * f (1 for 0).
+double FullScale(double max_abs);
+struct QuantityScale {
+  std::string unit;                  // UnitOf: "A", "Nm", "rpm", "Wb", ...
+  std::vector<std::string> arrays;   // the axes and outputs of this unit, in file order
+  int bits = 0;                      // 16, 32; 0: floating
+  double full_scale = 1;             // a power of two
+  double lsb = 0;                    // full_scale / 2^(bits - 1); 0 when floating
+  double offset = 0;                 // always 0
+  double min_value = 0, max_value = 0;   // physical range: [-full_scale, full_scale - lsb]
+};
+// One per unit of the table's axes and outputs, in order of first use.
+std::vector<QuantityScale> QuantityScales(const Table& t, CType ct);
+// The scale of the axis or output `name` (nullptr when it has none).
+const QuantityScale* ScaleOf(const std::vector<QuantityScale>& scales, const std::string& name);
+// `values` as integers of `s`: each rounded to the nearest raw (half away
+// from zero). A value whose nearest raw lies outside the signed `bits`-bit
+// range is refused, never saturated: OutOfRange naming `what`, the index,
+// the value and the range; InvalidArgument for a floating scale.
+absl::StatusOr<std::vector<int64_t>> Quantize(const std::vector<double>& values, const QuantityScale& s,
+                                              const std::string& what);
+
 struct ExportOptions {
-  CType ctype = CType::kDouble;   // C header element type of the value arrays and scalars
+  // C header (h) and A2L element type of the value arrays; the other
+  // formats write the values as decimals regardless.
+  CType ctype = CType::kDouble;
 };
 struct Exported {
   std::string bytes;
   uint32_t payload_crc32 = 0;    // over the values (PayloadBytes), as written inside the file
   std::string payload_sha256;    // over the values (PayloadBytes), as written inside the file
   std::string file_sha256;       // over `bytes`: equals `sha256sum FILE` of the written file
+  // h and a2l with a fixed-point ctype: the scale of each quantity, as the
+  // file states it; empty otherwise.
+  std::vector<QuantityScale> fixed_point;
 };
-// Errors: InvalidArgument (empty table, a non-finite value: named by field).
+// Errors: InvalidArgument (empty table, a non-finite value: named by field),
+// OutOfRange (fixed point: a value the integer type cannot hold; cannot
+// happen with the scales QuantityScales chooses, kept as the guard).
 absl::StatusOr<Exported> Export(const Table& t, Format f, const ExportOptions& opt = {});
 
 // SVG plots (drawn with plot/), the motoring half of the (id, iq) plane on

@@ -117,6 +117,72 @@ TEST(SplineFamily, ConservativeAndSymmetricByConstruction) {
   }
 }
 
+// The mirrored smoothing-spline layout (the measured |iq| range, evaluated
+// at |iq| with the odd part at iq = 0 removed) with random coefficients:
+// psi_d(0, 0) = psi_pm, psi_d even and psi_q odd in iq, psi_q(id, 0) = 0,
+// L = Jacobian of psi (reciprocal), inside and beyond the knots, and flux
+// and inductance continuous across iq = 0 (W' is C2 there; only Lqq's
+// slope may turn).
+TEST(SplineFamily, MirroredLayoutIsConservativeEvenAndContinuous) {
+  Family f;
+  f.kind = Family::kSpline;
+  f.spline.spans = 4;
+  f.spline.id_lo_a = -110;
+  f.spline.id_hi_a = 8;
+  f.spline.smoothing = true;
+  f.spline.symmetric = true;
+  f.spline.mirrored = true;
+  f.spline.spans_q = 6;
+  f.spline.iq_lo_a = -6;
+  f.spline.iq_hi_a = 110;
+  ASSERT_TRUE(f.SymmetricInIq());
+  ASSERT_EQ(f.Name(), "smooth");
+  std::mt19937_64 rng(7);
+  std::normal_distribution<double> nd(0, 1);
+  std::vector<double> p(f.NumParams());
+  p[0] = 0.0114;
+  for (size_t k = 1; k < p.size(); ++k) p[k] = nd(rng);
+  auto psi = [&](double id, double iq, double* d, double* q) { FamilyFlux(f, id, iq, p.data(), d, q); };
+  auto ind = [&](double id, double iq, double* a, double* b, double* c) { FamilyInductance(f, id, iq, p.data(), a, b, c); };
+  double d0, q0;
+  psi(0, 0, &d0, &q0);
+  EXPECT_NEAR(d0, p[0], 1e-15) << "psi_d(0, 0) = psi_pm";
+  for (double id : {-150.0, -100.0, -37.0, 0.0, 6.0, 20.0}) {
+    double d, q;
+    psi(id, 0, &d, &q);
+    EXPECT_NEAR(q, 0.0, 1e-14) << "psi_q(id, 0) = 0 at id " << id;
+    // Across iq = 0: flux and inductance continuous (one-sided limits).
+    double dp, qp, dm, qm, lp[3], lm[3];
+    psi(id, 1e-7, &dp, &qp);
+    psi(id, -1e-7, &dm, &qm);
+    EXPECT_NEAR(dp, dm, 1e-9);
+    EXPECT_NEAR(qp, qm, 1e-8);
+    ind(id, 1e-7, &lp[0], &lp[1], &lp[2]);
+    ind(id, -1e-7, &lm[0], &lm[1], &lm[2]);
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(lp[c], lm[c], 1e-9) << "inductance " << c << " at id " << id;
+    for (double iq : {-140.0, -60.0, -0.5, 0.7, 13.0, 55.0, 109.0, 130.0}) {
+      double d1, q1;
+      psi(id, iq, &d1, &q1);
+      double dn, qn;
+      psi(id, -iq, &dn, &qn);
+      EXPECT_NEAR(dn, d1, 1e-14);
+      EXPECT_NEAR(qn, -q1, 1e-14);
+      double ldd, lqq, ldq;
+      ind(id, iq, &ldd, &lqq, &ldq);
+      const double h = 1e-4;
+      double a, b, c, e;
+      psi(id + h, iq, &a, &b);
+      psi(id - h, iq, &c, &e);
+      EXPECT_NEAR(ldd, (a - c) / (2 * h), 1e-7) << id << ", " << iq;
+      EXPECT_NEAR(ldq, (b - e) / (2 * h), 1e-7) << id << ", " << iq;
+      psi(id, iq + h, &a, &b);
+      psi(id, iq - h, &c, &e);
+      EXPECT_NEAR(ldq, (a - c) / (2 * h), 1e-7) << "reciprocity at " << id << ", " << iq;
+      EXPECT_NEAR(lqq, (b - e) / (2 * h), 1e-7) << id << ", " << iq;
+    }
+  }
+}
+
 // Fits with known truth: both twin magnetics families, spline only.
 TEST(SplineFit, RecoversTruthOnBothMagneticsFamilies) {
   sim::MotorParams mp;

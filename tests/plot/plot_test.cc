@@ -436,6 +436,36 @@ TEST(Figure, ClassHeatmapColoursByBoundsAndLabelsCells) {
   EXPECT_TRUE(OutsideViewBox(p.svg).empty());
 }
 
+// Equal scaling widens one axis; a range symmetric about zero (the whole
+// left half of the current plane, both torque directions) stays centred:
+// the span added goes half to each end, not all to one.
+TEST(Figure, EqualAspectWidensASymmetricRangeOnBothEnds) {
+  Figure f("fig-eq", 300, 800);   // tall: the y axis is the one widened
+  f.SetXRange(-10, 1);
+  f.SetYRange(-10, 10);
+  f.SetEqualAspect(true);
+  f.SetTight(true, true);
+  f.Line({0, 0}, {-10, 10}, Style{}, "");
+  Parsed p(f.Svg());
+  const XMLElement* clip = nullptr;
+  const XMLElement* line = nullptr;
+  Walk(p.svg, [&](const XMLElement* e) {
+    if (!clip && std::strcmp(e->Name(), "rect") == 0 && e->Parent() &&
+        std::strcmp(e->Parent()->ToElement()->Name(), "clipPath") == 0) {
+      clip = e;
+    }
+    const char* c = e->Attribute("class");
+    if (!line && c && std::strcmp(c, "line") == 0) line = e;
+  });
+  ASSERT_NE(clip, nullptr);
+  ASSERT_NE(line, nullptr);
+  double x0, y_lo, x1, y_hi;   // the line from y = -10 (bottom) to y = 10 (top)
+  ASSERT_EQ(std::sscanf(line->Attribute("d"), "M%lf %lf L%lf %lf", &x0, &y_lo, &x1, &y_hi), 4) << line->Attribute("d");
+  const double top = clip->DoubleAttribute("y"), bottom = top + clip->DoubleAttribute("height");
+  EXPECT_GT(y_hi - top, 20) << "the y axis was widened";
+  EXPECT_NEAR(y_hi - top, bottom - y_lo, 1.0) << "as much room above iq = 10 as below iq = -10 (px)";
+}
+
 TEST(CoincidentGroups, MergesCurvesOnTopOfEachOther) {
   const std::vector<std::vector<double>> ys{{1, 2, 3}, {1.001, 2, 3}, {1, 2.5, 3}, {1, 2.0005, 2.999}, {1, 2.5, 3.001}};
   EXPECT_EQ(CoincidentGroups(ys, 0.01), (std::vector<size_t>{0, 0, 2, 0, 2}));

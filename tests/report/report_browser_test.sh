@@ -1,19 +1,27 @@
 #!/usr/bin/env bash
 # Browser test of `fluxcal report`: fits the public Baldor EOL set (real
-# machine, hf_results + steady state) and a simulated set with a concealed
-# dead time (diagnosed), writes one report page for each, opens them in
-# headless Chromium and checks that they rendered: no console errors, every
-# figure present in the rendered DOM with non-zero width and height, the
-# figure count the command reported, and no SVG text running past its
-# figure's edge. Screenshots stay in ARTEFACTS/ (a build artefact).
+# machine measured in the motoring half only, hf_results + steady state;
+# data/real/baldor_eol) and a simulated set with a concealed dead time
+# (diagnosed by the report itself, and from a diagnosis document), and a
+# fit of the Baldor's measured flux map with its nodes drawn; writes one
+# report page for each, opens them in headless Chromium and checks
+# (check_page.py) that they rendered: no console errors, every figure
+# present in the rendered DOM with non-zero width and height, the figure
+# count the command reported, no SVG text running past its figure's edge,
+# no unrounded number and no "-0" in the visible text; and what each page
+# must show: the generating half of the current plane, dashed and dotted
+# curves with their legend entries (extrapolated, by symmetry), the
+# envelope, the diagnosis' residual maps when the report ran the diagnosis
+# and only its spectrum from a document. Screenshots stay in ARTEFACTS/
+# (a build artefact).
 #
-# usage: report_browser_test.sh FLUXCAL_BINARY ARTEFACTS_DIR SHARED_DIR
+# usage: report_browser_test.sh FLUXCAL_BINARY ARTEFACTS_DIR DATA_DIR
 # FLUXCAL_NO_BROWSER=1 skips (exit 77, reported as skipped by ctest). A
 # missing Chromium otherwise fails: CI installs it (scripts/install-deps.sh).
 set -euo pipefail
 F=$1
 A=$2
-SHARED=$3
+DATA=$3
 if [ "${FLUXCAL_NO_BROWSER:-0}" = "1" ]; then
   echo "report_browser_test: skipped (FLUXCAL_NO_BROWSER=1)" >&2
   exit 77
@@ -32,16 +40,35 @@ mkdir -p "$A"
 W=$(mktemp -d)
 trap 'rm -rf "$W"' EXIT
 
-# Fixture 1: the real machine's EOL data (no waveforms: hf_results points).
-"$F" fit "$SHARED/examples/real/baldor_eol" --out "$W/baldor.json" 2>"$W/fit_baldor.log" >/dev/null
-"$F" report "$W/baldor.json" --set "$SHARED/examples/real/baldor_eol" --out "$A/baldor.html" --json \
+# Fixture 1: the real machine's EOL data (no waveforms: hf_results points),
+# measured for iq >= 0 only; its model (smooth-asym) is not symmetric in iq,
+# so the generating half the tables use is extrapolated.
+"$F" fit "$DATA/real/baldor_eol" --out "$W/baldor.json" 2>"$W/fit_baldor.log" >/dev/null
+"$F" report "$W/baldor.json" --set "$DATA/real/baldor_eol" --out "$A/baldor.html" --json \
   > "$W/baldor_report.json"
+EXPECT_baldor="generating,dashed-labelled,extrapolated,envelope"
 
-# Fixture 2: simulated EOL run with an uncompensated dead time, diagnosed.
+# Fixture 2: simulated EOL run with an uncompensated dead time; the report
+# runs the diagnosis (residual maps and spectrum embedded), and a second
+# page takes the diagnosis document (spectrum only, and it says why).
 "$F" simulate --serial IPM-REPORT-TEST --seed 7 --effects dead_time_s=2.5e-6 --out "$W/sim" 2>/dev/null >/dev/null
 "$F" fit "$W/sim" --out "$W/sim.json" 2>/dev/null >/dev/null
+"$F" report "$W/sim.json" --set "$W/sim" --diagnose --out "$A/sim.html" --json > "$W/sim_report.json"
+EXPECT_sim="generating,dashed-labelled,envelope,residual-maps"
 "$F" diagnose "$W/sim" --json > "$W/diag.json" 2>/dev/null || true
-"$F" report "$W/sim.json" --set "$W/sim" --diagnosis "$W/diag.json" --out "$A/sim.html" --json > "$W/sim_report.json"
+"$F" report "$W/sim.json" --diagnosis "$W/diag.json" --out "$A/sim_doc.html" --json > "$W/sim_doc_report.json"
+EXPECT_sim_doc="generating,spectrum-only"
+
+# Fixture 3: the measured flux map of the same machine (both torque
+# directions), fitted, its nodes over the surfaces; the map-fit row.
+"$F" fit --map "$DATA/real/baldor_fluxmap_measured.csv" --pole-pairs 2 --rs-ohm 3.6 --udc-v 540 --serial BALDOR-MAP \
+  --out "$W/map.json" 2>/dev/null >/dev/null
+"$F" report "$W/map.json" --map "$DATA/real/baldor_fluxmap_measured.csv" --out "$A/map.html" --json \
+  > "$W/map_report.json"
+EXPECT_map="generating,envelope"
+for want in "<th>flux error against the map</th><td>RMS " "flux map nodes" "Both halves measured"; do
+  grep -qF "$want" "$A/map.html" || { echo "FAIL: map.html lacks '$want'" >&2; exit 1; }
+done
 
 # From the service: the page its GetReport builds for the stored version,
 # with the store's provenance (version, creation time, stored verdict,
@@ -91,7 +118,9 @@ if "$F" report "$W/sim.json" --diagnosis "$W/bad_diag.json" --out "$W/x.html" 2>
 fi
 grep -q "bad_diag.json: field 'format'" "$W/bad.err" || { echo "FAIL: error does not name file and field:"; cat "$W/bad.err"; exit 1; } >&2
 
-for name in baldor sim service service_diagnosed; do
+EXPECT_service="generating"
+EXPECT_service_diagnosed="generating"
+for name in baldor sim sim_doc map service service_diagnosed; do
   html="$A/$name.html"
   # --dump-dom prints the DOM after layout; console messages go to stderr
   # with --enable-logging=stderr --v=0.
@@ -101,24 +130,38 @@ for name in baldor sim service service_diagnosed; do
     --hide-scrollbars --window-size=1400,5200 --screenshot="$A/$name.png" "file://$html" \
     >/dev/null 2>> "$W/$name.console"
   cp "$W/$name.console" "$A/$name.console.log"
-  python3 "$HERE/check_page.py" "$html" "$W/$name.dom" "$W/$name.console" "$W/${name}_report.json" "$A/$name.png"
+  expect_var="EXPECT_$name"
+  python3 "$HERE/check_page.py" "$html" "$W/$name.dom" "$W/$name.console" "$W/${name}_report.json" "$A/$name.png" \
+    --expect "${!expect_var}"
 done
 # The checker must catch what it is for: a page with a console error, an
-# external image, a zero-size figure and a label past the edge.
+# external image, a zero-size figure, a label past the edge, unrounded
+# numbers and a "-0", a current plane whose MTPA stays in the motoring half
+# and whose dotted MTPV has no legend entry, no envelope, no residual maps.
 cat > "$W/bad.html" <<'HTML'
 <!DOCTYPE html><html><body><figure><svg id="z" width="100" height="0"><text x="90" y="10">far too long</text></svg></figure>
+<figure><svg id="fig-plane" width="300" height="300"><g class="yticks"><text x="20" y="204">0</text><text x="20" y="104">10</text></g>
+<path class="line" d="M50 200 L60 150 L70 100" stroke="#d62728"/>
+<path class="line" d="M50 150 L60 140" stroke="#1f77b4" stroke-dasharray="2 3"/>
+<g class="legend"><line x1="200" y1="20" x2="224" y2="20" stroke="#1f77b4"/><text x="230" y="24">MTPV</text></g></svg></figure>
+<p>psi_pm 0.446782133 Wb, measured region id -18 .. -0 A</p>
 <img src="elsewhere.png"><script>console.error("boom")</script></body></html>
 HTML
-echo '{"figures": 1}' > "$W/bad_report.json"
+echo '{"figures": 2}' > "$W/bad_report.json"
 timeout 60 "$CHROME" --headless --no-sandbox --disable-gpu --user-data-dir="$W/profile-bad" \
   --enable-logging=stderr --v=0 --dump-dom "file://$W/bad.html" > "$W/bad.dom" 2> "$W/bad.console"
-if python3 "$HERE/check_page.py" "$W/bad.html" "$W/bad.dom" "$W/bad.console" "$W/bad_report.json" "$W/none.png" > "$W/bad.check"; then
+if python3 "$HERE/check_page.py" "$W/bad.html" "$W/bad.dom" "$W/bad.console" "$W/bad_report.json" "$W/none.png" \
+     --expect generating,dashed-labelled,extrapolated,envelope,residual-maps > "$W/bad.check"; then
   echo "FAIL: the page checker passed a broken page" >&2; exit 1
 fi
-for what in "console message" "external reference" "zero size" "runs past" "<script>"; do
+for what in "console message" "external reference" "zero size" "runs past" "<script>" "unrounded number '0.446782133'" \
+            "a '-0'" "does not reach both iq < 0 and iq > 0" "dashed '2 3' without a legend entry" \
+            "no legend entry 'dotted: extrapolated'" "no torque-speed envelope" "residual-before not embedded"; do
   grep -q "$what" "$W/bad.check" || { echo "FAIL: the page checker missed: $what" >&2; cat "$W/bad.check" >&2; exit 1; }
 done
 
 grep -q '"verdict"' "$W/sim_report.json"
 grep -q "Diagnosis" "$A/sim.html" || { echo "FAIL: diagnosis section missing from sim.html" >&2; exit 1; }
+grep -qF "computed by this report from the recording set" "$A/sim.html" || \
+  { echo "FAIL: sim.html does not say where its residual maps come from" >&2; exit 1; }
 echo "report_browser_test: ok (artefacts in $A)"

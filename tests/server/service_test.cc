@@ -454,10 +454,18 @@ TEST_P(ServiceTest, EightConcurrentStationsThenFitExportQuery) {
   auto* p = q.add_points();
   p->set_id_a(-40);
   p->set_iq_a(60);
+  auto* mirrored = q.add_points();   // the half the stations did not measure
+  mirrored->set_id_a(-40);
+  mirrored->set_iq_a(-60);
   v1::QueryFluxResponse qr;
   ASSERT_TRUE(stub_->QueryFlux(&qc, q, &qr).ok());
   sim::AnalyticMotor truth{sim::MotorParams{}};
   EXPECT_NEAR(qr.values(0).ldd_h() / (1.03 * truth.Inductance(-40, 60).ldd_h), 1.0, 0.005);
+  EXPECT_EQ(qr.values(0).region(), "measured");
+  EXPECT_EQ(qr.values(1).region(), "by_symmetry");
+  EXPECT_FALSE(qr.values(1).extrapolated());
+  EXPECT_FALSE(qr.values(1).invalid()) << qr.values(1).invalid_reason();
+  EXPECT_NEAR(qr.values(1).ldd_h(), qr.values(0).ldd_h(), 1e-9 * qr.values(0).ldd_h());
   grpc::ClientContext ec;
   v1::ExportTableRequest e;
   e.set_serial("IPM-C-3");

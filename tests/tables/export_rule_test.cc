@@ -20,30 +20,6 @@ bool Has(const absl::Status& s, const std::string& what) {
   return std::string(s.message()).find(what) != std::string::npos;
 }
 
-// The twin motor fitted from its own flux linkage on a grid (id -150..0 A,
-// iq 0..150 A: measured current limit 150 A), with the facts given.
-fit::Calibration TwinCalibration(std::optional<double> udc_v, std::optional<double> rs_ohm) {
-  const sim::AnalyticMotor motor{sim::MotorParams{}};
-  fit::FitData d;
-  d.serial = "IPM-RULE-1";
-  d.pole_pairs = sim::MotorParams().pole_pairs;
-  d.rs_ohm = rs_ohm;
-  d.udc_v = udc_v;
-  for (int a = 0; a <= 10; ++a) {
-    for (int b = 0; b <= 10; ++b) {
-      const double id = -150.0 + 15 * a, iq = 15.0 * b;
-      const auto f = motor.Flux(id, iq);
-      d.fluxes.push_back({id, iq, f.psi_d_wb, f.psi_q_wb, 1e-6});
-    }
-  }
-  d.psi_pm_prior_wb = motor.Flux(0, 0).psi_d_wb;
-  fit::FitOptions o;
-  o.model = "analytic";
-  auto cal = fit::Fit(d, o);
-  EXPECT_TRUE(cal.ok()) << cal.status();
-  return *cal;
-}
-
 const fit::Calibration& WithUdc() {
   static const auto* c = new fit::Calibration(TwinCalibration(sim::DriveParams().udc_v, sim::MotorParams().rs_ohm));
   return *c;

@@ -1,10 +1,15 @@
 // The limits the table tests compute for: the twin motor's pole pairs and
 // Rs, the twin drive's Udc (the test motors are the twin's analytic family)
 // and a current limit of 150 A. Stated here, once: tables::MachineLimits has
-// no defaults of any machine.
+// no defaults of any machine. And the twin's calibration the export tests
+// start from.
 #ifndef FLUXCAL_TESTS_TABLES_TWIN_LIMITS_H_
 #define FLUXCAL_TESTS_TABLES_TWIN_LIMITS_H_
 
+#include <optional>
+
+#include "fitting/fit.h"
+#include "gtest/gtest.h"
 #include "simulation/twin.h"
 #include "tables/tables.h"
 
@@ -17,6 +22,30 @@ inline MachineLimits TwinLimits(double i_max_a = 150.0) {
   lim.udc_v = sim::DriveParams().udc_v;
   lim.i_max_a = i_max_a;
   return lim;
+}
+
+// The twin motor fitted from its own flux linkage on a grid (id -150..0 A,
+// iq 0..150 A: measured current limit 150 A), with the facts given.
+inline fit::Calibration TwinCalibration(std::optional<double> udc_v, std::optional<double> rs_ohm) {
+  const sim::AnalyticMotor motor{sim::MotorParams{}};
+  fit::FitData d;
+  d.serial = "IPM-RULE-1";
+  d.pole_pairs = sim::MotorParams().pole_pairs;
+  d.rs_ohm = rs_ohm;
+  d.udc_v = udc_v;
+  for (int a = 0; a <= 10; ++a) {
+    for (int b = 0; b <= 10; ++b) {
+      const double id = -150.0 + 15 * a, iq = 15.0 * b;
+      const auto f = motor.Flux(id, iq);
+      d.fluxes.push_back({id, iq, f.psi_d_wb, f.psi_q_wb, 1e-6});
+    }
+  }
+  d.psi_pm_prior_wb = motor.Flux(0, 0).psi_d_wb;
+  fit::FitOptions o;
+  o.model = "analytic";
+  auto cal = fit::Fit(d, o);
+  EXPECT_TRUE(cal.ok()) << cal.status();
+  return *cal;
 }
 
 }  // namespace fluxcal::tables

@@ -1,0 +1,96 @@
+// The report page of the public Baldor EOL set (data/real/baldor_eol, the
+// issue's example: a real machine, 540 V DC link), fitted once: the whole
+// page (BuildReport with the set's points) and, for comparison, the three
+// tables it must contain (MTPA, MTPV, field weakening as `fluxcal export`
+// computes them, the page's checksums). The difference is what the page's
+// own figures cost. Run:
+//   ./build/bench/report_bench --benchmark_min_time=2
+#include <string>
+
+#include "benchmark/benchmark.h"
+#include "fitting/fit.h"
+#include "identification/identify.h"
+#include "io/recording_set.h"
+#include "report/report.h"
+#include "tables/tables.h"
+
+namespace {
+
+struct Fixture {
+  fluxcal::fit::FitData data;
+  fluxcal::fit::Calibration cal;
+  bool ok = false;
+};
+
+const Fixture& Baldor() {
+  static const Fixture f = [] {
+    Fixture x;
+    // The repository's data/ beside bench/: this file's own path (relative
+    // to the build directory when the compiler was given a relative one),
+    // or run from the repository's root or its build directory.
+    std::string here = __FILE__;
+    here = here.substr(0, here.rfind("/bench/"));
+    absl::StatusOr<fluxcal::io::RecordingSet> set = absl::NotFoundError("data/real/baldor_eol");
+    for (const std::string& root : {here, std::string("."), std::string(".."), "../" + here}) {
+      set = fluxcal::io::ReadRecordingSet(root + "/data/real/baldor_eol");
+      if (set.ok()) break;
+    }
+    if (!set.ok()) return x;
+    x.data = fluxcal::fit::FitDataFromRecording(*set, {});
+    auto cal = fluxcal::fit::Fit(x.data);
+    if (!cal.ok()) return x;
+    x.cal = *cal;
+    x.ok = true;
+    return x;
+  }();
+  return f;
+}
+
+void BM_ReportPage(benchmark::State& state) {
+  const Fixture& f = Baldor();
+  if (!f.ok) {
+    state.SkipWithError("data/real/baldor_eol");
+    return;
+  }
+  fluxcal::report::ReportInputs in;
+  in.calibration = &f.cal;
+  in.calibration_json = f.cal.ToJson();
+  in.identified = &f.data;
+  size_t bytes = 0;
+  for (auto _ : state) {
+    auto rep = fluxcal::report::BuildReport(in);
+    if (!rep.ok()) state.SkipWithError(std::string(rep.status().message()).c_str());
+    bytes = rep.ok() ? rep->html.size() : 0;
+    benchmark::DoNotOptimize(rep);
+  }
+  state.counters["page_bytes"] = static_cast<double>(bytes);
+}
+BENCHMARK(BM_ReportPage)->Unit(benchmark::kMillisecond);
+
+void BM_ReportTablesOnly(benchmark::State& state) {
+  const Fixture& f = Baldor();
+  if (!f.ok) {
+    state.SkipWithError("data/real/baldor_eol");
+    return;
+  }
+  fluxcal::tables::MachineLimits lim;
+  lim.pole_pairs = f.cal.pole_pairs();
+  lim.rs_ohm = f.cal.rs_ohm();
+  lim.udc_v = f.cal.udc_v();
+  lim.i_max_a = f.cal.MeasuredCurrentLimitA();
+  for (auto _ : state) {
+    for (const char* kind : {"mtpa", "mtpv", "fw"}) {
+      fluxcal::tables::TableSpec spec;
+      spec.kind = kind;
+      spec.measured_current_limit_a = lim.i_max_a;
+      spec.allow_extrapolation = std::string(kind) == "mtpv";   // as the page: this MTPV lies beyond the limit
+      auto t = fluxcal::tables::BuildTable(f.cal, lim, spec);
+      benchmark::DoNotOptimize(t);
+    }
+  }
+}
+BENCHMARK(BM_ReportTablesOnly)->Unit(benchmark::kMillisecond);
+
+}  // namespace
+
+BENCHMARK_MAIN();
