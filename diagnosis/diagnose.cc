@@ -119,10 +119,6 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
   auto refreshed = [&](const Model& mm, const FitOut& ff, const std::vector<Block>& free_blocks) -> std::optional<Refreshed> {
     auto cal = fit::Fit(CorrectedFitData(set, mm, ff.p, ids));
     if (!cal.ok()) return std::nullopt;
-    if (std::getenv("FLUXCAL_DEBUG")) {
-      std::fprintf(stderr, "  refresh at psh %.4g %.4g:\n", ff.p.b[kAngleHarm][0], ff.p.b[kAngleHarm][1]);
-      for (const auto& c : cal->summary.candidates) std::fprintf(stderr, "    %s\n", c.c_str());
-    }
     Refreshed r{mm, {}};
     SetSurfaces(*cal, &r.model);
     Params p2 = ff.p;
@@ -172,7 +168,6 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
       if (cands[c].block == kHarm) st.b[kHarm][0] = 0.0;
       FitOut f = Solve(m, st, trial);
       std::optional<Model> cand_model;
-      if (std::getenv("FLUXCAL_DEBUG")) std::fprintf(stderr, "cand %s ok %d chi2 %.1f k_eff %.1f lam %.3g bic %.1f (cur chi2 %.1f k %.1f lam %.3g bic %.1f)\n", cands[c].effect.c_str(), f.ok, f.chi2, f.k_eff, f.lambda, f.bic, current.chi2, current.k_eff, current.lambda, current.bic);
       if (!f.ok) continue;
       const double dbic = f.bic - current.bic;
       const double sig = Significance(cands[c], f, m);
@@ -191,7 +186,6 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
         // as `fluxcal fit` would from the data freed of it (its family and
         // smoothness chosen anew), do they relax or fit better?
         auto rf = refreshed(m, f, trial);
-        if (std::getenv("FLUXCAL_DEBUG") && rf) std::fprintf(stderr, "  refreshed %s: %s k_eff %.1f chi2 %.2f bic %.1f\n", cands[c].effect.c_str(), rf->model.surf.Name().c_str(), rf->fit.k_eff, rf->fit.chi2, rf->fit.bic);
         if (rf && rf->fit.bic - current.bic < -opt.bic_threshold &&
             (RelaxesSurfaces(current, rf->fit) ||
              PracticallySignificant(z_current, Residuals(rf->model, rf->fit.p), current.rms, rf->fit.rms, opt))) {
@@ -202,7 +196,6 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
                 "surfaces be smoother";
         }
       }
-      if (std::getenv("FLUXCAL_DEBUG")) std::fprintf(stderr, "  -> %s sig %.2f why: %s\n", cands[c].effect.c_str(), sig, why.c_str());
       if (!why.empty()) {
         std::string name = cands[c].effect;
         if (cands[c].block == kHarm) name += absl::StrFormat(" (order %d)", cands[c].order);
@@ -372,25 +365,6 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
   for (size_t k = 1; k < model_name.size(); ++k) name += "+" + model_name[k];
   rep.final_model = {name, current.rms, current.bic, current.chi2};
   const auto z_after = Residuals(m, current.p);
-  if (std::getenv("FLUXCAL_DEBUG")) {   // DEBUG (scratch)
-    const auto ptr = current.p.Ptrs();
-    for (size_t k = 0; k < m.ss.size(); ++k) {
-      const auto& o = m.ss[k];
-      const Complex u = m.PredictSs(ptr.data(), o);
-      std::fprintf(stderr, "ss %zu id %.1f iq %.1f rpm %.0f u %.3f %+.3f pred %.3f %+.3f d %.3f %+.3f sig %.3f T %.3f pred %.3f\n", k, o.id_a, o.iq_a, o.speed_rpm, o.u.real(), o.u.imag(), u.real(), u.imag(), (o.u-u).real(), (o.u-u).imag(), o.sigma, o.torque, m.PredictTorque(ptr.data(), o));
-    }
-    for (const auto& o : m.hf) {
-      Complex i0, i1;
-      m.PredictHf(ptr.data(), o, &i0, &i1);
-      double ldd, lqq, ldq;
-      m.Inductance(ptr.data(), o.id_a, o.iq_a, &ldd, &lqq, &ldq);
-      std::fprintf(stderr, "hf %s id %.1f iq %.1f rpm %.0f |i0| %.4f |i1| %.4f d0 %.2f %.2f d1 %.2f %.2f L %.4f %.4f %.5f\n", o.point.c_str(), o.id_a, o.iq_a, o.speed_rpm, std::abs(o.i0), std::abs(o.i1), ((o.i0-i0)/o.sigma0).real(), ((o.i0-i0)/o.sigma0).imag(), ((o.i1-i1)/o.sigma1).real(), ((o.i1-i1)/o.sigma1).imag(), ldd, lqq, ldq);
-    }
-    for (const auto& o : m.dc) {
-      const Complex u = m.PredictDc(ptr.data(), o);
-      std::fprintf(stderr, "dc %s id %.1f iq %.1f th %.2f u %.3f %+.3f d %.4f %+.4f sig %.4f\n", o.point.c_str(), o.id_a, o.iq_a, o.theta, o.u.real(), o.u.imag(), (o.u-u).real(), (o.u-u).imag(), o.sigma);
-    }
-  }
   rep.remaining = Locate(z_after, opt.mismatch_sigma);
   for (size_t k = 0; k < z_before.size(); ++k) {
     rep.residuals.push_back({z_before[k].point, z_before[k].signal, z_before[k].id_a, z_before[k].iq_a,
@@ -561,12 +535,6 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
     }
     if (after.ok()) {
       rep.waveform_rms_after_a = ReplaySpectrum(set, *after, rep.spectrum_hz, &rep.spectrum_after_a);
-      if (std::getenv("FLUXCAL_DEBUG3")) {
-        for (const auto& wp : AnalyseWaveforms(set, *after, m.pole_pairs)) {
-          if (!wp.spectrum_angle.empty()) std::fprintf(stderr, "angle %s s2 %.3g\n", wp.point.c_str(), wp.sigma2_bin_angle);
-          for (const auto& l : wp.lines) std::fprintf(stderr, "line %s %s f %.0f amp %.4f sim %.4f z2 %.0f kind %s %d %d\n", wp.point.c_str(), l.channel.c_str(), l.freq_hz, l.amp_a, l.sim_amp_a, l.z2, l.kind.c_str(), l.order, l.m);
-        }
-      }
       for (auto& w : WaveformMismatches(AnalyseWaveforms(set, *after, m.pole_pairs), m.pole_pairs, f_inj,
                                         opt.mismatch_sigma)) {
         rep.remaining.push_back(std::move(w));

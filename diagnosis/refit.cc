@@ -375,7 +375,6 @@ FitOut Solve(const Model& m, const Params& start, const std::vector<Block>& free
       if (!stepped) return;
     }
   };
-  if (std::getenv("FLUXCAL_DEBUG2")) std::fprintf(stderr, "solve: n %d x %d surf_off %d |J| %.3g |Jsurf| %.3g |S| %.3g lam %.3g f %.3g\n", rows, L.n, L.surf_offset, lin.J.norm(), L.surf_offset >= 0 ? lin.J.middleCols(L.surf_offset, m.BlockSize(kBase) - 1).norm() : 0.0, S.norm(), lambda, f);
   converge(40);
   if (penalised) {
     // lambda by the BIC of the problem linearised at the solution, for

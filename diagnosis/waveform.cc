@@ -390,11 +390,6 @@ std::vector<WaveformPoint> AnalyseWaveforms(const io::RecordingSet& set, const s
         for (size_t k = 0; k < n; ++k) {
           quant[k] = std::round((line[k] + best_shift - c) / count) * count + c - line[k];
         }
-        if (std::getenv("FLUXCAL_DEBUG3")) {
-          double e2 = 0;
-          for (size_t k = 0; k < n; ++k) e2 += std::pow(th[k] - line[k] - quant[k], 2);
-          std::fprintf(stderr, "quant %s count %.6g c %.3g resid %.3g\n", wp.point.c_str(), count, c, std::sqrt(e2 / n));
-        }
       }
       std::vector<Complex> ain(n), aout, qin(n), qout;
       for (size_t k = 0; k < n; ++k) {
