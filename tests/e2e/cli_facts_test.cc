@@ -11,8 +11,8 @@
 //  - a report without the facts its verdict needs never says pass, and
 //    without Udc it says that the voltage limit cannot be drawn.
 // In-repo data: the twin's set, identified here and written out as a bare
-// hf_results.csv. The published Baldor EOL file (../shared) repeats the
-// original report when present.
+// hf_results.csv. The published Baldor EOL file (data/real/baldor_eol)
+// repeats the original report.
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -264,8 +264,8 @@ TEST_F(Facts, ReportWithoutTheFactsNeverPasses) {
 
 // The defect as first reported, on the published Baldor EOL file.
 TEST(FactsBaldor, AsReported) {
-  const std::string hf = std::string(FLUXCAL_SHARED_DIR) + "/examples/real/baldor_eol/hf_results.csv";
-  if (!fs::exists(hf)) GTEST_SKIP() << "needs ../shared/examples/real/baldor_eol/hf_results.csv";
+  const std::string hf = std::string(FLUXCAL_SOURCE_DIR) + "/data/real/baldor_eol/hf_results.csv";
+  ASSERT_TRUE(fs::exists(hf)) << "in-repo fixture missing: " << hf;
   const fs::path dir = fs::temp_directory_path() / ("fluxcal_facts_baldor_" + std::to_string(::getpid()));
   fs::create_directories(dir);
   const std::string cal = (dir / "c.json").string(), out = (dir / "fw.csv").string();

@@ -7,13 +7,13 @@
 # figure count the command reported, and no SVG text running past its
 # figure's edge. Screenshots stay in ARTEFACTS/ (a build artefact).
 #
-# usage: report_browser_test.sh FLUXCAL_BINARY ARTEFACTS_DIR SHARED_DIR
+# usage: report_browser_test.sh FLUXCAL_BINARY ARTEFACTS_DIR REAL_DATA_DIR (data/real)
 # FLUXCAL_NO_BROWSER=1 skips (exit 77, reported as skipped by ctest). A
 # missing Chromium otherwise fails: CI installs it (scripts/install-deps.sh).
 set -euo pipefail
 F=$1
 A=$2
-SHARED=$3
+REAL=$3
 if [ "${FLUXCAL_NO_BROWSER:-0}" = "1" ]; then
   echo "report_browser_test: skipped (FLUXCAL_NO_BROWSER=1)" >&2
   exit 77
@@ -33,8 +33,8 @@ W=$(mktemp -d)
 trap 'rm -rf "$W"' EXIT
 
 # Fixture 1: the real machine's EOL data (no waveforms: hf_results points).
-"$F" fit "$SHARED/examples/real/baldor_eol" --out "$W/baldor.json" 2>"$W/fit_baldor.log" >/dev/null
-"$F" report "$W/baldor.json" --set "$SHARED/examples/real/baldor_eol" --out "$A/baldor.html" --json \
+"$F" fit "$REAL/baldor_eol" --out "$W/baldor.json" 2>"$W/fit_baldor.log" >/dev/null
+"$F" report "$W/baldor.json" --set "$REAL/baldor_eol" --out "$A/baldor.html" --json \
   > "$W/baldor_report.json"
 
 # Fixture 2: simulated EOL run with an uncompensated dead time, diagnosed.

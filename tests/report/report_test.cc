@@ -2,7 +2,7 @@
 // the tables library's for the same limits, the limits say where they came
 // from, a bad diagnosis document is refused naming file and field, and text
 // from the inputs is escaped. Fixture: the public Baldor EOL set (real
-// machine, hf_results), fitted here.
+// machine, hf_results; data/real/baldor_eol), fitted here.
 #include "report/report.h"
 
 #include <gtest/gtest.h>
@@ -24,7 +24,7 @@ size_t Count(const std::string& s, const std::string& what) {
 class ReportTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    const std::string dir = std::string(FLUXCAL_SHARED_DIR) + "/examples/real/baldor_eol";
+    const std::string dir = std::string(FLUXCAL_SOURCE_DIR) + "/data/real/baldor_eol";
     auto set = io::ReadRecordingSet(dir);
     ASSERT_TRUE(set.ok()) << set.status();
     data_ = new fit::FitData(fit::FitDataFromHfRows(&set->manifest, set->hf_results));
