@@ -5,6 +5,8 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
+#include <system_error>
 
 #include "absl/strings/str_cat.h"
 #include "io/csv.h"
@@ -131,6 +133,36 @@ absl::Status WriteOutput(const std::string& path, std::string_view data) {
     return absl::DataLossError("cannot write to stdout");
   }
   return absl::OkStatus();
+}
+
+std::string CheckOverwrite(const ParsedArgs& args, const std::vector<OutputPath>& outputs) {
+  if (args.Has("force")) return "";
+  namespace fs = std::filesystem;
+  for (const auto& o : outputs) {
+    if (o.path.empty() || o.path == "-") continue;
+    std::error_code ec;
+    const fs::file_status st = fs::symlink_status(o.path, ec);
+    if (ec || !fs::exists(st)) continue;
+    if (fs::is_directory(st) && fs::is_empty(o.path, ec) && !ec) continue;
+    return absl::StrCat("flag --", o.flag, ": '", o.path, "' exists",
+                        fs::is_directory(st) ? " and is not empty" : "",
+                        "; not overwritten (give --force to replace it)");
+  }
+  return "";
+}
+
+absl::Status WriteNewOutput(const ParsedArgs& args, const OutputPath& output, std::string_view data) {
+  if (std::string refusal = CheckOverwrite(args, {output}); !refusal.empty()) {
+    return absl::FailedPreconditionError(refusal);
+  }
+  return WriteOutput(output.path, data);
+}
+
+int ExitCodeFor(const absl::Status& status) {
+  if (status.ok()) return 0;
+  const std::string m(status.message());
+  const bool names_flag = m.rfind("flag --", 0) == 0 || m.rfind("--", 0) == 0;
+  return absl::IsInvalidArgument(status) && names_flag ? 2 : 1;
 }
 
 }  // namespace fluxcal::cli

@@ -62,6 +62,32 @@ std::string CheckOutToStdout(const ParsedArgs& args, const std::string& out_flag
 // Writes data to path, or to stdout for "-".
 absl::Status WriteOutput(const std::string& path, std::string_view data);
 
+// The one overwrite rule (docs/cli.md, "Files a command writes"): no command
+// replaces a file that exists unless it is given --force. Every command that
+// writes a file declares kForceFlag and calls CheckOverwrite for every path
+// it will write, before any work (so a refusal costs nothing), and
+// WriteNewOutput at the moment of writing. "-" (stdout) is never refused;
+// an empty directory is not "existing output", a directory with files is.
+inline const FlagSpec kForceFlag = {"force", "", "replace output files that exist (refused otherwise)"};
+struct OutputPath {
+  std::string flag;   // the flag that names it, without "--" ("out", "svg")
+  std::string path;
+};
+// "" when every path may be written; else the refusal, naming the flag and
+// the path: "flag --out: 'cal.json' exists; not overwritten (give --force
+// to replace it)". A refusal exits 1 (the command was well formed).
+std::string CheckOverwrite(const ParsedArgs& args, const std::vector<OutputPath>& outputs);
+// CheckOverwrite for one path, then WriteOutput: FailedPrecondition with
+// the refusal, or WriteOutput's status.
+absl::Status WriteNewOutput(const ParsedArgs& args, const OutputPath& output, std::string_view data);
+
+// The exit status of a refused request (docs/cli.md, "Exit status"): 2 when
+// the status names a flag to give or correct (InvalidArgument whose message
+// starts with "flag --" or "--"), 1 for everything else: bad input, a
+// failed check, a table refused for what it would contain (the MTPV curve
+// outside the current limit, mostly clamped cells), an existing output.
+int ExitCodeFor(const absl::Status& status);
+
 }  // namespace fluxcal::cli
 
 #endif  // FLUXCAL_CLI_ARGS_H_

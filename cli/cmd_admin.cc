@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <system_error>
 
 #include "absl/strings/match.h"
 #include "cli/args.h"
@@ -63,13 +64,21 @@ int Migrate(const ParsedArgs& a) {
 
 int Backup(const ParsedArgs& a) {
   const auto db = a.Get("db"), out = a.Get("out");
-  if (!db || !out) return Fail("usage: fluxcal admin backup --db PATH --out FILE [--json]", 2);
+  if (!db || !out) return Fail("usage: fluxcal admin backup --db PATH --out FILE [--force] [--json]", 2);
   if (absl::StartsWith(*db, "postgres")) {
     return Fail("--db: PostgreSQL is backed up with pg_dump -Fc (docs/service.md), not with fluxcal", 2);
   }
-  if (std::filesystem::exists(*out)) return Fail("--out: '" + *out + "' exists; refusing to overwrite");
+  // The overwrite rule (cli/args.h); SQLite's -wal and -shm beside an old
+  // backup count too: a new file under the old name would replay them.
+  if (auto e = CheckOverwrite(a, {{"out", *out}, {"out", *out + "-wal"}, {"out", *out + "-shm"}}); !e.empty()) {
+    return Fail(e);
+  }
   const std::string path = absl::StartsWith(*db, "sqlite:") ? db->substr(7) : *db;
   if (!std::filesystem::exists(path)) return Fail("--db: no SQLite store at '" + path + "'");
+  for (const std::string& old : {*out, *out + "-wal", *out + "-shm"}) {   // --force given, or none exists
+    std::error_code ec;
+    std::filesystem::remove(old, ec);
+  }
   auto store = storage::SqliteStore::Open(path, /*create=*/false);
   if (!store.ok()) return Fail(std::string(store.status().message()));
   if (auto st = (*store)->Backup(*out); !st.ok()) return Fail(std::string(st.message()));
@@ -103,6 +112,7 @@ const FlagSpecs kAdminFlags = {
     {"db", "URL", "backup, hash: the store (SQLite PATH; hash also postgresql://...)"},
     {"out", "FILE", "backup: the SQLite backup file to write"},
     {"json", "", "print the result as one JSON document"},
+    {kForceFlag.name, kForceFlag.value, "backup: " + kForceFlag.help},
 };
 
 int RunAdmin(const std::vector<std::string>& argv) {
@@ -126,7 +136,7 @@ int RunAdmin(const std::vector<std::string>& argv) {
 FLUXCAL_REGISTER_COMMAND("admin", "store administration: migrate SQLite to PostgreSQL, backup, content hash",
                          RunAdmin,
                          "fluxcal admin migrate --from sqlite:PATH --to postgresql://... [--json]\n"
-                         "fluxcal admin backup --db PATH --out FILE [--json]\n"
+                         "fluxcal admin backup --db PATH --out FILE [--force] [--json]\n"
                          "fluxcal admin hash --db URL [--json]\n"
                          "fluxcal admin keygen|add-key|add-cert|revoke|list-keys|verify-db|anchor ...  (fluxcal help admin add-key, ...)",
                          kAdminFlags);

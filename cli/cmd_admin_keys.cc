@@ -64,6 +64,7 @@ const FlagSpecs kListKeysFlags = {
 const FlagSpecs kKeygenFlags = {
     {"out", "PREFIX", "writes PREFIX.key (private, for serve --signing-key / export --sign-key) and PREFIX.pub"},
     {"json", "", "print the result as one JSON document"},
+    kForceFlag,
 };
 
 int AddEntry(const std::vector<std::string>& argv, bool cert) {
@@ -170,18 +171,22 @@ int RunListKeys(const std::vector<std::string>& argv) {
 int RunKeygen(const std::vector<std::string>& argv) {
   auto args = ParseArgs(argv, kKeygenFlags);
   if (!args.ok() || !args->Get("out")) {
-    std::fprintf(stderr, "usage: fluxcal admin keygen --out PREFIX [--json]   (writes PREFIX.key, PREFIX.pub)\n");
+    std::fprintf(stderr, "usage: fluxcal admin keygen --out PREFIX [--force] [--json]   (writes PREFIX.key, PREFIX.pub)\n");
     return 2;
+  }
+  const std::string key = *args->Get("out") + ".key", pub = *args->Get("out") + ".pub";
+  // The overwrite rule (cli/args.h): a key pair in use is never replaced
+  // unless --force says so.
+  if (auto e = CheckOverwrite(*args, {{"out", key}, {"out", pub}}); !e.empty()) {
+    return Fail("keygen", absl::AlreadyExistsError(e));
   }
   auto kp = tables::GenerateEd25519();
   if (!kp.ok()) return Fail("keygen", kp.status());
-  const std::string key = *args->Get("out") + ".key", pub = *args->Get("out") + ".pub";
-  if (io::ReadFileToString(key).ok()) return Fail("keygen", absl::AlreadyExistsError(key + ": exists; not overwritten"));
   const mode_t old = ::umask(077);
-  auto s = io::WriteFileAtomically(key, kp->private_pem);
+  auto s = WriteNewOutput(*args, {"out", key}, kp->private_pem);
   ::umask(old);
   if (!s.ok()) return Fail("keygen", s);
-  if (auto s2 = io::WriteFileAtomically(pub, kp->public_pem); !s2.ok()) return Fail("keygen", s2);
+  if (auto s2 = WriteNewOutput(*args, {"out", pub}, kp->public_pem); !s2.ok()) return Fail("keygen", s2);
   auto id = tables::KeyId(kp->public_pem);
   if (args->Has("json")) {
     std::cout << nlohmann::json{{"private_key", key}, {"public_key", pub}, {"key_id", id.value_or("")}}.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
@@ -195,7 +200,7 @@ int RunKeygen(const std::vector<std::string>& argv) {
 }  // namespace
 
 FLUXCAL_REGISTER_COMMAND("admin keygen", "make an Ed25519 key pair for signing exports", RunKeygen,
-                         "fluxcal admin keygen --out PREFIX [--json]",
+                         "fluxcal admin keygen --out PREFIX [--force] [--json]",
                          kKeygenFlags);
 FLUXCAL_REGISTER_COMMAND("admin add-key", "make a bearer token for an identity with a role (printed once)",
                          RunAddKey,

@@ -8,6 +8,8 @@
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <iterator>
+#include <system_error>
 
 #include "cli/args.h"
 #include "cli/command.h"
@@ -29,7 +31,11 @@ const FlagSpecs kDiagnoseFlags = {
     {"server", "ADDR", "diagnose a serial's stored raw recording at the service instead, HOST[:PORT] (default port 50051)"},
     {"store", "", "with --server: store the diagnosed model as a new calibration version marked with the findings"},
     {"json", "", "print the diagnosis report as one JSON document (docs/diagnosis-report.md)"},
+    kForceFlag,
 };
+
+// The figures --plots DIR holds.
+const char* const kPlotFiles[] = {"residual_before.svg", "residual_after.svg", "replay_spectrum.svg"};
 
 // fluxcal diagnose SERIAL --server ADDR [--store] [--json]: the service
 // diagnoses the serial's latest stored raw recording (`eol
@@ -126,9 +132,19 @@ int RunDiagnose(const std::vector<std::string>& argv) {
   }
   if (args->positional.size() != 1) {
     std::fprintf(stderr, "usage: fluxcal diagnose <recording-set> [--json] [--plots DIR] [--exclude-effects a,b]\n"
-                         "       [--calibration-out cal.json]\n"
+                         "       [--calibration-out cal.json] [--force]\n"
                          "       fluxcal diagnose --table1 data/paper_table1.csv [--json]\n");
     return 2;
+  }
+  // The overwrite rule (cli/args.h), before the (slow) diagnosis.
+  std::vector<OutputPath> outputs;
+  if (auto out = args->Get("calibration-out")) outputs.push_back({"calibration-out", *out});
+  if (auto dir = args->Get("plots")) {
+    for (const char* f : kPlotFiles) outputs.push_back({"plots", *dir + "/" + f});
+  }
+  if (auto e = CheckOverwrite(*args, outputs); !e.empty()) {
+    std::fprintf(stderr, "fluxcal diagnose: %s\n", e.c_str());
+    return 1;
   }
   auto set = io::ReadRecordingSet(args->positional[0]);
   if (!set.ok()) {
@@ -153,10 +169,16 @@ int RunDiagnose(const std::vector<std::string>& argv) {
     return 1;
   }
   if (auto dir = args->Get("plots")) {
-    std::filesystem::create_directories(*dir);
-    (void)io::WriteFileAtomically(*dir + "/residual_before.svg", diag::ResidualMapSvg(*rep, false));
-    (void)io::WriteFileAtomically(*dir + "/residual_after.svg", diag::ResidualMapSvg(*rep, true));
-    (void)io::WriteFileAtomically(*dir + "/replay_spectrum.svg", diag::SpectrumSvg(*rep));
+    std::error_code ec;
+    std::filesystem::create_directories(*dir, ec);
+    const std::string svgs[] = {diag::ResidualMapSvg(*rep, false), diag::ResidualMapSvg(*rep, true),
+                                diag::SpectrumSvg(*rep)};
+    for (size_t k = 0; k < std::size(svgs); ++k) {
+      if (auto st = WriteNewOutput(*args, {"plots", *dir + "/" + kPlotFiles[k]}, svgs[k]); !st.ok()) {
+        std::fprintf(stderr, "fluxcal diagnose: %s\n", std::string(st.message()).c_str());
+        return 1;
+      }
+    }
     std::fprintf(stderr, "diagnose: plots in %s\n", dir->c_str());
   }
   if (auto out = args->Get("calibration-out")) {
@@ -168,7 +190,9 @@ int RunDiagnose(const std::vector<std::string>& argv) {
       return 1;
     }
     const nlohmann::json j = diag::MarkedCalibrationJson(*rep, *cal);
-    if (auto st = io::WriteFileAtomically(*out, j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n"); !st.ok()) {
+    if (auto st = WriteNewOutput(*args, {"calibration-out", *out},
+                                 j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n");
+        !st.ok()) {
       std::fprintf(stderr, "fluxcal diagnose: %s\n", std::string(st.message()).c_str());
       return 1;
     }
@@ -182,7 +206,7 @@ int RunDiagnose(const std::vector<std::string>& argv) {
 }  // namespace
 
 FLUXCAL_REGISTER_COMMAND("diagnose", "locate, explain and model what the nominal model misses", RunDiagnose,
-                         "fluxcal diagnose <recording-set> [--json] [--plots DIR] [--exclude-effects a,b] [--calibration-out cal.json]\n"
+                         "fluxcal diagnose <recording-set> [--json] [--plots DIR] [--exclude-effects a,b] [--calibration-out cal.json] [--force]\n"
                          "fluxcal diagnose --table1 data/paper_table1.csv [--json]",
                          kDiagnoseFlags);
 

@@ -75,13 +75,14 @@ const FlagSpecs kEolFlags = {
     {"tables-dir", "DIR", "on a pass, fetch the MTPA (CDFX) and field-weakening (DCM) tables there"},
     {"upload-recording", "", "also upload the raw waveforms (replayable on the service)"},
     {"json", "", "print the result as one JSON document"},
+    {kForceFlag.name, kForceFlag.value, "replace table files in --tables-dir that exist (refused otherwise)"},
 };
 
 int RunEol(const std::vector<std::string>& argv) {
   auto args = ParseArgs(argv, kEolFlags);
   if (!args.ok() || args->positional.size() != 1 || !args->Get("server")) {
     std::fprintf(stderr, "usage: fluxcal eol <recording-set> --server ADDR [--station ID] [--model M] "
-                         "[--tables-dir DIR] [--upload-recording] [--json]\n");
+                         "[--tables-dir DIR [--force]] [--upload-recording] [--json]\n");
     return 2;
   }
   auto set = io::ReadRecordingSet(args->positional[0]);
@@ -266,7 +267,10 @@ int RunEol(const std::vector<std::string>& argv) {
       auto s = stub->ExportTable(&ctx, er, &resp);
       if (!s.ok()) return ReportRpcError("eol", s);
       const std::string path = *dir + "/" + serial + "_v" + std::to_string(resp.version()) + "_" + table + "." + format;
-      if (auto st = io::WriteFileAtomically(path, resp.data()); !st.ok()) {
+      // Named by serial and stored version, which a store never reuses: a
+      // file already there came from another store (the overwrite rule,
+      // cli/args.h, applies when the names are known, i.e. here).
+      if (auto st = WriteNewOutput(*args, {"tables-dir", path}, resp.data()); !st.ok()) {
         std::fprintf(stderr, "fluxcal eol: %s\n", std::string(st.message()).c_str());
         return 1;
       }

@@ -10,7 +10,9 @@
 // (`sha256`, equal to `sha256sum FILE`) and the payload checksums under
 // their own names (`payload_crc32`, `payload_sha256`).
 #include <cstdio>
+#include <filesystem>
 #include <iostream>
+#include <system_error>
 
 #include "absl/status/status.h"
 #include "absl/strings/numbers.h"
@@ -55,6 +57,7 @@ const FlagSpecs kExportFlags = {
     {"server", "ADDR", "export a serial's stored calibration from the service, HOST[:PORT] (default port 50051)"},
     {"version", "N", "with --server: calibration version (default the latest)"},
     {"json", "", "print a summary (checksums, limits, verdict) as one JSON document"},
+    kForceFlag,
 };
 
 int RunExport(const std::vector<std::string>& argv) {
@@ -110,13 +113,20 @@ int RunExport(const std::vector<std::string>& argv) {
     if (!v.ok()) return Fail(std::string(v.status().message()), 2);
     *dst = *v;
   }
+  // Every flag checked: the overwrite rule (cli/args.h), before any work.
+  // OUT.sig counts as an output whether or not this export signs: a
+  // signature left from an earlier table would vouch for bytes no longer there.
+  const std::string out_file = *args->Get("out");
+  const OutputPath out_path{"out", out_file}, svg_path{"svg", args->Get("svg").value_or("")};
+  const OutputPath sig_path_out{"out", to_stdout ? "" : out_file + ".sig"};
+  if (auto e = CheckOverwrite(*args, {out_path, sig_path_out, svg_path}); !e.empty()) return Fail(e);
   std::fprintf(stderr, "export: building %s table (at most %d points) for %s\n", spec.kind.c_str(), spec.points,
                spec.serial.c_str());
   auto built = tables::BuildExportTable(*cal, spec, request);
   if (!built.ok()) {
-    // A flag to give or correct is a usage error; a table refused for what
-    // it would contain (mostly clamped, no MTPV point inside) is not.
-    return Fail(std::string(built.status().message()), absl::IsInvalidArgument(built.status()) ? 2 : 1);
+    // A flag to give or correct is a usage error (2); a table refused for
+    // what it would contain (mostly clamped, no MTPV point inside) is not (1).
+    return Fail(std::string(built.status().message()), ExitCodeFor(built.status()));
   }
   const tables::Table* table = &built->table;
   const tables::MachineLimits& lim = built->limits.limits;
@@ -133,15 +143,20 @@ int RunExport(const std::vector<std::string>& argv) {
   options.ctype = *ctype;
   auto out = tables::Export(*table, *fmt, options);
   if (!out.ok()) return Fail(std::string(out.status().message()));
-  if (auto st = WriteOutput(*args->Get("out"), out->bytes); !st.ok()) return Fail(std::string(st.message()));
+  if (auto st = WriteNewOutput(*args, out_path, out->bytes); !st.ok()) return Fail(std::string(st.message()));
   std::string sig_path;
+  if (!to_stdout && !args->Get("sign-key")) {
+    // --force replaced the table: a signature of the old one goes with it.
+    std::error_code ec;
+    std::filesystem::remove(sig_path_out.path, ec);
+  }
   if (auto key_path = args->Get("sign-key")) {
     auto key = io::ReadFileToString(*key_path);
     if (!key.ok()) return Fail("--sign-key " + *key_path + ": cannot read", 2);
     auto sig = tables::SignDetached(out->bytes, *key);
     if (!sig.ok()) return Fail("--sign-key: " + std::string(sig.status().message()));
     sig_path = *args->Get("out") + ".sig";
-    if (auto st = io::WriteFileAtomically(sig_path, *sig); !st.ok()) return Fail(std::string(st.message()));
+    if (auto st = WriteNewOutput(*args, {"out", sig_path}, *sig); !st.ok()) return Fail(std::string(st.message()));
   }
   if (auto svg = args->Get("svg")) {
     std::string text;
@@ -161,7 +176,7 @@ int RunExport(const std::vector<std::string>& argv) {
         text = tables::PlotCurvesSvg(*cal, lim, *mtpa, mtpv.ok() ? &*mtpv : nullptr);
       }
     }
-    if (auto st = io::WriteFileAtomically(*svg, text); !st.ok()) return Fail(std::string(st.message()));
+    if (auto st = WriteNewOutput(*args, svg_path, text); !st.ok()) return Fail(std::string(st.message()));
   }
   size_t extrapolated = 0;
   for (auto c : table->extrapolated) extrapolated += c;
@@ -214,8 +229,8 @@ int RunExport(const std::vector<std::string>& argv) {
 }  // namespace
 
 FLUXCAL_REGISTER_COMMAND("export", "export MTPA / MTPV / field-weakening tables for ECU flashing", RunExport,
-                         "fluxcal export calibration.json --out FILE [--table mtpa|mtpv|fw] [--format csv|json|h|cdfx|dcm|a2l] [flags]\n"
-                         "fluxcal export SERIAL --server ADDR [--version N] --out FILE [--table T] [--format F] [flags]",
+                         "fluxcal export calibration.json --out FILE [--force] [--table mtpa|mtpv|fw] [--format csv|json|h|cdfx|dcm|a2l] [flags]\n"
+                         "fluxcal export SERIAL --server ADDR [--version N] --out FILE [--force] [--table T] [--format F] [flags]",
                          kExportFlags);
 
 }  // namespace fluxcal::cli

@@ -22,6 +22,7 @@
 #include "cli/args.h"
 #include "cli/command.h"
 #include "cli/support_flux_map.h"
+#include "cli/support_progress.h"
 #include "fitting/fit.h"
 #include "fitting/plot.h"
 #include "io/csv.h"
@@ -65,6 +66,7 @@ const FlagSpecs kFitFlags = [] {
     {"udc-v", "V", "DC-link voltage of the drive, V (optional; fw/mtpv exports need it)"},
     {"psi-std-wb", "S", "with --map: flux standard deviation per component, Wb (default 0.2 % of the largest |psi|)"},
     {"json", "", "print the calibration and fit summary as one JSON document"},
+    kForceFlag,
   };
   for (auto c : FluxMapConventionFlags()) {
     c.help = "with --map: " + c.help;
@@ -120,23 +122,32 @@ int RunFit(const std::vector<std::string>& argv) {
                 "`fluxcal compare`", 2);
   }
   const std::string input = from_map ? *args->Get("map") : args->positional[0];
-  fit::FitData data;
-  std::optional<io::FluxMap> map;
+  // A map's flags (it states no pole pairs, no serial).
+  int pole_pairs = 0;
+  absl::StatusOr<std::optional<double>> std_wb = std::optional<double>();
+  std::string serial;
   if (from_map) {
-    int pole_pairs = 0;
     auto pp = args->Get("pole-pairs");
     if (!pp || !absl::SimpleAtoi(*pp, &pole_pairs) || !io::CheckPolePairs("pole_pairs", pole_pairs).ok()) {
       return Fail(absl::StrCat("--map needs --pole-pairs P (an integer 1..", io::kMaxPolePairs,
                                "): a flux map does not say"), 2);
     }
-    auto std_wb = args->GetDouble("psi-std-wb");
+    std_wb = args->GetDouble("psi-std-wb");
     if (!std_wb.ok()) return Fail(std::string(std_wb.status().message()), 2);
     if (std_wb->has_value() && !(**std_wb > 0)) return Fail("flag --psi-std-wb: must be positive", 2);
-    const std::string serial = args->Get("serial").value_or(std::filesystem::path(input).stem().string());
+    serial = args->Get("serial").value_or(std::filesystem::path(input).stem().string());
     if (!io::IsValidSerial(serial)) {
       return Fail("serial '" + io::Printable(serial) + "' (from " + (args->Get("serial") ? "--serial" : "the file name") +
                       ") is not 1 to 64 characters of A-Z a-z 0-9 - _ .; give --serial", 2);
     }
+  }
+  // Every flag checked: existing outputs are refused before any work (the
+  // overwrite rule, cli/args.h).
+  const OutputPath out_path{"out", *args->Get("out")}, svg_path{"svg", args->Get("svg").value_or("")};
+  if (auto e = CheckOverwrite(*args, {out_path, svg_path}); !e.empty()) return Fail(e);
+  fit::FitData data;
+  std::optional<io::FluxMap> map;
+  if (from_map) {
     io::FluxMapReadOptions ro;
     ro.convention = *convention;
     auto m = io::ReadFluxMapCsv(input, ro);
@@ -157,10 +168,7 @@ int RunFit(const std::vector<std::string>& argv) {
     fit::FitData probe = fit::FitDataFromRecording(*set, {});
     if (auto st = pipeline::ApplyStatedFacts(stated, source, &probe); !st.ok()) return Fail(std::string(st.message()), 2);
     ident::IdentifyOptions opt;
-    opt.progress = [](size_t k, size_t n) {
-      std::fprintf(stderr, "\rfit: identifying point %zu/%zu", k + 1, n);
-      if (k + 1 == n) std::fprintf(stderr, "\n");
-    };
+    opt.progress = ProgressLine("fit: identifying point").Callback();
     auto d = pipeline::FitDataFromSet(*set, opt);
     if (!d.ok()) return Fail(std::string(d.status().message()));
     data = std::move(*d);
@@ -182,13 +190,13 @@ int RunFit(const std::vector<std::string>& argv) {
   auto cal = fit::Fit(data, fo);
   if (!cal.ok()) return Fail(std::string(cal.status().message()));
   const bool to_stdout = *args->Get("out") == "-";
-  if (auto st = WriteOutput(*args->Get("out"), cal->ToJson().dump(2) + "\n"); !st.ok()) {
+  if (auto st = WriteNewOutput(*args, out_path, cal->ToJson().dump(2) + "\n"); !st.ok()) {
     return Fail(std::string(st.message()));
   }
   for (const auto& c : cal->summary.candidates) std::fprintf(stderr, "fit:   %s\n", c.c_str());
   for (const auto& e : cal->summary.excluded) std::fprintf(stderr, "fit: %s\n", e.c_str());
   if (auto svg = args->Get("svg")) {
-    if (auto st = io::WriteFileAtomically(*svg, fit::PlotFitSvg(*cal, data)); !st.ok()) {
+    if (auto st = WriteNewOutput(*args, svg_path, fit::PlotFitSvg(*cal, data)); !st.ok()) {
       return Fail(std::string(st.message()));
     }
     std::fprintf(stderr, "fit: plot %s\n", svg->c_str());
@@ -228,8 +236,8 @@ int RunFit(const std::vector<std::string>& argv) {
 
 FLUXCAL_REGISTER_COMMAND("fit", "fit flux-linkage surfaces (Ceres) to a recording set or hf_results.csv",
                          RunFit,
-                         "fluxcal fit <recording-set> --out calibration.json [--model M] [--svg PLOT.svg] [--udc-v V] [--rs-ohm R] [--json]\n"
-                         "fluxcal fit hf_results.csv --serial S --pole-pairs P --psi-pm-wb WB [--rs-ohm R] [--udc-v V] --out calibration.json [--json]\n"
+                         "fluxcal fit <recording-set> --out calibration.json [--force] [--model M] [--svg PLOT.svg] [--udc-v V] [--rs-ohm R] [--json]\n"
+                         "fluxcal fit hf_results.csv --serial S --pole-pairs P --psi-pm-wb WB [--rs-ohm R] [--udc-v V] --out calibration.json [--force] [--json]\n"
                          "fluxcal fit --map map.csv --pole-pairs P [--psi-std-wb S] [--rs-ohm R] [--udc-v V] [--serial S] [--convention C] "
                          "[--current S] [--flux-amplitude S] [--units U] [--model M] --out calibration.json [--json]",
                          kFitFlags);

@@ -9,6 +9,7 @@
 #include "absl/strings/str_join.h"
 #include "cli/args.h"
 #include "cli/command.h"
+#include "cli/support_progress.h"
 #include "identification/identify.h"
 #include "io/recording_set.h"
 #include "nlohmann/json.hpp"
@@ -44,13 +45,10 @@ int RunIdentify(const std::vector<std::string>& argv) {
     std::fprintf(stderr, "fluxcal identify: %s\n", std::string(set.status().message()).c_str());
     return 1;
   }
-  opt.progress = [](size_t k, size_t n) {
-    std::fprintf(stderr, "\ridentify: point %zu/%zu", k + 1, n);
-    if (k + 1 == n) std::fprintf(stderr, "\n");
-  };
+  opt.progress = ProgressLine("identify: point").Callback();
   auto results = ident::IdentifySet(*set, opt);
   if (!results.ok()) {
-    std::fprintf(stderr, "\nfluxcal identify: %s\n", std::string(results.status().message()).c_str());
+    std::fprintf(stderr, "fluxcal identify: %s\n", std::string(results.status().message()).c_str());
     return 1;
   }
   auto num = [](double v, bool present) { return present ? absl::StrFormat("%.9g", v) : std::string(); };

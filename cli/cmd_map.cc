@@ -56,8 +56,8 @@ const FlagSpecs kMapExportFlags = {
     {"grid", "IDMIN:IDMAX:N,IQMIN:IQMAX:M", "current grid of the forward map, A (default the measured region, 21 x 21)"},
     {"inverse", "", "write the inverse map i(psi) instead of psi(id, iq)"},
     {"psi-grid", "PDMIN:PDMAX:N,PQMIN:PQMAX:M", "with --inverse: flux grid, Wb (default the fluxes of the measured region)"},
-    {"force", "", "overwrite an existing --out file"},
     {"json", "", "print a summary (nodes, sha256) as one JSON document"},
+    kForceFlag,
 };
 
 int RunMapExport(const std::vector<std::string>& argv) {
@@ -73,9 +73,6 @@ int RunMapExport(const std::vector<std::string>& argv) {
   if (inverse && args->Get("grid")) return Fail("--grid is the current grid of a forward map; with --inverse use --psi-grid", 2);
   if (!inverse && args->Get("psi-grid")) return Fail("--psi-grid needs --inverse", 2);
   const std::string out = *args->Get("out");
-  if (!to_stdout && std::filesystem::exists(out) && !args->Has("force")) {
-    return Fail(out + ": exists; not overwritten (use --force)");
-  }
   auto cal = fit::LoadCalibrationFile(args->positional[0]);
   if (!cal.ok()) return Fail(std::string(cal.status().message()));
 
@@ -91,6 +88,8 @@ int RunMapExport(const std::vector<std::string>& argv) {
     tables::DefaultCurrentGrid(*cal, &a, &b);
   }
 
+  // Every flag checked: the overwrite rule (cli/args.h), before any work.
+  if (auto e = CheckOverwrite(*args, {{"out", out}}); !e.empty()) return Fail(e);
   std::string text;
   nlohmann::json summary = {{"out", out}, {"serial", cal->serial()}, {"model", cal->family().Name()},
                             {"kind", inverse ? "inverse" : "forward"}};
@@ -129,7 +128,7 @@ int RunMapExport(const std::vector<std::string>& argv) {
                            "--convention fluxcal (the axes cannot be detected without it)\n");
     }
   }
-  if (auto st = WriteOutput(out, text); !st.ok()) return Fail(std::string(st.message()));
+  if (auto st = WriteNewOutput(*args, {"out", out}, text); !st.ok()) return Fail(std::string(st.message()));
   const std::string sha = io::Sha256Hex(text);
   summary["rows"] = rows;
   summary["bytes"] = text.size();

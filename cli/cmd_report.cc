@@ -29,6 +29,7 @@
 #include "cli/args.h"
 #include "cli/command.h"
 #include "cli/support_flux_map.h"
+#include "cli/support_progress.h"
 #include "cli/support_remote.h"
 #include "fitting/calibration.h"
 #include "fitting/fit.h"
@@ -158,8 +159,8 @@ void PrintSummary(const Written& w, bool json) {
 
 // --server: the service's page (GetReport), its SHA-256 checked, written
 // byte for byte.
-int RunRemoteReport(const std::string& server, const std::string& serial, int version, double speed_rpm,
-                    std::optional<double> udc_v, const std::string& out, bool json) {
+int RunRemoteReport(const ParsedArgs& args, const std::string& server, const std::string& serial, int version,
+                    double speed_rpm, std::optional<double> udc_v, const std::string& out, bool json) {
   auto stub = MakeStub(server);
   if (!stub) return Fail("--server " + server + ": cannot set up the client");
   v1::GetReportRequest req;
@@ -182,7 +183,7 @@ int RunRemoteReport(const std::string& server, const std::string& serial, int ve
     std::fprintf(stderr, "fluxcal report: no fleet comparison: the service shows it to roles that may read fleet "
                          "statistics (engineer, admin)\n");
   }
-  if (auto st = WriteOutput(out, resp.html()); !st.ok()) return Fail(std::string(st.message()));
+  if (auto st = WriteNewOutput(args, {"out", out}, resp.html()); !st.ok()) return Fail(std::string(st.message()));
   PrintSummary({out, resp.serial(), resp.verdict(), resp.html_sha256(), resp.version(), resp.figures(),
                 resp.html().size(), resp.voltage_limit_speed_rpm()},
                json);
@@ -205,6 +206,7 @@ FlagSpecs ReportFlags() {
     {"udc-v", "V", "DC-link voltage, V (default the set's manifest drive.udc_v, else the calibration's; none: no "
                    "voltage limit or field weakening drawn)"},
     {"json", "", "print a summary (verdict, figures, bytes, sha256) as one JSON document"},
+    kForceFlag,
   };
   for (auto c : FluxMapConventionFlags()) {
     c.help = "with --map: " + c.help;
@@ -250,17 +252,20 @@ int RunReport(const std::vector<std::string>& argv) {
   if (!speed.ok()) return Fail(std::string(speed.status().message()), 2);
   auto udc = PositiveFlag(*args, "udc-v");
   if (!udc.ok()) return Fail(std::string(udc.status().message()), 2);
+  int version = 0;
+  if (auto v = args->Get("version")) {
+    if (!args->Get("server")) return Fail("flag --version needs --server", 2);
+    if (!absl::SimpleAtoi(*v, &version) || version < 0) return Fail("flag --version: expected a non-negative integer", 2);
+  }
+  // Every flag checked: the overwrite rule (cli/args.h), before any work.
+  if (auto e = CheckOverwrite(*args, {{"out", out}}); !e.empty()) return Fail(e);
 
   absl::StatusOr<nlohmann::json> cal_json;
   std::string source, source_fleet, mtime = "unknown";
   std::optional<std::vector<report::FleetPoint>> fleet;
   if (auto server = args->Get("server")) {
-    int version = 0;
-    if (auto v = args->Get("version"); v && (!absl::SimpleAtoi(*v, &version) || version < 0)) {
-      return Fail("flag --version: expected a non-negative integer", 2);
-    }
     if (!local_extras) {
-      return RunRemoteReport(*server, cal_path, version, speed->value_or(0.0), *udc, out, args->Has("json"));
+      return RunRemoteReport(*args, *server, cal_path, version, speed->value_or(0.0), *udc, out, args->Has("json"));
     }
     std::fprintf(stderr, "report: --set/--diagnosis/--map are local: the page is built here, not by the service\n");
     cal_json = FetchCalibration(*server, cal_path, version);
@@ -273,7 +278,6 @@ int RunReport(const std::vector<std::string>& argv) {
     }
     source_fleet = "FleetStatistics of the service at " + *server + " (latest calibration of every serial)";
   } else {
-    if (args->Get("version")) return Fail("flag --version needs --server", 2);
     cal_json = ReadJson(cal_path);
     source = cal_path;
     mtime = FileMtimeUtc(cal_path);
@@ -308,10 +312,7 @@ int RunReport(const std::vector<std::string>& argv) {
     if (!read.ok()) return Fail(std::string(read.status().message()));
     set = std::move(*read);
     ident::IdentifyOptions opt;
-    opt.progress = [](size_t k, size_t n) {
-      std::fprintf(stderr, "\rreport: identifying point %zu/%zu", k + 1, n);
-      if (k + 1 == n) std::fprintf(stderr, "\n");
-    };
+    opt.progress = ProgressLine("report: identifying point").Callback();
     if (auto st = pipeline::AddRecordingSetToReport(*set, *set_dir, opt, &measured, &in); !st.ok()) {
       return Fail(std::string(st.message()));
     }
@@ -338,7 +339,7 @@ int RunReport(const std::vector<std::string>& argv) {
   std::fprintf(stderr, "report: building tables and figures for %s\n", cal->serial().c_str());
   auto rep = report::BuildReport(in);
   if (!rep.ok()) return Fail(std::string(rep.status().message()));
-  if (auto st = WriteOutput(out, rep->html); !st.ok()) return Fail(std::string(st.message()));
+  if (auto st = WriteNewOutput(*args, {"out", out}, rep->html); !st.ok()) return Fail(std::string(st.message()));
   PrintSummary({out, cal->serial(), in.verdict, io::Sha256Hex(rep->html), cal->version, rep->figures,
                 rep->html.size(), rep->ellipse_speed_rpm},
                args->Has("json"));
@@ -348,7 +349,7 @@ int RunReport(const std::vector<std::string>& argv) {
 }  // namespace
 
 FLUXCAL_REGISTER_COMMAND("report", "one self-contained HTML report page for a calibration", RunReport,
-                         "fluxcal report calibration.json --out report.html [--set DIR] [--diagnosis FILE] [flags]\n"
+                         "fluxcal report calibration.json --out report.html [--force] [--set DIR] [--diagnosis FILE] [flags]\n"
                          "fluxcal report SERIAL --server ADDR [--version N] [--speed-rpm N] [--udc-v V] "
                          "--out report.html\n"
                          "fluxcal report SERIAL --server ADDR --set DIR [--diagnosis FILE] [flags]   (page built here)",

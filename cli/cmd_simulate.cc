@@ -1,5 +1,5 @@
 // fluxcal simulate [--motor motor.json] [--plan plan.json] [--effects k=v,...]
-//                  [--seed N] [--serial S] [--spread] --out DIR [--json]
+//                  [--seed N] [--serial S] [--spread] --out DIR [--force] [--json]
 // Writes a recording set (docs/recording-format.md) and, beside it (never
 // inside), DIR.truth.json with the true inductances and effect parameters.
 #include <chrono>
@@ -36,6 +36,7 @@ const FlagSpecs kSimulateFlags = {
     {"spread", "", "perturb the motor as production spread (from --seed)"},
     {"noise-a", "A", "accepted for compatibility; has no effect (use --effects noise_a=A)"},
     {"json", "", "print the result as one JSON document"},
+    kForceFlag,
 };
 
 int RunSimulate(const std::vector<std::string>& argv) {
@@ -44,7 +45,7 @@ int RunSimulate(const std::vector<std::string>& argv) {
   auto out = args->Get("out");
   if (!out || !args->positional.empty()) {
     return Fail("usage: fluxcal simulate [--motor motor.json] [--plan plan.json] "
-                "[--effects k=v,...] [--second-udc-v V] [--seed N] [--serial S] [--spread] --out DIR [--json]", 2);
+                "[--effects k=v,...] [--second-udc-v V] [--seed N] [--serial S] [--spread] --out DIR [--force] [--json]", 2);
   }
   sim::TwinConfig cfg;
   if (auto m = args->Get("motor")) {
@@ -72,16 +73,20 @@ int RunSimulate(const std::vector<std::string>& argv) {
     if (!(**second_udc > 0)) return Fail("flag --second-udc-v: must be positive", 2);
     plan = sim::WithSecondUdc(std::move(plan), **second_udc);
   }
+  // Every flag checked: the overwrite rule (cli/args.h), before the
+  // simulation: a directory with files in it, or DIR.truth.json, is
+  // refused unless --force.
+  std::string dir = *out;
+  while (dir.size() > 1 && dir.back() == '/') dir.pop_back();
+  const std::string truth = dir + ".truth.json";
+  if (auto e = CheckOverwrite(*args, {{"out", dir}, {"out", truth}}); !e.empty()) return Fail(e);
   const auto t0 = std::chrono::steady_clock::now();
   std::fprintf(stderr, "simulate: %zu points, %zu steady-state rows, effects: %s\n", plan.points.size(),
                plan.steady_state.size(), absl::StrJoin(sim::ActiveEffectNames(cfg.effects), ",").c_str());
   auto res = sim::Simulate(cfg, plan);
   if (!res.ok()) return Fail(std::string(res.status().message()));
   const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  std::string dir = *out;
-  while (dir.size() > 1 && dir.back() == '/') dir.pop_back();
   if (auto st = io::WriteRecordingSet(dir, res->set); !st.ok()) return Fail(std::string(st.message()));
-  const std::string truth = dir + ".truth.json";
   if (auto st = io::WriteFileAtomically(truth, sim::TruthJson(cfg, *res)); !st.ok()) {
     return Fail(std::string(st.message()));
   }
@@ -103,7 +108,7 @@ int RunSimulate(const std::vector<std::string>& argv) {
 
 FLUXCAL_REGISTER_COMMAND("simulate", "simulate an EOL run with the digital twin, write a recording set",
                          RunSimulate,
-                         "fluxcal simulate [--motor motor.json] [--plan plan.json] [--effects k=v,...] [--second-udc-v V] [--seed N] [--serial S] [--spread] --out DIR [--json]",
+                         "fluxcal simulate [--motor motor.json] [--plan plan.json] [--effects k=v,...] [--second-udc-v V] [--seed N] [--serial S] [--spread] --out DIR [--force] [--json]",
                          kSimulateFlags);
 
 }  // namespace fluxcal::cli

@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "cli/args.h"
+#include "cli/build_info.h"   // generated: cmake/build_info.cmake
 #include "cli/command.h"
 #include "cli/support_remote.h"
 #include "nlohmann/json.hpp"
@@ -35,7 +36,7 @@ const FlagSpecs& ClientFlags() {
 
 void PrintUsage(FILE* to) {
   std::fprintf(to, "usage: fluxcal <command> [args]   (fluxcal help COMMAND, or COMMAND --help, for its flags)\n"
-                   "       fluxcal --version\n\ncommands:\n");
+                   "       fluxcal --version [--json]   (release, git commit, build type)\n\ncommands:\n");
   for (const auto& [name, cmd] : fluxcal::cli::CommandRegistry()) {
     std::fprintf(to, "  %-16s %s\n", name.c_str(), cmd.summary.c_str());
   }
@@ -112,7 +113,20 @@ void PrintRegistryJson() {
 
 int main(int argc, char** argv) {
   if (argc >= 2 && (std::string(argv[1]) == "--version" || std::string(argv[1]) == "version")) {
-    std::printf("fluxcal %s\n", FLUXCAL_VERSION);
+    // The release, the commit the binary was built from and the build type
+    // (cmake/build_info.cmake): enough to tell two builds apart in a report.
+    const bool json = argc == 3 && std::string(argv[2]) == "--json";
+    if (argc > 2 && !json) {
+      std::fprintf(stderr, "usage: fluxcal --version [--json]\n");
+      return 2;
+    }
+    if (json) {
+      std::printf("%s\n", nlohmann::json{{"version", FLUXCAL_VERSION},
+                                         {"commit", FLUXCAL_GIT_DESCRIBE},
+                                         {"build_type", FLUXCAL_BUILD_TYPE}}.dump(2).c_str());
+    } else {
+      std::printf("fluxcal %s (commit %s, %s build)\n", FLUXCAL_VERSION, FLUXCAL_GIT_DESCRIBE, FLUXCAL_BUILD_TYPE);
+    }
     return 0;
   }
   if (argc < 2) {

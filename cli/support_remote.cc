@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <iostream>
 #include <map>
 
@@ -281,6 +282,13 @@ int RunRemoteExport(const std::vector<std::string>& argv, const FlagSpecs& flags
     return 2;
   }
   const bool to_stdout = *args->Get("out") == "-";
+  // The overwrite rule (cli/args.h) before the call; OUT.sig too, since the
+  // service may sign (and a stale one must not sit beside a new table).
+  const OutputPath out_path{"out", *args->Get("out")}, sig_path{"out", to_stdout ? "" : *args->Get("out") + ".sig"};
+  if (auto e = CheckOverwrite(*args, {out_path, sig_path}); !e.empty()) {
+    std::fprintf(stderr, "fluxcal export: %s\n", e.c_str());
+    return 1;
+  }
   v1::ExportTableRequest req;
   req.set_serial(args->positional[0]);
   req.set_table(args->Get("table").value_or("mtpa"));
@@ -308,14 +316,18 @@ int RunRemoteExport(const std::vector<std::string>& argv, const FlagSpecs& flags
   Deadline(&ctx, 120);
   auto s = stub->ExportTable(&ctx, req, &resp);
   if (!s.ok()) return ReportRpcError("export", s);
-  if (auto st = WriteOutput(*args->Get("out"), resp.data()); !st.ok()) {
+  if (auto st = WriteNewOutput(*args, out_path, resp.data()); !st.ok()) {
     std::fprintf(stderr, "fluxcal export: %s\n", std::string(st.message()).c_str());
     return 1;
+  }
+  if (!to_stdout && resp.signature().empty()) {
+    std::error_code ec;   // --force replaced the table: an old signature goes with it
+    std::filesystem::remove(sig_path.path, ec);
   }
   if (!resp.signature().empty() && to_stdout) {
     std::fprintf(stderr, "fluxcal export: the service signed the table; the signature is not written with --out -\n");
   } else if (!resp.signature().empty()) {
-    if (auto st = io::WriteFileAtomically(*args->Get("out") + ".sig", resp.signature()); !st.ok()) {
+    if (auto st = WriteNewOutput(*args, sig_path, resp.signature()); !st.ok()) {
       std::fprintf(stderr, "fluxcal export: %s\n", std::string(st.message()).c_str());
       return 1;
     }

@@ -1,21 +1,32 @@
 #!/usr/bin/env bash
 # The README's first command: the main job end to end on the embedded
-# default (SQLite). Installs dependencies, builds, starts the service on a
-# SQLite file, simulates EOL runs of several serials with production spread,
-# streams them, fits, exports tables in every format, runs engineer queries,
-# diagnoses a run, writes one report page per serial and an index linking
-# them (out/demo/index.html), prints where every output is, stops the service.
+# default (SQLite). Builds the `fluxcal` binary (reusing a build that
+# exists; configuring, after installing missing Debian packages, only when
+# there is none or it belongs to another path: scripts/configure.sh),
+# starts the service on a SQLite file, simulates EOL runs of several
+# serials with production spread, streams them, fits, exports tables in
+# every format, runs engineer queries, diagnoses a run, writes one report
+# page per serial and an index linking them (out/demo/index.html), prints
+# where every output is, stops the service.
+#   OUT (default out/demo; replaced on every run), PORT (default a free
+#   loopback port), SERIALS (default 6), BUILD_DIR (default build).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=${OUT:-out/demo}
-PORT=${PORT:-50561}
 SERIALS=${SERIALS:-6}
+BUILD_DIR=${BUILD_DIR:-build}
+export BUILD_DIR
 
 step() { printf '\n== %s\n' "$*" >&2; }
 
-step "build (installs missing Debian packages first)"
-bash scripts/build.sh
-F=$PWD/build/cli/fluxcal
+step "build $BUILD_DIR/cli/fluxcal (reused if built; configured only if needed)"
+bash scripts/configure.sh
+cmake --build "$BUILD_DIR" --target fluxcal >&2
+F=$(cd "$BUILD_DIR" && pwd -P)/cli/fluxcal
+"$F" --version >&2
+# A port the kernel hands out (bind to 0) unless PORT is given: a second
+# demo, or anything else on a fixed port, does not collide with this one.
+PORT=${PORT:-$(python3 -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1]); s.close()')}
 
 rm -rf "$OUT"
 mkdir -p "$OUT/sets" "$OUT/tables" "$OUT/queries" "$OUT/plots"
@@ -23,10 +34,17 @@ step "start the calibration service on $OUT/fluxcal.db (127.0.0.1:$PORT)"
 "$F" serve --db "$OUT/fluxcal.db" --listen "127.0.0.1:$PORT" 2> "$OUT/serve.log" &
 SERVER=$!
 trap 'kill $SERVER 2>/dev/null || true; wait $SERVER 2>/dev/null || true' EXIT
+up=0
 for _ in $(seq 50); do
-  "$F" list --server "127.0.0.1:$PORT" >/dev/null 2>&1 && break
+  "$F" list --server "127.0.0.1:$PORT" >/dev/null 2>&1 && { up=1; break; }
+  kill -0 "$SERVER" 2>/dev/null || break
   sleep 0.2
 done
+if [ "$up" != 1 ]; then
+  echo "demo: the service did not start on 127.0.0.1:$PORT; its log ($OUT/serve.log):" >&2
+  cat "$OUT/serve.log" >&2
+  exit 1
+fi
 
 step "simulate $SERIALS EOL runs with the digital twin (production spread; the last one with an uncompensated dead time)"
 for i in $(seq 1 "$SERIALS"); do
@@ -48,9 +66,15 @@ done
 
 first=IPM-DEMO-0001
 step "flashing station: every table in every format for $first"
+# The drive's DC-link voltage, as the station knows it (the set's manifest,
+# drive.udc_v): a run of HF points does not carry it into the store, and
+# mtpv and fw tables are computed for a voltage limit (docs/cli.md, Machine facts).
+udc=$(python3 -c 'import json, sys; print(json.load(open(sys.argv[1]))["drive"]["udc_v"])' "$OUT/sets/$first/manifest.json")
 for table in mtpa mtpv fw; do
+  limits=()
+  [ "$table" != mtpa ] && limits=(--udc-v "$udc")
   for fmt in csv json h cdfx dcm; do
-    "$F" export "$first" --server "127.0.0.1:$PORT" --table "$table" --format "$fmt" \
+    "$F" export "$first" --server "127.0.0.1:$PORT" --table "$table" --format "$fmt" "${limits[@]}" \
       --out "$OUT/tables/${first}_${table}.${fmt}" >&2
   done
 done
@@ -115,6 +139,7 @@ PY
 
 step "summary"
 cat >&2 <<SUMMARY
+  binary:         $F (fluxcal help lists the commands)
   store:          $OUT/fluxcal.db (SQLite, WAL)   service log: $OUT/serve.log
   recording sets: $OUT/sets/ (truth files beside them: $OUT/sets/*.truth.json)
   EOL results:    $OUT/queries/eol_*.json

@@ -3,14 +3,15 @@
 query the flux linkage, export an MTPA table, check its checksums and write it.
 
     python3 example.py --server 127.0.0.1:50051 --serial IPM-PY-1 --out mtpa.json [--json]
-        [--ca PEM] [--cert PEM --key PEM] [--token-file FILE] [--insecure]
+        [--ca PEM] [--cert PEM --key PEM] [--token-file FILE] [--insecure] [--connect-timeout-s S]
 
 The points are synthetic, in the shape the service sees from a station: a
 6 x 6 grid of (id_a, iq_a), Ldd constant, Lqq saturating with iq as the
 twin's analytic motor does (the same curve as tests/server/python_interop_
 test.py), with the standard errors HF identification gives on a clean
 bench. Exits 0 when the fit passes, 3 when it fails its verdict, 1 on an
-error (the message names the RPC, the serial and the field).
+error, printed as one message, never a traceback (it names the RPC, the
+serial and the field; for a server that does not answer, what to check).
 """
 import argparse
 import hashlib
@@ -58,11 +59,13 @@ def main():
     ap.add_argument("--token-file")
     ap.add_argument("--insecure", action="store_true")
     ap.add_argument("--json", action="store_true", help="one JSON document on stdout")
+    ap.add_argument("--connect-timeout-s", type=float, default=10.0,
+                    help="how long to wait for the server to answer, s (default 10)")
     a = ap.parse_args()
     log = lambda m: print(f"example {a.serial}: {m}", file=sys.stderr)  # noqa: E731
     try:
         with Client(a.server, ca=a.ca, cert=a.cert, key=a.key, token_file=a.token_file, insecure=a.insecure) as c:
-            c.wait_ready()
+            c.wait_ready(a.connect_timeout_s)
             points = synthetic_points()
             # The run's key is its content: rerunning the example replays the
             # stored run instead of adding a second one.

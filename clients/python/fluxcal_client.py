@@ -7,11 +7,20 @@ generated code would drift from it. Generation uses Debian's protoc
 the protoc inside Debian 12's python3-grpc-tools (1.14) predates proto3
 `optional`, which HfPoint.ldq_h uses, and refuses the file.
 
-Connection rules are the C++ client's (cli/support_remote.h): TLS when a CA
-or a client certificate is given, or when the address is not loopback
-(unless insecure=True); a bearer token goes in the `authorization` metadata
-of every call. Units are in field names (`id_a`, `ld_h`, `psi_d_wb`), as in
-the proto.
+Connection rules are the C++ client's (cli/support_remote.h, io/net.h):
+TLS when a CA or a client certificate is given, or when the address is not
+loopback (unless insecure=True); loopback is what the address resolves to,
+every address of it, never how it is spelt. A bearer token goes in the
+`authorization` metadata of every call, and never in plaintext off
+loopback: Client refuses before connecting. HOST alone means port 50051.
+Units are in field names (`id_a`, `ld_h`, `psi_d_wb`), as in the proto.
+
+A point's `reliable` defaults to True when a point leaves it out (the
+proto's bool defaults to false, which the service counts as unreliable: a
+run whose points are mostly unreliable fails its verdict); a run whose
+points are all unreliable is sent, with an UnreliablePointsWarning.
+A server that cannot be reached raises ServerUnreachableError (a
+FluxcalError) saying what to check.
 
     from fluxcal_client import Client
     c = Client("127.0.0.1:50051")
@@ -21,11 +30,14 @@ the proto.
 """
 import hashlib
 import importlib
+import ipaddress
 import os
+import socket
 import struct
 import subprocess
 import sys
 import tempfile
+import warnings
 import zlib
 
 import grpc
@@ -34,6 +46,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 # clients/python -> the repository's proto/ directory.
 DEFAULT_PROTO_DIR = os.path.normpath(os.path.join(HERE, "..", "..", "proto"))
 GRPC_PYTHON_PLUGIN = "/usr/bin/grpc_python_plugin"
+DEFAULT_PORT = 50051   # `fluxcal serve`'s default (cli/args.h, kDefaultPort)
 
 
 def hf_points_sha256(points):
@@ -66,11 +79,30 @@ class StoredNotSentError(Exception):
 
 class FluxcalError(Exception):
     """An RPC failed: `code` is the grpc.StatusCode, the message names the
-    RPC, the serial and the server's field-level reason."""
+    RPC, the serial and the server's field-level reason (and, for a server
+    that cannot be reached, what to check)."""
 
-    def __init__(self, rpc, serial, code, details):
-        self.rpc, self.serial, self.code, self.details = rpc, serial, code, details
-        super().__init__(f"{rpc} {serial}: {code.name}: {details}")
+    def __init__(self, rpc, serial, code, details, hint=""):
+        self.rpc, self.serial, self.code, self.details, self.hint = rpc, serial, code, details, hint
+        super().__init__(f"{rpc}{' ' + serial if serial else ''}: {code.name}: {details}" + (f" ({hint})" if hint else ""))
+
+
+class ServerUnreachableError(FluxcalError):
+    """No `fluxcal serve` answered at the address (nothing listening, a
+    firewall, TLS where the server speaks plaintext or the reverse, a name
+    that does not resolve): raised by wait_ready() instead of grpc's
+    FutureTimeoutError, and for UNAVAILABLE on a call."""
+
+
+class UnreliablePointsWarning(UserWarning):
+    """ingest_hf_results sent a run in which every point is marked
+    unreliable: the service stores it, and its fit fails the verdict."""
+
+
+def _unreachable_hint(address):
+    return (f"cannot reach {address}: is `fluxcal serve` running there? TLS: give its CA (ca=, example.py --ca; "
+            f"cert and key too if it requires client certificates), or insecure (insecure=True, --insecure) for a "
+            f"plaintext test server off loopback")
 
 
 def generate_stubs(out_dir, proto_dir=DEFAULT_PROTO_DIR):
@@ -106,16 +138,91 @@ def load_stubs(gen_dir=None, proto_dir=DEFAULT_PROTO_DIR):
     return pb, rpc
 
 
+def server_target(server):
+    """The gRPC target for a server address, as the C++ client's --server
+    (cli/args.h, ServerTarget): HOST means HOST:50051, [V6] and a bare IPv6
+    address get the port too; HOST:PORT, [V6]:PORT and unix:, dns:, ipv4:,
+    ipv6: targets are taken as they are."""
+    for scheme in ("unix:", "unix-abstract:", "dns:", "ipv4:", "ipv6:", "vsock:"):
+        if server.startswith(scheme):
+            return server
+    if not server:
+        return server
+    if server.startswith("["):
+        return server + f":{DEFAULT_PORT}" if server.endswith("]") else server
+    colons = server.count(":")
+    if colons == 0:
+        return f"{server}:{DEFAULT_PORT}"
+    if colons > 1:
+        return f"[{server}]:{DEFAULT_PORT}"   # a bare IPv6 address
+    return server
+
+
+def _host_of(item):
+    """The host of one HOST:PORT, [V6]:PORT, HOST or bare V6 item."""
+    if item.startswith("["):
+        close = item.find("]")
+        return item[1:close] if close >= 0 else item[1:]
+    if item.count(":") == 1:
+        return item.split(":", 1)[0]
+    return item   # no port, or a bare IPv6 address
+
+
+def _is_loopback_ip(text):
+    try:
+        ip = ipaddress.ip_address(text.split("%", 1)[0])   # fe80::1%eth0: the scope is not part of the address
+    except ValueError:
+        return False
+    if isinstance(ip, ipaddress.IPv6Address) and ip.ipv4_mapped is not None:
+        ip = ip.ipv4_mapped   # ::ffff:127.0.0.1
+    return ip.is_loopback   # 127.0.0.0/8 (RFC 1122), ::1 (RFC 4291)
+
+
+def check_loopback(address):
+    """(loopback, why) with the rule of io/net.h (the C++ server and CLI):
+    a unix socket is loopback; otherwise every host of the address must
+    resolve (getaddrinfo) and EVERY address it resolves to must be loopback
+    (127.0.0.0/8, ::1, ::ffff:127.0.0.0/104). A name is judged by what it
+    resolves to, never by how it is spelt: `127.plant.example` that does not
+    resolve, or resolves to 10.20.0.5, is not loopback; `localhost` is when
+    the hosts file says so. An empty host (":50051") or a wildcard is not.
+    `why` says what the address is ("resolves to 127.0.0.1", "does not
+    resolve (...)") for messages."""
+    for scheme in ("unix:", "unix-abstract:"):
+        if address.startswith(scheme):
+            return True, "is a unix socket"
+    rest = address
+    if rest.startswith("ipv4:") or rest.startswith("ipv6:"):
+        hosts = [_host_of(item) for item in rest[5:].split(",")]   # gRPC's literal address lists
+    else:
+        if rest.startswith("dns:"):
+            rest = rest[4:]
+            if rest.startswith("//"):   # dns://[AUTHORITY]/HOST:PORT
+                slash = rest.find("/", 2)
+                rest = rest[slash + 1:] if slash >= 0 else ""
+        hosts = [_host_of(rest)]
+    resolved = []
+    loopback = True
+    for host in hosts:
+        if not host:
+            return False, "has no host (every interface)"
+        try:
+            infos = socket.getaddrinfo(host, None, type=socket.SOCK_STREAM)
+        except (socket.gaierror, UnicodeError) as e:
+            return False, f"does not resolve ({host!r}: {getattr(e, 'strerror', None) or e})"
+        for info in infos:
+            a = info[4][0]
+            if a not in resolved:
+                resolved.append(a)
+            loopback = loopback and _is_loopback_ip(a)
+    if not resolved:
+        return False, "resolves to nothing"
+    return loopback, "resolves to " + " and ".join(resolved)
+
+
 def is_loopback(address):
-    """127.0.0.0/8, localhost, [::1] and unix: addresses (as the C++ client)."""
-    host = address
-    for scheme in ("dns:///", "ipv4:", "ipv6:"):
-        if host.startswith(scheme):
-            host = host[len(scheme):]
-    if host.startswith("unix:"):
-        return True
-    host = host.rsplit(":", 1)[0]
-    return host in ("localhost", "[::1]") or host.startswith("127.")
+    """check_loopback(address)[0]: every address it resolves to is loopback."""
+    return check_loopback(address)[0]
 
 
 def _read(path, flag):
@@ -155,22 +262,32 @@ class Client:
 
     def __init__(self, address, ca=None, cert=None, key=None, token=None, token_file=None, insecure=False,
                  gen_dir=None, proto_dir=DEFAULT_PROTO_DIR, timeout_s=120.0):
-        self.pb, rpc = load_stubs(gen_dir, proto_dir)
-        self.timeout_s = timeout_s
         if (cert is None) != (key is None):
             raise RuntimeError("cert and key go together (mutual TLS)")
+        self.address = server_target(address)
+        if token_file:
+            # The first line, as the C++ client reads --token-file.
+            token = _read(token_file, "token_file").decode("utf-8").splitlines()[0].strip()
+        # Loopback by what the address resolves to, every address of it
+        # (check_loopback, the rule of io/net.h).
+        loopback, why = check_loopback(self.address)
+        tls = bool(ca or cert or (not insecure and not loopback))
+        if token and not tls and not loopback:
+            # A bearer token is a password: never in clear off this
+            # machine, not even with insecure=True (cli/support_remote.cc).
+            raise RuntimeError(f"token: tokens need TLS off loopback; {self.address} {why}, so the token is not "
+                               f"sent in plaintext (drop insecure=True and pass ca=)")
+        self.pb, rpc = load_stubs(gen_dir, proto_dir)
+        self.timeout_s = timeout_s
         options = [("grpc.max_receive_message_length", 64 << 20)]
-        if ca or cert or (not insecure and not is_loopback(address)):
+        if tls:
             creds = grpc.ssl_channel_credentials(
                 root_certificates=_read(ca, "ca") if ca else None,
                 private_key=_read(key, "key") if key else None,
                 certificate_chain=_read(cert, "cert") if cert else None)
-            self.channel = grpc.secure_channel(address, creds, options=options)
+            self.channel = grpc.secure_channel(self.address, creds, options=options)
         else:
-            self.channel = grpc.insecure_channel(address, options=options)
-        if token_file:
-            # The first line, as the C++ client reads --token-file.
-            token = _read(token_file, "token_file").decode("utf-8").splitlines()[0].strip()
+            self.channel = grpc.insecure_channel(self.address, options=options)
         # Per-call metadata rather than call credentials: grpcio attaches
         # call credentials only to TLS channels, and a loopback server with
         # --auth takes tokens over plaintext too.
@@ -187,19 +304,31 @@ class Client:
         self.close()
 
     def wait_ready(self, timeout_s=20.0):
-        """Blocks until the channel connects (a server just started)."""
-        grpc.channel_ready_future(self.channel).result(timeout=timeout_s)
+        """Blocks until the channel connects (a server just started).
+        Raises ServerUnreachableError when nothing answers within
+        timeout_s."""
+        try:
+            grpc.channel_ready_future(self.channel).result(timeout=timeout_s)
+        except grpc.FutureTimeoutError:
+            raise ServerUnreachableError("connect", "", grpc.StatusCode.UNAVAILABLE,
+                                         f"no answer within {timeout_s:g} s",
+                                         _unreachable_hint(self.address)) from None
 
     def _call(self, name, serial, method, request):
         try:
             return method(request, timeout=self.timeout_s, metadata=self._metadata)
         except grpc.RpcError as e:
+            if e.code() == grpc.StatusCode.UNAVAILABLE:
+                raise ServerUnreachableError(name, serial, e.code(), e.details(),
+                                             _unreachable_hint(self.address)) from None
             raise FluxcalError(name, serial, e.code(), e.details()) from None
 
     def ingest_hf_results(self, serial, points, motor=None, station_id="", idempotency_key=""):
         """Streams one run of identified HF points for `serial`, one message
         per point. `points`: dicts with HfPoint's fields (point_id, id_a,
-        iq_a, ld_h, lq_h, optional ldq_h, *_std, temperature_c, reliable).
+        iq_a, ld_h, lq_h, optional ldq_h, *_std, temperature_c, reliable;
+        `reliable` True when absent: say False for a point the bench's
+        identification flagged).
         `motor` ({pole_pairs, rs_ohm, psi_pm_wb}) is required for a serial the
         store does not know yet. Returns IngestHfResultsResponse (accepted,
         points_sha256, run_id, replayed).
@@ -210,9 +339,15 @@ class Client:
         reply's count and digest of what the service stored must equal what
         was sent, or StoredNotSentError is raised. An invalid point fails the
         whole stream (FluxcalError, INVALID_ARGUMENT naming message, point
-        and field); nothing is stored then."""
+        and field); nothing is stored then. A run whose points are all
+        marked unreliable is sent with an UnreliablePointsWarning (its fit
+        will fail the verdict)."""
         pb = self.pb
-        sent = [pb.HfPoint(**p) for p in points]
+        sent = [pb.HfPoint(**{"reliable": True, **p}) for p in points]
+        if sent and not any(p.reliable for p in sent):
+            warnings.warn(f"IngestHfResults {serial}: all {len(sent)} points are marked reliable=False; the service "
+                          f"stores them and the fit will fail its verdict (a majority of unreliable points)",
+                          UnreliablePointsWarning, stacklevel=2)
         first = pb.IngestHfResultsRequest(serial=serial, station_id=station_id, idempotency_key=idempotency_key,
                                           end_follows=True)
         if motor is not None:

@@ -19,6 +19,7 @@
 #include "fitting/fit.h"
 #include "simulation/twin.h"
 #include "tables/tables.h"
+#include "tests/support/shared_examples.h"
 #include "tinyxml2.h"
 
 namespace fluxcal::diag {
@@ -683,8 +684,12 @@ TEST(Calibration, DiagnosedDeadTimeGivesTheCleanMotorsTables) {
 // The independent generator's sets: expected verdict and effects from the
 // truth files (never their motor section).
 TEST(Examples, IndependentSets) {
-  const fs::path root = fs::path(FLUXCAL_SHARED_DIR) / "examples";
-  if (!fs::exists(root)) GTEST_SKIP() << "no shared examples";
+  const fs::path root = fluxcal::testing::SharedExamplesDir();
+  if (auto why = fluxcal::testing::MissingSharedExamples({"clean", "dead_time", "cross_saturation"},
+                                                "Matrix.CleanSetsHaveNoFindings, Matrix.EachEffectAlone (twin sets)");
+      !why.empty()) {
+    GTEST_SKIP() << why;
+  }
   for (const char* name : {"clean", "dead_time", "cross_saturation"}) {
     std::ifstream tf(root / (std::string(name) + ".truth.json"));
     const auto truth = nlohmann::json::parse(tf);
@@ -763,8 +768,12 @@ absl::StatusOr<fit::Calibration> TrueMotorCalibration(const nlohmann::json& trut
 // example recorded without the dead time lands near its own true motor;
 // the plain fit of the dead-time set is 30x farther.
 TEST(Examples, DiagnosedDeadTimeTablesAgainstTheTrueMotor) {
-  const fs::path root = fs::path(FLUXCAL_SHARED_DIR) / "examples";
-  if (!fs::exists(root / "dead_time") || !fs::exists(root / "clean")) GTEST_SKIP() << "no shared examples";
+  const fs::path root = fluxcal::testing::SharedExamplesDir();
+  if (auto why = fluxcal::testing::MissingSharedExamples({"dead_time", "clean"},
+                                                "Calibration.DiagnosedDeadTimeGivesTheCleanMotorsTables (twin sets)");
+      !why.empty()) {
+    GTEST_SKIP() << why;
+  }
   auto plain_fit = [](const io::RecordingSet& set) {
     auto ids = ident::IdentifySet(set, {});
     EXPECT_TRUE(ids.ok());
@@ -810,8 +819,12 @@ TEST(Examples, DiagnosedDeadTimeTablesAgainstTheTrueMotor) {
 // the MTPA table within 0.2 % (docs/fitting.md quotes these figures:
 // 0.098 % and 0.120 %).
 TEST(Examples, PlainFitTablesAgainstTheTrueMotor) {
-  const fs::path root = fs::path(FLUXCAL_SHARED_DIR) / "examples";
-  if (!fs::exists(root / "clean") || !fs::exists(root / "cross_saturation")) GTEST_SKIP() << "no shared examples";
+  const fs::path root = fluxcal::testing::SharedExamplesDir();
+  if (auto why = fluxcal::testing::MissingSharedExamples({"clean", "cross_saturation"},
+                                                "fitting_test Fit.RecoversTruthWithinHalfPercent (twin set)");
+      !why.empty()) {
+    GTEST_SKIP() << why;
+  }
   for (const char* name : {"clean", "cross_saturation"}) {
     std::ifstream tf(root / (std::string(name) + ".truth.json"));
     const auto truth = nlohmann::json::parse(tf);

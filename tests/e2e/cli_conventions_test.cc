@@ -70,7 +70,9 @@ TEST(CliConventions, EveryCommandAnswersHelpWithEveryFlag) {
       ASSERT_NE(at, std::string::npos) << flag << " missing from\n" << help.out;
       EXPECT_FALSE(f["help"].get<std::string>().empty()) << flag;
     }
-    if (cmd["server_client"].get<bool>()) EXPECT_NE(help.out.find("--token-file"), std::string::npos);
+    if (cmd["server_client"].get<bool>()) {
+      EXPECT_NE(help.out.find("--token-file"), std::string::npos);
+    }
     // The same text from -h and from `fluxcal help NAME`.
     const Result h = Fluxcal(name + " -h");
     EXPECT_EQ(h.code, 0);

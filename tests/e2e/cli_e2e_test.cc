@@ -101,8 +101,9 @@ TEST(Cli, EndToEnd) {
     const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
     EXPECT_NE(text.find("static const float fluxcal_mtpa_id_a[" + std::to_string(rows) + "]"), std::string::npos);
     EXPECT_EQ(Fluxcal("export " + cal + " --table mtpa --format h --ctype half --out " + out).code, 2);
-    EXPECT_EQ(Fluxcal("export " + cal + " --table mtpa --format csv --i-max-a 1000 --out " + out).code, 2);
-    auto x = Json(Fluxcal("export " + cal + " --table mtpa --format csv --points 8 --i-max-a 1000 --allow-extrapolation --out " +
+    // (--force: `out` holds the table above; the overwrite rule, docs/cli.md.)
+    EXPECT_EQ(Fluxcal("export " + cal + " --table mtpa --format csv --i-max-a 1000 --force --out " + out).code, 2);
+    auto x = Json(Fluxcal("export " + cal + " --table mtpa --format csv --points 8 --i-max-a 1000 --allow-extrapolation --force --out " +
                           out + " --json"));
     EXPECT_GT(x["extrapolated_cells"].get<int>(), 0);
   }
@@ -127,7 +128,9 @@ TEST(Cli, EndToEnd) {
     EXPECT_NE(bad.out.find("changed after signing"), std::string::npos) << bad.out;
   }
   Json(Fluxcal("admin keygen --out " + prefix + "2 --json"));
-  Json(Fluxcal("export " + cal + " --table mtpa --format dcm --points 8 --out " + table + " --sign-key " + prefix + ".key --json"));
+  // The tampered table replaced (--force: the overwrite rule) by a fresh signed one.
+  Json(Fluxcal("export " + cal + " --table mtpa --format dcm --points 8 --force --out " + table + " --sign-key " + prefix +
+               ".key --json"));
   const auto other = Fluxcal("verify " + table + " --pubkey " + prefix + "2.pub --json");
   EXPECT_EQ(other.code, 1);
   EXPECT_NE(other.out.find("not by this key"), std::string::npos) << other.out;

@@ -11,8 +11,8 @@
 //  - a report without the facts its verdict needs never says pass, and
 //    without Udc it says that the voltage limit cannot be drawn.
 // In-repo data: the twin's set, identified here and written out as a bare
-// hf_results.csv. The published Baldor EOL file (../shared) repeats the
-// original report when present.
+// hf_results.csv. The published Baldor EOL file (data/real/baldor_eol)
+// repeats the original report.
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -199,7 +199,7 @@ TEST_F(Facts, ExportsTakeUdcFromTheCalibrationOrTheFlag) {
   const std::string set_cal = Path("set_cal.json");
   const auto c = JsonOf(RunFluxcal("fit " + Path("set") + " --model analytic --out " + set_cal + " --json"));
   EXPECT_EQ(c["udc_v"].get<double>(), 50.0) << "the manifest's drive.udc_v";
-  const auto g = JsonOf(RunFluxcal("export " + set_cal + " --table fw --out " + fw + " --json"));
+  const auto g = JsonOf(RunFluxcal("export " + set_cal + " --table fw --force --out " + fw + " --json"));
   EXPECT_EQ(g["udc_v"].get<double>(), 50.0);
   EXPECT_EQ(g["sources"]["udc_v"], "the calibration");
   ExpectRoundAxis(FirstColumn(Path("fw.csv"), 1), "fw speed_rpm");
@@ -225,7 +225,7 @@ TEST_F(Facts, MostlyClampedTableIsRefusedUnlessAskedFor) {
   EXPECT_TRUE(Has(ok.err, "warning:")) << ok.err;
   EXPECT_TRUE(fs::exists(fw));
   // Any clamped cell is warned about, also below the threshold.
-  const RunResult some = RunFluxcal("export " + cal + " --table fw --udc-v 50 --out " + fw + " --json");
+  const RunResult some = RunFluxcal("export " + cal + " --table fw --udc-v 50 --force --out " + fw + " --json");
   const auto s = JsonOf(some);
   ASSERT_GT(s["clamped_cells"].get<int>(), 0);
   EXPECT_TRUE(Has(some.err, "warning: " + std::to_string(s["clamped_cells"].get<int>()) + " of ")) << some.err;
@@ -244,7 +244,7 @@ TEST_F(Facts, ReportWithoutTheFactsNeverPasses) {
     const std::string html((std::istreambuf_iterator<char>(in)), {});
     EXPECT_TRUE(Has(html, "The voltage limit and the field-weakening map cannot be drawn"));
   }
-  const auto with_udc = JsonOf(RunFluxcal("report " + cal + " --udc-v 50 --out " + page + " --json"));
+  const auto with_udc = JsonOf(RunFluxcal("report " + cal + " --udc-v 50 --force --out " + page + " --json"));
   EXPECT_GT(with_udc["voltage_limit_speed_rpm"].get<double>(), 0.0);
 
   // A calibration file that does not state the nominal psi_pm (as every
@@ -255,7 +255,7 @@ TEST_F(Facts, ReportWithoutTheFactsNeverPasses) {
   j["rs_ohm"] = 0.0;   // how older files wrote an Rs nobody stated
   const std::string old = Path("old_cal.json");
   std::ofstream(old) << j.dump(2);
-  const auto o = JsonOf(RunFluxcal("report " + old + " --out " + page + " --json"));
+  const auto o = JsonOf(RunFluxcal("report " + old + " --force --out " + page + " --json"));
   EXPECT_EQ(o["verdict"].get<std::string>().rfind("fail: nominal psi_pm unknown", 0), 0u) << o["verdict"];
   std::ifstream in(page);
   const std::string html((std::istreambuf_iterator<char>(in)), {});
@@ -264,8 +264,8 @@ TEST_F(Facts, ReportWithoutTheFactsNeverPasses) {
 
 // The defect as first reported, on the published Baldor EOL file.
 TEST(FactsBaldor, AsReported) {
-  const std::string hf = std::string(FLUXCAL_SHARED_DIR) + "/examples/real/baldor_eol/hf_results.csv";
-  if (!fs::exists(hf)) GTEST_SKIP() << "needs ../shared/examples/real/baldor_eol/hf_results.csv";
+  const std::string hf = std::string(FLUXCAL_SOURCE_DIR) + "/data/real/baldor_eol/hf_results.csv";
+  ASSERT_TRUE(fs::exists(hf)) << "in-repo fixture missing: " << hf;
   const fs::path dir = fs::temp_directory_path() / ("fluxcal_facts_baldor_" + std::to_string(::getpid()));
   fs::create_directories(dir);
   const std::string cal = (dir / "c.json").string(), out = (dir / "fw.csv").string();

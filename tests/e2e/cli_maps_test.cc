@@ -114,7 +114,7 @@ TEST(CliMaps, ForeignConventionsAreReadOrRefusedWithTheirCause) {
   // SyR-e's axes, detected and given: the same calibration (the conversion
   // is exact, so the fit sees the same numbers).
   for (const std::string flags : {"", " --convention syre"}) {
-    const Result syre = Fluxcal(fit + path("syre.csv") + flags + " --out " + path("syre.json"), dir);
+    const Result syre = Fluxcal(fit + path("syre.csv") + flags + " --force --out " + path("syre.json"), dir);
     ASSERT_EQ(syre.code, 0) << flags << ": " << syre.err;
     const auto sj = nlohmann::json::parse(syre.out);
     EXPECT_NEAR(sj["psi_pm_wb"].get<double>(), psi_pm, 1e-9 * psi_pm) << flags << ": psi_pm, Wb";

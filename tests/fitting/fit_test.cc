@@ -245,13 +245,13 @@ TEST(Fit, SteadyStateVoltagesAndTheApparentMistake) {
   EXPECT_GT(e_bad, 0.01);
 }
 
-// A measured machine (shared/examples/real: a 5.6 kW PM-SyRM's flux map and
+// A measured machine (data/real: a 5.6 kW PM-SyRM's flux map and
 // what an EOL bench reports for it). The fit from the bench's 36 HF points
 // and 9 steady-state rows is compared with the measured map over the sampled
 // region (id -18..0 A, iq 0..24 A), RMS of |psi error| relative to the
 // largest |psi| there. The old 1.5x extrapolation gate kept a 6 % fit here.
 TEST(Fit, MeasuredPmSyrmMapWithinHalfPercent) {
-  const std::string dir = std::string(FLUXCAL_SHARED_DIR) + "/examples/real";
+  const std::string dir = std::string(FLUXCAL_SOURCE_DIR) + "/data/real";
   auto set = io::ReadRecordingSet(dir + "/baldor_eol");
   ASSERT_TRUE(set.ok()) << set.status();
   auto cal = Fit(FitDataFromRecording(*set, {}));

@@ -2,7 +2,7 @@
 // bench reports them (6 x 6 differential inductances with 0.3 % noise, nine
 // steady-state rows at speed with 0.3 % + 0.05 V voltage noise and 0.5 %
 // torque noise, psi_pm from the map), over several noise draws:
-//   - the measured map of a 5.6 kW PM-SyRM (../shared/examples/real), whose
+//   - the measured map of a 5.6 kW PM-SyRM (data/real), whose
 //     inductances come from the map's own central differences;
 //   - synthetic maps with the traits of real ones (closed-form co-energies,
 //     so the truth is exact): a PM-SyRM (small psi_pm, Lq >> Ld), an IPMSM
@@ -137,8 +137,8 @@ struct Grid {
 const Grid& Baldor() {
   static const Grid* g = [] {
     auto* g = new Grid;
-    auto text = io::ReadFileToString(std::string(FLUXCAL_SHARED_DIR) + "/examples/real/baldor_fluxmap_measured.csv");
-    EXPECT_TRUE(text.ok());
+    auto text = io::ReadFileToString(std::string(FLUXCAL_SOURCE_DIR) + "/data/real/baldor_fluxmap_measured.csv");
+    EXPECT_TRUE(text.ok()) << "in-repo fixture: " << text.status();
     std::istringstream in(text.ok() ? *text : "");
     std::string line;
     std::getline(in, line);

@@ -8,6 +8,7 @@
 #include "gtest/gtest.h"
 #include "identification/identify.h"
 #include "nlohmann/json.hpp"
+#include "tests/support/shared_examples.h"
 
 namespace fluxcal::ident {
 namespace {
@@ -15,8 +16,12 @@ namespace {
 namespace fs = std::filesystem;
 
 TEST(Examples, CleanSetWithinHalfPercentBothMethods) {
-  const fs::path root = fs::path(FLUXCAL_SHARED_DIR) / "examples";
-  if (!fs::exists(root / "clean")) GTEST_SKIP() << "no shared examples";
+  const fs::path root = fluxcal::testing::SharedExamplesDir();
+  if (auto why = fluxcal::testing::MissingSharedExamples(
+          {"clean"}, "PaperPipeline.*, LsqDemodulator.* and ZohRoundTrip.* (recordings with known inductances)");
+      !why.empty()) {
+    GTEST_SKIP() << why;
+  }
   auto set = io::ReadRecordingSet((root / "clean").string());
   ASSERT_TRUE(set.ok()) << set.status();
   std::ifstream tf(root / "clean.truth.json");

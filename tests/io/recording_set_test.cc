@@ -13,6 +13,7 @@
 
 #include "gtest/gtest.h"
 #include "io/csv.h"
+#include "tests/support/shared_examples.h"
 
 namespace fluxcal::io {
 namespace {
@@ -283,8 +284,12 @@ TEST_F(RecordingSetTest, HfResultsNegativeInductanceIsDataTextIsNot) {
 }
 
 TEST(ExampleSets, ReadAllThree) {
-  const fs::path root = fs::path(FLUXCAL_SHARED_DIR) / "examples";
-  if (!fs::exists(root)) GTEST_SKIP() << "shared examples not present at " << root;
+  const fs::path root = fluxcal::testing::SharedExamplesDir();
+  if (auto why = fluxcal::testing::MissingSharedExamples({"clean", "dead_time", "cross_saturation"},
+                                                "RecordingSetTest.* (a full set written here and read back)");
+      !why.empty()) {
+    GTEST_SKIP() << why;
+  }
   for (const char* name : {"clean", "dead_time", "cross_saturation"}) {
     auto r = ReadRecordingSet((root / name).string());
     ASSERT_TRUE(r.ok()) << name << ": " << r.status();

@@ -4,7 +4,13 @@ serve`: example.py end to end (ingest, fit, query, export, write) with its
 --json output asserted, a rerun that replays the run, the same with a bearer
 token on a server with --auth, and server reflection v1 and v1alpha
 (list_services, file_containing_symbol; UNAUTHENTICATED without a token).
+Issue 25 and 24: loopback judged by what an address resolves to and no token
+in clear off loopback (the rule of io/net.h), a missing server reported as a
+message (ServerUnreachableError; example.py exits 1 without a traceback),
+`reliable` True when a point leaves it out and a warning for a run of
+unreliable points.
 Usage: python_client_test.py FLUXCAL_BINARY CLIENT_DIR PROTO_DIR"""
+import contextlib
 import json
 import os
 import shutil
@@ -12,6 +18,7 @@ import socket
 import subprocess
 import sys
 import tempfile
+import warnings
 
 import grpc
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
@@ -141,8 +148,118 @@ def check_digest_form():
     check(got == want, f"hf_points_sha256: {got}, the C++ form gives {want}")
 
 
+@contextlib.contextmanager
+def fake_resolver(table):
+    """socket.getaddrinfo answering the names in `table` (name -> list of
+    numeric addresses) and every other name as the system does."""
+    real = socket.getaddrinfo
+
+    def fake(host, port, *args, **kwargs):
+        if host in table:
+            out = []
+            for a in table[host]:
+                fam = socket.AF_INET6 if ":" in a else socket.AF_INET
+                out.append((fam, socket.SOCK_STREAM, 6, "", (a, 0) if fam == socket.AF_INET else (a, 0, 0, 0)))
+            return out
+        return real(host, port, *args, **kwargs)
+
+    socket.getaddrinfo = fake
+    try:
+        yield
+    finally:
+        socket.getaddrinfo = real
+
+
+def check_loopback_rule():
+    """Loopback is what an address resolves to, every address of it (the
+    rule of io/net.h), not how it is spelt: the old client took
+    `127.plant.example` for loopback and sent a token in clear to it."""
+    sys.path.insert(0, CLIENT_DIR)
+    import fluxcal_client as fc
+    names = {"127.plant.example": ["10.20.0.5"], "mixed.example": ["127.0.0.1", "10.0.0.1"],
+             "lo.example": ["127.0.0.5", "::1"], "mapped.example": ["::ffff:127.0.0.1"]}
+    want = {"127.0.0.1:50051": True, "127.1.2.3:1": True, "[::1]:50051": True, "unix:/tmp/fluxcal.sock": True,
+            "dns:///127.0.0.1:1": True, "dns://8.8.8.8/127.0.0.1:1": True, "lo.example:1": True,
+            "mapped.example:1": True, "127.plant.example:50051": False, "mixed.example:1": False,
+            "ipv4:127.0.0.1:1,10.0.0.1:1": False, "ipv4:127.0.0.1:1,127.0.0.2:1": True, "10.1.2.3:1": False,
+            ":50051": False, "0.0.0.0:1": False, "[::]:1": False, "127.no-such-host.invalid:1": False}
+    with fake_resolver(names):
+        for address, loopback in want.items():
+            got, why = fc.check_loopback(address)
+            check(got is loopback, f"check_loopback({address!r}) = {got} ({why}), expected {loopback}")
+        _, why = fc.check_loopback("127.plant.example:50051")
+        check("10.20.0.5" in why, f"check_loopback names what the address resolves to: {why}")
+        # A token in clear off loopback is refused before any connection,
+        # also with insecure=True; to loopback it is sent.
+        for address in ("127.plant.example:50051", "10.255.255.1:50051", "mixed.example"):
+            try:
+                fc.Client(address, token="secret", insecure=True, gen_dir=os.path.join(WORK, "gen"),
+                          proto_dir=PROTO_DIR)
+                check(False, f"{address}: a token in plaintext off loopback was not refused")
+            except RuntimeError as e:
+                check("tokens need TLS off loopback" in str(e), f"{address}: {e}")
+        fc.Client("lo.example:1", token="secret", gen_dir=os.path.join(WORK, "gen"), proto_dir=PROTO_DIR).close()
+    for server, target in (("h", "h:50051"), ("h:1", "h:1"), ("[::1]", "[::1]:50051"), ("::1", "[::1]:50051"),
+                           ("[::1]:7", "[::1]:7"), ("unix:/s", "unix:/s"), ("dns:///h:1", "dns:///h:1")):
+        check(fc.server_target(server) == target, f"server_target({server!r}) = {fc.server_target(server)!r}")
+
+
+def check_missing_server():
+    """A server that is not there: a message naming the address and what to
+    check, not grpc's FutureTimeoutError traceback."""
+    sys.path.insert(0, CLIENT_DIR)
+    import fluxcal_client as fc
+    addr = f"127.0.0.1:{free_port()}"   # nothing listens there
+    c = fc.Client(addr, gen_dir=os.path.join(WORK, "gen"), proto_dir=PROTO_DIR)
+    try:
+        c.wait_ready(timeout_s=1.0)
+        check(False, f"{addr}: wait_ready returned without a server")
+    except fc.ServerUnreachableError as e:
+        check(isinstance(e, fc.FluxcalError) and addr in str(e) and "fluxcal serve" in str(e),
+              f"wait_ready without a server: {e}")
+    finally:
+        c.close()
+    code, stdout, stderr = example(addr, "IPM-PY-NONE", os.path.join(WORK, "none.json"), "--connect-timeout-s", "1")
+    check(code == 1, f"example without a server: exit {code}, expected 1")
+    check("Traceback" not in stderr and "FutureTimeoutError" not in stderr, f"example without a server: {stderr}")
+    check(f"cannot reach {addr}" in stderr and "fluxcal serve" in stderr, f"example without a server: {stderr}")
+    check(stdout == "", f"example without a server printed on stdout: {stdout!r}")
+
+
+def check_reliable_default(addr):
+    """A point that leaves `reliable` out is reliable (before: the proto's
+    false, 36 of 36 points unreliable and a failed verdict, silently); a run
+    of points all marked unreliable is sent with a warning."""
+    sys.path.insert(0, CLIENT_DIR)
+    import fluxcal_client as fc
+    import example as ex
+    with fc.Client(addr, gen_dir=os.path.join(WORK, "gen"), proto_dir=PROTO_DIR) as c:
+        c.wait_ready(10.0)
+        points = ex.synthetic_points()
+        for p in points:
+            del p["reliable"]
+        with warnings.catch_warnings(record=True) as w:
+            warnings.simplefilter("always")
+            c.ingest_hf_results("IPM-PY-REL-1", points, motor=ex.MOTOR)
+        check(not w, f"a run of reliable points warned: {[str(x.message) for x in w]}")
+        fit = c.fit("IPM-PY-REL-1")
+        check(fit.calibration.verdict == "pass", f"points without `reliable`: verdict {fit.calibration.verdict}")
+        for p in points:
+            p["reliable"] = False
+        with warnings.catch_warnings(record=True) as w:
+            warnings.simplefilter("always")
+            c.ingest_hf_results("IPM-PY-REL-2", points, motor=ex.MOTOR)
+        check(len(w) == 1 and issubclass(w[0].category, fc.UnreliablePointsWarning)
+              and "all 36 points" in str(w[0].message), f"all unreliable: warnings {[str(x.message) for x in w]}")
+        fit = c.fit("IPM-PY-REL-2")
+        check(fit.calibration.verdict.startswith("fail: 36 of 36 points flagged unreliable"),
+              f"all unreliable: verdict {fit.calibration.verdict}")
+
+
 def main():
     check_digest_form()
+    check_loopback_rule()
+    check_missing_server()
     classes = reflection_classes()
     # Open server on loopback (no --auth): every caller is admin.
     proc, addr = serve("open")
@@ -155,6 +272,7 @@ def main():
         code, stdout, _ = example(addr, "IPM-PY-EX-1", out)
         check_example_output(code, stdout, "IPM-PY-EX-1", out, version=2, replayed=True)
         check_reflection(addr, (), classes)
+        check_reliable_default(addr)
         # A bad serial: exit 1, the message names the RPC and the field.
         code, _, stderr = example(addr, "bad serial!", out)
         check(code == 1 and "IngestHfResults" in stderr and "serial" in stderr, f"bad serial: {code} {stderr}")
