@@ -32,11 +32,26 @@ class GradAccumulator {
 // out per coefficient: psi_d = p0 + kW (sum c B_i' E_j - the same at the
 // origin), psi_q = kW (sum c B_i E_j' [- at the origin when not folded]),
 // Ldd = kW sum c B_i'' E_j, Lqq = kW sum c B_i E_j'', Ldq = kW sum c B_i' E_j'.
+// The mirrored layout evaluates S at q = |iq| (psi_q and Ldq take the sign
+// of iq) and its pivot coefficient is a combination of the free ones
+// (MirrorConstraint::Terms): the gradient spreads over them.
 void SplineAt(const SplineDomain& dom, const double* p, double id, double iq, SurfacePoint* out) {
   const int ne = dom.NumEven();
+  const bool mirrored = dom.mirrored && dom.smoothing && dom.symmetric;
+  const MirrorConstraint mc(dom);
+  const double sign = mirrored && iq < 0 ? -1.0 : 1.0;
+  const double q = mirrored ? std::abs(iq) : iq;
+  // Calls add(parameter index, weight) for full coefficient (i, j).
+  auto terms = [&](int i, int j, auto add) {
+    if (mirrored) {
+      mc.Terms(j, [&](int e, double w) { add(1 + i * ne + e, w); });
+    } else {
+      add(1 + i * ne + dom.QIndex(j), 1.0);
+    }
+  };
   const double kW = kPolyL0H * kPolyI0A * kPolyI0A;
   const Basis1d bd = EvalBasis(id, dom.id_lo_a, dom.id_hi_a, dom.spans);
-  const Basis1d bq = EvalBasis(iq, dom.IqLo(), dom.iq_hi_a, dom.SpansQ());
+  const Basis1d bq = EvalBasis(q, dom.IqLo(), dom.iq_hi_a, dom.SpansQ());
   const Basis1d b0d = EvalBasis(0.0, dom.id_lo_a, dom.id_hi_a, dom.spans);
   const Basis1d b0q = EvalBasis(0.0, dom.IqLo(), dom.iq_hi_a, dom.SpansQ());
   GradAccumulator acc;
@@ -46,22 +61,25 @@ void SplineAt(const SplineDomain& dom, const double* p, double id, double iq, Su
   acc.Add(0, kPsiD, 1.0);
   for (int a = 0; a <= kSplineDegree; ++a) {
     for (int c = 0; c <= kSplineDegree; ++c) {
-      const int idx = 1 + (bd.first + a) * ne + dom.QIndex(bq.first + c);
-      const double w[kSurfaceValues] = {kW * bd.d1[a] * bq.v[c], kW * bd.v[a] * bq.d1[c], kW * bd.d2[a] * bq.v[c],
-                                        kW * bd.v[a] * bq.d2[c], kW * bd.d1[a] * bq.d1[c]};
-      for (int s = 0; s < kSurfaceValues; ++s) {
-        v[s] += p[idx] * w[s];
-        acc.Add(idx, s, w[s]);
-      }
-      const int idx0 = 1 + (b0d.first + a) * ne + dom.QIndex(b0q.first + c);
+      const double w[kSurfaceValues] = {kW * bd.d1[a] * bq.v[c], sign * kW * bd.v[a] * bq.d1[c],
+                                        kW * bd.d2[a] * bq.v[c], kW * bd.v[a] * bq.d2[c],
+                                        sign * kW * bd.d1[a] * bq.d1[c]};
+      terms(bd.first + a, bq.first + c, [&](int idx, double t) {
+        for (int s = 0; s < kSurfaceValues; ++s) {
+          v[s] += p[idx] * t * w[s];
+          acc.Add(idx, s, t * w[s]);
+        }
+      });
       const double w0d = -kW * b0d.d1[a] * b0q.v[c];
-      v[kPsiD] += p[idx0] * w0d;
-      acc.Add(idx0, kPsiD, w0d);
-      if (!dom.Folded()) {
-        const double w0q = -kW * b0d.v[a] * b0q.d1[c];
-        v[kPsiQ] += p[idx0] * w0q;
-        acc.Add(idx0, kPsiQ, w0q);
-      }
+      const double w0q = dom.Folded() || mirrored ? 0.0 : -kW * b0d.v[a] * b0q.d1[c];
+      terms(b0d.first + a, b0q.first + c, [&](int idx0, double t) {
+        v[kPsiD] += p[idx0] * t * w0d;
+        acc.Add(idx0, kPsiD, t * w0d);
+        if (w0q != 0.0) {
+          v[kPsiQ] += p[idx0] * t * w0q;
+          acc.Add(idx0, kPsiQ, t * w0q);
+        }
+      });
     }
   }
   out->grad = acc.Take();

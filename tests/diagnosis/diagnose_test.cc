@@ -12,6 +12,7 @@
 #include <set>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 #include "gtest/gtest.h"
 #include "nlohmann/json.hpp"
 #include "identification/identify.h"
@@ -30,6 +31,20 @@ namespace fs = std::filesystem;
 std::set<std::string> Named(const DiagnosisReport& r) {
   std::set<std::string> s;
   for (const auto& f : r.findings) s.insert(f.effect);
+  return s;
+}
+
+// What is left unexplained, for failure messages: each remaining mismatch's
+// signal, kind, order, size, significance and where.
+std::string Remaining(const DiagnosisReport& r) {
+  std::string s;
+  for (const auto& m : r.remaining) {
+    s += absl::StrFormat("\n  remaining %s %s order %d %.4g Hz size %.3g A %.1f sigma at %s", m.signal, m.kind,
+                         m.order, m.frequency_hz, m.size_a, m.significance_sigma, m.where);
+  }
+  for (const auto& h : r.held_out) {
+    if (!h.passed) s += absl::StrFormat("\n  held-out %s failed", h.signal);
+  }
   return s;
 }
 
@@ -515,7 +530,7 @@ TEST(Matrix, PositionSensorHarmonic) {
     auto r = SimulateThenDiagnose(cfg, plan);
     ASSERT_TRUE(r.ok()) << r.status();
     const std::string label = absl::StrCat("seed ", c.seed);
-    EXPECT_EQ(r->verdict, "explained") << label;
+    EXPECT_EQ(r->verdict, "explained") << label << Remaining(*r);
     std::set<std::string> want = {"position_sensor_harmonic"};
     if (c.offset_rad != 0) want.insert("position_offset");
     if (c.dead_time_s > 0) want.insert("dead_time");
@@ -948,7 +963,7 @@ TEST(Examples, RealMagneticsBenchSets) {
     ASSERT_TRUE(set.ok());
     auto r = Diagnose(*set);
     ASSERT_TRUE(r.ok()) << r.status();
-    EXPECT_EQ(r->verdict, truth["expected_verdict"].get<std::string>()) << name;
+    EXPECT_EQ(r->verdict, truth["expected_verdict"].get<std::string>()) << name << Remaining(*r);
     std::set<std::string> want;
     for (const auto& e : truth["concealed_effects"]) want.insert(e["effect"].get<std::string>());
     EXPECT_EQ(Named(*r), want) << name;

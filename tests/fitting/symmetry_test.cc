@@ -299,6 +299,7 @@ TEST(Symmetry, FoldedSmoothCalibrationStillLoads) {
 // Inductance and every replay call) gives the templated family's values on
 // every layout: the symmetric mirrored spline of one-sided data, the
 // asymmetric one, the folded spline<R>, a polynomial; both signs of iq,
+// and SurfaceAt, the values and gradients the diagnosis refit uses;
 // inside the knot span and beyond it (the Taylor continuation).
 TEST(Symmetry, SurfaceEvaluatorIsTheFamily) {
   const FitData data = PublicBench();
@@ -315,9 +316,20 @@ TEST(Symmetry, SurfaceEvaluatorIsTheFamily) {
         FamilyFlux(f, id, iq, cal->params().data(), &want[0], &want[1]);
         FamilyInductance(f, id, iq, cal->params().data(), &want[2], &want[3], &want[4]);
         ev.Eval(id, iq, &got[0], &got[1], &got[2], &got[3], &got[4]);
+        // SurfaceAt (the diagnosis refit's values and parameter
+        // gradients): the same values, and, the spline and polynomial
+        // families being linear in their parameters, each value the
+        // gradient's sum over them.
+        const SurfacePoint sp = SurfaceAt(f, cal->params().data(), id, iq);
+        double lin[5] = {0, 0, 0, 0, 0};
+        for (const auto& [idx, g] : sp.grad) {
+          for (int k = 0; k < 5; ++k) lin[k] += g[k] * cal->params()[idx];
+        }
         for (int k = 0; k < 5; ++k) {
-          EXPECT_NEAR(got[k], want[k], 1e-12 + 1e-10 * std::abs(want[k]))
-              << f.Name() << " value " << k << " at id " << id << " A, iq " << iq << " A";
+          const double tol = 1e-12 + 1e-10 * std::abs(want[k]);
+          EXPECT_NEAR(got[k], want[k], tol) << f.Name() << " value " << k << " at id " << id << " A, iq " << iq << " A";
+          EXPECT_NEAR(sp.value[k], want[k], tol) << f.Name() << " SurfaceAt " << k << " at " << id << ", " << iq;
+          EXPECT_NEAR(lin[k], want[k], tol) << f.Name() << " SurfaceAt gradient " << k << " at " << id << ", " << iq;
         }
       }
     }
