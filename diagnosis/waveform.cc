@@ -367,6 +367,42 @@ std::vector<WaveformPoint> AnalyseWaveforms(const io::RecordingSet& set, const s
       }
       std::vector<double> line(n), quant(n, 0.0);
       for (size_t k = 0; k < n; ++k) line[k] = icpt + slope * static_cast<double>(k);
+      // The model's own sensor error (a position-sensor harmonic found by
+      // the diagnosis, ReplayPoint::angle_error_rad): the reading modelled
+      // is the line plus it, then quantised.
+      std::vector<double> err(n, 0.0);
+      if (r.angle_error_rad.size() == w.size()) {
+        for (size_t k = 0; k < n; ++k) err[k] = r.angle_error_rad[k + 1];
+      }
+      // The named error's second-harmonic part, refined on this record: its
+      // amplitude and phase come from the currents (to ~10 %), while the
+      // quantised reading moves a count wherever the error does, so a few
+      // per cent off shifts transitions and leaves sawtooth lines the
+      // effect does not cause. Least squares of the reading beyond its
+      // line on sin / cos(2 theta); the refined harmonic replaces the
+      // model's only when it is the same effect (amplitude within 30 %,
+      // phase within 0.3 rad): an error the model does not name is never
+      // fitted here.
+      {
+        double ss = 0, cc = 0, sc = 0, sr = 0, cr = 0, se = 0, ce = 0;
+        for (size_t k = 0; k < n; ++k) {
+          const double sk = std::sin(2 * line[k]), ck = std::cos(2 * line[k]), rk = th[k] - line[k];
+          ss += sk * sk; cc += ck * ck; sc += sk * ck;
+          sr += sk * rk; cr += ck * rk; se += sk * err[k]; ce += ck * err[k];
+        }
+        const double det = ss * cc - sc * sc;
+        if (det > 0) {
+          const Complex model((cc * se - sc * ce) / det, (ss * ce - sc * se) / det);
+          const Complex data((cc * sr - sc * cr) / det, (ss * cr - sc * sr) / det);
+          if (std::abs(model) > 0 && std::abs(std::abs(data) / std::abs(model) - 1.0) < 0.3 &&
+              std::abs(std::arg(data / model)) < 0.3) {
+            for (size_t k = 0; k < n; ++k) {
+              const double sk = std::sin(2 * line[k]), ck = std::cos(2 * line[k]);
+              err[k] += (data.real() - model.real()) * sk + (data.imag() - model.imag()) * ck;
+            }
+          }
+        }
+      }
       if (count > 0) {
         // The grid's zero: the readings lie on c + m count, so c is the
         // circular mean of the readings modulo a count. The line's own
@@ -382,14 +418,16 @@ std::vector<WaveformPoint> AnalyseWaveforms(const io::RecordingSet& set, const s
           const double shift = count * t / 128.0;
           double se = 0;
           for (size_t k = 0; k < n; ++k) {
-            const double qk = std::round((line[k] + shift - c) / count) * count + c;
+            const double qk = std::round((line[k] + err[k] + shift - c) / count) * count + c;
             se += (th[k] - qk) * (th[k] - qk);
           }
           if (se < best) { best = se; best_shift = shift; }
         }
         for (size_t k = 0; k < n; ++k) {
-          quant[k] = std::round((line[k] + best_shift - c) / count) * count + c - line[k];
+          quant[k] = std::round((line[k] + err[k] + best_shift - c) / count) * count + c - line[k];
         }
+      } else {
+        quant = err;
       }
       std::vector<Complex> ain(n), aout, qin(n), qout;
       for (size_t k = 0; k < n; ++k) {
@@ -407,10 +445,19 @@ std::vector<WaveformPoint> AnalyseWaveforms(const io::RecordingSet& set, const s
       if (count > 0) {
         const double cps = slope / count, slip = std::abs(cps - std::round(cps)) * fs;
         if (slip > 0) {
+          // A named angle error (err) modulates the slip rate at twice the
+          // electrical frequency: the sawtooth's lines then carry sidebands
+          // at +-2 j f_e, as sensitive to the error's exact size as the
+          // transitions are.
+          bool modulated = false;
+          for (double e : err) modulated |= e != 0.0;
+          const int sidebands = modulated ? 3 : 0;
           for (int k = 1; k <= 200 && k * slip < 40 * fs; ++k) {
-            const double f = std::remainder(k * slip, fs);
-            wp.angle_nuisance_hz.push_back(f);
-            wp.angle_nuisance_hz.push_back(-f);
+            for (int j = -sidebands; j <= sidebands; ++j) {
+              const double f = std::remainder(k * slip + 2.0 * j * wp.f_e_hz, fs);
+              wp.angle_nuisance_hz.push_back(f);
+              wp.angle_nuisance_hz.push_back(-f);
+            }
           }
         }
       }

@@ -137,6 +137,10 @@ absl::StatusOr<std::vector<ReplayPoint>> ReplayOpenLoop(const io::RecordingSet& 
     rp.ia_a.push_back(w.ia_a[0]);   // sample 0 is not simulated
     rp.ib_a.push_back(w.ib_a[0]);
     rp.ic_a.push_back(w.ic_a[0]);
+    rp.angle_error_rad.resize(n);
+    for (size_t k = 0; k < n; ++k) {
+      rp.angle_error_rad[k] = AngleSensorError(opt.effects, true_theta(k)) - opt.effects.offset_rad;
+    }
     double se = 0;
     for (size_t k = 1; k < n; ++k) {
       const double c = std::cos(th[k]), s = std::sin(th[k]);

@@ -172,6 +172,10 @@ absl::StatusOr<Plan> LoadPlanJson(const std::string& path);
 struct ReplayPoint {
   std::string point;
   std::vector<double> ia_a, ib_a, ic_a;
+  // What the modelled angle sensor adds to the true angle beyond its
+  // constant offset, per sample (rad; AngleSensorError less offset_rad):
+  // the rotor-angle channel's model of the reading (diagnosis/waveform.cc).
+  std::vector<double> angle_error_rad;
   double residual_rms_a = 0;   // vs the recorded currents
 };
 struct ReplayOptions {
