@@ -441,7 +441,9 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
         refit.erase(std::remove_if(refit.begin(), refit.end(), [](Block b) { return b == kBase; }),
                     refit.end());
       }
-      const FitOut f = Solve(m, current.p, refit, kind);
+      Model m_held = m;
+      if (current.lambda > 0) m_held.surf_lambda = current.lambda;
+      const FitOut f = Solve(m_held, current.p, refit, kind);
       if (!f.ok) continue;
       HeldOutCheck h;
       h.signal = KindSignal(kind);

@@ -376,7 +376,11 @@ FitOut Solve(const Model& m, const Params& start, const std::vector<Block>& free
     }
   };
   converge(40);
-  if (penalised) {
+  // A held-out refit keeps the smoothness the full fit chose (the caller
+  // sets m.surf_lambda to it): with a class left out, the BIC would choose
+  // the surfaces' roughness on less data, and the prediction would test
+  // that choice, not the effects.
+  if (penalised && held_out < 0) {
     // lambda by the BIC of the problem linearised at the solution, for
     // every lambda at the price of one eigendecomposition (the
     // Demmler-Reinsch basis of fit.cc's SolveLinear): with B = S + eps I =
