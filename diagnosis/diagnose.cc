@@ -441,9 +441,18 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
         refit.erase(std::remove_if(refit.begin(), refit.end(), [](Block b) { return b == kBase; }),
                     refit.end());
       }
+      // The surfaces' smoothness: the full fit's (with a class left out,
+      // the BIC chooses it on less data, and the prediction would test
+      // that choice, not the effects) and the one the remaining classes
+      // choose; the prediction is judged with the better of the two, as
+      // the check is of the effects.
       Model m_held = m;
       if (current.lambda > 0) m_held.surf_lambda = current.lambda;
-      const FitOut f = Solve(m_held, current.p, refit, kind);
+      FitOut f = Solve(m_held, current.p, refit, kind, /*choose_lambda=*/false);
+      if (kind != kHfKind && m.surf_lambda > 0) {
+        const FitOut g = Solve(m, current.p, refit, kind);
+        if (g.ok && (!f.ok || RelativeRmsOf(m, g.p, kind) < RelativeRmsOf(m, f.p, kind))) f = g;
+      }
       if (!f.ok) continue;
       HeldOutCheck h;
       h.signal = KindSignal(kind);

@@ -456,7 +456,10 @@ double RelativeRmsOf(const Model& m, const Params& p, int kind);
 // Least squares over every observation except those of kind `held_out`
 // (-1: none), with the blocks in `free_blocks` free; covariance of the
 // effect blocks.
-FitOut Solve(const Model& m, const Params& start, const std::vector<Block>& free_blocks, int held_out = -1);
+// choose_lambda: the surfaces' smoothing weight chosen by BIC at the
+// solution (refit.cc); false keeps m.surf_lambda.
+FitOut Solve(const Model& m, const Params& start, const std::vector<Block>& free_blocks, int held_out = -1,
+             bool choose_lambda = true);
 
 // ---- locate.cc --------------------------------------------------------------
 struct Z {

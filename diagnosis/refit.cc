@@ -312,7 +312,8 @@ double Bic(double rss, double k_eff, int n) {
 // the effect had roughened -- the surfaces keep absorbing the effect and
 // it is never seen (a 0.02 rad angle-sensor harmonic on the twin: the plain
 // fit interpolated with 97 effective parameters of 145).
-FitOut Solve(const Model& m, const Params& start, const std::vector<Block>& free_blocks, int held_out) {
+FitOut Solve(const Model& m, const Params& start, const std::vector<Block>& free_blocks, int held_out,
+             bool choose_lambda) {
   FitOut out;
   out.p = start;
   std::vector<std::pair<int, int>> obs;
@@ -376,11 +377,7 @@ FitOut Solve(const Model& m, const Params& start, const std::vector<Block>& free
     }
   };
   converge(40);
-  // A held-out refit keeps the smoothness the full fit chose (the caller
-  // sets m.surf_lambda to it): with a class left out, the BIC would choose
-  // the surfaces' roughness on less data, and the prediction would test
-  // that choice, not the effects.
-  if (penalised && held_out < 0) {
+  if (penalised && choose_lambda) {
     // lambda by the BIC of the problem linearised at the solution, for
     // every lambda at the price of one eigendecomposition (the
     // Demmler-Reinsch basis of fit.cc's SolveLinear): with B = S + eps I =

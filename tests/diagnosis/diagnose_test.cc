@@ -459,7 +459,7 @@ TEST(Matrix, InverterVoltageDrop) {
     auto r = SimulateThenDiagnose(cfg, plan);
     ASSERT_TRUE(r.ok()) << r.status();
     const std::string label = absl::StrCat("seed ", c.seed);
-    EXPECT_EQ(r->verdict, "explained") << label;
+    EXPECT_EQ(r->verdict, "explained") << label << Remaining(*r);
     std::set<std::string> want;
     if (c.threshold_v > 0) want.insert(c.second_udc ? "inverter_voltage_drop" : "dead_time");
     if (c.dead_time_s > 0) want.insert("dead_time");
