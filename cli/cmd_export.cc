@@ -25,9 +25,8 @@
 #include "io/csv.h"
 #include "nlohmann/json.hpp"
 #include "io/sha256.h"
-#include "tables/export_rule.h"
+#include "pipeline/export.h"
 #include "tables/signature.h"
-#include "tables/tables.h"
 
 namespace fluxcal::cli {
 namespace {
@@ -122,7 +121,10 @@ int RunExport(const std::vector<std::string>& argv) {
   if (auto e = CheckOverwrite(*args, {out_path, sig_path_out, svg_path}); !e.empty()) return Fail(e);
   std::fprintf(stderr, "export: building %s table (at most %d points) for %s\n", spec.kind.c_str(), spec.points,
                spec.serial.c_str());
-  auto built = tables::BuildExportTable(*cal, spec, request);
+  tables::ExportOptions options;
+  options.ctype = *ctype;
+  // The one export path (pipeline/export.h), the service's too.
+  auto built = pipeline::ExportCalibration(*cal, spec, request, args->Get("format").value_or("csv"), options);
   if (!built.ok()) {
     // A flag to give or correct is a usage error (2); a table refused for
     // what it would contain (mostly clamped, no MTPV point inside) is not (1).
@@ -139,10 +141,7 @@ int RunExport(const std::vector<std::string>& argv) {
                  100 * clamp.share, clamp.why.c_str(),
                  clamp.share > tables::kMaxClampedShare ? " (exported on --allow-clamped)" : "");
   }
-  tables::ExportOptions options;
-  options.ctype = *ctype;
-  auto out = tables::Export(*table, *fmt, options);
-  if (!out.ok()) return Fail(std::string(out.status().message()));
+  const tables::Exported* out = &built->exported;
   if (auto st = WriteNewOutput(*args, out_path, out->bytes); !st.ok()) return Fail(std::string(st.message()));
   std::string sig_path;
   if (!to_stdout && !args->Get("sign-key")) {
@@ -158,28 +157,12 @@ int RunExport(const std::vector<std::string>& argv) {
     sig_path = *args->Get("out") + ".sig";
     if (auto st = WriteNewOutput(*args, {"out", sig_path}, *sig); !st.ok()) return Fail(std::string(st.message()));
   }
-  if (auto svg = args->Get("svg")) {
-    std::string text;
-    if (spec.kind == "fw") {
-      text = tables::PlotMapSvg(*table, "id_a");
-    } else {
-      tables::TableSpec ms = spec;
-      ms.measured_current_limit_a = table->measured_current_limit_a;   // as the export rule set it
-      ms.kind = "mtpa";
-      auto mtpa = spec.kind == "mtpa" ? absl::StatusOr<tables::Table>(*table) : tables::BuildTable(*cal, lim, ms);
-      if (spec.kind == "mtpv") {
-        // The MTPV table's own figure; MTPA beside it for reference.
-        text = tables::PlotMtpvSvg(*cal, lim, *table, mtpa.ok() ? &*mtpa : nullptr);
-      } else {
-        ms.kind = "mtpv";
-        auto mtpv = tables::BuildTable(*cal, lim, ms);
-        text = tables::PlotCurvesSvg(*cal, lim, *mtpa, mtpv.ok() ? &*mtpv : nullptr);
-      }
+  if (args->Get("svg")) {
+    if (auto st = WriteNewOutput(*args, svg_path, pipeline::ExportFigureSvg(*cal, spec, *built)); !st.ok()) {
+      return Fail(std::string(st.message()));
     }
-    if (auto st = WriteNewOutput(*args, svg_path, text); !st.ok()) return Fail(std::string(st.message()));
   }
-  size_t extrapolated = 0;
-  for (auto c : table->extrapolated) extrapolated += c;
+  const size_t extrapolated = static_cast<size_t>(built->extrapolated_cells);
   char crc[16];
   std::snprintf(crc, sizeof crc, "%08x", out->payload_crc32);
   // The file checksum is recomputed from the bytes just written, so that

@@ -41,18 +41,6 @@ int Fail(const std::string& m, int code = 1) {
   return code;
 }
 
-// The --model names fit::Fit accepts (fitting/fit.cc), checked before any
-// identification so that a typo costs nothing.
-bool KnownModel(const std::string& m) {
-  if (m == "auto" || m == "analytic" || m == "poly" || m == "spline" || m == "smooth" || m == "smooth-asym") {
-    return true;
-  }
-  int n = 0;
-  if (m.rfind("poly", 0) == 0 && absl::SimpleAtoi(m.substr(4), &n)) return n >= 2 && n <= 10;
-  if (m.rfind("spline", 0) == 0 && absl::SimpleAtoi(m.substr(6), &n)) return n >= 1 && n <= 8;
-  return false;
-}
-
 const FlagSpecs kFitFlags = [] {
   FlagSpecs f = {
     {"out", "FILE", "calibration JSON to write (required; - for stdout)"},
@@ -79,9 +67,9 @@ int RunFit(const std::vector<std::string>& argv) {
   auto args = ParseArgs(argv, kFitFlags);
   if (!args.ok()) return Fail(std::string(args.status().message()), 2);
   if (auto e = CheckOutToStdout(*args); !e.empty()) return Fail(e, 2);
-  if (auto m = args->Get("model"); m && !KnownModel(*m)) {
-    return Fail("flag --model: expected auto, analytic, poly, polyN (N 2..10), spline, splineN (N 1..8), smooth or "
-                "smooth-asym, got '" + *m + "'", 2);
+  // The fit's own parser, before any identification: a typo costs nothing.
+  if (auto m = args->Get("model")) {
+    if (auto parsed = fit::ParseModelName(*m); !parsed.ok()) return Fail(std::string(parsed.status().message()), 2);
   }
   if (int pp = 0; args->Get("pole-pairs") && (!absl::SimpleAtoi(*args->Get("pole-pairs"), &pp) || pp < 1)) {
     return Fail("flag --pole-pairs: expected a positive integer", 2);

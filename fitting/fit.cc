@@ -11,6 +11,7 @@
 #include <tuple>
 
 #include "absl/container/inlined_vector.h"
+#include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "ceres/ceres.h"
@@ -1161,26 +1162,23 @@ absl::StatusOr<Calibration> FitScreened(const FitData& d, std::vector<std::strin
     }
     return f;
   };
-  auto number_after = [&](const std::string& prefix) {
-    try { return std::stoi(o.model.substr(prefix.size())); } catch (...) { return 0; }
-  };
+  auto model = ParseModelName(o.model);
+  if (!model.ok()) return model.status();
+  using M = ModelName;
+  const bool all = model->kind == M::kAuto;
   std::vector<Family> candidates;
-  if (o.model == "analytic" || o.model == "auto") candidates.push_back({Family::kAnalytic, 0, {}});
-  if (o.model == "poly" || o.model == "auto") {
+  if (all || model->kind == M::kAnalytic) candidates.push_back({Family::kAnalytic, 0, {}});
+  if (all || (model->kind == M::kPoly && model->n == 0)) {
     for (int deg = 3; deg <= 8; ++deg) candidates.push_back({Family::kPoly, deg, {}});
-  } else if (o.model.rfind("poly", 0) == 0 && o.model.size() > 4) {
-    const int deg = number_after("poly");
-    if (deg < 2 || deg > 10) return absl::InvalidArgumentError("flag --model: poly degree must be 2..10");
-    candidates.push_back({Family::kPoly, deg, {}});
+  } else if (model->kind == M::kPoly) {
+    candidates.push_back({Family::kPoly, model->n, {}});
   }
-  if (o.model == "spline" || o.model == "auto") {
+  if (all || (model->kind == M::kSpline && model->n == 0)) {
     for (int spans = 1; spans <= 4; ++spans) candidates.push_back(spline(spans));
-  } else if (o.model.rfind("spline", 0) == 0 && o.model.size() > 6) {
-    const int spans = number_after("spline");
-    if (spans < 1 || spans > 8) return absl::InvalidArgumentError("flag --model: spline spans must be 1..8");
-    candidates.push_back(spline(spans));
+  } else if (model->kind == M::kSpline) {
+    candidates.push_back(spline(model->n));
   }
-  if (o.model == "smooth" || o.model == "auto") candidates.push_back(smooth(true));
+  if (all || model->kind == M::kSmooth) candidates.push_back(smooth(true));
   // smooth-asym keeps psi_q(0, 0) = 0 and leaves psi_q(id, 0) to the data:
   // measured Ldq (psi_q(id, 0) is its integral along id from 0), flux rows
   // or flux nodes. Without any of them it is unobservable (any Ldq along
@@ -1195,12 +1193,8 @@ absl::StatusOr<Calibration> FitScreened(const FitData& d, std::vector<std::strin
   for (const auto& obs : d.inductances) ldq_seen |= obs.ldq_h.has_value();
   const bool psi_q_level_seen = ldq_seen || !d.steady_state.empty() || !d.fluxes.empty();
   const bool both_halves = measured_iq.halves == IqHalves::kBoth;
-  if (o.model == "smooth-asym" || ((o.model == "smooth" || o.model == "auto") && psi_q_level_seen && both_halves)) {
+  if (model->kind == M::kSmoothAsym || ((all || model->kind == M::kSmooth) && psi_q_level_seen && both_halves)) {
     candidates.push_back(smooth(false));
-  }
-  if (candidates.empty()) {
-    return absl::InvalidArgumentError(absl::StrCat("flag --model: expected auto, analytic, poly, polyN, spline, "
-                                                   "splineN, smooth or smooth-asym, got '", o.model, "'"));
   }
   std::vector<Solved> solved;
   const int n_data = static_cast<int>(3 * d.inductances.size() + 3 * d.steady_state.size() + 2 * d.fluxes.size());
@@ -1317,6 +1311,25 @@ double RowMisfit(const Calibration& cal, const FitData& d, const SteadyStateObse
 // robust spreads beyond the rows' median is excluded and the fit redone;
 // twice at most. A model error that every row shares (a dead time, an Rs)
 // moves them alike and excludes none.
+absl::StatusOr<ModelName> ParseModelName(const std::string& name) {
+  using M = ModelName;
+  if (name == "auto") return M{M::kAuto, 0};
+  if (name == "analytic") return M{M::kAnalytic, 0};
+  if (name == "poly") return M{M::kPoly, 0};
+  if (name == "spline") return M{M::kSpline, 0};
+  if (name == "smooth") return M{M::kSmooth, 0};
+  if (name == "smooth-asym") return M{M::kSmoothAsym, 0};
+  int n = 0;
+  if (name.rfind("poly", 0) == 0 && absl::SimpleAtoi(name.substr(4), &n) && n >= 2 && n <= 10) {
+    return M{M::kPoly, n};
+  }
+  if (name.rfind("spline", 0) == 0 && absl::SimpleAtoi(name.substr(6), &n) && n >= 1 && n <= 8) {
+    return M{M::kSpline, n};
+  }
+  return absl::InvalidArgumentError(absl::StrCat("flag --model: expected auto, analytic, poly, polyN (N 2..10), "
+                                                 "spline, splineN (N 1..8), smooth or smooth-asym, got '", name, "'"));
+}
+
 absl::StatusOr<Calibration> Fit(const FitData& input, const FitOptions& o) {
   if (input.pole_pairs < 1 || input.pole_pairs > 100) {
     return absl::InvalidArgumentError(absl::StrCat(

@@ -70,8 +70,27 @@ struct FitData {
   std::vector<FluxObservation> fluxes;
 };
 
+// A model name as `fluxcal fit --model`, `fluxcal eol --model` and the Fit
+// RPC's `model` field give it, parsed in this one place: Fit builds its
+// candidates from it, and `fluxcal fit` calls it before the (slow)
+// identification so that a typo costs nothing. (The CLI once kept its own
+// copy, which refused "poly3x" while Fit's std::stoi read it as poly3.)
+struct ModelName {
+  enum Kind { kAuto, kAnalytic, kPoly, kSpline, kSmooth, kSmoothAsym };
+  Kind kind = kAuto;
+  // kPoly: the degree 2..10, kSpline: the spans 1..8; 0 for "poly" /
+  // "spline": every degree 3..8 / spans 1..4, chosen by cross-validation.
+  int n = 0;
+};
+// "auto", "analytic", "poly", "polyN" (N 2..10), "spline", "splineN" (N
+// 1..8), "smooth" or "smooth-asym"; N as absl::SimpleAtoi reads it (no
+// trailing characters). Anything else is InvalidArgument naming the flag
+// --model and every accepted name.
+absl::StatusOr<ModelName> ParseModelName(const std::string& name);
+
 struct FitOptions {
-  // "auto" (BIC over all), "analytic", "poly" (BIC over degrees), "polyN".
+  // A name ParseModelName accepts: "auto" (BIC over all), "analytic",
+  // "poly" (BIC over degrees), "polyN", ...
   std::string model = "auto";
   // Relative floor on inductance standard errors: the data are not more
   // precise than the model family can represent (0.2 %).

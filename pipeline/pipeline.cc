@@ -404,41 +404,6 @@ absl::StatusOr<QueryResult> QueryFlux(storage::Store& store, const std::string& 
   return out;
 }
 
-absl::StatusOr<ExportResult> ExportTable(storage::Store& store, const std::string& serial, int version,
-                                         const tables::TableSpec& spec_in, const tables::ExportRequest& request,
-                                         const std::string& format, const tables::ExportOptions& options) {
-  auto fmt = tables::ParseFormat(format);
-  if (!fmt.ok()) return fmt.status();
-  auto cal = LoadCalibration(store, serial, version);
-  if (!cal.ok()) return cal.status();
-  // Verdict and release state travel inside the file, so that a flashing
-  // tool that only sees the file sees them too.
-  auto row = store.GetCalibration(serial, cal->version);
-  if (!row.ok()) return row.status();
-  auto released = store.IsReleased(serial, cal->version);
-  if (!released.ok()) return released.status();
-  tables::TableSpec spec = spec_in;
-  spec.serial = serial;
-  spec.calibration_version = cal->version;
-  spec.model = cal->family().Name();
-  spec.verdict = row->verdict.empty() ? tables::kVerdictUnknown : row->verdict;
-  spec.release_state = *released ? tables::kReleased : tables::kNotReleased;
-  auto built = tables::BuildExportTable(*cal, spec, request);
-  if (!built.ok()) return built.status();
-  auto e = tables::Export(built->table, *fmt, options);
-  if (!e.ok()) return e.status();
-  ExportResult r;
-  r.exported = *e;
-  r.version = cal->version;
-  r.verdict = row->verdict;
-  r.released = *released;
-  r.cells = static_cast<int>(built->clamped.cells);
-  r.clamped_cells = static_cast<int>(built->clamped.clamped);
-  for (auto c : built->table.extrapolated) r.extrapolated_cells += c;
-  r.limits = std::move(built->limits);
-  return r;
-}
-
 absl::StatusOr<int> FlashableVersion(storage::Store& store, const std::string& serial, int version) {
   if (version == 0) {
     auto v = store.LatestReleasedVersion(serial);

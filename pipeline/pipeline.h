@@ -15,6 +15,7 @@
 #include "diagnosis/diagnose.h"
 #include "fitting/calibration.h"
 #include "io/recording_set.h"
+#include "pipeline/export.h"
 #include "pipeline/points.h"
 #include "storage/store.h"
 #include "tables/export_rule.h"
@@ -113,24 +114,7 @@ struct QueryResult {
 absl::StatusOr<QueryResult> QueryFlux(storage::Store& store, const std::string& serial, int version,
                                       const std::vector<std::pair<double, double>>& points);
 
-struct ExportResult {
-  tables::Exported exported;
-  int version = 0;
-  int cells = 0;
-  int clamped_cells = 0;
-  int extrapolated_cells = 0;
-  std::string verdict;     // the stored verdict of the exported version
-  bool released = false;   // the version is released for flashing
-  tables::ExportLimits limits;   // what the table was computed for, and from where
-};
-// The table under the export rule (tables/export_rule.h: limits from the
-// request, else the stored calibration; refused when mostly clamped). The
-// stored verdict and release state of the version, and the measured current
-// limit, are written into the exported file (tables::Table); spec.verdict
-// and spec.release_state are overwritten from the store.
-absl::StatusOr<ExportResult> ExportTable(storage::Store& store, const std::string& serial, int version,
-                                         const tables::TableSpec& spec, const tables::ExportRequest& request,
-                                         const std::string& format, const tables::ExportOptions& options = {});
+// Export (ExportResult, ExportCalibration, ExportTable): pipeline/export.h.
 
 // The version a flashing station gets (ExportTable for the flasher role):
 // version 0 is the newest released one (FailedPrecondition when there is

@@ -47,6 +47,33 @@ const Case& TwinCase() {
 
 double PsiScale(const sim::TruthPoint& t) { return std::max(std::hypot(t.psi_d_wb, t.psi_q_wb), t.psi_pm_wb); }
 
+// The one model-name parser (Fit's candidates, `fluxcal fit --model`
+// before identification, the Fit RPC through pipeline::FitSerial).
+TEST(Fit, ModelNamesParsedOnce) {
+  struct Want {
+    const char* name;
+    ModelName::Kind kind;
+    int n;
+  };
+  for (const Want& w : {Want{"auto", ModelName::kAuto, 0}, Want{"analytic", ModelName::kAnalytic, 0},
+                        Want{"poly", ModelName::kPoly, 0}, Want{"poly2", ModelName::kPoly, 2},
+                        Want{"poly10", ModelName::kPoly, 10}, Want{"spline", ModelName::kSpline, 0},
+                        Want{"spline1", ModelName::kSpline, 1}, Want{"spline8", ModelName::kSpline, 8},
+                        Want{"smooth", ModelName::kSmooth, 0}, Want{"smooth-asym", ModelName::kSmoothAsym, 0}}) {
+    auto m = ParseModelName(w.name);
+    ASSERT_TRUE(m.ok()) << w.name << ": " << m.status();
+    EXPECT_EQ(m->kind, w.kind) << w.name;
+    EXPECT_EQ(m->n, w.n) << w.name;
+  }
+  // "poly3x": Fit's std::stoi once read it as poly3 while the CLI refused it.
+  for (const char* bad : {"poly3x", "poly1", "poly11", "spline0", "spline9", "polyX", "smooth-sym", "", "AUTO"}) {
+    auto m = ParseModelName(bad);
+    ASSERT_EQ(m.status().code(), absl::StatusCode::kInvalidArgument) << bad;
+    EXPECT_EQ(m.status().message().rfind("flag --model: expected auto, analytic, poly, polyN (N 2..10)", 0), 0u)
+        << m.status();
+  }
+}
+
 TEST(Fit, RecoversTruthWithinHalfPercent) {
   const Case& c = TwinCase();
   for (const char* model : {"auto", "analytic", "poly"}) {

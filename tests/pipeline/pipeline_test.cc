@@ -13,6 +13,7 @@
 #include <fstream>
 
 #include "absl/strings/str_format.h"
+#include "fitting/fit.h"
 #include "gtest/gtest.h"
 #include "io/sha256.h"
 #include "nlohmann/json.hpp"
@@ -217,6 +218,105 @@ TEST(Pipeline, ExportTakesTheCalibrationsFactsOrTheRequests) {
   auto i_max = ExportTable(**store, "IPM-X", 2, spec, rpc, "csv");
   ASSERT_EQ(i_max.status().code(), absl::StatusCode::kInvalidArgument) << i_max.status();
   EXPECT_EQ(i_max.status().message().rfind("i_max_a: ", 0), 0u) << i_max.status();
+}
+
+// `fluxcal export cal.json` and the service's ExportTable are one path
+// (pipeline/export.h): for the same calibration and request they compute
+// the same cells from the same limits, and differ only in what the store
+// adds (verdict, release state). Where the two copies once disagreed, a
+// calibration without a measured current circle, both refuse and name the
+// input to give (the CLI's behaviour, documented in docs/tables.md); the
+// service used to export it at 150 A.
+TEST(Pipeline, LocalAndStoredExportsAreOnePath) {
+  auto store = storage::Store::Open(":memory:");
+  ASSERT_TRUE(store.ok());
+  ASSERT_TRUE(IngestHfRun(**store, "IPM-L", "st", kMotor, Grid(1.0)).ok());
+  ASSERT_TRUE(FitSerial(**store, "IPM-L", "analytic", {}).ok());
+  auto cal = LoadCalibration(**store, "IPM-L", 1);
+  ASSERT_TRUE(cal.ok()) << cal.status();
+  tables::TableSpec spec;
+  spec.points = 12;
+  spec.speed_points = 6;
+  for (const char* kind : {"mtpa", "mtpv", "fw"}) {
+    spec.kind = kind;
+    tables::ExportRequest flags;   // as `fluxcal export` states it
+    flags.udc_v = 60;
+    tables::ExportRequest rpc = flags;   // as the RPC states it
+    rpc.names_flags = false;
+    auto local = ExportCalibration(*cal, spec, flags, "csv");
+    auto stored = ExportTable(**store, "IPM-L", 1, spec, rpc, "csv");
+    ASSERT_TRUE(local.ok()) << kind << ": " << local.status();
+    ASSERT_TRUE(stored.ok()) << kind << ": " << stored.status();
+    EXPECT_EQ(local->exported.payload_sha256, stored->exported.payload_sha256) << kind;
+    EXPECT_EQ(local->cells, stored->cells) << kind;
+    EXPECT_EQ(local->clamped_cells, stored->clamped_cells) << kind;
+    EXPECT_EQ(local->extrapolated_cells, stored->extrapolated_cells) << kind;
+    EXPECT_EQ(local->limits.limits.i_max_a, stored->limits.limits.i_max_a) << kind;
+    EXPECT_EQ(local->limits.limits.udc_v, stored->limits.limits.udc_v) << kind;
+    EXPECT_EQ(local->version, 1);
+    // A file alone says it does not know; the store says what it knows.
+    EXPECT_NE(local->exported.bytes.find(std::string("# release_state: ") + tables::kReleaseUnknown + "\n"),
+              std::string::npos);
+    EXPECT_NE(stored->exported.bytes.find("# release_state: not released\n"), std::string::npos);
+    EXPECT_NE(stored->exported.bytes.find("# verdict: " + stored->verdict + "\n"), std::string::npos);
+    // The figure of `fluxcal export --svg` comes from the same result.
+    EXPECT_NE(ExportFigureSvg(*cal, spec, *local).find("<svg"), std::string::npos) << kind;
+  }
+  // No measured current circle (measured id only >= 0): no table from an
+  // invented current limit, on either path.
+  const fit::Calibration no_circle(cal->serial(), cal->family(), cal->params(), cal->covariance(), cal->pole_pairs(),
+                                   cal->rs_ohm(), 0.0, 20.0, 0.0, 100.0);
+  ASSERT_EQ(no_circle.MeasuredCurrentLimitA(), 0.0);
+  spec.kind = "mtpa";
+  auto local = ExportCalibration(no_circle, spec, tables::ExportRequest{}, "csv");
+  ASSERT_EQ(local.status().code(), absl::StatusCode::kInvalidArgument) << local.status();
+  EXPECT_EQ(local.status().message().rfind("flag --i-max-a: ", 0), 0u) << local.status();
+  storage::CalibrationRow row;
+  row.serial = "IPM-L";
+  row.run_id = 1;
+  row.model = no_circle.family().Name();
+  row.verdict = "fail: test";
+  row.calibration_json = no_circle.ToJson().dump();
+  ASSERT_TRUE((*store)->AddCalibration(row).ok());
+  tables::ExportRequest rpc;
+  rpc.names_flags = false;
+  auto stored = ExportTable(**store, "IPM-L", 2, spec, rpc, "csv");
+  ASSERT_EQ(stored.status().code(), absl::StatusCode::kInvalidArgument) << stored.status();
+  EXPECT_EQ(stored.status().message().rfind("i_max_a: ", 0), 0u) << stored.status();
+  // Given, the limit is taken on both paths alike.
+  tables::ExportRequest given;
+  given.i_max_a = 80;
+  given.names_flags = false;
+  spec.allow_extrapolation = true;   // 80 A lies beyond the (empty) measured region
+  local = ExportCalibration(no_circle, spec, given, "csv");
+  stored = ExportTable(**store, "IPM-L", 2, spec, given, "csv");
+  ASSERT_TRUE(local.ok()) << local.status();
+  ASSERT_TRUE(stored.ok()) << stored.status();
+  EXPECT_EQ(local->limits.limits.i_max_a, 80);
+  EXPECT_EQ(local->exported.payload_sha256, stored->exported.payload_sha256);
+  // A format name is checked before any table is computed, on both paths.
+  EXPECT_EQ(ExportCalibration(*cal, spec, given, "xlsx").status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(ExportTable(**store, "IPM-L", 1, spec, given, "xlsx").status().code(),
+            absl::StatusCode::kInvalidArgument);
+}
+
+// The service fits the model names `fluxcal fit --model` accepts, read by
+// the one parser (fit::ParseModelName): "poly3x" was refused by the CLI's
+// copy and fitted as poly3 by the service's std::stoi; now both refuse it.
+TEST(Pipeline, FitTakesTheModelNamesTheCliTakes) {
+  auto store = storage::Store::Open(":memory:");
+  ASSERT_TRUE(store.ok());
+  ASSERT_TRUE(IngestHfRun(**store, "IPM-M", "st", kMotor, Grid(1.0)).ok());
+  for (const char* bad : {"poly3x", "poly11", "spline0", "polyX", "Auto"}) {
+    auto r = FitSerial(**store, "IPM-M", bad, {});
+    ASSERT_EQ(r.status().code(), absl::StatusCode::kInvalidArgument) << bad << ": " << r.status();
+    EXPECT_NE(r.status().message().find("got '" + std::string(bad) + "'"), std::string::npos) << r.status();
+    EXPECT_EQ(fit::ParseModelName(bad).status().code(), absl::StatusCode::kInvalidArgument) << bad;
+  }
+  auto ok = FitSerial(**store, "IPM-M", "poly3", {});
+  ASSERT_TRUE(ok.ok()) << ok.status();
+  EXPECT_EQ(ok->model, "poly3");
+  EXPECT_EQ(ok->version, 1) << "a refused name stores no version";
 }
 
 // The verdict never passes a calibration missing a fact it depends on: a

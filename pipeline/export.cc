@@ -1,0 +1,74 @@
+#include "pipeline/export.h"
+
+#include <utility>
+
+#include "pipeline/pipeline.h"
+
+namespace fluxcal::pipeline {
+
+absl::StatusOr<ExportResult> ExportCalibration(const fit::Calibration& cal, const tables::TableSpec& spec,
+                                               const tables::ExportRequest& request, const std::string& format,
+                                               const tables::ExportOptions& options) {
+  // The format first: a wrong name costs no table.
+  auto fmt = tables::ParseFormat(format);
+  if (!fmt.ok()) return fmt.status();
+  auto built = tables::BuildExportTable(cal, spec, request);
+  if (!built.ok()) return built.status();
+  auto e = tables::Export(built->table, *fmt, options);
+  if (!e.ok()) return e.status();
+  ExportResult r;
+  r.exported = std::move(*e);
+  r.version = built->table.calibration_version;
+  r.clamped = built->clamped;
+  r.cells = static_cast<int>(built->clamped.cells);
+  r.clamped_cells = static_cast<int>(built->clamped.clamped);
+  for (auto c : built->table.extrapolated) r.extrapolated_cells += c;
+  r.table = std::move(built->table);
+  r.limits = std::move(built->limits);
+  return r;
+}
+
+absl::StatusOr<ExportResult> ExportTable(storage::Store& store, const std::string& serial, int version,
+                                         const tables::TableSpec& spec_in, const tables::ExportRequest& request,
+                                         const std::string& format, const tables::ExportOptions& options) {
+  if (auto fmt = tables::ParseFormat(format); !fmt.ok()) return fmt.status();
+  auto cal = LoadCalibration(store, serial, version);
+  if (!cal.ok()) return cal.status();
+  // Verdict and release state travel inside the file, so that a flashing
+  // tool that only sees the file sees them too.
+  auto row = store.GetCalibration(serial, cal->version);
+  if (!row.ok()) return row.status();
+  auto released = store.IsReleased(serial, cal->version);
+  if (!released.ok()) return released.status();
+  tables::TableSpec spec = spec_in;
+  spec.serial = serial;
+  spec.calibration_version = cal->version;
+  spec.model = cal->family().Name();
+  spec.verdict = row->verdict.empty() ? tables::kVerdictUnknown : row->verdict;
+  spec.release_state = *released ? tables::kReleased : tables::kNotReleased;
+  auto r = ExportCalibration(*cal, spec, request, format, options);
+  if (!r.ok()) return r.status();
+  r->version = cal->version;
+  r->verdict = row->verdict;
+  r->released = *released;
+  return r;
+}
+
+std::string ExportFigureSvg(const fit::Calibration& cal, const tables::TableSpec& spec, const ExportResult& exported) {
+  const tables::Table& table = exported.table;
+  const tables::MachineLimits& lim = exported.limits.limits;
+  if (spec.kind == "fw") return tables::PlotMapSvg(table, "id_a");
+  tables::TableSpec ms = spec;
+  ms.measured_current_limit_a = table.measured_current_limit_a;   // as the export rule set it
+  ms.kind = "mtpa";
+  auto mtpa = spec.kind == "mtpa" ? absl::StatusOr<tables::Table>(table) : tables::BuildTable(cal, lim, ms);
+  if (spec.kind == "mtpv") {
+    // The MTPV table's own figure; MTPA beside it for reference.
+    return tables::PlotMtpvSvg(cal, lim, table, mtpa.ok() ? &*mtpa : nullptr);
+  }
+  ms.kind = "mtpv";
+  auto mtpv = tables::BuildTable(cal, lim, ms);
+  return tables::PlotCurvesSvg(cal, lim, *mtpa, mtpv.ok() ? &*mtpv : nullptr);
+}
+
+}  // namespace fluxcal::pipeline

@@ -1,0 +1,63 @@
+// The export use case, written once for both of its callers: `fluxcal
+// export cal.json` (a calibration held here, ExportCalibration) and the
+// service's ExportTable RPC (a stored version, ExportTable, which reads the
+// version and then takes the same path). Before, the CLI kept its own copy
+// of the steps, and the copies had drifted (the service fell back to
+// 150 A without a measured current limit, the CLI refused); the limits
+// themselves are decided by the export rule (tables/export_rule.h).
+#ifndef FLUXCAL_PIPELINE_EXPORT_H_
+#define FLUXCAL_PIPELINE_EXPORT_H_
+
+#include <string>
+
+#include "absl/status/statusor.h"
+#include "fitting/calibration.h"
+#include "storage/store.h"
+#include "tables/export_rule.h"
+#include "tables/tables.h"
+
+namespace fluxcal::pipeline {
+
+struct ExportResult {
+  tables::Exported exported;
+  tables::Table table;           // as written (verdict, release state, flags)
+  tables::ClampSummary clamped;  // cells, clamped cells, share and why
+  int version = 0;
+  int cells = 0;
+  int clamped_cells = 0;
+  int extrapolated_cells = 0;
+  std::string verdict;     // the stored verdict of the exported version (ExportTable; empty for a file)
+  bool released = false;   // the version is released for flashing (ExportTable)
+  tables::ExportLimits limits;   // what the table was computed for, and from where
+};
+
+// The `spec` table of `cal` under the export rule (limits from `request`,
+// else the calibration; refused when mostly clamped), written as `format`
+// (csv|json|h|cdfx|dcm|a2l). spec.serial, calibration_version and model are
+// taken from `cal` when empty / 0; spec.verdict and release_state are
+// written into the file as given (a file alone: tables::kVerdictUnknown and
+// kReleaseUnknown, the defaults). Errors: InvalidArgument naming the flag
+// or field to give (request.names_flags), FailedPrecondition for a table
+// refused for what it would contain, the serialiser's.
+absl::StatusOr<ExportResult> ExportCalibration(const fit::Calibration& cal, const tables::TableSpec& spec,
+                                               const tables::ExportRequest& request, const std::string& format,
+                                               const tables::ExportOptions& options = {});
+
+// ExportCalibration of the stored `version` of `serial` (0: the latest).
+// The stored verdict and release state of the version are written into the
+// exported file (spec.verdict and spec.release_state are overwritten from
+// the store), and returned in `verdict` / `released`.
+absl::StatusOr<ExportResult> ExportTable(storage::Store& store, const std::string& serial, int version,
+                                         const tables::TableSpec& spec, const tables::ExportRequest& request,
+                                         const std::string& format, const tables::ExportOptions& options = {});
+
+// The figure of an exported table (`fluxcal export --svg`): the fw map as a
+// heat map of id_a; the MTPV table with MTPA beside it for reference; the
+// MTPA table with MTPV beside it. The reference table is computed for the
+// same limits as `exported` and left out when it cannot be (e.g. no MTPV
+// point inside the current limit). `spec` is the one given to the export.
+std::string ExportFigureSvg(const fit::Calibration& cal, const tables::TableSpec& spec, const ExportResult& exported);
+
+}  // namespace fluxcal::pipeline
+
+#endif  // FLUXCAL_PIPELINE_EXPORT_H_
