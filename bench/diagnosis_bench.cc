@@ -1,10 +1,13 @@
 // Diagnosis of a simulated 36-point set (plus rotating points and
 // steady-state rows) with a concealed dead time. Run:
 //   ./build/bench/diagnosis_bench --benchmark_min_time=1
+#include <filesystem>
 #include <string>
 
 #include "benchmark/benchmark.h"
 #include "diagnosis/diagnose.h"
+#include "io/recording_set.h"
+#include "simulation/bench_effect.h"
 #include "simulation/twin.h"
 
 namespace {
@@ -46,6 +49,47 @@ void BM_DiagnoseEolExtensionsPair(benchmark::State& state) {
   }
 }
 BENCHMARK(BM_DiagnoseEolExtensionsPair)->Unit(benchmark::kMillisecond);
+
+// Physics outside the catalogue (simulation/bench_effects/): rotor
+// eccentricity, located in the waveforms and left unexplained -- the
+// waveform locator's replays of every point before and after.
+void BM_DiagnoseOutsideTheCatalogue(benchmark::State& state) {
+  fluxcal::sim::TwinConfig cfg;
+  cfg.seed = 31;
+  cfg.motor = fluxcal::sim::PerturbForProduction(cfg.motor, 31);
+  if (!fluxcal::sim::SetBenchEffectParameter("eccentricity", 0.03, &cfg.effects.unmodelled).ok()) {
+    state.SkipWithError("eccentricity");
+    return;
+  }
+  static auto sim = fluxcal::sim::Simulate(cfg, fluxcal::sim::DefaultPlan());
+  for (auto _ : state) {
+    auto r = fluxcal::diag::Diagnose(sim->set);
+    benchmark::DoNotOptimize(r);
+  }
+}
+BENCHMARK(BM_DiagnoseOutsideTheCatalogue)->Unit(benchmark::kMillisecond);
+
+// A bench on a measured machine's magnetics with a concealed dead time
+// (../shared/examples/real/baldor_bench_dead_time, beside the repository;
+// skipped without it): the set's own spline calibration as baseline.
+void BM_DiagnoseRealMagneticsBench(benchmark::State& state) {
+  std::string root = __FILE__;
+  root = root.substr(0, root.rfind("/bench/")) + "/../shared/examples/real/baldor_bench_dead_time";
+  if (!std::filesystem::exists(root)) {
+    state.SkipWithError("no ../shared/examples/real/baldor_bench_dead_time");
+    return;
+  }
+  static auto set = fluxcal::io::ReadRecordingSet(root);
+  if (!set.ok()) {
+    state.SkipWithError("baldor_bench_dead_time does not read");
+    return;
+  }
+  for (auto _ : state) {
+    auto r = fluxcal::diag::Diagnose(*set);
+    benchmark::DoNotOptimize(r);
+  }
+}
+BENCHMARK(BM_DiagnoseRealMagneticsBench)->Unit(benchmark::kMillisecond);
 
 }  // namespace
 

@@ -27,7 +27,9 @@ fit::FitData CorrectedFitData(const io::RecordingSet& set, const Model& m, const
   Model mc = m;
   mc.dead_nom_s = 0.0;   // no dead time acts in the clean model
   Params clean = final_p;
-  for (Block b : {kDead, kRhf, kOffset, kGain, kDelay, kHarm, kSensorOffset, kUdcGain, kRImb, kDrift, kVth, kAngleHarm, kIronLoss}) {
+  // The test's drifts go too: the calibration holds the mean.
+  for (Block b : {kDead, kRhf, kOffset, kGain, kDelay, kHarm, kSensorOffset, kUdcGain, kRImb, kDrift, kVth, kAngleHarm,
+                  kIronLoss, kPsiDrift}) {
     std::fill(clean.b[b].begin(), clean.b[b].end(), 0.0);
   }
   const auto pf = final_p.Ptrs(), pc = clean.Ptrs();

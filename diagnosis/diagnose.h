@@ -20,11 +20,35 @@
 
 namespace fluxcal::diag {
 
+// A physical hypothesis for a located mismatch (docs/diagnosis.md,
+// "Naming what is not modelled"): what it is, whether the catalogue models
+// it, and what it would show elsewhere in the recordings.
+struct Hypothesis {
+  std::string physics;
+  std::string effect;        // its catalogue name, "" when outside the catalogue
+  std::string predicts;      // what else it would do (the test that tells it apart)
+};
+
 struct Mismatch {
-  std::string signal;          // hf_current | dc_voltage | steady_state_voltage | torque
+  std::string signal;          // hf_current | dc_voltage | steady_state_voltage | torque |
+                               // phase_current | zero_sequence_current (waveforms)
   std::string where;           // human description of the region
   std::vector<std::string> points;
   double significance_sigma = 0;
+  // Waveform-level mismatches (compatible extension, docs/diagnosis-report.md):
+  // the kind of component ("electrical_harmonic", "mechanical_order",
+  // "injection_sideband", "injection_harmonic", "fixed_frequency_line",
+  // "unexplained_line", "angle_pattern", "region"), its order (harmonic
+  // number, mechanical order, rotor-angle order; 0 when none), its
+  // frequency at the points where it was seen (Hz; 0 when it moves with
+  // speed), its size (largest amplitude, A), and how it depends on the
+  // recording order, the current magnitude and the speed.
+  std::string kind;
+  int order = 0;
+  double frequency_hz = 0;
+  double size_a = 0;
+  std::string dependence;
+  std::vector<Hypothesis> hypotheses;   // ranked, most likely first
 };
 
 // An effect the data cannot tell apart from a finding (same signature in

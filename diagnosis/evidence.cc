@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <functional>
+#include <limits>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -10,32 +11,41 @@
 
 namespace fluxcal::diag::detail {
 
-// The fitted surfaces as a twin magnetic model (for waveform replay).
+// The fitted surfaces as a twin magnetic model (for waveform replay): one
+// evaluator for the parameters (fitting/surface.h), and the last point's
+// flux and inductance kept, since the plant's Newton steps ask for both at
+// each point.
 class SurfaceModel : public sim::MagneticModel {
  public:
-  SurfaceModel(const Model& m, const Params& p) : m_(m), p_(p), ptr_(p_.Ptrs()) {}
+  SurfaceModel(const Model& m, const Params& p)
+      : eval_(m.surf, p.b[kBase]), psi_pm_(m.PsiPm(p.Ptrs().data())) {}
   sim::FluxLinkage Flux(double id, double iq, double) const override {
-    sim::FluxLinkage f;
-    m_.Flux(ptr_.data(), id, iq, &f.psi_d_wb, &f.psi_q_wb);
-    return f;
+    Update(id, iq);
+    return {last_.psi_d, last_.psi_q};
   }
   sim::DifferentialInductance Inductance(double id, double iq, double) const override {
-    sim::DifferentialInductance l;
-    m_.Inductance(ptr_.data(), id, iq, &l.ldd_h, &l.lqq_h, &l.ldq_h);
-    return l;
+    Update(id, iq);
+    return {last_.ldd, last_.lqq, last_.ldq};
   }
+
  private:
-  const Model& m_;
-  Params p_;
-  std::vector<const double*> ptr_;
+  struct Point {
+    double id = std::numeric_limits<double>::quiet_NaN(), iq = 0, psi_d = 0, psi_q = 0, ldd = 0, lqq = 0, ldq = 0;
+  };
+  void Update(double id, double iq) const {
+    if (id == last_.id && iq == last_.iq) return;
+    last_.id = id;
+    last_.iq = iq;
+    eval_.Eval(id, iq, &last_.psi_d, &last_.psi_q, &last_.ldd, &last_.lqq, &last_.ldq);
+    last_.psi_d += psi_pm_;   // the family's psi_pm slot is 0 in the model's parameters
+  }
+  fit::SurfaceEvaluator eval_;
+  double psi_pm_;
+  mutable Point last_;
 };
 
-// Replays every waveform point with the model and effects of `p`; returns
-// the overall RMS of simulated minus recorded phase currents and fills the
-// residual spectrum at `freqs` (mean over points of |DFT| of the complex
-// alpha-beta residual, in A).
-double ReplayResidual(const io::RecordingSet& set, const Model& m, const Params& p, int harm_order,
-                      const std::vector<double>& freqs, std::vector<double>* spectrum) {
+absl::StatusOr<std::vector<sim::ReplayPoint>> ReplayModel(const io::RecordingSet& set, const Model& m,
+                                                          const Params& p, int harm_order) {
   SurfaceModel model(m, p);
   const auto ptr = p.Ptrs();
   sim::ReplayOptions opt;
@@ -63,14 +73,17 @@ double ReplayResidual(const io::RecordingSet& set, const Model& m, const Params&
   opt.effects.offset_c_a = PhaseOffset(so, 2);
   double* g[3] = {&opt.effects.gain_a, &opt.effects.gain_b, &opt.effects.gain_c};
   for (int x = 0; x < 3; ++x) *g[x] = PhaseGain(m.M1(ptr.data()), m.M2(ptr.data()), x);
-  auto rep = sim::ReplayOpenLoop(set, model, opt);
+  return sim::ReplayOpenLoop(set, model, opt);
+}
+
+double ReplaySpectrum(const io::RecordingSet& set, const std::vector<sim::ReplayPoint>& replay,
+                      const std::vector<double>& freqs, std::vector<double>* spectrum) {
   spectrum->assign(freqs.size(), 0.0);
-  if (!rep.ok()) return std::nan("");
   double se = 0;
   size_t n_all = 0;
   const double fs = set.manifest.drive.f_sample_hz;
-  for (size_t k = 0; k < rep->size(); ++k) {
-    const auto& r = (*rep)[k];
+  for (size_t k = 0; k < replay.size(); ++k) {
+    const auto& r = replay[k];
     const auto& w = set.waveforms[k];
     se += r.residual_rms_a * r.residual_rms_a * 3.0 * (w.size() - 1);
     n_all += 3 * (w.size() - 1);
@@ -87,7 +100,7 @@ double ReplayResidual(const io::RecordingSet& set, const Model& m, const Params&
         acc += e[s] * rot;
         rot *= step;
       }
-      (*spectrum)[f] += std::abs(acc) / static_cast<double>(w.size() - 1) / static_cast<double>(rep->size());
+      (*spectrum)[f] += std::abs(acc) / static_cast<double>(w.size() - 1) / static_cast<double>(replay.size());
     }
   }
   return n_all ? std::sqrt(se / n_all) : 0.0;

@@ -19,36 +19,36 @@
 #include "absl/status/statusor.h"
 #include "diagnosis/diagnose.h"
 #include "fitting/fit.h"
+#include "fitting/flux_family.h"
+#include "fitting/surface.h"
 #include "identification/identify.h"
 #include "io/recording_set.h"
 #include "simulation/effects.h"
 #include "simulation/frames.h"
+#include "simulation/twin.h"
 
 namespace fluxcal::diag::detail {
 
 using Complex = std::complex<double>;
 using sim::kPi;
 using sim::kSqrt3;
-constexpr double kL0 = 1e-4;    // inductance scale of the surface polynomials [H]
-constexpr double kI0 = 100.0;   // current scale [A]
 constexpr double kIth = 1.0;    // soft-sign current of the dead-time model [A], before its profile
 // Two DC-link voltages differing by more than 10 %: the dead time's error
 // (proportional to Udc) and a switch threshold (not) part by at least 10 %
 // of their size, several times the held voltages' noise at EOL currents.
 constexpr double kTwoUdcRatio = 1.1;
 
-inline double IPow(double x, int n) {
-  double r = 1.0;
-  for (int k = 0; k < n; ++k) r *= x;
-  return r;
-}
 
 // ---- Parameter blocks (scaled to order one) -----------------------------
+// kBase: the flux-linkage surfaces, the parameters of the set's own
+// calibration family (fit::Family; Model::BlockSize), element 0 (the
+// family's psi_pm slot) held at zero: psi_pm is the nominal value times
+// the kPsi block.
 enum Block {
-  kBase, kCross, kDead, kRs, kRhf, kOffset, kGain, kPsi, kDelay, kHarm, kSensorOffset, kUdcGain, kRImb, kDrift,
-  kVth, kAngleHarm, kIronLoss, kNumBlocks
+  kBase, kDead, kRs, kRhf, kOffset, kGain, kPsi, kDelay, kHarm, kSensorOffset, kUdcGain, kRImb, kDrift,
+  kVth, kAngleHarm, kIronLoss, kPsiDrift, kNumBlocks
 };
-constexpr int kBlockSize[kNumBlocks] = {10, 8, 1, 1, 1, 1, 3, 1, 1, 1, 2, 1, 2, 1, 1, 2, 1};
+constexpr int kBlockSize[kNumBlocks] = {0, 1, 1, 1, 1, 3, 1, 1, 1, 2, 1, 2, 1, 1, 2, 1, 1};
 // Fit scales of the effect blocks, from the catalogue (simulation/effects.h):
 // value = neutral + scale x block value (psi_pm relative to its nominal).
 const double kScaleDead = sim::EffectParam("dead_time", "dead_time_s").fit_scale;
@@ -67,14 +67,13 @@ const double kScaleVth = sim::EffectParam("inverter_voltage_drop", "threshold_v"
 // iron_loss is fitted as the conductance 1 / R_fe (linear in the model).
 const double kScaleGfe = sim::EffectParam("iron_loss", "r_fe_ohm").fit_scale;
 const double kScaleAngleHarm = sim::EffectParam("position_sensor_harmonic", "harmonic_amplitude_rad").fit_scale;
-// Cross terms x^a y^b of the co-energy (a >= 1, b >= 2 even): they vanish
-// with iq = 0 or id = 0 as the machine's symmetry requires.
-constexpr int kCrossTerms[8][2] = {{1, 2}, {2, 2}, {3, 2}, {1, 4}, {2, 4}, {4, 2}, {5, 2}, {3, 4}};
-
 struct Candidate {
   std::string effect;
   Block block;
   int order = 0;   // spatial harmonics only
+  // A second block freed with it (magnet_temperature drifting: the drift
+  // beside the mean); kNumBlocks: none.
+  Block also = kNumBlocks;
 };
 
 // Per-observation data, precomputed from the recording.
@@ -114,6 +113,7 @@ struct DcObs {
 };
 struct SsObs {
   double id_a, iq_a, speed_rpm, w_e;
+  double progress = 0.5;   // the row's place among the steady-state rows in recording order, 0..1
   Complex u, dead, dead_v;
   double sigma, scale;
   bool has_torque;
@@ -141,40 +141,65 @@ struct Model {
   double udc_ratio = 1.0;
   double udc_nom_v = 0.0;   // the manifest's drive.udc_v
 
-  // Differential inductance of the surfaces: base self-axis polynomials
-  // Ldd(id), Lqq(iq) plus the cross terms of W'_x = L0 I0^2 sum c x^a y^b.
-  void Inductance(const double* const* p, double id, double iq, double* ldd, double* lqq, double* ldq) const {
-    const double x = id / kI0, y = iq / kI0;
-    const double* b = p[kBase];
-    const double* c = p[kCross];
-    double dd = b[0] + x * (b[1] + x * (b[2] + x * (b[3] + x * b[4])));
-    double qq = b[5] + y * (b[6] + y * (b[7] + y * (b[8] + y * b[9])));
-    double dq = 0;
-    for (int k = 0; k < kBlockSize[kCross]; ++k) {
-      const int a = kCrossTerms[k][0], e = kCrossTerms[k][1];
-      if (a >= 2) dd += c[k] * a * (a - 1) * IPow(x, a - 2) * IPow(y, e);
-      qq += c[k] * e * (e - 1) * IPow(x, a) * IPow(y, e - 2);
-      dq += c[k] * a * e * IPow(x, a - 1) * IPow(y, e - 1);
-    }
-    *ldd = kL0 * dd;
-    *lqq = kL0 * qq;
-    *ldq = kL0 * dq;
+  // The magnetics: the set's own calibration (fit::Fit of its identified
+  // points and steady-state rows, the fit `fluxcal fit SET` makes), its
+  // family and parameters refitted beside the effects, with the smoothing
+  // spline's roughness penalty at the calibration's own weight (refit.cc).
+  // A machine's saturation and cross saturation are its calibration, never
+  // missing physics (docs/diagnosis.md, "The baseline").
+  fit::Family surf;
+  std::vector<double> surf_init;        // the calibration's parameters, psi_pm slot 0
+  // The roughness penalty lambda |R c|^2, R^T R = P^T P (+ eps I) of the
+  // smoothing spline (fit.cc); 0 rows: a family without one. lambda is the
+  // calibration's; each refit chooses its own (refit.cc, Solve).
+  Eigen::MatrixXd surf_R;
+  double surf_lambda = 0;
+  double surf_k_eff = 0;                // effective parameters of the surfaces (BIC)
+  int BlockSize(int b) const { return b == kBase ? surf.NumParams() : kBlockSize[b]; }
+  // psi_pm at the kPsi block (magnet_temperature), relative to nominal;
+  // with `progress` (0..1, a steady-state row's place in recording order)
+  // also the drift of the kPsiDrift block: its change from the first row to
+  // the last, the mean kept at kPsi.
+  double PsiPm(const double* const* p, double progress = -1.0) const {
+    const double drift = progress >= 0.0 ? p[kPsiDrift][0] * (progress - 0.5) : 0.0;
+    return psi_nom * (1 + kScalePsi * (p[kPsi][0] + drift));
   }
-  // Flux linkage: gradient of the same co-energy (psi = grad W').
-  void Flux(const double* const* p, double id, double iq, double* pd, double* pq) const {
-    const double x = id / kI0, y = iq / kI0;
-    const double* b = p[kBase];
-    const double* c = p[kCross];
-    const double psi_pm = psi_nom * (1 + kScalePsi * p[kPsi][0]);
-    double d = x * (b[0] + x * (b[1] / 2 + x * (b[2] / 3 + x * (b[3] / 4 + x * b[4] / 5))));
-    double q = y * (b[5] + y * (b[6] / 2 + y * (b[7] / 3 + y * (b[8] / 4 + y * b[9] / 5))));
-    for (int k = 0; k < kBlockSize[kCross]; ++k) {
-      const int a = kCrossTerms[k][0], e = kCrossTerms[k][1];
-      d += c[k] * a * IPow(x, a - 1) * IPow(y, e);
-      q += c[k] * e * IPow(x, a) * IPow(y, e - 1);
+
+  // A probe of the surfaces for the chain rule (refit.cc): while `on`, every
+  // surface value read is shifted by `delta` (psi_d, psi_q, Ldd, Lqq, Ldq)
+  // and the last operating point read is recorded. Single-threaded use only.
+  struct SurfaceProbe {
+    bool on = false, seen = false;
+    double delta[fit::kSurfaceValues] = {};
+    double id_a = 0, iq_a = 0;
+  };
+  mutable SurfaceProbe probe;
+
+  // Differential inductance of the surfaces (flux_family.h, the Hessian of
+  // the co-energy).
+  void Inductance(const double* const* p, double id, double iq, double* ldd, double* lqq, double* ldq) const {
+    fit::FamilyInductance(surf, id, iq, p[kBase], ldd, lqq, ldq);
+    if (probe.on) {
+      *ldd += probe.delta[fit::kLdd];
+      *lqq += probe.delta[fit::kLqq];
+      *ldq += probe.delta[fit::kLdq];
+      probe.seen = true;
+      probe.id_a = id;
+      probe.iq_a = iq;
     }
-    *pd = psi_pm + kL0 * kI0 * d;
-    *pq = kL0 * kI0 * q;
+  }
+  // Flux linkage: gradient of the same co-energy (psi = grad W'), with the
+  // magnet flux of the kPsi block.
+  void Flux(const double* const* p, double id, double iq, double* pd, double* pq, double progress = -1.0) const {
+    fit::FamilyFlux(surf, id, iq, p[kBase], pd, pq);
+    *pd += PsiPm(p, progress) - p[kBase][0];
+    if (probe.on) {
+      *pd += probe.delta[fit::kPsiD];
+      *pq += probe.delta[fit::kPsiQ];
+      probe.seen = true;
+      probe.id_a = id;
+      probe.iq_a = iq;
+    }
   }
   double Rs(const double* const* p) const { return rs_nom + kScaleRs * p[kRs][0]; }
   double DeadTime(const double* const* p) const { return dead_nom_s + kScaleDead * p[kDead][0]; }
@@ -186,13 +211,13 @@ struct Model {
   // Steady state with iron loss: the branch voltage e = w_e J psi(i_m) drives
   // g e beside the magnetising current, so i_m = i - g w_e J psi(i_m), solved
   // by two fixed-point steps (g w_e L ~ 1e-2: each step gains two digits).
-  Complex MagnetisingCurrent(const double* const* p, Complex i, double w_e) const {
+  Complex MagnetisingCurrent(const double* const* p, Complex i, double w_e, double progress = -1.0) const {
     const double g = Gfe(p);
     if (g == 0.0 || w_e == 0.0) return i;
     Complex im = i;
     for (int it = 0; it < 2; ++it) {
       double pd, pq;
-      Flux(p, im.real(), im.imag(), &pd, &pq);
+      Flux(p, im.real(), im.imag(), &pd, &pq, progress);
       im = i - g * w_e * Complex(-pq, pd);
     }
     return im;
@@ -358,23 +383,22 @@ struct Model {
   // (psi_i / L)(1 + h^2 / (2 L^2)): the current-dependent flux behind a mean
   // current i is L i (1 - h^2 / (2 L^2)) per axis, to second order in h / L
   // (a 20 uH harmonic on 150 uH moves it 0.9 %).
-  void SteadyFlux(const double* const* p, Complex im, double* pd, double* pq) const {
-    Flux(p, im.real(), im.imag(), pd, pq);
+  void SteadyFlux(const double* const* p, Complex im, double* pd, double* pq, double progress = -1.0) const {
+    Flux(p, im.real(), im.imag(), pd, pq, progress);
     if (p[kHarm][0] == 0.0) return;
     const double h = Harm(p);
     double ldd, lqq, ldq;
     Inductance(p, im.real(), im.imag(), &ldd, &lqq, &ldq);
-    double p0d, p0q;
-    Flux(p, 0.0, 0.0, &p0d, &p0q);
+    const double p0d = PsiPm(p, progress);   // psi(0, 0) = (psi_pm, 0) in every family
     if (ldd > 0) *pd = p0d + (*pd - p0d) * (1.0 - 0.5 * h * h / (ldd * ldd));
     if (lqq > 0) *pq *= 1.0 - 0.5 * h * h / (lqq * lqq);
   }
   Complex PredictSs(const double* const* p, const SsObs& o) const {
     const Complex rot = std::polar(1.0, Offset(p));
     const Complex it = rot * Complex(o.id_a, o.iq_a) / M1(p);
-    const Complex im = MagnetisingCurrent(p, it, o.w_e);
+    const Complex im = MagnetisingCurrent(p, it, o.w_e, o.progress);
     double pd, pq;
-    SteadyFlux(p, im, &pd, &pq);
+    SteadyFlux(p, im, &pd, &pq, o.progress);
     const double rs = RsAt(p, 1.0);   // recorded after the points: the winding is warm
     const Complex u_true(rs * it.real() - o.w_e * pq, rs * it.imag() + o.w_e * pd);
     return UdcGain(p) * (std::conj(rot) * u_true * std::polar(1.0, o.w_e * Delay(p)) + DeadTime(p) * o.dead +
@@ -383,9 +407,9 @@ struct Model {
   double PredictTorque(const double* const* p, const SsObs& o) const {
     const Complex it = std::polar(1.0, Offset(p)) * Complex(o.id_a, o.iq_a) / M1(p);
     // Only the magnetising current makes torque (the iron-loss current none).
-    const Complex im = MagnetisingCurrent(p, it, o.w_e);
+    const Complex im = MagnetisingCurrent(p, it, o.w_e, o.progress);
     double pd, pq;
-    SteadyFlux(p, im, &pd, &pq);
+    SteadyFlux(p, im, &pd, &pq, o.progress);
     return 1.5 * pole_pairs * (pd * im.imag() - pq * im.real());
   }
 };
@@ -393,8 +417,11 @@ struct Model {
 
 struct Params {
   std::vector<std::vector<double>> b;
-  Params() {
-    for (int k = 0; k < kNumBlocks; ++k) b.emplace_back(kBlockSize[k], 0.0);
+  Params() = default;
+  // Every block at zero (neutral), the surfaces at the model's calibration.
+  explicit Params(const Model& m) {
+    for (int k = 0; k < kNumBlocks; ++k) b.emplace_back(m.BlockSize(k), 0.0);
+    b[kBase] = m.surf_init;
   }
   std::vector<const double*> Ptrs() const {
     std::vector<const double*> v;
@@ -406,6 +433,10 @@ struct Params {
 struct FitOut {
   Params p;
   double chi2 = 0, bic = 0, rms = 0;
+  double penalty = 0;   // the surfaces' roughness penalty at the solution
+  double lambda = 0;    // the penalty weight the fit chose (Solve)
+  double k_eff = 0;     // effective parameters (surfaces and effects)
+  double Objective() const { return chi2 + penalty; }
   int k = 0, n = 0;
   std::map<Block, std::vector<double>> stdev;
   bool ok = false;
@@ -425,7 +456,10 @@ double RelativeRmsOf(const Model& m, const Params& p, int kind);
 // Least squares over every observation except those of kind `held_out`
 // (-1: none), with the blocks in `free_blocks` free; covariance of the
 // effect blocks.
-FitOut Solve(const Model& m, const Params& start, const std::vector<Block>& free_blocks, int held_out = -1);
+// choose_lambda: the surfaces' smoothing weight chosen by BIC at the
+// solution (refit.cc); false keeps m.surf_lambda.
+FitOut Solve(const Model& m, const Params& start, const std::vector<Block>& free_blocks, int held_out = -1,
+             bool choose_lambda = true);
 
 // ---- locate.cc --------------------------------------------------------------
 struct Z {
@@ -464,7 +498,10 @@ absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident:
 // m->ith_a: the soft-sign current is a profile parameter of the model
 // (Diagnose), not linear in it like Td.
 void SetSoftSignCurrent(const io::RecordingSet& set, double ith_a, Model* m);
-void InitBase(const Model& m, const std::vector<ident::HfPointResult>& all_ids, Params* p);
+// The set's own calibration as the model's magnetics (Model::surf*):
+// fit::Fit of the identified points and steady-state rows.
+void SetSurfaces(const fit::Calibration& cal, Model* m);
+absl::Status InitSurfaces(const io::RecordingSet& set, const std::vector<ident::HfPointResult>& ids, Model* m);
 
 // ---- verdict.cc -------------------------------------------------------------
 extern const double kPhasePhi[3];
@@ -475,8 +512,53 @@ bool Plausible(const Candidate& c, const FitOut& f, const Model& m);
 double Significance(const Candidate& c, const FitOut& f, const Model& m);
 
 // ---- evidence.cc ------------------------------------------------------------
-double ReplayResidual(const io::RecordingSet& set, const Model& m, const Params& p, int harm_order,
+// Every waveform point replayed open loop through the twin with the
+// model's surfaces and the effects of `p` (sim::ReplayOpenLoop).
+absl::StatusOr<std::vector<sim::ReplayPoint>> ReplayModel(const io::RecordingSet& set, const Model& m,
+                                                          const Params& p, int harm_order);
+// The overall RMS of simulated minus recorded phase currents of a replay,
+// and the residual's spectrum at `freqs` (mean over points of |DFT| of the
+// complex alpha-beta residual, in A).
+double ReplaySpectrum(const io::RecordingSet& set, const std::vector<sim::ReplayPoint>& replay,
                       const std::vector<double>& freqs, std::vector<double>* spectrum);
+
+// ---- waveform.cc ------------------------------------------------------------
+struct WaveformLine {
+  std::string channel;   // phase_current | zero_sequence_current | rotor_angle
+  double freq_hz = 0, amp_a = 0, z2 = 0;
+  double sim_amp_a = 0;  // the model's own line in the simulated current at that bin
+  std::string kind;      // what it is a multiple of ("" : nothing)
+  int order = 0, m = 0;
+};
+struct WaveformPoint {
+  std::string point;
+  size_t index = 0;                 // recording order
+  double id_a = 0, iq_a = 0, speed_rpm = 0, f_e_hz = 0, df_hz = 0;
+  double noise_a = 0;               // per-sample noise of the residual (recording's own)
+  double sigma2_bin = 0, sigma2_bin_zero = 0, coherent_gain = 1;
+  std::vector<double> freq_hz, nuisance_hz;
+  std::vector<double> angle_nuisance_hz;          // the angle channel's: count-slip sawtooth harmonics
+  std::vector<Complex> spectrum, spectrum_zero;   // Hann-windowed residual spectra
+  std::vector<Complex> spectrum_sim;              // ... and the simulated current's
+  std::vector<Complex> spectrum_angle;            // rotating: the recorded angle less its line
+  std::vector<Complex> spectrum_angle_model;      // ... and its count quantisation's
+  double sigma2_bin_angle = 0;
+  std::vector<WaveformLine> lines;
+};
+// The residual of every replayed point freed of the nuisance lines, its
+// spectra, noise and lines (waveform.cc's comment).
+std::vector<WaveformPoint> AnalyseWaveforms(const io::RecordingSet& set, const std::vector<sim::ReplayPoint>& replay,
+                                            int pole_pairs);
+// ---- hypotheses.cc ------------------------------------------------------------
+// Fills each mismatch's ranked hypotheses (catalogue effects and physics
+// outside it) from its kind, signal and order.
+void AttachHypotheses(std::vector<Mismatch>* mismatches, int pole_pairs);
+
+// The lines grouped by what they are multiples of, each group with its
+// significance over the points, its size and dependence: the located
+// waveform mismatches at or above `sigma_threshold`.
+std::vector<Mismatch> WaveformMismatches(const std::vector<WaveformPoint>& pts, int pole_pairs, double f_inj_hz,
+                                         double sigma_threshold);
 
 // ---- corrected.cc -----------------------------------------------------------
 fit::FitData CorrectedFitData(const io::RecordingSet& set, const Model& m, const Params& final_p,

@@ -113,6 +113,8 @@ std::vector<Mismatch> AnglePatterns(const std::vector<Z>& zs, double threshold) 
       if (sigma < threshold) continue;
       Mismatch mm;
       mm.signal = signal;
+      mm.kind = "angle_pattern";
+      mm.order = k;
       mm.where = absl::StrFormat("standstill, varying with the rotor angle as cos(%d theta_e + phase)", k);
       mm.significance_sigma = sigma;
       std::vector<std::pair<double, std::string>> worst;
@@ -133,6 +135,7 @@ std::vector<Mismatch> Locate(const std::vector<Z>& zs, double threshold) {
     std::sort(r.points.rbegin(), r.points.rend());
     Mismatch mm;
     mm.signal = r.signal;
+    mm.kind = "region";
     mm.where = r.where;
     mm.significance_sigma = r.Sigma();
     for (const auto& [v, name] : r.points) if (v > 4.0 && mm.points.size() < 12) mm.points.push_back(name);

@@ -213,8 +213,11 @@ absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident:
       m.dc.push_back(d);
     }
   }
-  for (const auto& row : set.steady_state) {
+  for (size_t r = 0; r < set.steady_state.size(); ++r) {
+    const auto& row = set.steady_state[r];
     SsObs o;
+    o.progress = set.steady_state.size() > 1 ? static_cast<double>(r) / static_cast<double>(set.steady_state.size() - 1)
+                                             : 0.5;
     o.id_a = row.id_a; o.iq_a = row.iq_a; o.speed_rpm = row.speed_rpm;
     o.w_e = row.speed_rpm * m.pole_pairs * 2 * kPi / 60;
     o.u = sim::ZohGain(o.w_e, m.ts) * Complex(row.ud_ref_v, row.uq_ref_v);
@@ -250,26 +253,40 @@ absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident:
   }
   if (nt) m.torque_scale_nm = std::max(0.1, std::sqrt(t2 / nt));
   SetSoftSignCurrent(set, kIth, &m);
+  if (auto st = InitSurfaces(set, *ids, &m); !st.ok()) return st;
   return m;
 }
 
-void InitBase(const Model& m, const std::vector<ident::HfPointResult>& all_ids, Params* p) {
-  // Quartic self-axis surfaces by least squares on the identified values.
-  std::vector<ident::HfPointResult> ok;
-  for (const auto& r : all_ids) if (std::isfinite(r.ld_h) && std::isfinite(r.id_a)) ok.push_back(r);
-  const auto& ids = ok;
-  Eigen::MatrixXd A(ids.size(), 5), B(ids.size(), 5);
-  Eigen::VectorXd a(ids.size()), b(ids.size());
-  for (size_t k = 0; k < ids.size(); ++k) {
-    const double x = ids[k].id_a / kI0, y = ids[k].iq_a / kI0;
-    A.row(k) << 1, x, x * x, x * x * x, x * x * x * x;
-    B.row(k) << 1, y, y * y, y * y * y, y * y * y * y;
-    a(k) = ids[k].ld_h / kL0;
-    b(k) = ids[k].lq_h / kL0;
+void SetSurfaces(const fit::Calibration& cal, Model* m) {
+  m->surf = cal.family();
+  m->surf_init = cal.params();
+  m->surf_init[0] = 0.0;   // psi_pm is Model::PsiPm's (nominal x the kPsi block)
+  m->surf_k_eff = cal.summary.effective_parameters > 0 ? cal.summary.effective_parameters
+                                                       : static_cast<double>(m->surf.NumParams() - 1);
+  const int k = m->surf.NumParams();
+  m->surf_R.resize(0, k);
+  m->surf_lambda = cal.summary.smoothing_lambda;
+  const Eigen::MatrixXd P = fit::SmoothingPenalty(m->surf);
+  if (m->surf_lambda > 0 && P.rows() > 0) {
+    // lambda |P c|^2 = lambda |R c|^2 with R the Cholesky factor of
+    // P^T P + eps I (eps as fit.cc's: the directions nothing sees stay put).
+    Eigen::MatrixXd B = P.transpose() * P;
+    B.diagonal().array() += 1e-9 * B.trace() / k;
+    Eigen::LLT<Eigen::MatrixXd> llt(B);
+    if (llt.info() == Eigen::Success) m->surf_R = Eigen::MatrixXd(llt.matrixU());
   }
-  const Eigen::VectorXd ca = A.colPivHouseholderQr().solve(a), cb = B.colPivHouseholderQr().solve(b);
-  for (int k = 0; k < 5; ++k) { p->b[kBase][k] = ca(k); p->b[kBase][5 + k] = cb(k); }
-  (void)m;
+}
+
+absl::Status InitSurfaces(const io::RecordingSet& set, const std::vector<ident::HfPointResult>& ids, Model* m) {
+  const fit::FitData data = fit::FitDataFromRecording(set, ids);
+  auto cal = fit::Fit(data);
+  if (!cal.ok()) {
+    return absl::Status(cal.status().code(),
+                        absl::StrCat("diagnosis: the set's own calibration (the baseline's magnetics) could not be "
+                                     "fitted: ", cal.status().message()));
+  }
+  SetSurfaces(*cal, m);
+  return absl::OkStatus();
 }
 
 }  // namespace fluxcal::diag::detail

@@ -25,6 +25,49 @@ nlohmann::json MarkedCalibrationJson(const DiagnosisReport& r, const fit::Calibr
   return j;
 }
 
+namespace {
+// A located mismatch: the contract's four fields, then the compatible
+// extensions (docs/diagnosis-report.md) where they say something.
+nlohmann::json MismatchJson(const Mismatch& m) {
+  using nlohmann::json;
+  json j = {{"signal", m.signal}, {"where", m.where}, {"points", m.points},
+            {"significance_sigma", m.significance_sigma}};
+  if (!m.kind.empty()) j["kind"] = m.kind;
+  if (m.order != 0) j["order"] = m.order;
+  if (m.frequency_hz != 0) j["frequency_hz"] = m.frequency_hz;
+  if (m.size_a > 0) j["size_a"] = m.size_a;
+  if (!m.dependence.empty()) j["dependence"] = m.dependence;
+  if (!m.hypotheses.empty()) {
+    json hs = json::array();
+    for (const auto& h : m.hypotheses) {
+      json x = {{"physics", h.physics}, {"predicts", h.predicts}};
+      if (!h.effect.empty()) x["effect"] = h.effect;
+      hs.push_back(x);
+    }
+    j["hypotheses"] = hs;
+  }
+  return j;
+}
+
+std::string MismatchText(const Mismatch& m) {
+  std::string s = absl::StrFormat("%s at %s: %.1f sigma", m.signal, m.where, m.significance_sigma);
+  if (m.size_a > 0) s += absl::StrFormat(", up to %.3g A", m.size_a);
+  if (!m.points.empty()) s += absl::StrCat(", worst points ", absl::StrJoin(m.points, ", "));
+  if (!m.dependence.empty()) s += absl::StrCat("; ", m.dependence);
+  return s;
+}
+
+std::string HypothesesText(const Mismatch& m) {
+  std::string s;
+  for (size_t k = 0; k < m.hypotheses.size(); ++k) {
+    const auto& h = m.hypotheses[k];
+    s += absl::StrFormat("      %zu) %s%s; it would %s.\n", k + 1, h.physics,
+                         h.effect.empty() ? " (not in the catalogue)" : absl::StrCat(" (", h.effect, ")"), h.predicts);
+  }
+  return s;
+}
+}  // namespace
+
 nlohmann::json ToJson(const DiagnosisReport& r) {
   using nlohmann::json;
   json j;
@@ -33,10 +76,7 @@ nlohmann::json ToJson(const DiagnosisReport& r) {
   j["verdict"] = r.verdict;
   j["baseline"] = {{"model", r.baseline.model}, {"residual_rms", r.baseline.residual_rms}, {"bic", r.baseline.bic}};
   j["mismatches"] = json::array();
-  for (const auto& m : r.mismatches) {
-    j["mismatches"].push_back({{"signal", m.signal}, {"where", m.where}, {"points", m.points},
-                               {"significance_sigma", m.significance_sigma}});
-  }
+  for (const auto& m : r.mismatches) j["mismatches"].push_back(MismatchJson(m));
   j["findings"] = json::array();
   for (const auto& f : r.findings) {
     json alternatives = json::array();
@@ -55,10 +95,7 @@ nlohmann::json ToJson(const DiagnosisReport& r) {
   // Compatible extensions (docs/diagnosis.md): what is still significant
   // after the refit, and the corrected differential inductances.
   j["remaining_mismatches"] = json::array();
-  for (const auto& m : r.remaining) {
-    j["remaining_mismatches"].push_back({{"signal", m.signal}, {"where", m.where}, {"points", m.points},
-                                         {"significance_sigma", m.significance_sigma}});
-  }
+  for (const auto& m : r.remaining) j["remaining_mismatches"].push_back(MismatchJson(m));
   j["held_out"] = json::array();
   for (const auto& h : r.held_out) {
     j["held_out"].push_back({{"signal", h.signal}, {"significance_sigma", h.significance_sigma},
@@ -89,15 +126,13 @@ nlohmann::json ToJson(const DiagnosisReport& r) {
 
 std::string ToText(const DiagnosisReport& r) {
   std::string s = absl::StrFormat("Diagnosis of %s: %s.\n", r.serial, r.verdict);
-  s += absl::StrFormat("The nominal model (manifest Rs and psi_pm, self-axis saturation only, dead time compensated, "
-                       "ideal sensors) leaves a relative residual of %.3g %%.\n", 100 * r.baseline.residual_rms);
+  s += absl::StrFormat("The nominal model (manifest Rs and psi_pm, the set's own calibration as its magnetics, dead "
+                       "time as the manifest declares, ideal sensors) leaves a relative residual of %.3g %%.\n",
+                       100 * r.baseline.residual_rms);
   if (r.mismatches.empty()) {
     s += "No region of the operating space or signal departs from it beyond the noise estimated from the data.\n";
   }
-  for (const auto& m : r.mismatches) {
-    s += absl::StrFormat("  Mismatch in %s at %s: %.1f sigma%s%s.\n", m.signal, m.where, m.significance_sigma,
-                         m.points.empty() ? "" : ", worst points ", absl::StrJoin(m.points, ", "));
-  }
+  for (const auto& m : r.mismatches) s += absl::StrCat("  Mismatch in ", MismatchText(m), ".\n");
   for (size_t k = 0; k < r.findings.size(); ++k) {
     const auto& f = r.findings[k];
     std::vector<std::string> ps;
@@ -121,7 +156,8 @@ std::string ToText(const DiagnosisReport& r) {
                          r.final_model.residual_rms > 0 ? r.baseline.residual_rms / r.final_model.residual_rms : 0.0);
   }
   for (const auto& m : r.remaining) {
-    s += absl::StrFormat("  Still unexplained: %s at %s (%.1f sigma).\n", m.signal, m.where, m.significance_sigma);
+    s += absl::StrCat("  Still unexplained: ", MismatchText(m), ".\n");
+    if (!m.hypotheses.empty()) s += absl::StrCat("    What could make it, most likely first:\n", HypothesesText(m));
   }
   for (const auto& h : r.held_out) {
     s += absl::StrFormat("  Fitted without %s, the final model predicts it to %.1f sigma (relative RMS %.3g %%)%s.\n",

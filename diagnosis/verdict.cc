@@ -106,8 +106,18 @@ Finding Describe(const Candidate& c, const Model& m, const FitOut& f) {
       break;
     }
     case kPsi:
-      out.parameters["psi_pm_wb"] = m.psi_nom * (1 + kScalePsi * p[kPsi][0]);
+    case kPsiDrift:
+      // The mean over the steady-state rows; a drift (docs/diagnosis-report.md)
+      // also as psi_pm at the first and the last row in recording order.
+      out.parameters["psi_pm_wb"] = m.PsiPm(p);
       out.parameter_std["psi_pm_wb"] = m.psi_nom * kScalePsi * sd(kPsi, 0);
+      if (c.block == kPsiDrift) {
+        out.parameters["psi_pm_start_wb"] = m.PsiPm(p, 0.0);
+        out.parameters["psi_pm_end_wb"] = m.PsiPm(p, 1.0);
+        const double sm = kScalePsi * sd(kPsi, 0), sdr = 0.5 * kScalePsi * sd(kPsiDrift, 0);
+        out.parameter_std["psi_pm_start_wb"] = m.psi_nom * std::hypot(sm, sdr);
+        out.parameter_std["psi_pm_end_wb"] = m.psi_nom * std::hypot(sm, sdr);
+      }
       break;
     case kDelay:
       out.parameters["delay_s"] = m.Delay(p);
@@ -130,23 +140,41 @@ Finding Describe(const Candidate& c, const Model& m, const FitOut& f) {
       break;
     }
     case kUdcGain:
+      // udc_gain is the contract's name (docs/diagnosis-report.md);
+      // udc_sense_gain, the catalogue's, stays beside it (same value).
+      out.parameters["udc_gain"] = m.UdcGain(p);
+      out.parameter_std["udc_gain"] = kScaleUdcGain * sd(kUdcGain, 0);
       out.parameters["udc_sense_gain"] = m.UdcGain(p);
       out.parameter_std["udc_sense_gain"] = kScaleUdcGain * sd(kUdcGain, 0);
       break;
     case kRImb: {
       // dr_x = 2 Re(r2 e^{-j 2 phi_x}), the zero-sum set (the common part is Rs).
       const char* names[3] = {"dr_a_ohm", "dr_b_ohm", "dr_c_ohm"};
+      // The contract's r_x_ohm: each phase's resistance, the model's Rs
+      // (the common part) plus its zero-sum share.
+      const char* absolute[3] = {"r_a_ohm", "r_b_ohm", "r_c_ohm"};
       const double sdr = kScaleRImb * std::max(sd(kRImb, 0), sd(kRImb, 1));
       for (int x = 0; x < 3; ++x) {
-        out.parameters[names[x]] = 2 * std::real(m.RImb(p) * std::polar(1.0, -2 * kPhasePhi[x]));
+        const double dr = 2 * std::real(m.RImb(p) * std::polar(1.0, -2 * kPhasePhi[x]));
+        out.parameters[names[x]] = dr;
         out.parameter_std[names[x]] = 2 * sdr;
+        out.parameters[absolute[x]] = m.Rs(p) + dr;
+        out.parameter_std[absolute[x]] = std::hypot(2 * sdr, kScaleRs * sd(kRs, 0));
       }
       break;
     }
-    case kDrift:
+    case kDrift: {
+      // A drift is reported as one (docs/diagnosis-report.md): Rs at the
+      // first and the last point of the recording, and the rise.
       out.parameters["winding_temp_rise_k"] = kScaleDrift * p[kDrift][0];
       out.parameter_std["winding_temp_rise_k"] = kScaleDrift * sd(kDrift, 0);
+      out.parameters["rs_start_ohm"] = m.RsAt(p, 0.0);
+      out.parameters["rs_end_ohm"] = m.RsAt(p, 1.0);
+      const double drs = m.Rs(p) * sim::kCopperAlphaPerK * kScaleDrift * sd(kDrift, 0);
+      out.parameter_std["rs_end_ohm"] = std::hypot(drs, kScaleRs * sd(kRs, 0));
+      out.parameter_std["rs_start_ohm"] = kScaleRs * sd(kRs, 0);
       break;
+    }
     default:
       break;
   }
@@ -170,22 +198,7 @@ bool Plausible(const Candidate& c, const FitOut& f, const Model& m) {
 }
 
 // Distance of an effect's parameter from neutral, in standard deviations.
-// Cross saturation has no single parameter: it counts when the cross
-// coupling it fits is material, max |Ldq| over the measured points above the
-// identification's own Ldq accuracy (1 % of the mean inductance,
-// tests/identification); expressed on the same 3-sigma scale.
 double Significance(const Candidate& c, const FitOut& f, const Model& m) {
-  if (c.block == kCross) {
-    const auto ptr = f.p.Ptrs();
-    double max_ldq = 0, mean_l = 0;
-    for (const auto& o : m.hf) {
-      double ldd, lqq, ldq;
-      m.Inductance(ptr.data(), o.id_a, o.iq_a, &ldd, &lqq, &ldq);
-      max_ldq = std::max(max_ldq, std::abs(ldq));
-      mean_l += 0.5 * (ldd + lqq) / m.hf.size();
-    }
-    return 3.0 * max_ldq / (0.01 * mean_l);
-  }
   // Materiality (the catalogue's floors): below them no calibration
   // decision changes, however precisely the data pin the value down. The
   // size of a finding is its largest parameter's distance from neutral.

@@ -10,6 +10,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "io/csv.h"
+#include "fitting/surface.h"
 #include "nlohmann/json.hpp"
 
 namespace fluxcal::fit {
@@ -19,17 +20,20 @@ Calibration::Calibration(std::string serial, Family family, std::vector<double> 
                          double id_min_a, double id_max_a, double iq_min_a, double iq_max_a)
     : serial_(std::move(serial)), family_(family), params_(std::move(params)),
       covariance_(std::move(covariance)), pole_pairs_(pole_pairs), rs_ohm_(rs_ohm),
-      id_min_a_(id_min_a), id_max_a_(id_max_a), iq_min_a_(iq_min_a), iq_max_a_(iq_max_a) {}
+      id_min_a_(id_min_a), id_max_a_(id_max_a), iq_min_a_(iq_min_a), iq_max_a_(iq_max_a),
+      eval_(std::make_shared<const SurfaceEvaluator>(family_, params_)) {}
 
 sim::FluxLinkage Calibration::Flux(double id, double iq, double) const {
   sim::FluxLinkage f;
-  FamilyFlux(family_, id, iq, params_.data(), &f.psi_d_wb, &f.psi_q_wb);
+  if (eval_) eval_->Eval(id, iq, &f.psi_d_wb, &f.psi_q_wb, nullptr, nullptr, nullptr);
+  else FamilyFlux(family_, id, iq, params_.data(), &f.psi_d_wb, &f.psi_q_wb);
   return f;
 }
 
 sim::DifferentialInductance Calibration::Inductance(double id, double iq, double) const {
   sim::DifferentialInductance l;
-  FamilyInductance(family_, id, iq, params_.data(), &l.ldd_h, &l.lqq_h, &l.ldq_h);
+  if (eval_) eval_->Eval(id, iq, nullptr, nullptr, &l.ldd_h, &l.lqq_h, &l.ldq_h);
+  else FamilyInductance(family_, id, iq, params_.data(), &l.ldd_h, &l.lqq_h, &l.ldq_h);
   return l;
 }
 
@@ -224,6 +228,8 @@ nlohmann::json Calibration::ToJson() const {
               {"rms_relative", summary.rms_relative}, {"termination", summary.termination},
               {"usable", summary.usable}, {"candidates", summary.candidates},
               {"excluded", summary.excluded}};
+  j["fit"]["effective_parameters"] = summary.effective_parameters;
+  if (summary.smoothing_lambda > 0) j["fit"]["smoothing_lambda"] = summary.smoothing_lambda;
   if (summary.flux_nodes > 0) {
     auto& f = j["fit"];
     f["flux_nodes"] = summary.flux_nodes;
@@ -355,6 +361,8 @@ absl::StatusOr<Calibration> Calibration::FromJson(const nlohmann::json& j) {
       c.summary.usable = f.value("usable", false);
       c.summary.candidates = f.value("candidates", std::vector<std::string>{});
       c.summary.excluded = f.value("excluded", std::vector<std::string>{});
+      c.summary.effective_parameters = f.value("effective_parameters", 0.0);
+      c.summary.smoothing_lambda = f.value("smoothing_lambda", 0.0);
       // Absent before map fits reported them (and for fits without flux nodes).
       c.summary.flux_nodes = f.value("flux_nodes", 0);
       c.summary.flux_rms_relative = f.value("flux_rms_relative", 0.0);

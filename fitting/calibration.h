@@ -13,6 +13,7 @@
 #define FLUXCAL_FITTING_CALIBRATION_H_
 
 #include <optional>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -24,6 +25,7 @@
 
 namespace fluxcal::fit {
 
+class SurfaceEvaluator;
 // Where an operating point lies relative to the data a calibration was
 // fitted to (Calibration::RegionOf):
 //  kMeasured: inside the measured region (the box the observations span,
@@ -71,6 +73,11 @@ struct FitSummary {
   double chi2 = 0, bic = 0, rms_relative = 0;
   std::string termination;
   bool usable = false;
+  // The selected family's effective parameters (tr H of a penalised fit)
+  // and, for a smoothing spline, the penalty weight lambda it was fitted
+  // with (fit.cc, SolveLinear): what a refit of the same surfaces with other
+  // unknowns beside them (diagnosis) keeps them as smooth with.
+  double effective_parameters = 0, smoothing_lambda = 0;
   std::vector<std::string> candidates;   // model-selection table "name cv bic ..."
   // Observations the fit left out or the robust loss down-weighted, each
   // with its point and reason ("hf point 31 (id 0 A, iq 0 A): ldd_h ...").
@@ -168,6 +175,10 @@ class Calibration : public sim::MagneticModel {
   int pole_pairs_ = 0;   // 0: unknown (only a default-constructed calibration)
   std::optional<double> rs_ohm_, psi_pm_nominal_wb_, udc_v_;
   double id_min_a_ = 0, id_max_a_ = 0, iq_min_a_ = 0, iq_max_a_ = 0;
+  // The surfaces' evaluator for these parameters (fitting/surface.h),
+  // shared by copies: Flux and Inductance are called millions of times by
+  // a replay and a table solver.
+  std::shared_ptr<const SurfaceEvaluator> eval_;
   IqHalves iq_halves_ = IqHalves::kUnknown;
   double iq_signed_min_a_ = 0, iq_signed_max_a_ = 0;
 };

@@ -20,6 +20,7 @@
 #include "fitting/flux_error.h"
 #include "identification/identify.h"
 #include "io/flux_map.h"
+#include "fitting/surface.h"
 
 namespace fluxcal::fit {
 namespace {
@@ -361,6 +362,7 @@ struct Solved {
   Family family;
   std::vector<double> params, covariance;
   double chi2 = 0, bic = 0, cv = 0, k_eff = 0;
+  double lambda = 0;   // smoothing families: the roughness penalty's weight
   int n_obs = 0, k = 0;
   std::string termination;
   bool usable = false;
@@ -672,6 +674,7 @@ Solved SolveLinear(const Family& fam, Built& b, const FitOptions& o, const Eigen
   }
   const double k_eff = penalty != nullptr ? dof : s.k;
   s.k_eff = k_eff;
+  s.lambda = penalty != nullptr ? lambda : 0.0;
   s.bic = chi2 + k_eff * std::log(std::max(1, n));
   s.usable = p.allFinite();
   s.termination = penalty != nullptr
@@ -695,55 +698,6 @@ Solved SolveLinear(const Family& fam, Built& b, const FitOptions& o, const Eigen
   for (int i = 0; i < k; ++i)
     for (int j = 0; j < k; ++j) s.covariance[i * k + j] = cov(i, j) * scale;
   return s;
-}
-
-// Roughness of a smoothing-spline co-energy: every third derivative of W,
-//   R = int W_ddd^2 + 3 W_ddq^2 + 3 W_dqq^2 + W_qqq^2  (did diq),
-// the squared norm of the third-derivative tensor (binomial weights count
-// its equal mixed entries). On uniform knots the a-th derivative of a
-// B-spline expansion is, to leading order, the a-th difference of its
-// coefficients over h^a (de Boor, A Practical Guide to Splines, X(12);
-// the P-spline penalty of Eilers & Marx, Stat. Sci. 11 (1996)), so each row
-// is Delta_d^a Delta_q^b c / (h_d^a h_q^b) over the whole coefficient grid,
-// measured region or not. The penalty's null space is W quadratic, i.e. a
-// constant inductance: where no data pull, the surface continues with the
-// inductance it has at the data's edge, and a strong lambda flattens
-// towards the best constant-inductance model instead of oscillating.
-Eigen::MatrixXd SmoothingPenalty(const Family& fam) {
-  const SplineDomain& dom = fam.spline;
-  const int nd = dom.NumD(), nq = dom.NumQ(), ne = dom.NumEven(), k = fam.NumParams();
-  // The mirrored layout's coefficients are constrained (MirrorConstraint):
-  // the differences are of the full coefficients, expressed in the free ones.
-  const MirrorConstraint mirror(dom);
-  const double hd = (dom.id_hi_a - dom.id_lo_a) / dom.spans, hq = (dom.iq_hi_a - dom.IqLo()) / dom.SpansQ();
-  // Binomial difference stencils of order 0..3.
-  const std::vector<std::vector<double>> stencil = {{1}, {-1, 1}, {1, -2, 1}, {-1, 3, -3, 1}};
-  const double weight[4] = {1, 3, 3, 1};   // (a, b) = (3,0), (2,1), (1,2), (0,3)
-  // A common current unit keeps the rows of order one.
-  const double unit = std::max(hd, hq);
-  std::vector<Eigen::VectorXd> rows;
-  for (int a = 3; a >= 0; --a) {
-    const int bq = 3 - a;
-    const double scale = std::sqrt(weight[3 - a]) * std::pow(unit / hd, a) * std::pow(unit / hq, bq);
-    for (int i = 0; i + a < nd; ++i) {
-      for (int j = 0; j + bq < nq; ++j) {
-        Eigen::VectorXd row = Eigen::VectorXd::Zero(k);
-        for (int u = 0; u <= a; ++u)
-          for (int v = 0; v <= bq; ++v)
-            if (dom.mirrored) {
-              mirror.Terms(j + v, [&](int e, double w) {
-                row(1 + (i + u) * ne + e) += w * scale * stencil[a][u] * stencil[bq][v];
-              });
-            } else {
-              row(1 + (i + u) * ne + dom.QIndex(j + v)) += scale * stencil[a][u] * stencil[bq][v];
-            }
-        rows.push_back(row);
-      }
-    }
-  }
-  Eigen::MatrixXd P(rows.size(), k);
-  for (size_t r = 0; r < rows.size(); ++r) P.row(r) = rows[r].transpose();
-  return P;
 }
 
 Solved Solve(const Family& fam, const FitData& d, const FitOptions& o, const Eigen::MatrixXd* penalty = nullptr,
@@ -1284,6 +1238,8 @@ absl::StatusOr<Calibration> FitScreened(const FitData& d, std::vector<std::strin
   cal.summary.bic = best->bic;
   cal.summary.termination = best->termination;
   cal.summary.usable = best->usable;
+  cal.summary.smoothing_lambda = best->lambda;
+  cal.summary.effective_parameters = best->k_eff;
   double rel = 0;
   int nrel = 0;
   for (const auto& obs : d.inductances) {

@@ -34,6 +34,7 @@
 #define FLUXCAL_FITTING_FLUX_FAMILY_H_
 
 #include <cmath>
+#include <limits>
 #include <string>
 #include <utility>
 #include <vector>
@@ -243,6 +244,14 @@ struct MirrorConstraint {
 template <typename T, typename P>
 void SplineFluxAndInductance(const SplineDomain& dom, double id, double iq, const P* p, T* psi_d,
                              T* psi_q, T* ldd, T* lqq, T* ldq) {
+  if (!std::isfinite(id) || !std::isfinite(iq)) {
+    // A diverging simulation's state: no basis to index; NaN out.
+    const T nan(std::numeric_limits<double>::quiet_NaN());
+    for (T* out : {psi_d, psi_q, ldd, lqq, ldq}) {
+      if (out != nullptr) *out = nan;
+    }
+    return;
+  }
   if (dom.mirrored && dom.smoothing && dom.symmetric) {
     const double s = iq < 0 ? -1.0 : 1.0, q = std::abs(iq);
     const MirrorConstraint mc(dom);

@@ -102,7 +102,10 @@ PointRun RunPoint(const TwinConfig& cfg, const PlantModel& m, double id_ref, dou
     }
     const double ial = c * i_sample.d - s * i_sample.q, ibe = s * i_sample.d + c * i_sample.q;
     const Phases iph = InverseClarke(ial, ibe);
-    const double ia = iph.a, ib = iph.b, ic = iph.c;
+    double ia = iph.a, ib = iph.b, ic = iph.c;
+    // Physics outside the catalogue acting on the sensors (interference,
+    // crosstalk) before their gains, offsets, noise and quantisation.
+    for (const auto& e : cfg.effects.unmodelled) e->Sense(t, &ia, &ib, &ic);
     const double lsb = cfg.sensors.adc_lsb_a;
     auto sense = [&](double i, double g, double offset) {
       double v = g * i + offset + noise(*rng);
@@ -113,6 +116,7 @@ PointRun RunPoint(const TwinConfig& cfg, const PlantModel& m, double id_ref, dou
                  mb = sense(ib, cfg.effects.gain_b, cfg.effects.offset_b_a),
                  mc = sense(ic, cfg.effects.gain_c, cfg.effects.offset_c_a);
     double th_meas = th + AngleSensorError(cfg.effects, th);
+    for (const auto& e : cfg.effects.unmodelled) th_meas += e->AngleError(th, m.MechanicalAngle(th));
     // Encoder counts, read to the nearest count (an encoder whose zero is
     // aligned mid-count, as EOL benches calibrate it: no half-count bias).
     if (dtheta_enc > 0) th_meas = std::round(WrapAngle(th_meas) / dtheta_enc) * dtheta_enc;
@@ -194,6 +198,11 @@ PointRun RunPoint(const TwinConfig& cfg, const PlantModel& m, double id_ref, dou
     for (int j = 0; j < S; ++j) {
       std::pair<double, double> u = held(static_cast<long>(k) * S + j);
       const double th_j = th + we * h * j;
+      // A DC link whose ripple the modulator does not see scales every
+      // voltage the inverter applies over the sub-step.
+      double udc_factor = 1.0;
+      for (const auto& e : cfg.effects.unmodelled) udc_factor *= e->UdcFactor(t + h * j);
+      if (udc_factor != 1.0) { u.first *= udc_factor; u.second *= udc_factor; }
       if (k >= n_settle) {
         // Exact mean of the held alpha-beta voltage in the rotating frame
         // over the sub-step: e^{-j theta_mid} sin(y)/y, y = w_e h / 2.
@@ -265,6 +274,8 @@ PlantModel MakePlant(const TwinConfig& cfg, double temperature_c) {
   m.threshold_v = cfg.effects.threshold_v;
   m.slope_ohm = cfg.effects.slope_ohm;
   m.g_fe_s = cfg.effects.r_fe_ohm > 0 ? 1.0 / cfg.effects.r_fe_ohm : 0.0;
+  m.pole_pairs = cfg.motor.pole_pairs;
+  m.unmodelled = &cfg.effects.unmodelled;
   return m;
 }
 
@@ -376,9 +387,17 @@ absl::StatusOr<SimulationResult> Simulate(const TwinConfig& cfg, const Plan& pla
   mf.drive.dead_time_compensated = true;
   mf.injection = io::InjectionInfo{"rotating", cfg.injection.amplitude_v, cfg.injection.frequency_hz};
   std::mt19937_64 rng(cfg.seed);
+  // The magnets' temperature over the test (magnet_temperature drifting):
+  // a linear rise over every recorded item, points then steady-state rows.
+  const size_t items = plan.points.size() + plan.steady_state.size();
+  auto magnet_rise = [&](size_t item) {
+    return items > 1 ? cfg.effects.magnet_temp_rise_k * static_cast<double>(item) / static_cast<double>(items - 1)
+                     : 0.0;
+  };
   for (size_t k = 0; k < plan.points.size(); ++k) {
     const auto& pt = plan.points[k];
-    PlantModel m = MakePlant(cfg, pt.temperature_c);
+    PlantModel m = MakePlant(cfg, pt.temperature_c + magnet_rise(k));
+    m.sector = pt.sector;
     if (pt.udc_v > 0) {
       m.udc_v = pt.udc_v;
       m.u_max_v = pt.udc_v / kSqrt3;
@@ -405,8 +424,9 @@ absl::StatusOr<SimulationResult> Simulate(const TwinConfig& cfg, const Plan& pla
   if (!plan.steady_state.empty()) {
     mf.steady_state = "steady_state.csv";
     std::normal_distribution<double> tnoise(0.0, 0.01);
-    for (const auto& ss : plan.steady_state) {
-      PlantModel m = MakePlant(cfg, ss.temperature_c);
+    for (size_t r = 0; r < plan.steady_state.size(); ++r) {
+      const auto& ss = plan.steady_state[r];
+      PlantModel m = MakePlant(cfg, ss.temperature_c + magnet_rise(plan.points.size() + r));
       m.rs_ohm *= 1.0 + kCopperAlphaPerK * cfg.effects.winding_temp_rise_k;
       PointRun run = RunPoint(cfg, m, ss.id_ref_a, ss.iq_ref_a, ss.speed_rpm, 0.2,
                               ss.temperature_c, false, plan.settle_s, 0.05, &rng);

@@ -54,7 +54,11 @@ const std::vector<EffectRow>& EffectCatalogue() {
       {"magnet_temperature", "magnet flux linkage differs from nominal / drifts with temperature",
        "back-EMF in the steady-state voltages and torque differ from the nominal magnet flux (magnet "
        "temperature or magnetisation)",
-       {{"psi_pm_wb", "Wb", 0.0, 1e-2, 0.005, FloorKind::kRelativeNominal}}},
+       {{"psi_pm_wb", "Wb", 0.0, 1e-2, 0.005, FloorKind::kRelativeNominal},
+        // A drift (documented extension): psi_pm at the first and last
+        // steady-state row in recording order.
+        {"psi_pm_start_wb", "Wb", 0.0, 1e-2, 0.005, FloorKind::kRelativeNominal},
+        {"psi_pm_end_wb", "Wb", 0.0, 1e-2, 0.005, FloorKind::kRelativeNominal}}},
       {"sampling_delay", "extra delay between voltage command and its application",
        "HF current lags the command by a phase proportional to frequency and the steady-state voltages are "
        "rotated by w_e times the same time: extra delay between command and inverter",
@@ -197,7 +201,7 @@ std::map<std::string, double*> DoubleFields(Effects* e) {
           {"threshold_v", &e->threshold_v},   {"slope_ohm", &e->slope_ohm},
           {"harmonic_amplitude_rad", &e->harmonic_amplitude_rad},
           {"harmonic_phase_rad", &e->harmonic_phase_rad},
-          {"r_fe_ohm", &e->r_fe_ohm}};
+          {"r_fe_ohm", &e->r_fe_ohm},         {"magnet_temp_rise_k", &e->magnet_temp_rise_k}};
 }
 
 }  // namespace
@@ -222,10 +226,12 @@ absl::Status ParseEffects(const std::string& spec, Effects* e, double* noise_a) 
     else if (k == "psi_pm_wb") e->psi_pm_wb = v;
     else if (k == "order") e->order = static_cast<int>(v);
     else if (k == "noise_a" && noise_a != nullptr) *noise_a = v;
+    else if (SetBenchEffectParameter(k, v, &e->unmodelled).ok()) continue;
     else {
       std::vector<std::string> known;
       for (const auto& [name, ptr] : DoubleFields(&scratch)) known.push_back(name);
       for (const char* x : {"rs_ohm", "psi_pm_wb", "order", "noise_a"}) known.push_back(x);
+      for (const auto& x : BenchEffectParameterNames()) known.push_back(x);
       return absl::InvalidArgumentError(
           absl::StrCat("flag --effects: unknown key '", k, "' (known: ", absl::StrJoin(known, ", "), ")"));
     }
@@ -266,7 +272,7 @@ std::vector<std::string> ActiveEffectNames(const Effects& e) {
     const std::string name(row.name);
     if (name == "cross_saturation") on = e.cross_saturation != 0;
     else if (name == "stator_resistance") on = e.rs_ohm.has_value();
-    else if (name == "magnet_temperature") on = e.psi_pm_wb.has_value();
+    else if (name == "magnet_temperature") on = e.psi_pm_wb.has_value() || e.magnet_temp_rise_k != 0.0;
     else if (name == "spatial_harmonics") on = e.order != 0 && e.amplitude_h != 0;
     else if (name == "position_sensor_harmonic") on = e.harmonic_amplitude_rad != 0;
     else {

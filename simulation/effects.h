@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "absl/status/status.h"
+#include "simulation/bench_effect.h"
 
 namespace fluxcal::sim {
 
@@ -66,6 +67,10 @@ struct Effects {
   double offset_rad = 0.0;       // position_offset: measured = true + offset
   double gain_a = 1.0, gain_b = 1.0, gain_c = 1.0;   // current_sensor_gain
   std::optional<double> psi_pm_wb;   // magnet_temperature: true psi_pm (manifest nominal)
+  // magnet_temperature drifting: the magnets warm linearly over the test
+  // (its points, then its steady-state rows, in recording order) by this
+  // rise; psi_pm follows the motor's temperature coefficient.
+  double magnet_temp_rise_k = 0.0;
   double delay_s = 0.0;          // sampling_delay: extra command delay
   int order = 0;                 // spatial_harmonics: order in theta_e
   double amplitude_h = 0.0;      //   and inductance amplitude
@@ -79,6 +84,9 @@ struct Effects {
   // position_sensor_harmonic: measured angle = true + offset + amplitude sin(2 theta_e + phase).
   double harmonic_amplitude_rad = 0.0, harmonic_phase_rad = 0.0;
   double r_fe_ohm = 0.0;         // iron_loss: parallel (iron-loss) resistance; 0: none
+  // Physics outside the catalogue (simulation/bench_effect.h): the twin
+  // applies it, diagnosis never models it.
+  BenchEffects unmodelled;
 };
 
 // The angle sensor's reading error at the true electrical angle: the
@@ -86,8 +94,9 @@ struct Effects {
 // bench and the replays).
 double AngleSensorError(const Effects& e, double theta_true_rad);
 
-// Parses "dead_time_s=2e-6,offset_rad=0.05,..." (keys: Effects' fields plus
-// noise_a). Unknown keys are errors listing the known ones.
+// Parses "dead_time_s=2e-6,offset_rad=0.05,..." (keys: Effects' fields,
+// noise_a, and the bench effects' parameters, which switch those on).
+// Unknown keys are errors listing the known ones.
 absl::Status ParseEffects(const std::string& spec, Effects* effects, double* noise_a);
 // Report names of the effects that are on, in catalogue order.
 std::vector<std::string> ActiveEffectNames(const Effects& e);

@@ -6,8 +6,10 @@
 #ifndef FLUXCAL_SIMULATION_PLANT_H_
 #define FLUXCAL_SIMULATION_PLANT_H_
 
+#include <algorithm>
 #include <cmath>
 
+#include "simulation/bench_effect.h"
 #include "simulation/frames.h"
 #include "simulation/magnetic_model.h"
 #include "simulation/saturation_model.h"
@@ -43,9 +45,35 @@ struct PlantModel {
   // magnetising branch (0: none). The flux follows the magnetising current
   // i_m; the terminals carry i_m + g e, e the voltage across the branch.
   double g_fe_s = 0;
+  // Physics outside the catalogue (simulation/bench_effect.h), and what its
+  // mechanical angle needs: th_m = (th_e + 2 pi sector) / pole_pairs.
+  const BenchEffects* unmodelled = nullptr;
+  int pole_pairs = 4, sector = 0;
 
-  // psi(i, theta) including the spatial-harmonic term amp cos(n theta) i.
+  double MechanicalAngle(double th) const { return (th + 2 * kPi * sector) / std::max(1, pole_pairs); }
+  double PsiPm() const { return map ? map->Flux(0, 0, map_temperature_c).psi_d_wb + map_psi_shift_wb : p[0]; }
+  void Unmodelled(double th, double* pd, double* pq, double* ldd, double* lqq, double* ldq) const {
+    if (unmodelled == nullptr || unmodelled->empty()) return;
+    const double psi_pm = PsiPm();
+    for (const auto& e : *unmodelled) e->ModifyMagnetics(th, MechanicalAngle(th), psi_pm, pd, pq, ldd, lqq, ldq);
+  }
+
+  // psi(i, theta) including the spatial-harmonic term amp cos(n theta) i and
+  // the physics outside the catalogue.
   void Flux(double id, double iq, double th, double* pd, double* pq) const {
+    BaseFlux(id, iq, th, pd, pq);
+    Unmodelled(th, pd, pq, nullptr, nullptr, nullptr);
+  }
+  void Jacobian(double id, double iq, double th, double* ldd, double* lqq, double* ldq) const {
+    BaseJacobian(id, iq, th, ldd, lqq, ldq);
+    if (unmodelled != nullptr && !unmodelled->empty()) {
+      // ModifyMagnetics takes the flux beside the inductance.
+      double pd, pq;
+      BaseFlux(id, iq, th, &pd, &pq);
+      Unmodelled(th, &pd, &pq, ldd, lqq, ldq);
+    }
+  }
+  void BaseFlux(double id, double iq, double th, double* pd, double* pq) const {
     if (map) {
       const auto f = map->Flux(id, iq, map_temperature_c);
       *pd = f.psi_d_wb + map_psi_shift_wb;
@@ -59,7 +87,7 @@ struct PlantModel {
       *pq += h * iq;
     }
   }
-  void Jacobian(double id, double iq, double th, double* ldd, double* lqq, double* ldq) const {
+  void BaseJacobian(double id, double iq, double th, double* ldd, double* lqq, double* ldq) const {
     if (map) {
       const auto l = map->Inductance(id, iq, map_temperature_c);
       *ldd = l.ldd_h;

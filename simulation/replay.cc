@@ -53,6 +53,27 @@ double PointUdc(const io::Waveform& w, double manifest_udc_v, const Effects& e) 
   return n > 0 ? sum / static_cast<double>(n) / e.udc_sense_gain : manifest_udc_v;
 }
 
+// The least-squares line through a point's unwrapped recorded angle:
+// theta(k) = intercept + slope k (rad, rad per sample).
+struct AngleLine {
+  double intercept_rad = 0, slope_rad = 0;
+};
+AngleLine FitAngleLine(const io::Waveform& w) {
+  const size_t n = w.size();
+  double sx = 0, sy = 0, sxx = 0, sxy = 0, unwrapped = n > 0 ? w.theta_e_rad[0] : 0.0;
+  for (size_t k = 0; k < n; ++k) {
+    if (k > 0) unwrapped += std::remainder(w.theta_e_rad[k] - w.theta_e_rad[k - 1], 2 * kPi);
+    const double x = static_cast<double>(k);
+    sx += x; sy += unwrapped; sxx += x * x; sxy += x * unwrapped;
+  }
+  const double nn = static_cast<double>(n);
+  AngleLine a;
+  const double den = nn * sxx - sx * sx;
+  a.slope_rad = den > 0 ? (nn * sxy - sx * sy) / den : 0.0;
+  a.intercept_rad = n > 0 ? (sy - a.slope_rad * sx) / nn : 0.0;
+  return a;
+}
+
 }  // namespace
 
 absl::StatusOr<std::vector<ReplayPoint>> ReplayOpenLoop(const io::RecordingSet& set, const MagneticModel& model,
@@ -74,8 +95,18 @@ absl::StatusOr<std::vector<ReplayPoint>> ReplayOpenLoop(const io::RecordingSet& 
     const PlantModel m = ReplayPlant(model, mf.points[p].temperature_c.value_or(25.0), opt.rs_ohm, opt.effects,
                                      PointUdc(w, mf.drive.udc_v.value_or(50.0), opt.effects), ts, 1e9);
     // Inverting measured = true + error(true) to first order in the error
-    // (a fraction of a degree): error(measured - offset).
+    // (a fraction of a degree): error(measured - offset). A rotating point
+    // turns at constant speed (the test holds it), so its true angle is the
+    // least-squares line through the recorded one: an encoder's count
+    // quantisation (one count per sample, now and then two) read as the
+    // rotor's own motion put a speed spike into the back-EMF at every extra
+    // count and a current jump into the replay (every 25 ms at 150 rpm on a
+    // 4096-count encoder); at speed the angle harmonic averages out, as in
+    // ReplayClosedLoop.
+    const bool rotating = std::abs(mf.points[p].speed_rpm) > 0.0;
+    const AngleLine line = FitAngleLine(w);
     auto true_theta = [&](size_t k) {
+      if (rotating) return line.intercept_rad + line.slope_rad * static_cast<double>(k) - opt.effects.offset_rad;
       return w.theta_e_rad[k] - AngleSensorError(opt.effects, w.theta_e_rad[k] - opt.effects.offset_rad);
     };
     // Unwrapped angle and its per-sample rate (the plant needs w_e).
@@ -106,6 +137,10 @@ absl::StatusOr<std::vector<ReplayPoint>> ReplayOpenLoop(const io::RecordingSet& 
     rp.ia_a.push_back(w.ia_a[0]);   // sample 0 is not simulated
     rp.ib_a.push_back(w.ib_a[0]);
     rp.ic_a.push_back(w.ic_a[0]);
+    rp.angle_error_rad.resize(n);
+    for (size_t k = 0; k < n; ++k) {
+      rp.angle_error_rad[k] = AngleSensorError(opt.effects, true_theta(k)) - opt.effects.offset_rad;
+    }
     double se = 0;
     for (size_t k = 1; k < n; ++k) {
       const double c = std::cos(th[k]), s = std::sin(th[k]);
@@ -123,13 +158,25 @@ absl::StatusOr<std::vector<ReplayPoint>> ReplayOpenLoop(const io::RecordingSet& 
       const double we = (th[k + 1] - th[k]) / ts;
       // Interval [t_k, t_k+1) holds the command of row k-1 (row 0 for the
       // first interval, whose predecessor was not recorded), shifted by the
-      // sampling_delay effect in sub-steps.
-      const int delay_sub = static_cast<int>(std::llround(opt.effects.delay_s / h));
-      for (int j = 0; j < S; ++j) {
-        const long sub = static_cast<long>(k) * S + j - delay_sub;
-        long row = (sub >= 0 ? sub / S : (sub - S + 1) / S) - 1;
-        row = std::clamp<long>(row, 0, static_cast<long>(n) - 1);   // before row 0: row 0
-        Rk4(m, &x, th[k] + we * h * j, we, h, w.ualpha_ref_v[row], w.ubeta_ref_v[row]);
+      // sampling_delay effect: delay = (d + a) Ts, so the interval holds row
+      // k-1-d-1 for its first a Ts and row k-1-d for the rest, each part
+      // integrated in sub-steps of at most h (a delay rounded to whole
+      // sub-steps, 20 us here, was another delay than the one fitted).
+      const double q = std::max(0.0, opt.effects.delay_s) / ts;
+      const long d = static_cast<long>(std::floor(q));
+      const double frac = q - static_cast<double>(d);
+      auto row_of = [&](long r) { return std::clamp<long>(r, 0, static_cast<long>(n) - 1); };
+      double t0 = 0.0;
+      for (int part = 0; part < 2; ++part) {
+        const double len = (part == 0 ? frac : 1.0 - frac) * ts;
+        if (len <= 1e-12 * ts) continue;
+        const long row = row_of(static_cast<long>(k) - 1 - d - (part == 0 ? 1 : 0));
+        const int steps = std::max(1, static_cast<int>(std::ceil(len / h - 1e-9)));
+        const double hs = len / steps;
+        for (int j = 0; j < steps; ++j) {
+          Rk4(m, &x, th[k] + we * (t0 + hs * j), we, hs, w.ualpha_ref_v[row], w.ubeta_ref_v[row]);
+        }
+        t0 += len;
       }
     }
     rp.residual_rms_a = std::sqrt(se / (3.0 * (n - 1)));
@@ -202,15 +249,8 @@ absl::StatusOr<std::vector<ReplayPoint>> ReplayClosedLoop(const io::RecordingSet
     // injection has the recorded phase at its first sample.
     // The plant's angle: the least-squares line through the unwrapped
     // recorded angle (an encoder's quantisation averages out along it).
-    double sx = 0, sy = 0, sxx = 0, sxy = 0, unwrapped = w.theta_e_rad[0];
-    for (size_t k = 0; k < n; ++k) {
-      if (k > 0) unwrapped += std::remainder(w.theta_e_rad[k] - w.theta_e_rad[k - 1], 2 * kPi);
-      const double x = static_cast<double>(k);
-      sx += x; sy += unwrapped; sxx += x * x; sxy += x * unwrapped;
-    }
-    const double nn = static_cast<double>(n);
-    const double slope = (nn * sxy - sx * sy) / (nn * sxx - sx * sx);   // rad per sample
-    const double intercept = (sy - slope * sx) / nn;
+    const AngleLine line = FitAngleLine(w);
+    const double slope = line.slope_rad, intercept = line.intercept_rad;
     const double we = slope * fs;
     const double speed_rpm = ElectricalRadSToRpm(we, cfg.motor.pole_pairs);
     const size_t n_settle = static_cast<size_t>(std::llround(opt.settle_s * fs));

@@ -87,6 +87,11 @@ struct PlanPoint {
   double theta_e_rad = 0.0;            // locked rotor angle (speed = 0) / start angle
   double temperature_c = 25.0;
   double udc_v = 0.0;                  // DC-link voltage of this point; 0: the drive's
+  // The pole pair the rotor stands in (0 .. pole_pairs - 1): the mechanical
+  // angle is (theta_e_rad + 2 pi sector) / pole_pairs. Locked points at one
+  // electrical angle in different sectors differ only mechanically
+  // (simulation/bench_effect.h).
+  int sector = 0;
 };
 struct PlanSteadyState {
   double id_ref_a = 0, iq_ref_a = 0, speed_rpm = 1000, temperature_c = 25.0;
@@ -167,6 +172,10 @@ absl::StatusOr<Plan> LoadPlanJson(const std::string& path);
 struct ReplayPoint {
   std::string point;
   std::vector<double> ia_a, ib_a, ic_a;
+  // What the modelled angle sensor adds to the true angle beyond its
+  // constant offset, per sample (rad; AngleSensorError less offset_rad):
+  // the rotor-angle channel's model of the reading (diagnosis/waveform.cc).
+  std::vector<double> angle_error_rad;
   double residual_rms_a = 0;   // vs the recorded currents
 };
 struct ReplayOptions {

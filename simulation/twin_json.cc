@@ -25,8 +25,18 @@ std::string TruthJson(const TwinConfig& cfg, const SimulationResult& r) {
     if (name == "spatial_harmonics") p["order"] = e.order;   // an integer in the file
     eff.push_back({{"effect", name}, {"parameters", p}});
   }
+  // Physics outside the catalogue: concealed too, but never to be named;
+  // the verdict it calls for is `unexplained` or `partly_explained`.
+  json outside = json::array();
+  for (const auto& b : e.unmodelled) {
+    json p = json::object();
+    for (const auto& par : b->Parameters()) p[std::string(par.name)] = par.value;
+    outside.push_back({{"effect", std::string(b->Name())}, {"parameters", p}, {"in_catalogue", false}});
+  }
   j["concealed_effects"] = eff;
-  j["expected_verdict"] = eff.empty() ? "no_mismatch" : "explained";
+  if (!outside.empty()) j["concealed_outside_catalogue"] = outside;
+  j["expected_verdict"] = !outside.empty() ? (eff.empty() ? "unexplained" : "partly_explained")
+                                            : (eff.empty() ? "no_mismatch" : "explained");
   j["motor"] = {{"pole_pairs", cfg.motor.pole_pairs}, {"rs_ohm", e.rs_ohm.value_or(cfg.motor.rs_ohm)},
                 {"psi_pm_wb", e.psi_pm_wb.value_or(cfg.motor.sat.psi_pm_wb)},
                 {"ld0_h", cfg.motor.sat.ld0_h}, {"lq0_h", cfg.motor.sat.lq0_h},
@@ -163,6 +173,14 @@ absl::StatusOr<Plan> LoadPlanJson(const std::string& path) {
         }
         nlohmann::json rest = o;
         rest.erase("id");
+        if (o.contains("sector")) {
+          if (!o["sector"].is_number_integer() || o["sector"].get<long>() < 0 || o["sector"].get<long>() > 1000) {
+            return absl::InvalidArgumentError(
+                absl::StrCat(path, ": field 'points[", n, "].sector': expected an integer 0..1000"));
+          }
+          p.sector = o["sector"].get<int>();
+          rest.erase("sector");
+        }
         auto st = ReadNumbers(path, absl::StrCat("points[", n, "]."), rest,
                               {{"id_ref_a", &p.id_ref_a}, {"iq_ref_a", &p.iq_ref_a},
                                {"speed_rpm", &p.speed_rpm}, {"theta_e_rad", &p.theta_e_rad},

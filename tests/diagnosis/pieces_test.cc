@@ -11,12 +11,17 @@
 namespace fluxcal::diag::detail {
 namespace {
 
+// Magnetics: the quadratic co-energy (fit::Family poly2), constant
+// Ldd = 0.18 mH and Lqq = 0.36 mH: Ldd = 2 L0 c20, Lqq = 2 L0 c02.
 Model TestModel() {
   Model m;
   m.rs_nom = 0.011;
   m.psi_nom = 0.0114;
   m.ts = 1e-4;
   m.w_i = 2 * kPi * 500;
+  m.surf.kind = fit::Family::kPoly;
+  m.surf.degree = 2;
+  m.surf_init = {0.0, 0.9, 1.8};
   return m;
 }
 
@@ -52,7 +57,7 @@ TEST(EffectModel, SolvePhasorsMatchesIdentificationForwardModel) {
 // multiplies Rs by 1 + 0.00393 rise progress.
 TEST(EffectModel, PredictDcAnalytic) {
   const Model m = TestModel();
-  Params p;
+  Params p(m);
   DcObs o;
   o.id_a = -40;
   o.iq_a = 60;
@@ -78,9 +83,7 @@ TEST(EffectModel, PredictDcAnalytic) {
 // a DC-link gain scales it, a delay rotates it by w_e tau.
 TEST(EffectModel, PredictSsAnalytic) {
   Model m = TestModel();
-  Params p;
-  p.b[kBase][0] = 1.8;   // Ldd = 0.18 mH, constant
-  p.b[kBase][5] = 3.6;   // Lqq = 0.36 mH, constant
+  Params p(m);   // Ldd = 0.18 mH, Lqq = 0.36 mH, constant
   SsObs o{};
   o.id_a = -20;
   o.iq_a = 50;
@@ -104,9 +107,7 @@ TEST(EffectModel, PredictSsAnalytic) {
 // i - g w_e J psi.
 TEST(EffectModel, SteadyFluxWithHarmonicAndIronLoss) {
   Model m = TestModel();
-  Params p;
-  p.b[kBase][0] = 1.8;   // Ldd = 0.18 mH
-  p.b[kBase][5] = 3.6;   // Lqq = 0.36 mH
+  Params p(m);   // Ldd = 0.18 mH, Lqq = 0.36 mH
   p.b[kHarm] = {20.0};   // 20 uH
   auto ptr = p.Ptrs();
   double pd, pq;
@@ -119,9 +120,7 @@ TEST(EffectModel, SteadyFluxWithHarmonicAndIronLoss) {
   };
   EXPECT_NEAR(mean_current(pd - m.psi_nom, 1.8e-4, 2e-5), -20.0, 20 * 1e-3);
   EXPECT_NEAR(mean_current(pq, 3.6e-4, 2e-5), 50.0, 50 * 1e-4);
-  Params q;
-  q.b[kBase][0] = 1.8;
-  q.b[kBase][5] = 3.6;
+  Params q(m);
   q.b[kIronLoss] = {5.0};   // 0.05 S: 20 ohm
   ptr = q.Ptrs();
   SsObs o{};

@@ -11,6 +11,7 @@
 
 #include "fitting/calibration.h"
 #include "fitting/fit.h"
+#include "fitting/surface.h"
 #include "gtest/gtest.h"
 #include "identification/identify.h"
 #include "io/flux_map.h"
@@ -291,6 +292,47 @@ TEST(Symmetry, FoldedSmoothCalibrationStillLoads) {
   for (double iq : {-20.0, 0.0, 7.0}) {
     EXPECT_EQ(back->Flux(-9, iq).psi_q_wb, cal.Flux(-9, iq).psi_q_wb);
     EXPECT_EQ(back->Inductance(-9, iq).ldd_h, cal.Inductance(-9, iq).ldd_h);
+  }
+}
+
+// The surfaces' fast evaluator (SurfaceEvaluator, what Calibration::Flux,
+// Inductance and every replay call) gives the templated family's values on
+// every layout: the symmetric mirrored spline of one-sided data, the
+// asymmetric one, the folded spline<R>, a polynomial; both signs of iq,
+// and SurfaceAt, the values and gradients the diagnosis refit uses;
+// inside the knot span and beyond it (the Taylor continuation).
+TEST(Symmetry, SurfaceEvaluatorIsTheFamily) {
+  const FitData data = PublicBench();
+  for (const char* model : {"smooth", "smooth-asym", "spline", "poly3"}) {
+    FitOptions o;
+    o.model = model;
+    auto cal = Fit(data, o);
+    ASSERT_TRUE(cal.ok()) << model << ": " << cal.status();
+    const Family& f = cal->family();
+    const SurfaceEvaluator ev(f, cal->params());
+    for (double id : {-30.0, -17.0, -6.5, 0.0, 3.0}) {
+      for (double iq : {-40.0, -12.0, -0.3, 0.0, 0.7, 9.0, 23.0, 35.0}) {
+        double want[5], got[5];
+        FamilyFlux(f, id, iq, cal->params().data(), &want[0], &want[1]);
+        FamilyInductance(f, id, iq, cal->params().data(), &want[2], &want[3], &want[4]);
+        ev.Eval(id, iq, &got[0], &got[1], &got[2], &got[3], &got[4]);
+        // SurfaceAt (the diagnosis refit's values and parameter
+        // gradients): the same values, and, the spline and polynomial
+        // families being linear in their parameters, each value the
+        // gradient's sum over them.
+        const SurfacePoint sp = SurfaceAt(f, cal->params().data(), id, iq);
+        double lin[5] = {0, 0, 0, 0, 0};
+        for (const auto& [idx, g] : sp.grad) {
+          for (int k = 0; k < 5; ++k) lin[k] += g[k] * cal->params()[idx];
+        }
+        for (int k = 0; k < 5; ++k) {
+          const double tol = 1e-12 + 1e-10 * std::abs(want[k]);
+          EXPECT_NEAR(got[k], want[k], tol) << f.Name() << " value " << k << " at id " << id << " A, iq " << iq << " A";
+          EXPECT_NEAR(sp.value[k], want[k], tol) << f.Name() << " SurfaceAt " << k << " at " << id << ", " << iq;
+          EXPECT_NEAR(lin[k], want[k], tol) << f.Name() << " SurfaceAt gradient " << k << " at " << id << ", " << iq;
+        }
+      }
+    }
   }
 }
 

@@ -1,0 +1,641 @@
+// The waveform-level locator (docs/diagnosis.md, "The waveforms"): every
+// recorded test replayed through the twin with the model (the set's own
+// calibration and the effects found so far), the recorded phase currents
+// compared sample by sample, and what the model does not reproduce
+// located as lines in the residual's spectrum.
+//
+// Per point, the residual e = recorded - simulated (alpha-beta, complex;
+// and the zero sequence (ia + ib + ic) / 3, which a star winding cannot
+// carry, so whatever shows there is the sensors') is first freed of what
+// the summarised observables already judge and of the machine's own
+// nonlinearity over the HF excursion ("nuisance", least squares):
+//   - the fundamental and its slow drift: e^{j theta} (1, tau, tau^2) and
+//     e^{-j theta} (1, tau), a constant and a ramp (tau = time over the
+//     record, -1..1): the held or steady-state current the DC and
+//     steady-state observables compare, and an open-loop replay's settling;
+//   - the HF response and its harmonics in the rotor frame,
+//     e^{j theta} e^{j m (w_i t - theta)}, m = -5..5 (m = 1 is the
+//     positive sequence at w_i, m = -1 the negative one at 2 w_e - w_i):
+//     the HF phasors are what hf_current compares, and their harmonics are
+//     the saturation curve's own bending over the HF ellipse (a measured
+//     PM-SyRM at its knee puts 20-30 mA at 4 w_i, 0.1 % of its HF current;
+//     no smooth calibration reproduces that curvature exactly).
+// What remains is tested against the noise of the recording itself: the
+// residual's Hann-windowed spectrum, the noise per bin the median of the
+// bins away from the nuisance lines (an exponential distribution's median
+// is ln 2 times its mean). A bin that is a local maximum with power z^2 =
+// |R|^2 / sigma^2 >= kLineZ2 is a line (p = e^{-z^2} per bin: 5.6e-7, a
+// one-sided 5 sigma). Lines are named by what they are multiples of:
+// injection sidebands (rotor frame m (w_i - w_e) + j w_e), harmonics of the
+// electrical frequency, mechanical orders (electrical / pole pairs),
+// harmonics of the injection at standstill, lines at one fixed frequency at
+// several points (interference), and lines nothing explains.
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <complex>
+#include <limits>
+#include <map>
+#include <numeric>
+#include <tuple>
+
+#include <unsupported/Eigen/FFT>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "absl/strings/str_join.h"
+#include "diagnosis/internal.h"
+#include "simulation/frames.h"
+
+namespace fluxcal::diag::detail {
+namespace {
+
+// Power of a bin over the noise per bin at which a local maximum is a line:
+// e^{-14.4} = 5.6e-7, a one-sided Gaussian 5 sigma.
+constexpr double kLineZ2 = 14.4;
+// Harmonic orders of the rotor-frame HF response taken as the machine's own
+// (nuisance).
+constexpr int kHfHarmonics = 5;
+// How far the model's own lines are trusted: where the replay itself
+// generates a line (a dead time's 6k +- 1 harmonics and the HF response's
+// sidebands at speed, the saturation's harmonics), its size depends on
+// details beyond the effect's parameters -- the soft sign's shape, the
+// PWM period's timing, the curvature of the magnetics over the HF ellipse
+// -- and is taken as uncertain by its own size: a bin's noise is
+// sigma^2 + |S|^2, S the simulated current's bin. A residual line is then
+// located where it is above the noise and larger than anything the model
+// puts there: physics the model has no term for. (A dead time with a
+// 0.2 A soft sign on a measured PM-SyRM, replayed with its fitted value,
+// leaves 30-100 % of its own 2-30 mA sidebands at 150-300 rpm; kept at
+// 5 %, every one of them was a "mismatch".)
+constexpr double kModelLineAccuracy = 1.0;
+// Look-elsewhere: a line found by scanning ~1000 bins at each of ~40
+// points is judged against the number of places it could have been; a
+// named family against the number of names (rotor-frame harmonics x
+// sidebands, electrical harmonics, mechanical orders). For large z the
+// Gaussian tail gives z_adjusted^2 ~ z^2 - 2 ln N.
+constexpr double kNamedFamilies = 300.0;
+double LookElsewhere(double z, double trials) {
+  if (z <= 0 || trials <= 1) return z;
+  return std::sqrt(std::max(0.0, z * z - 2.0 * std::log(trials)));
+}
+
+// Gaussian-equivalent significance of a chi^2 with nu degrees of freedom
+// (Wilson-Hilferty cube-root transform).
+double ChiSquareSigma(double chi2, double nu) {
+  if (nu <= 0) return 0.0;
+  const double a = 2.0 / (9.0 * nu);
+  return (std::cbrt(chi2 / nu) - (1.0 - a)) / std::sqrt(a);
+}
+
+struct Label {
+  std::string kind;   // "" when nothing names it
+  int order = 0;      // harmonic number, mechanical order or sideband order
+  int m = 0;          // injection_sideband: the HF harmonic it sits beside
+};
+
+// What a line at f_hz is a multiple of, at a point turning at f_e_hz
+// (signed electrical frequency; 0 at standstill) with injection f_i_hz.
+Label Name(double f, double f_e, double f_i, int pole_pairs, double tol) {
+  Label l;
+  const bool turning = std::abs(f_e) >= 2 * tol;
+  if (!turning) {
+    const int m = static_cast<int>(std::lround(f / f_i));
+    if (m != 0 && std::abs(f - m * f_i) <= tol) return {"injection_harmonic", m, m};
+    return l;
+  }
+  // Rotor-frame sidebands of the HF response and its harmonics:
+  // f = f_e + m (f_i - f_e) + j f_e.
+  for (int m = -kHfHarmonics - 1; m <= kHfHarmonics + 1; ++m) {
+    if (m == 0) continue;
+    const double base = f_e + m * (f_i - f_e);
+    const int j = static_cast<int>(std::lround((f - base) / f_e));
+    if (std::abs(j) <= 12 && std::abs(f - base - j * f_e) <= tol) {
+      if (j == 0) return {"injection_harmonic", m, m};
+      return {"injection_sideband", j, m};
+    }
+  }
+  const int k = static_cast<int>(std::lround(f / f_e));
+  if (k != 0 && std::abs(k) <= 31 && std::abs(f - k * f_e) <= tol) return {"electrical_harmonic", k, 0};
+  const int km = static_cast<int>(std::lround(pole_pairs * f / f_e));
+  if (km % pole_pairs != 0 && std::abs(km) <= 4 * pole_pairs && std::abs(f - km * f_e / pole_pairs) <= tol) {
+    return {"mechanical_order", km, 0};
+  }
+  return l;
+}
+
+std::string KindText(const std::string& kind, int order, int m, double f_hz) {
+  if (kind == "electrical_harmonic") return absl::StrFormat("at speed, harmonic %d of the electrical frequency", order);
+  if (kind == "mechanical_order") {
+    return absl::StrFormat("at speed, mechanical order %d (%d x the electrical frequency / pole pairs)", order, order);
+  }
+  if (kind == "injection_sideband") {
+    return absl::StrFormat("at speed, sideband %+d x f_e of the HF response's rotor-frame harmonic %d", order, m);
+  }
+  if (kind == "injection_harmonic") return absl::StrFormat("harmonic %d of the injection", order);
+  if (kind == "fixed_frequency_line") return absl::StrFormat("a line at %.0f Hz at every speed", f_hz);
+  return absl::StrFormat("a line at %.0f Hz that no multiple of the electrical, mechanical or injection "
+                         "frequency explains",
+                         f_hz);
+}
+
+double Correlation(const std::vector<double>& x, const std::vector<double>& y) {
+  const size_t n = x.size();
+  if (n < 3) return 0.0;
+  const double mx = std::accumulate(x.begin(), x.end(), 0.0) / n, my = std::accumulate(y.begin(), y.end(), 0.0) / n;
+  double sxy = 0, sxx = 0, syy = 0;
+  for (size_t i = 0; i < n; ++i) {
+    sxy += (x[i] - mx) * (y[i] - my);
+    sxx += (x[i] - mx) * (x[i] - mx);
+    syy += (y[i] - my) * (y[i] - my);
+  }
+  return sxx > 0 && syy > 0 ? sxy / std::sqrt(sxx * syy) : 0.0;
+}
+
+}  // namespace
+
+std::vector<WaveformPoint> AnalyseWaveforms(const io::RecordingSet& set, const std::vector<sim::ReplayPoint>& replay,
+                                            int pole_pairs) {
+  std::vector<WaveformPoint> out;
+  const auto& mf = set.manifest;
+  const double fs = mf.drive.f_sample_hz;
+  const double f_i = mf.injection ? mf.injection->frequency_hz : 0.0;
+  const double w_i = 2 * kPi * f_i;
+  Eigen::FFT<double> fft;
+  for (size_t p = 0; p < replay.size() && p < set.waveforms.size(); ++p) {
+    const auto& w = set.waveforms[p];
+    const auto& r = replay[p];
+    // Sample 0 is not simulated (ReplayOpenLoop).
+    const size_t n = w.size() > 1 ? w.size() - 1 : 0;
+    if (n < 64 || r.ia_a.size() != w.size()) continue;
+    WaveformPoint wp;
+    wp.point = mf.points[p].id;
+    wp.index = p;
+    wp.speed_rpm = mf.points[p].speed_rpm;
+    wp.df_hz = fs / static_cast<double>(n);
+    // Unwrapped recorded angle; the electrical frequency from its line.
+    std::vector<double> th(n);
+    double unwrapped = w.theta_e_rad[1];
+    for (size_t k = 0; k < n; ++k) {
+      if (k > 0) unwrapped += std::remainder(w.theta_e_rad[k + 1] - w.theta_e_rad[k], 2 * kPi);
+      th[k] = unwrapped;
+    }
+    wp.f_e_hz = (th[n - 1] - th[0]) / (static_cast<double>(n - 1) / fs) / (2 * kPi);
+    if (std::abs(wp.speed_rpm) == 0.0) wp.f_e_hz = 0.0;
+    Eigen::VectorXcd e(n), sim_i(n);
+    Eigen::VectorXd e0(n);
+    Complex mean_i = 0;
+    for (size_t k = 0; k < n; ++k) {
+      const size_t s = k + 1;
+      const sim::AlphaBeta rec = sim::Clarke(w.ia_a[s], w.ib_a[s], w.ic_a[s]);
+      const sim::AlphaBeta sim_ab = sim::Clarke(r.ia_a[s], r.ib_a[s], r.ic_a[s]);
+      e(k) = Complex(rec.alpha - sim_ab.alpha, rec.beta - sim_ab.beta);
+      sim_i(k) = Complex(sim_ab.alpha, sim_ab.beta);
+      e0(k) = (w.ia_a[s] + w.ib_a[s] + w.ic_a[s] - r.ia_a[s] - r.ib_a[s] - r.ic_a[s]) / 3.0;
+      mean_i += Complex(rec.alpha, rec.beta) * std::polar(1.0, -th[k]);
+    }
+    mean_i /= static_cast<double>(n);
+    wp.id_a = mean_i.real();
+    wp.iq_a = mean_i.imag();
+    // Nuisance regressors (file comment).
+    std::vector<Eigen::VectorXcd> basis;
+    std::vector<double> nuisance_hz = {0.0};
+    auto tau = [&](size_t k) { return 2.0 * static_cast<double>(k) / static_cast<double>(n - 1) - 1.0; };
+    {
+      Eigen::VectorXcd one(n), ramp(n);
+      for (size_t k = 0; k < n; ++k) { one(k) = 1.0; ramp(k) = tau(k); }
+      basis.push_back(one);
+      basis.push_back(ramp);
+    }
+    for (int pw = 0; pw <= 2; ++pw) {
+      Eigen::VectorXcd b(n);
+      for (size_t k = 0; k < n; ++k) b(k) = std::polar(std::pow(tau(k), pw), th[k]);
+      basis.push_back(b);
+      if (pw < 2) {
+        for (size_t k = 0; k < n; ++k) b(k) = std::polar(std::pow(tau(k), pw), -th[k]);
+        basis.push_back(b);
+      }
+    }
+    nuisance_hz.push_back(wp.f_e_hz);
+    nuisance_hz.push_back(-wp.f_e_hz);
+    if (w_i > 0) {
+      for (int m = -kHfHarmonics; m <= kHfHarmonics; ++m) {
+        if (m == 0) continue;
+        Eigen::VectorXcd b(n);
+        for (size_t k = 0; k < n; ++k) {
+          const double t = static_cast<double>(k + 1) / fs;
+          b(k) = std::polar(1.0, th[k] + m * (w_i * t - th[k]));
+        }
+        basis.push_back(b);
+        nuisance_hz.push_back(wp.f_e_hz + m * (f_i - wp.f_e_hz));
+      }
+    }
+    Eigen::MatrixXcd B(n, basis.size());
+    for (size_t j = 0; j < basis.size(); ++j) B.col(j) = basis[j];
+    const Eigen::VectorXcd coef = B.colPivHouseholderQr().solve(e);
+    const Eigen::VectorXcd res = e - B * coef;
+    Eigen::VectorXd res0 = e0;
+    {
+      // The zero sequence: a constant and a ramp (sensor offsets).
+      Eigen::MatrixXd B0(n, 2);
+      for (size_t k = 0; k < n; ++k) { B0(k, 0) = 1.0; B0(k, 1) = tau(k); }
+      res0 = e0 - B0 * B0.colPivHouseholderQr().solve(e0);
+    }
+    // Spectra (Hann window) and the noise per bin.
+    std::vector<double> win(n);
+    double wsum = 0;
+    for (size_t k = 0; k < n; ++k) {
+      win[k] = 0.5 * (1.0 - std::cos(2 * kPi * static_cast<double>(k) / static_cast<double>(n - 1)));
+      wsum += win[k];
+    }
+    std::vector<Complex> xin(n), xout;
+    std::vector<Complex> zin(n), zout, sin_(n), sout;
+    for (size_t k = 0; k < n; ++k) {
+      xin[k] = res(k) * win[k];
+      zin[k] = Complex(res0(k) * win[k], 0.0);
+      sin_[k] = sim_i(k) * win[k];
+    }
+    fft.fwd(xout, xin);
+    fft.fwd(zout, zin);
+    fft.fwd(sout, sin_);
+    wp.spectrum_sim.assign(sout.begin(), sout.end());
+    wp.freq_hz.resize(n);
+    for (size_t b = 0; b < n; ++b) {
+      const long kb = b <= n / 2 ? static_cast<long>(b) : static_cast<long>(b) - static_cast<long>(n);
+      wp.freq_hz[b] = kb * wp.df_hz;
+    }
+    const double tol = 2.5 * wp.df_hz;
+    std::vector<bool> quiet(n, true);   // bins away from the nuisance lines
+    for (size_t b = 0; b < n; ++b) {
+      for (double nf : nuisance_hz) {
+        if (std::abs(wp.freq_hz[b] - nf) <= tol) quiet[b] = false;
+      }
+    }
+    auto noise_of = [&](const std::vector<Complex>& spec, bool positive_only) {
+      std::vector<double> pw;
+      for (size_t b = 0; b < n; ++b) {
+        if (!quiet[b] || (positive_only && wp.freq_hz[b] <= 0)) continue;
+        pw.push_back(std::norm(spec[b]));
+      }
+      if (pw.empty()) return 1e-300;
+      std::nth_element(pw.begin(), pw.begin() + pw.size() / 2, pw.end());
+      return std::max(pw[pw.size() / 2] / std::log(2.0), 1e-300);
+    };
+    wp.sigma2_bin = noise_of(xout, false);
+    wp.sigma2_bin_zero = noise_of(zout, true);
+    // Per-sample noise of the residual: the windowed bin variance is
+    // sigma^2 sum(w^2) for white noise of variance sigma^2.
+    double w2 = 0;
+    for (double x : win) w2 += x * x;
+    wp.noise_a = std::sqrt(wp.sigma2_bin / w2 / 2.0);
+    wp.spectrum.assign(xout.begin(), xout.end());
+    wp.spectrum_zero.assign(zout.begin(), zout.end());
+    wp.coherent_gain = wsum;
+    wp.nuisance_hz = nuisance_hz;
+    // Lines: local maxima above kLineZ2, away from the nuisance lines.
+    auto detect = [&](const std::vector<Complex>& spec, double s2, const std::string& channel) {
+      for (size_t b = 0; b < n; ++b) {
+        if (!quiet[b]) continue;
+        const bool real = channel != "phase_current";
+        if (real && wp.freq_hz[b] <= 0) continue;
+        const double model = channel == "phase_current" ? kModelLineAccuracy * std::abs(sout[b])
+                             : channel == "rotor_angle" && !wp.spectrum_angle_model.empty()
+                                 ? kModelLineAccuracy * std::abs(wp.spectrum_angle_model[b])
+                                 : 0.0;
+        const double z2 = std::norm(spec[b]) / (s2 + model * model);
+        if (z2 < kLineZ2) continue;
+        const double left = std::norm(spec[(b + n - 1) % n]), right = std::norm(spec[(b + 1) % n]);
+        if (std::norm(spec[b]) < left || std::norm(spec[b]) < right) continue;
+        WaveformLine l;
+        l.channel = channel;
+        l.freq_hz = wp.freq_hz[b];
+        // Amplitude of a complex line A e^{j w t}: |X| / sum(w)
+        // (the zero sequence is real: its cosine's amplitude is twice that).
+        l.amp_a = std::abs(spec[b]) / wsum * (real ? 2.0 : 1.0);
+        l.z2 = z2;
+        if (channel == "phase_current") l.sim_amp_a = std::abs(sout[b]) / wsum;
+        const Label nm = Name(l.freq_hz, wp.f_e_hz, f_i, pole_pairs, 1.5 * wp.df_hz);
+        l.kind = nm.kind;
+        l.order = nm.order;
+        l.m = nm.m;
+        wp.lines.push_back(l);
+      }
+    };
+    detect(xout, wp.sigma2_bin, "phase_current");
+    detect(zout, wp.sigma2_bin_zero, "zero_sequence_current");
+    if (std::abs(wp.f_e_hz) > 0.0) {
+      // The recorded angle at speed: the rotor turns at constant speed, so
+      // what the reading does beyond its least-squares line is the sensor's
+      // (its count quantisation, white; and any error that follows the
+      // rotor's position, which no current residual shows: the currents
+      // are measured in the stator).
+      double sx = 0, sy = 0, sxx = 0, sxy = 0;
+      for (size_t k = 0; k < n; ++k) {
+        const double x = static_cast<double>(k);
+        sx += x; sy += th[k]; sxx += x * x; sxy += x * th[k];
+      }
+      const double nn = static_cast<double>(n), den = nn * sxx - sx * sx;
+      const double slope = den > 0 ? (nn * sxy - sx * sy) / den : 0.0, icpt = (sy - slope * sx) / nn;
+      // The reading is quantised to counts: a line through them reads as a
+      // sawtooth at the rate the counts slip against the samples, lines of
+      // the sensor's resolution, not of the rotor. The count is the
+      // smallest difference between the distinct increments of the reading
+      // (m and m + 1 counts per sample); the sawtooth of an ideal line on
+      // that grid is the channel's
+      // model, judged as the model's own lines are (kModelLineAccuracy).
+      std::vector<double> inc;
+      for (size_t k = 1; k < n; ++k) inc.push_back(th[k] - th[k - 1]);
+      std::sort(inc.begin(), inc.end());
+      double count = 0;
+      for (size_t k = 1; k < inc.size(); ++k) {
+        const double d = inc[k] - inc[k - 1];
+        if (d > 1e-5 && (count == 0 || d < count)) count = d;
+      }
+      if (count > 0) {
+        // Refined over the whole record: every increment is a whole number
+        // m of counts, count = sum(inc m) / sum(m^2) (least squares); the
+        // file's decimals blur one difference, a thousand increments not.
+        double sim_ = 0, smm = 0;
+        for (size_t k = 1; k < n; ++k) {
+          const double d = th[k] - th[k - 1];
+          const double mk = std::round(d / count);
+          sim_ += d * mk;
+          smm += mk * mk;
+        }
+        if (smm > 0) count = sim_ / smm;
+      }
+      std::vector<double> line(n), quant(n, 0.0);
+      for (size_t k = 0; k < n; ++k) line[k] = icpt + slope * static_cast<double>(k);
+      // The model's own sensor error (a position-sensor harmonic found by
+      // the diagnosis, ReplayPoint::angle_error_rad): the reading modelled
+      // is the line plus it, then quantised.
+      std::vector<double> err(n, 0.0);
+      if (r.angle_error_rad.size() == w.size()) {
+        for (size_t k = 0; k < n; ++k) err[k] = r.angle_error_rad[k + 1];
+      }
+      // The named error's second-harmonic part, refined on this record: its
+      // amplitude and phase come from the currents (to ~10 %), while the
+      // quantised reading moves a count wherever the error does, so a few
+      // per cent off shifts transitions and leaves sawtooth lines the
+      // effect does not cause. Least squares of the reading beyond its
+      // line on sin / cos(2 theta); the refined harmonic replaces the
+      // model's only when it is the same effect (amplitude within 30 %,
+      // phase within 0.3 rad): an error the model does not name is never
+      // fitted here.
+      {
+        double ss = 0, cc = 0, sc = 0, sr = 0, cr = 0, se = 0, ce = 0;
+        for (size_t k = 0; k < n; ++k) {
+          const double sk = std::sin(2 * line[k]), ck = std::cos(2 * line[k]), rk = th[k] - line[k];
+          ss += sk * sk; cc += ck * ck; sc += sk * ck;
+          sr += sk * rk; cr += ck * rk; se += sk * err[k]; ce += ck * err[k];
+        }
+        const double det = ss * cc - sc * sc;
+        if (det > 0) {
+          const Complex model((cc * se - sc * ce) / det, (ss * ce - sc * se) / det);
+          const Complex data((cc * sr - sc * cr) / det, (ss * cr - sc * sr) / det);
+          if (std::abs(model) > 0 && std::abs(std::abs(data) / std::abs(model) - 1.0) < 0.3 &&
+              std::abs(std::arg(data / model)) < 0.3) {
+            for (size_t k = 0; k < n; ++k) {
+              const double sk = std::sin(2 * line[k]), ck = std::cos(2 * line[k]);
+              err[k] += (data.real() - model.real()) * sk + (data.imag() - model.imag()) * ck;
+            }
+          }
+        }
+      }
+      if (count > 0) {
+        // The grid's zero: the readings lie on c + m count, so c is the
+        // circular mean of the readings modulo a count. The line's own
+        // offset (least squares through a quantised ramp is off by up to a
+        // fraction of a count, and where the counts slip slowly -- 1.02
+        // counts per sample at 150 rpm -- that fraction moves every
+        // transition) is refined on a grid of 128 offsets within a count.
+        Complex phasor = 0;
+        for (size_t k = 0; k < n; ++k) phasor += std::polar(1.0, 2 * kPi * th[k] / count);
+        const double c = count * std::arg(phasor) / (2 * kPi);
+        double best = std::numeric_limits<double>::infinity(), best_shift = 0;
+        for (int t = -64; t < 64; ++t) {
+          const double shift = count * t / 128.0;
+          double se = 0;
+          for (size_t k = 0; k < n; ++k) {
+            const double qk = std::round((line[k] + err[k] + shift - c) / count) * count + c;
+            se += (th[k] - qk) * (th[k] - qk);
+          }
+          if (se < best) { best = se; best_shift = shift; }
+        }
+        for (size_t k = 0; k < n; ++k) {
+          quant[k] = std::round((line[k] + err[k] + best_shift - c) / count) * count + c - line[k];
+        }
+      } else {
+        quant = err;
+      }
+      std::vector<Complex> ain(n), aout, qin(n), qout;
+      for (size_t k = 0; k < n; ++k) {
+        ain[k] = Complex((th[k] - line[k]) * win[k], 0.0);
+        qin[k] = Complex(quant[k] * win[k], 0.0);
+      }
+      fft.fwd(aout, ain);
+      fft.fwd(qout, qin);
+      wp.spectrum_angle.assign(aout.begin(), aout.end());
+      wp.spectrum_angle_model.assign(qout.begin(), qout.end());
+      // The sawtooth's harmonics (k times the slip rate, aliased) are the
+      // channel's nuisance where the model leaves a little of them (a
+      // reading whose transitions fall a fraction of a sample off the
+      // ideal ramp's: 8 % of a count at 150 rpm on a measured-map bench).
+      if (count > 0) {
+        const double cps = slope / count, slip = std::abs(cps - std::round(cps)) * fs;
+        if (slip > 0) {
+          // A named angle error (err) modulates the slip rate at twice the
+          // electrical frequency: the sawtooth's lines then carry sidebands
+          // at +-2 j f_e, as sensitive to the error's exact size as the
+          // transitions are.
+          bool modulated = false;
+          for (double e : err) modulated |= e != 0.0;
+          const int sidebands = modulated ? 3 : 0;
+          for (int k = 1; k <= 200 && k * slip < 40 * fs; ++k) {
+            for (int j = -sidebands; j <= sidebands; ++j) {
+              const double f = std::remainder(k * slip + 2.0 * j * wp.f_e_hz, fs);
+              wp.angle_nuisance_hz.push_back(f);
+              wp.angle_nuisance_hz.push_back(-f);
+            }
+          }
+        }
+      }
+      const std::vector<bool> quiet_currents = quiet;
+      for (size_t b = 0; b < n; ++b) {
+        for (double f : wp.angle_nuisance_hz) {
+          if (std::abs(wp.freq_hz[b] - f) <= tol) quiet[b] = false;
+        }
+      }
+      wp.sigma2_bin_angle = noise_of(aout, true);
+      detect(aout, wp.sigma2_bin_angle, "rotor_angle");
+      quiet = quiet_currents;
+    }
+    out.push_back(std::move(wp));
+  }
+  return out;
+}
+
+std::vector<Mismatch> WaveformMismatches(const std::vector<WaveformPoint>& pts, int pole_pairs, double f_inj_hz,
+                                         double sigma_threshold) {
+  // Group the lines: named ones by (channel, kind, order, m); the others by
+  // frequency (a line at one frequency at several points is interference,
+  // not the machine).
+  struct Group {
+    std::string channel, kind;
+    int order = 0, m = 0;
+    double freq_hz = 0;
+    std::vector<std::pair<double, std::string>> seen;   // (z2, point)
+    double size_a = 0, sigma = 0;
+    std::string dependence;
+  };
+  std::map<std::tuple<std::string, std::string, int, int, long>, Group> groups;
+  size_t bins = 0;
+  for (const auto& wp : pts) {
+    bins += wp.spectrum.size();
+    for (const auto& l : wp.lines) {
+      const bool named = !l.kind.empty();
+      const long fkey = named ? 0 : std::lround(l.freq_hz / std::max(wp.df_hz, 1e-9));
+      auto& g = groups[{l.channel, named ? l.kind : "line", l.order, l.m, fkey}];
+      g.channel = l.channel;
+      g.kind = named ? l.kind : "line";
+      g.order = l.order;
+      g.m = l.m;
+      g.freq_hz = l.freq_hz;
+      g.seen.push_back({l.z2, wp.point});
+      g.size_a = std::max(g.size_a, l.amp_a);
+    }
+  }
+  std::vector<Group> located;
+  for (auto& [key, g] : groups) {
+    (void)key;
+    // The group's line measured at every point of its regime (turning or
+    // not), seen or not: its power there, for the significance over all of
+    // them, and its size for the dependence on order, current and speed.
+    std::vector<double> z2s, amps, order_idx, current, speed;
+    for (const auto& wp : pts) {
+      const bool turning = std::abs(wp.f_e_hz) >= 3 * wp.df_hz;
+      double f = g.freq_hz;
+      if (g.kind == "electrical_harmonic") {
+        if (!turning) continue;
+        f = g.order * wp.f_e_hz;
+      } else if (g.kind == "mechanical_order") {
+        if (!turning) continue;
+        f = g.order * wp.f_e_hz / pole_pairs;
+      } else if (g.kind == "injection_sideband") {
+        if (!turning) continue;
+        f = wp.f_e_hz + g.m * (f_inj_hz - wp.f_e_hz) + g.order * wp.f_e_hz;
+      } else if (g.kind == "injection_harmonic") {
+        f = turning ? wp.f_e_hz + g.m * (f_inj_hz - wp.f_e_hz) : g.m * f_inj_hz;
+      }
+      const bool zero = g.channel != "phase_current";   // a real signal's channel
+      if (zero) f = std::abs(f);
+      const auto& spec = g.channel == "zero_sequence_current" ? wp.spectrum_zero
+                         : g.channel == "rotor_angle"        ? wp.spectrum_angle
+                                                             : wp.spectrum;
+      const double s2 = g.channel == "zero_sequence_current" ? wp.sigma2_bin_zero
+                        : g.channel == "rotor_angle"        ? wp.sigma2_bin_angle
+                                                            : wp.sigma2_bin;
+      if (spec.empty()) continue;
+      bool nuisance = false;   // a nuisance bin carries no test
+      for (double nf : wp.nuisance_hz) nuisance |= std::abs(f - nf) <= 2.5 * wp.df_hz;
+      if (g.channel == "rotor_angle") {
+        for (double nf : wp.angle_nuisance_hz) nuisance |= std::abs(std::abs(f) - std::abs(nf)) <= 2.5 * wp.df_hz;
+      }
+      if (nuisance) continue;
+      const long nb = static_cast<long>(spec.size());
+      const long b0 = std::lround(f / wp.df_hz);
+      // The largest of the bin and its neighbours (the line between bins).
+      double best = 0, best_amp = 0;
+      for (long d = -1; d <= 1; ++d) {
+        const long b = ((b0 + d) % nb + nb) % nb;
+        const double model = g.channel == "phase_current" ? kModelLineAccuracy * std::abs(wp.spectrum_sim[b])
+                             : g.channel == "rotor_angle" && !wp.spectrum_angle_model.empty()
+                                 ? kModelLineAccuracy * std::abs(wp.spectrum_angle_model[b])
+                                 : 0.0;
+        const double z2 = std::norm(spec[b]) / (s2 + model * model);
+        if (z2 > best) { best = z2; best_amp = std::abs(spec[b]); }
+      }
+      z2s.push_back(best);
+      amps.push_back(best_amp / wp.coherent_gain * (zero ? 2.0 : 1.0));
+      order_idx.push_back(static_cast<double>(wp.index));
+      current.push_back(std::hypot(wp.id_a, wp.iq_a));
+      speed.push_back(std::abs(wp.speed_rpm));
+    }
+    // Significance: the sum of z^2 over the points it was looked for at
+    // (each ~ chi^2_2 / 2 under noise; the best of three bins counted as
+    // one less ln 3), or the single strongest line, whichever says more,
+    // each against the number of places such a line could have been found.
+    double chi2 = 0;
+    for (double z : z2s) chi2 += 2.0 * std::max(0.0, z - std::log(3.0));
+    double strongest = 0;
+    for (const auto& seen : g.seen) strongest = std::max(strongest, seen.first);
+    const bool named = g.kind != "line";
+    const double trials = named ? kNamedFamilies : static_cast<double>(std::max<size_t>(bins, 1));
+    g.sigma = std::max(LookElsewhere(ChiSquareSigma(chi2, 2.0 * std::max<size_t>(1, z2s.size())), trials),
+                       LookElsewhere(ChiSquareSigma(2.0 * strongest, 2.0), trials));
+    if (g.sigma < sigma_threshold) continue;
+    if (g.kind == "line") g.kind = g.seen.size() >= 2 ? "fixed_frequency_line" : "unexplained_line";
+    std::vector<std::string> dep;
+    if (amps.size() >= 4) {
+      const double ro = Correlation(order_idx, amps), rc = Correlation(current, amps), rs = Correlation(speed, amps);
+      if (std::abs(ro) >= 0.7) dep.push_back(absl::StrFormat("%s over the recording order (r = %.2f)", ro > 0 ? "grows" : "falls", ro));
+      if (std::abs(rc) >= 0.7) dep.push_back(absl::StrFormat("%s with the current magnitude (r = %.2f)", rc > 0 ? "grows" : "falls", rc));
+      if (std::abs(rs) >= 0.7) dep.push_back(absl::StrFormat("%s with speed (r = %.2f)", rs > 0 ? "grows" : "falls", rs));
+    }
+    g.dependence = absl::StrJoin(dep, "; ");
+    located.push_back(g);
+  }
+  // One mismatch per kind of component and channel: its strongest member
+  // gives order, frequency and dependence; the others are listed.
+  std::map<std::pair<std::string, std::string>, std::vector<const Group*>> by_kind;
+  for (const auto& g : located) by_kind[{g.channel, g.kind}].push_back(&g);
+  std::vector<Mismatch> out;
+  for (auto& [key, members] : by_kind) {
+    std::sort(members.begin(), members.end(), [](const Group* a, const Group* b) { return a->sigma > b->sigma; });
+    const Group& top = *members.front();
+    Mismatch mm;
+    mm.signal = key.first;
+    mm.kind = key.second;
+    mm.order = top.order;
+    mm.frequency_hz = (mm.kind == "fixed_frequency_line" || mm.kind == "unexplained_line" ||
+                       (mm.kind == "injection_harmonic" && std::abs(top.freq_hz) > 0))
+                          ? top.freq_hz
+                          : 0.0;
+    mm.significance_sigma = top.sigma;
+    mm.dependence = top.dependence;
+    std::vector<std::string> others;
+    std::map<std::string, double> points;
+    for (const Group* g : members) {
+      mm.size_a = std::max(mm.size_a, g->size_a);
+      if (g != &top && others.size() < 8) {
+        others.push_back(g->kind == "fixed_frequency_line" || g->kind == "unexplained_line"
+                             ? absl::StrFormat("%.0f Hz", g->freq_hz)
+                             : (g->kind == "injection_sideband" ? absl::StrFormat("%+d (beside %d)", g->order, g->m)
+                                                                 : absl::StrFormat("%d", g->order)));
+      }
+      for (const auto& seen : g->seen) points[seen.second] = std::max(points[seen.second], seen.first);
+    }
+    mm.where = KindText(mm.kind, top.order, top.m, top.freq_hz) +
+               (mm.signal == "zero_sequence_current" ? ", in the zero sequence (ia + ib + ic)"
+                : mm.signal == "rotor_angle"         ? ", in the recorded rotor angle beyond its constant speed (rad)"
+                                                     : ", in the phase currents");
+    if (!others.empty()) {
+      mm.where += absl::StrFormat("; %zu more of its kind%s (%s%s)", members.size() - 1,
+                                  members.size() - 1 > others.size() ? ", strongest" : "", absl::StrJoin(others, ", "),
+                                  members.size() - 1 > others.size() ? ", ..." : "");
+    }
+    std::vector<std::pair<double, std::string>> ranked;
+    for (const auto& [pt, z] : points) ranked.push_back({z, pt});
+    std::sort(ranked.rbegin(), ranked.rend());
+    for (const auto& r : ranked) {
+      if (mm.points.size() < 12) mm.points.push_back(r.second);
+    }
+    out.push_back(std::move(mm));
+  }
+  std::sort(out.begin(), out.end(),
+            [](const Mismatch& a, const Mismatch& b) { return a.significance_sigma > b.significance_sigma; });
+  return out;
+}
+
+}  // namespace fluxcal::diag::detail

@@ -1,0 +1,60 @@
+// A family's surfaces at one operating point with their derivatives with
+// respect to the family's parameters, and the roughness penalty of the
+// smoothing splines: what a fit that carries the flux-linkage surfaces as
+// unknowns beside other parameters (diagnosis/refit.cc) differentiates
+// through, and the penalty it keeps them smooth with.
+#ifndef FLUXCAL_FITTING_SURFACE_H_
+#define FLUXCAL_FITTING_SURFACE_H_
+
+#include <array>
+#include <utility>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "fitting/flux_family.h"
+
+namespace fluxcal::fit {
+
+// Values at (id_a, iq_a), in the order kSurfaceValues names them, and
+// their sparse gradient: d value / d params[index]. Linear families (poly,
+// spline): exact (a spline point touches the 25 coefficients around it and
+// the 25 around the origin that fix psi_d(0, 0) = psi_pm); the analytic
+// family: forward-mode automatic differentiation (ceres::Jet).
+enum SurfaceValue { kPsiD = 0, kPsiQ = 1, kLdd = 2, kLqq = 3, kLdq = 4, kSurfaceValues = 5 };
+struct SurfacePoint {
+  std::array<double, kSurfaceValues> value{};
+  std::vector<std::pair<int, std::array<double, kSurfaceValues>>> grad;
+};
+SurfacePoint SurfaceAt(const Family& f, const double* params, double id_a, double iq_a);
+
+// A family's surfaces for fixed parameters, evaluated at many points (a
+// replay's Newton steps, a table's solver): for the spline family the
+// origin's terms (psi_d(0, 0) = psi_pm and, unfolded, psi_q(0, 0) = 0 pin
+// the co-energy's slope there) are computed once, and flux and inductance
+// come from one pair of basis evaluations. The same values as FamilyFlux
+// and FamilyInductance; null pointers skip an output.
+class SurfaceEvaluator {
+ public:
+  SurfaceEvaluator() = default;
+  SurfaceEvaluator(const Family& f, std::vector<double> params);
+  void Eval(double id_a, double iq_a, double* psi_d, double* psi_q, double* ldd, double* lqq, double* ldq) const;
+
+ private:
+  Family f_;
+  std::vector<double> p_;
+  // Spline: the full coefficient grid c[i * NumQ + j] (folded pairs and the
+  // mirrored layout's pivot resolved once) and S's slopes at the origin.
+  std::vector<double> c_;
+  int nq_ = 0;
+  double slope0_d_ = 0, slope0_q_ = 0;
+};
+
+// Roughness of a smoothing-spline co-energy (fit.cc, where it is derived):
+// rows of third differences of the coefficients, one column per parameter
+// (column 0, psi_pm, is zero). Empty (0 x NumParams) for other families.
+Eigen::MatrixXd SmoothingPenalty(const Family& f);
+
+}  // namespace fluxcal::fit
+
+#endif  // FLUXCAL_FITTING_SURFACE_H_
