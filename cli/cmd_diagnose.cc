@@ -205,7 +205,7 @@ int RunDiagnose(const std::vector<std::string>& argv) {
 
 }  // namespace
 
-FLUXCAL_REGISTER_COMMAND("diagnose", "locate, explain and model what the nominal model misses", RunDiagnose,
+FLUXCAL_REGISTER_COMMAND("diagnose", "locate, explain and model what the set's own calibration and the twin miss", RunDiagnose,
                          "fluxcal diagnose <recording-set> [--json] [--plots DIR] [--exclude-effects a,b] [--calibration-out cal.json] [--force]\n"
                          "fluxcal diagnose --table1 data/paper_table1.csv [--json]",
                          kDiagnoseFlags);

@@ -1,0 +1,110 @@
+// Machines of other kinds than the twin's analytic family (closed-form
+// co-energies with the traits of measured maps, simulation/trait_motor.h),
+// recorded by the twin's bench on the default plan (id -100..0 A, iq
+// 0..100 A): their saturation and cross saturation are their own, so a
+// clean recording names no effect, and with a concealed dead time only
+// `dead_time` is named, within 10 %, and the diagnosed calibration is at
+// least as close to the true magnetics as the plain fit. The machines
+// symmetric in iq: one half measured cannot tell the psi_q(id, 0) machine
+// from a symmetric one (docs/fitting.md, "Symmetry").
+// Not asserted, because it does not hold yet (docs/diagnosis.md, "Open"):
+// the issue's `no_mismatch` on clean recordings. On five of the six kinds
+// the waveform locator finds lines in the injection band (harmonics of the
+// injection and their sidebands at multiples of f_e) that the replay with
+// the set's smoothed calibration does not reproduce; the verdict is then
+// `unexplained` (clean) or `partly_explained` (dead time), never
+// `explained` with an effect that is not there.
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <set>
+#include <string>
+
+#include "absl/strings/str_cat.h"
+#include "diagnosis/diagnose.h"
+#include "fitting/fit.h"
+#include "gtest/gtest.h"
+#include "identification/identify.h"
+#include "simulation/trait_motor.h"
+#include "simulation/twin.h"
+
+namespace fluxcal::diag {
+namespace {
+
+// Flux RMS of `cal` against the machine over the plan's region, relative to
+// the largest |psi| there.
+double FluxRms(const fit::Calibration& cal, const sim::MagneticModel& truth) {
+  double s2 = 0, scale = 0;
+  int n = 0;
+  for (int i = 0; i <= 10; ++i) {
+    for (int j = 0; j <= 10; ++j) {
+      const double id = -100.0 + 10.0 * i, iq = 10.0 * j;
+      const auto f = cal.Flux(id, iq);
+      const auto t = truth.Flux(id, iq);
+      s2 += std::pow(f.psi_d_wb - t.psi_d_wb, 2) + std::pow(f.psi_q_wb - t.psi_q_wb, 2);
+      scale = std::max(scale, std::hypot(t.psi_d_wb, t.psi_q_wb));
+      ++n;
+    }
+  }
+  return std::sqrt(s2 / n) / scale;
+}
+
+std::vector<sim::MotorTraits> Kinds() {
+  std::vector<sim::MotorTraits> v;
+  for (const auto& t : sim::RealLikeMotors(100.0, 0.15)) {
+    if (t.psi_q_offset_wb == 0) v.push_back(t);
+  }
+  for (const auto& t : sim::OtherKindMotors(100.0, 0.15)) {
+    if (t.psi_pm_wb > 0) v.push_back(t);   // the plan's speeds need a back-EMF to hold
+  }
+  return v;
+}
+
+TEST(OtherMachines, CleanIsNoMismatchDeadTimeAloneAndCloser) {
+  const auto kinds = Kinds();
+  ASSERT_GE(kinds.size(), 4u);
+  for (const auto& t : kinds) {
+    for (double dead_time_s : {0.0, 2e-6}) {
+      sim::TwinConfig cfg;
+      cfg.seed = 11;
+      cfg.motor.sat.psi_pm_wb = t.psi_pm_wb;
+      auto truth = std::make_shared<sim::TraitMotor>(t);
+      cfg.magnetics = truth;
+      cfg.control.gain_scheduled = true;
+      cfg.effects.dead_time_s = dead_time_s;
+      auto simulated = sim::Simulate(cfg, sim::DefaultPlan());
+      ASSERT_TRUE(simulated.ok()) << t.name << ": " << simulated.status();
+      auto r = Diagnose(simulated->set);
+      ASSERT_TRUE(r.ok()) << t.name << ": " << r.status();
+      const std::string label = absl::StrCat(t.name, dead_time_s > 0 ? ", dead time 2 us" : ", clean");
+      std::set<std::string> named;
+      for (const auto& f : r->findings) named.insert(f.effect);
+      std::string remaining;
+      for (const auto& m : r->remaining) remaining += "\n  remaining " + m.signal + " " + m.kind + " at " + m.where;
+      std::printf("%s: %s", label.c_str(), r->verdict.c_str());
+      for (const auto& f : r->findings) std::printf(" %s", f.effect.c_str());
+      if (dead_time_s == 0) {
+        std::printf("\n");
+        EXPECT_NE(r->verdict, "explained") << label;
+        EXPECT_TRUE(named.empty()) << label << ": " << r->findings[0].effect << remaining;
+        continue;
+      }
+      EXPECT_EQ(named, std::set<std::string>{"dead_time"}) << label << remaining;
+      if (const Finding* f = named.count("dead_time") ? &r->findings[0] : nullptr) {
+        EXPECT_NEAR(f->parameters.at("dead_time_s") / dead_time_s, 1.0, 0.1) << label;
+      }
+      auto diagnosed = DiagnosedCalibration(*r);
+      ASSERT_TRUE(diagnosed.ok()) << label << ": " << diagnosed.status();
+      auto ids = ident::IdentifySet(simulated->set, {});
+      ASSERT_TRUE(ids.ok());
+      auto plain = fit::Fit(fit::FitDataFromRecording(simulated->set, *ids));
+      ASSERT_TRUE(plain.ok());
+      const double d = FluxRms(*diagnosed, *truth), p = FluxRms(*plain, *truth);
+      std::printf("; flux RMS against the machine: diagnosed %.3f %%, plain fit %.3f %%\n", 100 * d, 100 * p);
+      EXPECT_LE(d, p * 1.02) << label;
+    }
+  }
+}
+
+}  // namespace
+}  // namespace fluxcal::diag
