@@ -94,6 +94,8 @@ class Calibration : public sim::MagneticModel {
   sim::FluxLinkage Flux(double id_a, double iq_a, double temperature_c = 25.0) const override;
   sim::DifferentialInductance Inductance(double id_a, double iq_a,
                                          double temperature_c = 25.0) const override;
+  void FluxAndInductance(double id_a, double iq_a, double temperature_c, sim::FluxLinkage* flux,
+                         sim::DifferentialInductance* inductance) const override;
   // Everything at one point with standard deviations from the parameter
   // covariance (first-order propagation), its region and its validity.
   FluxPrediction Predict(double id_a, double iq_a) const;
@@ -165,6 +167,9 @@ class Calibration : public sim::MagneticModel {
   std::string serial_;
   Family family_;
   std::vector<double> params_, covariance_;
+  // A spline family's surfaces at params_, set up once (flux_family.h):
+  // the tables evaluate a calibration ~10^5 times per table.
+  SplineSurface spline_;
   int pole_pairs_ = 0;   // 0: unknown (only a default-constructed calibration)
   std::optional<double> rs_ohm_, psi_pm_nominal_wb_, udc_v_;
   double id_min_a_ = 0, id_max_a_ = 0, iq_min_a_ = 0, iq_max_a_ = 0;

@@ -46,12 +46,14 @@ bool SolveIqForTorque(const sim::MagneticModel& m, const MachineLimits& lim, dou
                   ? iq_guess_a
                   : std::clamp(target / std::max(1e-9, t_hi) * hi, lo, hi);
   for (int it = 0; it < 60; ++it) {
-    // One flux evaluation per iteration serves both T and dT/diq.
-    const auto F = m.Flux(id, s * iq, lim.temperature_c);
+    // One surface evaluation per iteration serves both T and dT/diq (a
+    // spline calibration shares the basis between flux and inductance).
+    sim::FluxLinkage F;
+    sim::DifferentialInductance L;
+    m.FluxAndInductance(id, s * iq, lim.temperature_c, &F, &L);
     const double f = s * 1.5 * lim.pole_pairs * (F.psi_d_wb * s * iq - F.psi_q_wb * id) - target;
     if (std::abs(f) < 1e-10 * (1.0 + target)) break;
     if (f > 0) hi = iq; else lo = iq;
-    const auto L = m.Inductance(id, s * iq, lim.temperature_c);
     const double d = 1.5 * lim.pole_pairs * (F.psi_d_wb + L.ldq_h * s * iq - L.lqq_h * id);
     double next = iq - f / (d > 1e-12 ? d : 1e-12);
     if (!(next > lo && next < hi)) next = 0.5 * (lo + hi);
