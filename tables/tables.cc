@@ -9,6 +9,7 @@
 #include <ctime>
 #include <limits>
 #include <numbers>
+#include <optional>
 
 #include "absl/strings/ascii.h"
 #include "absl/strings/str_cat.h"
@@ -125,7 +126,14 @@ bool TrySolve(const sim::MagneticModel& m, const MachineLimits& lim, double t, d
   if (t == 0.0 && we <= 0) return true;
   const double s = t < 0 ? -1.0 : 1.0;
   const double id_min = -lim.i_max_a;
-  auto iq_of = [&](double id, double* iq) { return SolveIqForTorque(m, lim, id, t, s, iq); };
+  // Each locus point's Newton starts from the last point's iq: the
+  // minimisations below step along the locus.
+  double last_iq = 0.0;
+  auto iq_of = [&](double id, double* iq) {
+    if (!SolveIqForTorque(m, lim, id, t, s, iq, std::abs(last_iq))) return false;
+    last_iq = *iq;
+    return true;
+  };
   auto cur2 = [&](double id) {
     double iq;
     if (!iq_of(id, &iq)) return 1e30;
@@ -188,15 +196,21 @@ bool TrySolve(const sim::MagneticModel& m, const MachineLimits& lim, double t, d
 }
 
 // As SolveLeastCurrent, with the limit torque at this speed already known.
+// `clamp` (optional): the clamped point of this speed and torque sign, once
+// computed; it depends on nothing else, so a field-weakening column
+// computes it once for all the requests beyond its limit torque.
 OperatingPoint SolveWithMax(const sim::MagneticModel& m, const MachineLimits& lim, double t,
-                            double we, double tmax, const double* mtpa_id = nullptr) {
+                            double we, double tmax, const double* mtpa_id = nullptr,
+                            std::optional<OperatingPoint>* clamp = nullptr) {
   OperatingPoint op;
   if (std::abs(t) <= tmax && TrySolve(m, lim, t, we, &op, mtpa_id)) return op;
+  if (clamp != nullptr && clamp->has_value()) return **clamp;
   // Infeasible: deliver the largest torque of the same sign within limits.
   const double s = t < 0 ? -1.0 : 1.0;
   double tt = s * tmax;
   for (int k = 0; k < 8 && !TrySolve(m, lim, tt, we, &op); ++k) tt *= 1 - 1e-6 * (1 << (2 * k));
   op.clamped = true;
+  if (clamp != nullptr) *clamp = op;
   return op;
 }
 
@@ -217,14 +231,24 @@ namespace {
 // and |u| each have a single minimum along the locus (MTPA, MTPV), so h is
 // quasi-convex and the scan + golden section finds its minimum even when
 // the feasible arc is short (near the limit torque at high speed).
+// A locus point found inside both limits settles it: the search stops there
+// (a feasible request needs no more), so only an infeasible one costs the
+// whole search. Each locus point's Newton starts from the last one's iq.
 bool LocusFeasible(const sim::MagneticModel& m, const MachineLimits& lim, double we, double s, double t) {
+  bool found = false;
+  double last_iq = 0.0;
   auto h = [&](double id) {
+    if (found) return 0.0;
     double iq;
-    if (!SolveIqForTorque(m, lim, id, t, s, &iq)) return 1e30;
+    if (!SolveIqForTorque(m, lim, id, t, s, &iq, std::abs(last_iq))) return 1e30;
+    last_iq = iq;
     const double c = std::hypot(id, iq) / lim.i_max_a;
-    return we > 0 ? std::max(c, VoltageV(m, lim, id, iq, we) / lim.UMaxV()) : c;
+    const double v = we > 0 ? std::max(c, VoltageV(m, lim, id, iq, we) / lim.UMaxV()) : c;
+    found = v <= 1.0;
+    return v;
   };
-  return h(MinimiseScalar(h, -lim.i_max_a, 0.0, 24, 40)) <= 1.0;
+  const double id = MinimiseScalar(h, -lim.i_max_a, 0.0, 24, 40);
+  return found || h(id) <= 1.0;
 }
 
 // The limit torque by bisection on the request with LocusFeasible: robust,
@@ -550,6 +574,8 @@ absl::StatusOr<Table> BuildTable(const sim::MagneticModel& m, const MachineLimit
       tlim_motor[j] = MaxTorqueNm(m, lim, we, 1.0);
       tlim_gen[j] = spec.include_generating ? MaxTorqueNm(m, lim, we, -1.0) : 0.0;
     }
+    // The clamped point per speed and torque sign (SolveWithMax).
+    std::vector<std::optional<OperatingPoint>> clamp_motor(n.size()), clamp_gen(n.size());
     for (double x : tq) {
       // The MTPA point of this torque row is the same at every speed.
       OperatingPoint mtpa;
@@ -557,7 +583,8 @@ absl::StatusOr<Table> BuildTable(const sim::MagneticModel& m, const MachineLimit
       for (size_t j = 0; j < n.size(); ++j) {
         const double we = n[j] * lim.pole_pairs * 2 * kPi / 60.0;
         const double tlim = x < 0 ? tlim_gen[j] : tlim_motor[j];
-        const auto op = SolveWithMax(m, lim, x, we, tlim, have_mtpa ? &mtpa.id_a : nullptr);
+        const auto op = SolveWithMax(m, lim, x, we, tlim, have_mtpa ? &mtpa.id_a : nullptr,
+                                     x < 0 ? &clamp_gen[j] : &clamp_motor[j]);
         id.values.push_back(op.id_a);
         iq.values.push_back(op.iq_a);
         t.clamped.push_back(op.clamped);
