@@ -34,6 +34,7 @@
 #define FLUXCAL_FITTING_FLUX_FAMILY_H_
 
 #include <cmath>
+#include <limits>
 #include <string>
 #include <utility>
 #include <vector>
@@ -355,7 +356,23 @@ class SplineSurface {
       s = iq < 0 ? -1.0 : 1.0;
       q = std::abs(iq);
     }
-    const Basis1d bd = EvalBasis(id, dom_.id_lo_a, dom_.id_hi_a, dom_.spans);
+    // The solvers step along iq at fixed id (Newton on a column or a
+    // locus), so the id basis repeats from call to call: it is kept, per
+    // thread, keyed on everything it depends on (x and the knots), so it is
+    // never stale and a calibration stays safe to share between threads.
+    thread_local struct {
+      double x = std::numeric_limits<double>::quiet_NaN(), lo = 0, hi = 0;
+      int spans = 0;
+      Basis1d b;
+    } last_d;
+    if (!(id == last_d.x && dom_.id_lo_a == last_d.lo && dom_.id_hi_a == last_d.hi && dom_.spans == last_d.spans)) {
+      last_d.b = EvalBasis(id, dom_.id_lo_a, dom_.id_hi_a, dom_.spans);
+      last_d.x = id;
+      last_d.lo = dom_.id_lo_a;
+      last_d.hi = dom_.id_hi_a;
+      last_d.spans = dom_.spans;
+    }
+    const Basis1d& bd = last_d.b;
     const Basis1d bq = EvalBasis(q, dom_.IqLo(), dom_.iq_hi_a, dom_.SpansQ());
     double sd = 0, sq = 0, sdd = 0, sqq = 0, sdq = 0;
     for (int a = 0; a <= kSplineDegree; ++a) {

@@ -127,14 +127,10 @@ bool TrySolve(const sim::MagneticModel& m, const MachineLimits& lim, double t, d
   if (t == 0.0 && we <= 0) return true;
   const double s = t < 0 ? -1.0 : 1.0;
   const double id_min = -lim.i_max_a;
-  // Each locus point's Newton starts from the last point's iq: the
-  // minimisations below step along the locus.
-  double last_iq = 0.0;
-  auto iq_of = [&](double id, double* iq) {
-    if (!SolveIqForTorque(m, lim, id, t, s, iq, std::abs(last_iq))) return false;
-    last_iq = *iq;
-    return true;
-  };
+  // (Each locus point's Newton starts cold, from the bracket: where the
+  // torque is not monotone in iq (far beyond the measured region) a start
+  // carried over from a neighbouring point can settle on another root.)
+  auto iq_of = [&](double id, double* iq) { return SolveIqForTorque(m, lim, id, t, s, iq); };
   auto cur2 = [&](double id) {
     double iq;
     if (!iq_of(id, &iq)) return 1e30;
@@ -234,15 +230,13 @@ namespace {
 // the feasible arc is short (near the limit torque at high speed).
 // A locus point found inside both limits settles it: the search stops there
 // (a feasible request needs no more), so only an infeasible one costs the
-// whole search. Each locus point's Newton starts from the last one's iq.
+// whole search.
 bool LocusFeasible(const sim::MagneticModel& m, const MachineLimits& lim, double we, double s, double t) {
   bool found = false;
-  double last_iq = 0.0;
   auto h = [&](double id) {
     if (found) return 0.0;
     double iq;
-    if (!SolveIqForTorque(m, lim, id, t, s, &iq, std::abs(last_iq))) return 1e30;
-    last_iq = iq;
+    if (!SolveIqForTorque(m, lim, id, t, s, &iq)) return 1e30;
     const double c = std::hypot(id, iq) / lim.i_max_a;
     const double v = we > 0 ? std::max(c, VoltageV(m, lim, id, iq, we) / lim.UMaxV()) : c;
     found = v <= 1.0;
