@@ -121,16 +121,40 @@ namespace {
 // Least-current point for torque t under the limits; false if infeasible.
 // `mtpa_id` (optional): the least-current id of this torque without a
 // voltage limit, when already known (it does not depend on speed).
+// The locus points of one torque request that every speed of a
+// field-weakening row asks for again: its MTPA point and its end at
+// -i_max. A locus point depends on the request and id only (the solve is
+// deterministic), so the row keeps them; TrySolve looks them up by exact id.
+struct RowLoci {
+  double t = std::numeric_limits<double>::quiet_NaN();
+  struct Point { double id; bool ok; double iq; };
+  std::vector<Point> points;
+};
+
 bool TrySolve(const sim::MagneticModel& m, const MachineLimits& lim, double t, double we,
-              OperatingPoint* op, const double* mtpa_id = nullptr) {
+              OperatingPoint* op, const double* mtpa_id = nullptr, RowLoci* row = nullptr) {
   *op = OperatingPoint{};
   if (t == 0.0 && we <= 0) return true;
   const double s = t < 0 ? -1.0 : 1.0;
   const double id_min = -lim.i_max_a;
+  if (row != nullptr && row->t != t) *row = RowLoci{t, {}};
   // (Each locus point's Newton starts cold, from the bracket: where the
   // torque is not monotone in iq (far beyond the measured region) a start
   // carried over from a neighbouring point can settle on another root.)
-  auto iq_of = [&](double id, double* iq) { return SolveIqForTorque(m, lim, id, t, s, iq); };
+  auto iq_of = [&](double id, double* iq) {
+    const bool kept = row != nullptr && (id == id_min || (mtpa_id != nullptr && id == *mtpa_id));
+    if (kept) {
+      for (const auto& p : row->points) {
+        if (p.id == id) {
+          *iq = p.iq;
+          return p.ok;
+        }
+      }
+    }
+    const bool ok = SolveIqForTorque(m, lim, id, t, s, iq);
+    if (kept) row->points.push_back({id, ok, ok ? *iq : 0.0});
+    return ok;
+  };
   auto cur2 = [&](double id) {
     double iq;
     if (!iq_of(id, &iq)) return 1e30;
@@ -198,9 +222,9 @@ bool TrySolve(const sim::MagneticModel& m, const MachineLimits& lim, double t, d
 // computes it once for all the requests beyond its limit torque.
 OperatingPoint SolveWithMax(const sim::MagneticModel& m, const MachineLimits& lim, double t,
                             double we, double tmax, const double* mtpa_id = nullptr,
-                            std::optional<OperatingPoint>* clamp = nullptr) {
+                            std::optional<OperatingPoint>* clamp = nullptr, RowLoci* row = nullptr) {
   OperatingPoint op;
-  if (std::abs(t) <= tmax && TrySolve(m, lim, t, we, &op, mtpa_id)) return op;
+  if (std::abs(t) <= tmax && TrySolve(m, lim, t, we, &op, mtpa_id, row)) return op;
   if (clamp != nullptr && clamp->has_value()) return **clamp;
   // Infeasible: deliver the largest torque of the same sign within limits.
   const double s = t < 0 ? -1.0 : 1.0;
@@ -575,11 +599,12 @@ absl::StatusOr<Table> BuildTable(const sim::MagneticModel& m, const MachineLimit
       // The MTPA point of this torque row is the same at every speed.
       OperatingPoint mtpa;
       const bool have_mtpa = TrySolve(m, lim, x, 0.0, &mtpa);
+      RowLoci row;
       for (size_t j = 0; j < n.size(); ++j) {
         const double we = n[j] * lim.pole_pairs * 2 * kPi / 60.0;
         const double tlim = x < 0 ? tlim_gen[j] : tlim_motor[j];
         const auto op = SolveWithMax(m, lim, x, we, tlim, have_mtpa ? &mtpa.id_a : nullptr,
-                                     x < 0 ? &clamp_gen[j] : &clamp_motor[j]);
+                                     x < 0 ? &clamp_gen[j] : &clamp_motor[j], &row);
         id.values.push_back(op.id_a);
         iq.values.push_back(op.iq_a);
         t.clamped.push_back(op.clamped);
