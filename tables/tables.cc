@@ -118,9 +118,6 @@ double VoltageV(const sim::MagneticModel& m, const MachineLimits& lim, double id
 
 namespace {
 
-// Least-current point for torque t under the limits; false if infeasible.
-// `mtpa_id` (optional): the least-current id of this torque without a
-// voltage limit, when already known (it does not depend on speed).
 // The locus points of one torque request that every speed of a
 // field-weakening row asks for again: its MTPA point and its end at
 // -i_max. A locus point depends on the request and id only (the solve is
@@ -131,6 +128,10 @@ struct RowLoci {
   std::vector<Point> points;
 };
 
+// Least-current point for torque t under the limits; false if infeasible.
+// `mtpa_id` (optional): the least-current id of this torque without a
+// voltage limit, when already known (it does not depend on speed).
+// `row` (optional): the kept locus points of this request (RowLoci).
 bool TrySolve(const sim::MagneticModel& m, const MachineLimits& lim, double t, double we,
               OperatingPoint* op, const double* mtpa_id = nullptr, RowLoci* row = nullptr) {
   *op = OperatingPoint{};
