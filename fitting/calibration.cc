@@ -10,7 +10,6 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "io/csv.h"
-#include "fitting/surface.h"
 #include "nlohmann/json.hpp"
 
 namespace fluxcal::fit {
@@ -20,21 +19,40 @@ Calibration::Calibration(std::string serial, Family family, std::vector<double> 
                          double id_min_a, double id_max_a, double iq_min_a, double iq_max_a)
     : serial_(std::move(serial)), family_(family), params_(std::move(params)),
       covariance_(std::move(covariance)), pole_pairs_(pole_pairs), rs_ohm_(rs_ohm),
-      id_min_a_(id_min_a), id_max_a_(id_max_a), iq_min_a_(iq_min_a), iq_max_a_(iq_max_a),
-      eval_(std::make_shared<const SurfaceEvaluator>(family_, params_)) {}
+      id_min_a_(id_min_a), id_max_a_(id_max_a), iq_min_a_(iq_min_a), iq_max_a_(iq_max_a) {
+  if (family_.kind == Family::kSpline && static_cast<int>(params_.size()) == family_.NumParams()) {
+    spline_ = SplineSurface(family_.spline, params_.data());
+  }
+}
 
 sim::FluxLinkage Calibration::Flux(double id, double iq, double) const {
   sim::FluxLinkage f;
-  if (eval_) eval_->Eval(id, iq, &f.psi_d_wb, &f.psi_q_wb, nullptr, nullptr, nullptr);
-  else FamilyFlux(family_, id, iq, params_.data(), &f.psi_d_wb, &f.psi_q_wb);
+  if (!spline_.empty()) {
+    spline_.Eval(id, iq, &f.psi_d_wb, &f.psi_q_wb, nullptr, nullptr, nullptr);
+  } else {
+    FamilyFlux(family_, id, iq, params_.data(), &f.psi_d_wb, &f.psi_q_wb);
+  }
   return f;
 }
 
 sim::DifferentialInductance Calibration::Inductance(double id, double iq, double) const {
   sim::DifferentialInductance l;
-  if (eval_) eval_->Eval(id, iq, nullptr, nullptr, &l.ldd_h, &l.lqq_h, &l.ldq_h);
-  else FamilyInductance(family_, id, iq, params_.data(), &l.ldd_h, &l.lqq_h, &l.ldq_h);
+  if (!spline_.empty()) {
+    spline_.Eval(id, iq, nullptr, nullptr, &l.ldd_h, &l.lqq_h, &l.ldq_h);
+  } else {
+    FamilyInductance(family_, id, iq, params_.data(), &l.ldd_h, &l.lqq_h, &l.ldq_h);
+  }
   return l;
+}
+
+void Calibration::FluxAndInductance(double id, double iq, double temperature_c, sim::FluxLinkage* f,
+                                    sim::DifferentialInductance* l) const {
+  if (spline_.empty()) {
+    *f = Flux(id, iq, temperature_c);
+    *l = Inductance(id, iq, temperature_c);
+    return;
+  }
+  spline_.Eval(id, iq, &f->psi_d_wb, &f->psi_q_wb, &l->ldd_h, &l->lqq_h, &l->ldq_h);
 }
 
 const char* RegionName(Region r) {

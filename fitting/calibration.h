@@ -25,7 +25,6 @@
 
 namespace fluxcal::fit {
 
-class SurfaceEvaluator;
 // Where an operating point lies relative to the data a calibration was
 // fitted to (Calibration::RegionOf):
 //  kMeasured: inside the measured region (the box the observations span,
@@ -101,6 +100,8 @@ class Calibration : public sim::MagneticModel {
   sim::FluxLinkage Flux(double id_a, double iq_a, double temperature_c = 25.0) const override;
   sim::DifferentialInductance Inductance(double id_a, double iq_a,
                                          double temperature_c = 25.0) const override;
+  void FluxAndInductance(double id_a, double iq_a, double temperature_c, sim::FluxLinkage* flux,
+                         sim::DifferentialInductance* inductance) const override;
   // Everything at one point with standard deviations from the parameter
   // covariance (first-order propagation), its region and its validity.
   FluxPrediction Predict(double id_a, double iq_a) const;
@@ -172,13 +173,12 @@ class Calibration : public sim::MagneticModel {
   std::string serial_;
   Family family_;
   std::vector<double> params_, covariance_;
+  // A spline family's surfaces at params_, set up once (flux_family.h):
+  // the tables evaluate a calibration ~10^5 times per table.
+  SplineSurface spline_;
   int pole_pairs_ = 0;   // 0: unknown (only a default-constructed calibration)
   std::optional<double> rs_ohm_, psi_pm_nominal_wb_, udc_v_;
   double id_min_a_ = 0, id_max_a_ = 0, iq_min_a_ = 0, iq_max_a_ = 0;
-  // The surfaces' evaluator for these parameters (fitting/surface.h),
-  // shared by copies: Flux and Inductance are called millions of times by
-  // a replay and a table solver.
-  std::shared_ptr<const SurfaceEvaluator> eval_;
   IqHalves iq_halves_ = IqHalves::kUnknown;
   double iq_signed_min_a_ = 0, iq_signed_max_a_ = 0;
 };

@@ -310,6 +310,119 @@ void SplineFluxAndInductance(const SplineDomain& dom, double id, double iq, cons
   }
 }
 
+// A spline family's surfaces at fixed parameters, for evaluating a fitted
+// calibration many times (the tables' solvers call it ~10^5 times per
+// table). SplineFluxAndInductance re-derives per call what does not depend
+// on the operating point: the full coefficient grid (the mirrored layout's
+// pivot coefficient is a weighted sum of five parameters, the folded one's
+// an index fold), the basis at the origin and S's slope there. Here they
+// are computed once, and one call gives flux and inductance from one pair
+// of 1-D bases. Each coefficient and each sum is formed with the same
+// operations in the same order as SplineFluxAndInductance<double>, so the
+// values are the same to the last bit (tests/fitting/spline_test.cc).
+class SplineSurface {
+ public:
+  SplineSurface() = default;
+  SplineSurface(const SplineDomain& dom, const double* p) : dom_(dom), nq_(dom.NumQ()), psi_pm_(p[0]) {
+    const int nd = dom.NumD();
+    coef_.resize(static_cast<size_t>(nd) * nq_);
+    const bool mirrored = dom.mirrored && dom.smoothing && dom.symmetric;
+    const MirrorConstraint mc(dom);
+    for (int i = 0; i < nd; ++i) {
+      for (int j = 0; j < nq_; ++j) {
+        double c;
+        if (mirrored) {
+          c = mc.Coefficient<double>(p, i, j);
+        } else {
+          c = p[1 + i * dom.NumEven() + dom.QIndex(j)];
+        }
+        coef_[static_cast<size_t>(i) * nq_ + j] = c;
+      }
+    }
+    mirrored_ = mirrored;
+    const Basis1d b0d = EvalBasis(0.0, dom.id_lo_a, dom.id_hi_a, dom.spans);
+    const Basis1d b0q = mirrored ? mc.b0 : EvalBasis(0.0, dom.IqLo(), dom.iq_hi_a, dom.SpansQ());
+    double slope0 = 0.0, q0 = 0.0;
+    for (int a = 0; a <= kSplineDegree; ++a) {
+      for (int c = 0; c <= kSplineDegree; ++c) {
+        const double k = Coef(b0d.first + a, b0q.first + c);
+        slope0 += k * (b0d.d1[a] * b0q.v[c]);
+        q0 += k * (b0d.v[a] * b0q.d1[c]);
+      }
+    }
+    slope0_ = slope0;
+    psi_q0_ = !mirrored && !dom.Folded() ? q0 : 0.0;
+    subtract_q0_ = !mirrored && !dom.Folded();
+  }
+  bool empty() const { return coef_.empty(); }
+
+  // Any of the outputs may be null (flux: psi_d and psi_q together,
+  // inductance: the three together).
+  void Eval(double id, double iq, double* psi_d, double* psi_q, double* ldd, double* lqq, double* ldq) const {
+    if (!std::isfinite(id) || !std::isfinite(iq)) {
+      // A diverging simulation's state: no basis to index; NaN out.
+      for (double* out : {psi_d, psi_q, ldd, lqq, ldq}) {
+        if (out != nullptr) *out = std::numeric_limits<double>::quiet_NaN();
+      }
+      return;
+    }
+    double s = 1.0, q = iq;
+    if (mirrored_) {
+      s = iq < 0 ? -1.0 : 1.0;
+      q = std::abs(iq);
+    }
+    // The solvers step along iq at fixed id (Newton on a column or a
+    // locus), so the id basis repeats from call to call: it is kept, per
+    // thread, keyed on everything it depends on (x and the knots), so it is
+    // never stale and a calibration stays safe to share between threads.
+    thread_local struct {
+      double x = std::numeric_limits<double>::quiet_NaN(), lo = 0, hi = 0;
+      int spans = 0;
+      Basis1d b;
+    } last_d;
+    if (!(id == last_d.x && dom_.id_lo_a == last_d.lo && dom_.id_hi_a == last_d.hi && dom_.spans == last_d.spans)) {
+      last_d.b = EvalBasis(id, dom_.id_lo_a, dom_.id_hi_a, dom_.spans);
+      last_d.x = id;
+      last_d.lo = dom_.id_lo_a;
+      last_d.hi = dom_.id_hi_a;
+      last_d.spans = dom_.spans;
+    }
+    const Basis1d& bd = last_d.b;
+    const Basis1d bq = EvalBasis(q, dom_.IqLo(), dom_.iq_hi_a, dom_.SpansQ());
+    double sd = 0, sq = 0, sdd = 0, sqq = 0, sdq = 0;
+    for (int a = 0; a <= kSplineDegree; ++a) {
+      const double* row = &coef_[static_cast<size_t>(bd.first + a) * nq_ + bq.first];
+      for (int c = 0; c <= kSplineDegree; ++c) {
+        const double k = row[c];
+        sd += k * (bd.d1[a] * bq.v[c]);
+        sq += k * (bd.v[a] * bq.d1[c]);
+        sdd += k * (bd.d2[a] * bq.v[c]);
+        sqq += k * (bd.v[a] * bq.d2[c]);
+        sdq += k * (bd.d1[a] * bq.d1[c]);
+      }
+    }
+    const double kW = kPolyL0H * kPolyI0A * kPolyI0A;
+    if (psi_d != nullptr) {
+      *psi_d = psi_pm_ + kW * (sd - slope0_);
+      *psi_q = mirrored_ ? s * kW * sq : kW * sq;
+      if (subtract_q0_) *psi_q = *psi_q - kW * psi_q0_;
+    }
+    if (ldd != nullptr) {
+      *ldd = kW * sdd;
+      *lqq = kW * sqq;
+      *ldq = mirrored_ ? s * kW * sdq : kW * sdq;
+    }
+  }
+
+ private:
+  double Coef(int i, int j) const { return coef_[static_cast<size_t>(i) * nq_ + j]; }
+  SplineDomain dom_;
+  int nq_ = 0;
+  double psi_pm_ = 0, slope0_ = 0, psi_q0_ = 0;
+  bool mirrored_ = false, subtract_q0_ = false;
+  std::vector<double> coef_;   // full iq basis, row-major over the id basis
+};
+
 // The scalar value of a double or a ceres::Jet (its .a member): the spline's
 // basis depends on the operating point, which is data, never a parameter.
 inline double ScalarOf(double x) { return x; }

@@ -158,73 +158,19 @@ SurfacePoint SurfaceAt(const Family& f, const double* params, double id_a, doubl
 // inductance it has at the data's edge, and a strong lambda flattens
 // towards the best constant-inductance model instead of oscillating.
 SurfaceEvaluator::SurfaceEvaluator(const Family& f, std::vector<double> params) : f_(f), p_(std::move(params)) {
-  if (f_.kind != Family::kSpline || p_.empty()) return;
-  const SplineDomain& dom = f_.spline;
-  const int nd = dom.NumD(), ne = dom.NumEven();
-  nq_ = dom.NumQ();
-  c_.assign(static_cast<size_t>(nd) * nq_, 0.0);
-  const bool mirrored = dom.mirrored && dom.smoothing && dom.symmetric;
-  const MirrorConstraint mc(dom);
-  for (int i = 0; i < nd; ++i) {
-    for (int j = 0; j < nq_; ++j) {
-      c_[i * nq_ + j] = mirrored ? mc.Coefficient<double>(p_.data(), i, j) : p_[1 + i * ne + dom.QIndex(j)];
-    }
-  }
-  const Basis1d b0d = EvalBasis(0.0, dom.id_lo_a, dom.id_hi_a, dom.spans);
-  const Basis1d b0q = EvalBasis(0.0, dom.IqLo(), dom.iq_hi_a, dom.SpansQ());
-  for (int a = 0; a <= kSplineDegree; ++a) {
-    for (int c = 0; c <= kSplineDegree; ++c) {
-      const double coef = c_[(b0d.first + a) * nq_ + b0q.first + c];
-      slope0_d_ += coef * b0d.d1[a] * b0q.v[c];
-      slope0_q_ += coef * b0d.v[a] * b0q.d1[c];
-    }
+  if (f_.kind == Family::kSpline && static_cast<int>(p_.size()) == f_.NumParams()) {
+    spline_ = SplineSurface(f_.spline, p_.data());
   }
 }
 
 void SurfaceEvaluator::Eval(double id, double iq, double* psi_d, double* psi_q, double* ldd, double* lqq,
                             double* ldq) const {
-  if (f_.kind != Family::kSpline) {
-    if (psi_d != nullptr) FamilyFlux(f_, id, iq, p_.data(), psi_d, psi_q);
-    if (ldd != nullptr) FamilyInductance(f_, id, iq, p_.data(), ldd, lqq, ldq);
+  if (!spline_.empty()) {
+    spline_.Eval(id, iq, psi_d, psi_q, ldd, lqq, ldq);
     return;
   }
-  if (!std::isfinite(id) || !std::isfinite(iq)) {
-    for (double* out : {psi_d, psi_q, ldd, lqq, ldq}) {
-      if (out != nullptr) *out = std::numeric_limits<double>::quiet_NaN();
-    }
-    return;
-  }
-  // SplineFluxAndInductance's sums on the resolved coefficient grid, the
-  // origin's slopes from the constructor. The mirrored layout evaluates S
-  // at |iq| (psi_q, Ldq odd in iq; S_q(id, 0) = 0 by its constraint).
-  const SplineDomain& dom = f_.spline;
-  const bool mirrored = dom.mirrored && dom.smoothing && dom.symmetric;
-  const double sign = mirrored && iq < 0 ? -1.0 : 1.0;
-  const double q = mirrored ? std::abs(iq) : iq;
-  const double kW = kPolyL0H * kPolyI0A * kPolyI0A;
-  const Basis1d bd = EvalBasis(id, dom.id_lo_a, dom.id_hi_a, dom.spans);
-  const Basis1d bq = EvalBasis(q, dom.IqLo(), dom.iq_hi_a, dom.SpansQ());
-  double sd = 0, sq = 0, dd = 0, qq = 0, dq = 0;
-  for (int a = 0; a <= kSplineDegree; ++a) {
-    const double* row = &c_[(bd.first + a) * nq_ + bq.first];
-    for (int c = 0; c <= kSplineDegree; ++c) {
-      const double coef = row[c];
-      sd += coef * bd.d1[a] * bq.v[c];
-      sq += coef * bd.v[a] * bq.d1[c];
-      dd += coef * bd.d2[a] * bq.v[c];
-      qq += coef * bd.v[a] * bq.d2[c];
-      dq += coef * bd.d1[a] * bq.d1[c];
-    }
-  }
-  if (psi_d != nullptr) {
-    *psi_d = p_[0] + kW * (sd - slope0_d_);
-    *psi_q = sign * kW * (sq - (dom.Folded() || mirrored ? 0.0 : slope0_q_));
-  }
-  if (ldd != nullptr) {
-    *ldd = kW * dd;
-    *lqq = kW * qq;
-    *ldq = sign * kW * dq;
-  }
+  if (psi_d != nullptr) FamilyFlux(f_, id, iq, p_.data(), psi_d, psi_q);
+  if (ldd != nullptr) FamilyInductance(f_, id, iq, p_.data(), ldd, lqq, ldq);
 }
 
 Eigen::MatrixXd SmoothingPenalty(const Family& fam) {

@@ -29,11 +29,10 @@ struct SurfacePoint {
 SurfacePoint SurfaceAt(const Family& f, const double* params, double id_a, double iq_a);
 
 // A family's surfaces for fixed parameters, evaluated at many points (a
-// replay's Newton steps, a table's solver): for the spline family the
-// origin's terms (psi_d(0, 0) = psi_pm and, unfolded, psi_q(0, 0) = 0 pin
-// the co-energy's slope there) are computed once, and flux and inductance
-// come from one pair of basis evaluations. The same values as FamilyFlux
-// and FamilyInductance; null pointers skip an output.
+// replay's Newton steps): the spline family through SplineSurface
+// (flux_family.h, its one fast evaluation: the coefficient grid and the
+// origin's terms set up once), the others through FamilyFlux and
+// FamilyInductance. Null pointers skip an output.
 class SurfaceEvaluator {
  public:
   SurfaceEvaluator() = default;
@@ -43,11 +42,7 @@ class SurfaceEvaluator {
  private:
   Family f_;
   std::vector<double> p_;
-  // Spline: the full coefficient grid c[i * NumQ + j] (folded pairs and the
-  // mirrored layout's pivot resolved once) and S's slopes at the origin.
-  std::vector<double> c_;
-  int nq_ = 0;
-  double slope0_d_ = 0, slope0_q_ = 0;
+  SplineSurface spline_;
 };
 
 // Roughness of a smoothing-spline co-energy (fit.cc, where it is derived):

@@ -31,6 +31,14 @@ class MagneticModel {
   // Jacobian of Flux() with respect to (id, iq).
   virtual DifferentialInductance Inductance(double id_a, double iq_a,
                                             double temperature_c = 25.0) const = 0;
+  // Both at one point: what Newton steps on the surfaces need. A model
+  // whose two share work (a spline's basis) overrides it; the values are
+  // those of Flux() and Inductance().
+  virtual void FluxAndInductance(double id_a, double iq_a, double temperature_c, FluxLinkage* flux,
+                                 DifferentialInductance* inductance) const {
+    *flux = Flux(id_a, iq_a, temperature_c);
+    *inductance = Inductance(id_a, iq_a, temperature_c);
+  }
 };
 
 }  // namespace fluxcal::sim

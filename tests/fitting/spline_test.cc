@@ -8,6 +8,7 @@
 #include <set>
 #include <tuple>
 
+#include "fitting/calibration.h"
 #include "fitting/fit.h"
 #include "fitting/flux_family.h"
 #include "fitting/plot.h"
@@ -179,6 +180,53 @@ TEST(SplineFamily, MirroredLayoutIsConservativeEvenAndContinuous) {
       psi(id, iq - h, &c, &e);
       EXPECT_NEAR(ldq, (a - c) / (2 * h), 1e-7) << "reciprocity at " << id << ", " << iq;
       EXPECT_NEAR(lqq, (b - e) / (2 * h), 1e-7) << id << ", " << iq;
+    }
+  }
+}
+
+// The set-up-once surfaces a Calibration evaluates (SplineSurface) give the
+// family's values to the last bit, for the three layouts (folded spline<R>,
+// mirrored smooth, smooth-asym), inside and beyond the knots, through
+// Flux, Inductance and FluxAndInductance.
+TEST(SplineFamily, CalibrationSurfacesEqualTheFamilyExactly) {
+  std::vector<Family> families(3);
+  for (auto& f : families) f.kind = Family::kSpline;
+  families[0].spline = {3, -110, 8, 110};
+  for (int k : {1, 2}) {
+    SplineDomain& d = families[k].spline;
+    d.spans = 4;
+    d.id_lo_a = -110;
+    d.id_hi_a = 8;
+    d.smoothing = true;
+    d.spans_q = 6;
+    d.symmetric = k == 1;
+    d.mirrored = k == 1;
+    d.iq_lo_a = k == 1 ? -6 : -90;
+    d.iq_hi_a = 110;
+  }
+  std::mt19937_64 rng(11);
+  std::normal_distribution<double> nd(0, 1);
+  for (const Family& f : families) {
+    std::vector<double> p(f.NumParams());
+    p[0] = 0.0114;
+    for (size_t k = 1; k < p.size(); ++k) p[k] = nd(rng);
+    const Calibration cal("S", f, p, {}, 4, std::nullopt, -110, 8, 0, 110);
+    for (double id : {-150.0, -100.0, -37.0, 0.0, 6.0, 20.0}) {
+      for (double iq : {-140.0, -60.0, -0.5, 0.0, 0.7, 13.0, 55.0, 109.0, 130.0}) {
+        double d, q, ldd, lqq, ldq;
+        FamilyFlux(f, id, iq, p.data(), &d, &q);
+        FamilyInductance(f, id, iq, p.data(), &ldd, &lqq, &ldq);
+        const auto F = cal.Flux(id, iq);
+        const auto L = cal.Inductance(id, iq);
+        sim::FluxLinkage F2;
+        sim::DifferentialInductance L2;
+        cal.FluxAndInductance(id, iq, 25.0, &F2, &L2);
+        for (const auto& [x, y] : {std::pair{F.psi_d_wb, d}, {F.psi_q_wb, q}, {L.ldd_h, ldd}, {L.lqq_h, lqq},
+                                   {L.ldq_h, ldq}, {F2.psi_d_wb, d}, {F2.psi_q_wb, q}, {L2.ldd_h, ldd},
+                                   {L2.lqq_h, lqq}, {L2.ldq_h, ldq}}) {
+          EXPECT_EQ(x, y) << f.Name() << " at " << id << ", " << iq;
+        }
+      }
     }
   }
 }
