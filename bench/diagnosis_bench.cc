@@ -28,9 +28,7 @@ BENCHMARK(BM_Diagnose)->Unit(benchmark::kMillisecond);
 // catalogue's extensions, stepwise selection and held-out refits.
 void BM_DiagnoseEolExtensionsPair(benchmark::State& state) {
   fluxcal::sim::TwinConfig cfg;
-  // The repository's data/ beside bench/ (this file's own path).
-  std::string data = __FILE__;
-  data = data.substr(0, data.rfind("/bench/")) + "/data/";
+  const std::string data = std::string(FLUXCAL_SOURCE_DIR) + "/data/";
   if (!fluxcal::sim::LoadMotorJson(data + "motors/second_motor.json", &cfg).ok()) {
     state.SkipWithError("second_motor.json");
     return;
@@ -73,8 +71,7 @@ BENCHMARK(BM_DiagnoseOutsideTheCatalogue)->Unit(benchmark::kMillisecond);
 // (../shared/examples/real/baldor_bench_dead_time, beside the repository;
 // skipped without it): the set's own spline calibration as baseline.
 void BM_DiagnoseRealMagneticsBench(benchmark::State& state) {
-  std::string root = __FILE__;
-  root = root.substr(0, root.rfind("/bench/")) + "/../shared/examples/real/baldor_bench_dead_time";
+  const std::string root = std::string(FLUXCAL_SHARED_DIR) + "/examples/real/baldor_bench_dead_time";
   if (!std::filesystem::exists(root)) {
     state.SkipWithError("no ../shared/examples/real/baldor_bench_dead_time");
     return;

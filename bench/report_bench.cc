@@ -25,16 +25,9 @@ struct Fixture {
 const Fixture& Baldor() {
   static const Fixture f = [] {
     Fixture x;
-    // The repository's data/ beside bench/: this file's own path (relative
-    // to the build directory when the compiler was given a relative one),
-    // or run from the repository's root or its build directory.
-    std::string here = __FILE__;
-    here = here.substr(0, here.rfind("/bench/"));
-    absl::StatusOr<fluxcal::io::RecordingSet> set = absl::NotFoundError("data/real/baldor_eol");
-    for (const std::string& root : {here, std::string("."), std::string(".."), "../" + here}) {
-      set = fluxcal::io::ReadRecordingSet(root + "/data/real/baldor_eol");
-      if (set.ok()) break;
-    }
+    // The repository's data/ (FLUXCAL_SOURCE_DIR, bench/CMakeLists.txt).
+    absl::StatusOr<fluxcal::io::RecordingSet> set =
+        fluxcal::io::ReadRecordingSet(std::string(FLUXCAL_SOURCE_DIR) + "/data/real/baldor_eol");
     if (!set.ok()) return x;
     x.data = fluxcal::fit::FitDataFromRecording(*set, {});
     auto cal = fluxcal::fit::Fit(x.data);
