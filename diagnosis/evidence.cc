@@ -76,6 +76,18 @@ absl::StatusOr<std::vector<sim::ReplayPoint>> ReplayModel(const io::RecordingSet
   return sim::ReplayOpenLoop(set, model, opt);
 }
 
+bool ReplayRanAway(const io::Waveform& w, const sim::ReplayPoint& r) {
+  double rec_peak = 0, sim_peak = 0;
+  for (size_t s = 1; s < w.size() && s < r.ia_a.size(); ++s) {
+    for (double v : {w.ia_a[s], w.ib_a[s], w.ic_a[s]}) rec_peak = std::max(rec_peak, std::abs(v));
+    for (double v : {r.ia_a[s], r.ib_a[s], r.ic_a[s]}) {
+      if (!std::isfinite(v)) return true;
+      sim_peak = std::max(sim_peak, std::abs(v));
+    }
+  }
+  return sim_peak > 10.0 * rec_peak + 1.0;
+}
+
 double ReplaySpectrum(const io::RecordingSet& set, const std::vector<sim::ReplayPoint>& replay,
                       const std::vector<double>& freqs, std::vector<double>* spectrum) {
   spectrum->assign(freqs.size(), 0.0);
@@ -85,6 +97,7 @@ double ReplaySpectrum(const io::RecordingSet& set, const std::vector<sim::Replay
   for (size_t k = 0; k < replay.size(); ++k) {
     const auto& r = replay[k];
     const auto& w = set.waveforms[k];
+    if (ReplayRanAway(w, r)) continue;
     se += r.residual_rms_a * r.residual_rms_a * 3.0 * (w.size() - 1);
     n_all += 3 * (w.size() - 1);
     std::vector<Complex> e(w.size());

@@ -519,6 +519,11 @@ absl::StatusOr<std::vector<sim::ReplayPoint>> ReplayModel(const io::RecordingSet
 // The overall RMS of simulated minus recorded phase currents of a replay,
 // and the residual's spectrum at `freqs` (mean over points of |DFT| of the
 // complex alpha-beta residual, in A).
+// A replay that ran away (a model whose surfaces are not positive definite
+// where the recorded voltages drive it, integrated open loop) says nothing
+// about the recording: its currents non-finite or above ten times the
+// recorded peak. Such a point is left out of the spectra and the locator.
+bool ReplayRanAway(const io::Waveform& w, const sim::ReplayPoint& r);
 double ReplaySpectrum(const io::RecordingSet& set, const std::vector<sim::ReplayPoint>& replay,
                       const std::vector<double>& freqs, std::vector<double>* spectrum);
 

@@ -169,6 +169,7 @@ std::vector<WaveformPoint> AnalyseWaveforms(const io::RecordingSet& set, const s
     // Sample 0 is not simulated (ReplayOpenLoop).
     const size_t n = w.size() > 1 ? w.size() - 1 : 0;
     if (n < 64 || r.ia_a.size() != w.size()) continue;
+    if (ReplayRanAway(w, r)) continue;
     WaveformPoint wp;
     wp.point = mf.points[p].id;
     wp.index = p;
