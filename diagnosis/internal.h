@@ -26,6 +26,9 @@
 #include "simulation/effects.h"
 #include "simulation/frames.h"
 #include "simulation/twin.h"
+#include "physics/delay.h"
+#include "physics/inverter.h"
+#include "physics/torque.h"
 
 namespace fluxcal::diag::detail {
 
@@ -299,19 +302,10 @@ struct Model {
     *i1 = Complex(x(2), x(3));
   }
   // What an extra delay tau of the held (staircase) command does to the
-  // phasor of the *sampled* HF current. The current of an inductive load
-  // driven by a staircase is piecewise linear with corners at the steps; with
-  // tau = (n + a) T, 0 <= a < 1, each sample falls a fraction 1 - a into a
-  // segment, so the samples interpolate the undelayed corner values:
-  //   i(t_k) = (1 - a) i0(t_{k-n}) + a i0(t_{k-n-1})
-  //   => factor e^{-j w n T} ((1 - a) + a e^{-j w T}).
-  // Not the pure e^{-j w tau}: at half a sample the magnitude is
-  // cos(w T / 2) (-1.2 % at 500 Hz, 10 kHz), which would otherwise be fitted
-  // as a 1 % larger inductance. (R T / L << 1, as for any motor winding.)
-  Complex StaircaseDelay(double w, double tau_s) const {
-    const double q = tau_s / ts, n = std::floor(q), a = q - n;
-    return std::polar(1.0, -w * n * ts) * ((1.0 - a) + a * std::polar(1.0, -w * ts));
-  }
+  // phasor of the *sampled* HF current (physics/delay.h): not the pure
+  // e^{-j w tau}; at half a sample the magnitude is cos(w T / 2) (-1.2 % at
+  // 500 Hz, 10 kHz), which would otherwise be fitted as a 1 % larger inductance.
+  Complex StaircaseDelay(double w, double tau_s) const { return physics::StaircaseDelay(w, tau_s, ts); }
   void PredictHf(const double* const* p, const HfObs& o, Complex* i0, Complex* i1) const {
     const Complex rot = std::polar(1.0, AngleError(p, o.locked, o.theta));
     const Complex it = rot * Complex(o.id_a, o.iq_a);   // true-frame current
@@ -410,7 +404,7 @@ struct Model {
     const Complex im = MagnetisingCurrent(p, it, o.w_e, o.progress);
     double pd, pq;
     SteadyFlux(p, im, &pd, &pq, o.progress);
-    return 1.5 * pole_pairs * (pd * im.imag() - pq * im.real());
+    return physics::ElectromagneticTorque(pole_pairs, pd, pq, im.real(), im.imag());
   }
 };
 
@@ -491,7 +485,11 @@ bool PracticallySignificant(const std::vector<Z>& before, const std::vector<Z>& 
 
 // ---- observations.cc --------------------------------------------------------
 Complex DeadTimeUnit(double ia, double ib, double ic, double udc, double ts, double ith_a = kIth);
-double MeanSoftSign(double i0, double i1, double ith_a = kIth);
+// Mean of tanh(i / i_th) over a PWM period in which the current moves
+// linearly from i0 to i1 (physics/inverter.h). The HF ripple moves a phase
+// current by ~2 A within one period, as much as the soft-sign width, so the
+// start-of-period sample is not enough.
+inline double MeanSoftSign(double i0, double i1, double ith_a = kIth) { return physics::MeanSoftSign(i0, i1, ith_a); }
 absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident::HfPointResult>* ids);
 // (Re)computes every observation's dead-time and switch-threshold
 // signatures (dead*, dead_*_v) with the soft sign tanh(i / ith_a) and sets
