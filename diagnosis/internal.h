@@ -27,6 +27,7 @@
 #include "simulation/frames.h"
 #include "simulation/twin.h"
 #include "physics/delay.h"
+#include "physics/hf.h"
 #include "physics/inverter.h"
 #include "physics/torque.h"
 
@@ -264,42 +265,10 @@ struct Model {
   }
 
   // Eqs. (E1)-(E2) of identification/inductance.h with a voltage on both
-  // sequences: V = R I0 + j w (S I0 + D conj(I1)), Vn = R I1 + j w2 (S I1 + D conj(I0)).
-  // The magnetising branch at angular frequency w, exactly: jwL alone, or
-  // with iron loss (g = 1 / R_fe > 0) in parallel, jwL (I + jw g L)^-1 (a
-  // complex symmetric matrix; it commutes with L). A symmetric 2x2 matrix M
-  // acts on a sequence's phasor as S_M I + D_M conj(I_other) with
-  // S_M = (M_dd + M_qq) / 2, D_M = (M_dd - M_qq) / 2 + j M_dq, complex entries
-  // included (derivation: docs/diagnosis.md, "Iron loss").
-  static void BranchSD(double ldd, double lqq, double ldq, double w, double g, Complex* S, Complex* D) {
-    const Complex j(0.0, 1.0);
-    Complex mdd = j * w * ldd, mqq = j * w * lqq, mdq = j * w * ldq;
-    if (g != 0.0) {
-      // N = I + jw g L; M = jwL N^-1.
-      const Complex a = 1.0 + j * w * g * ldd, b = j * w * g * ldq, d = 1.0 + j * w * g * lqq;
-      const Complex det = a * d - b * b;
-      const Complex ia = d / det, ib = -b / det, id = a / det;
-      const Complex ndd = mdd * ia + mdq * ib, ndq = mdd * ib + mdq * id, nqq = mdq * ib + mqq * id;
-      mdd = ndd; mdq = ndq; mqq = nqq;
-    }
-    *S = 0.5 * (mdd + mqq);
-    *D = 0.5 * (mdd - mqq) + j * mdq;
-  }
+  // sequences and the magnetising branch with iron loss (physics/hf.h).
   void SolvePhasors(double ldd, double lqq, double ldq, double r, Complex v, Complex vn, double w_e,
                     Complex* i0, Complex* i1, double g_fe = 0.0) const {
-    const double w2 = 2.0 * w_e - w_i;
-    Complex S1, D1, S2, D2;
-    BranchSD(ldd, lqq, ldq, w_i, g_fe, &S1, &D1);
-    BranchSD(ldd, lqq, ldq, w2, g_fe, &S2, &D2);
-    const Complex a1 = r + S1, b1 = D1, a2 = r + S2, b2 = D2;
-    Eigen::Matrix4d A;
-    A << a1.real(), -a1.imag(), b1.real(), b1.imag(),
-         a1.imag(), a1.real(), b1.imag(), -b1.real(),
-         b2.real(), b2.imag(), a2.real(), -a2.imag(),
-         b2.imag(), -b2.real(), a2.imag(), a2.real();
-    const Eigen::Vector4d x = A.partialPivLu().solve(Eigen::Vector4d(v.real(), v.imag(), vn.real(), vn.imag()));
-    *i0 = Complex(x(0), x(1));
-    *i1 = Complex(x(2), x(3));
+    physics::SolveHfPhasors(ldd, lqq, ldq, r, v, vn, w_i, w_e, g_fe, i0, i1);
   }
   // What an extra delay tau of the held (staircase) command does to the
   // phasor of the *sampled* HF current (physics/delay.h): not the pure

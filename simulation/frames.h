@@ -16,8 +16,7 @@ namespace fluxcal::sim {
 
 using physics::kPi;
 using physics::kSqrt3;
-// Temperature coefficient of copper resistance at 20-25 degC [1/K].
-inline constexpr double kCopperAlphaPerK = 0.00393;
+using physics::kCopperAlphaPerK;
 
 using AlphaBeta = physics::AlphaBeta<double>;
 using Phases = physics::Phases<double>;

@@ -11,6 +11,7 @@
 #include "physics/constants.h"
 #include "physics/delay.h"
 #include "physics/frames.h"
+#include "physics/hf.h"
 #include "physics/inverter.h"
 #include "physics/speed.h"
 #include "physics/torque.h"
@@ -124,6 +125,48 @@ TEST(Delay, ZohGainIsTheMeanOfTheRotatingVectorOverAPeriod) {
   EXPECT_NEAR(std::abs(mean), ZohGain(w, T), 1e-9);
   EXPECT_EQ(ZohGain(0.0, T), 1.0);
   EXPECT_DOUBLE_EQ(ControlDelayAngle(w, T), 1.5 * w * T);
+}
+
+TEST(Delay, StaircaseDelayOfTheSampledCurrent) {
+  const double w = 2 * kPi * 500, T = 1e-4;
+  // Whole periods: the pure rotation e^{-j w n T}.
+  EXPECT_NEAR(std::abs(StaircaseDelay(w, 2 * T, T) - std::polar(1.0, -2 * w * T)), 0.0, 1e-12);
+  // Half a period: the mean of two corners, magnitude cos(w T / 2), phase -w T / 2.
+  const std::complex<double> h = StaircaseDelay(w, 0.5 * T, T);
+  EXPECT_NEAR(std::abs(h), std::cos(0.5 * w * T), 1e-12);
+  EXPECT_NEAR(std::arg(h), -0.5 * w * T, 1e-12);
+}
+
+TEST(Hf, PhasorsSolveE1E2) {
+  // Without iron loss the branch is j w L: S = j w (Ldd + Lqq)/2,
+  // D = j w ((Ldd - Lqq)/2 + j Ldq); the phasors must satisfy (E1)-(E2).
+  const double ldd = 1.8e-4, lqq = 3.6e-4, ldq = 1e-5, r = 0.02, wi = 2 * kPi * 500;
+  const std::complex<double> j(0, 1), v(5.0, 0.3), vn(0.2, -0.1);
+  for (double we : {0.0, 400.0}) {
+    std::complex<double> i0, i1;
+    SolveHfPhasors(ldd, lqq, ldq, r, v, vn, wi, we, 0.0, &i0, &i1);
+    const double w2 = 2 * we - wi;
+    const std::complex<double> s = 0.5 * (ldd + lqq), d(0.5 * (ldd - lqq), ldq);
+    const std::complex<double> e1 = r * i0 + j * wi * (s * i0 + d * std::conj(i1));
+    const std::complex<double> e2 = r * i1 + j * w2 * (s * i1 + d * std::conj(i0));
+    EXPECT_NEAR(std::abs(e1 - v), 0.0, 1e-9 * std::abs(v)) << we;
+    EXPECT_NEAR(std::abs(e2 - vn), 0.0, 1e-9 * std::abs(v)) << we;
+  }
+  // The paper's eq. (8) at standstill, R = 0, Ldq = 0: |I0| + |I1| = V / (w Ldd).
+  std::complex<double> i0, i1;
+  SolveHfPhasors(ldd, lqq, 0.0, 0.0, v, 0.0, wi, 0.0, 0.0, &i0, &i1);
+  EXPECT_NEAR(std::abs(i0) + std::abs(i1), std::abs(v) / (wi * ldd), 1e-9 * std::abs(i0));
+  EXPECT_NEAR(std::abs(i0) - std::abs(i1), std::abs(v) / (wi * lqq), 1e-9 * std::abs(i0));
+}
+
+TEST(Hf, IronLossBranchOfAnIsotropicMachine) {
+  // L = l I: M = j w l / (1 + j w g l), S = M, D = 0.
+  const double l = 2e-4, w = 2 * kPi * 800, g = 0.05;
+  std::complex<double> s, d;
+  HfBranch(l, l, 0.0, w, g, &s, &d);
+  const std::complex<double> j(0, 1), m = j * w * l / (1.0 + j * w * g * l);
+  EXPECT_NEAR(std::abs(s - m), 0.0, 1e-12 * std::abs(m));
+  EXPECT_NEAR(std::abs(d), 0.0, 1e-12 * std::abs(m));
 }
 
 TEST(Jet, EveryTemplateDifferentiates) {
