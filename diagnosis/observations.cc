@@ -19,10 +19,8 @@ namespace fluxcal::diag::detail {
 // units: (Udc/Ts) Clarke(tanh(i_x / i_th)) -- the command must add this to
 // hold the current when Td is not compensated.
 Complex DeadTimeUnit(double ia, double ib, double ic, double udc, double ts, double ith_a) {
-  const double k = udc / ts;
-  const double ea = k * physics::SoftSign(ia, ith_a), eb = k * physics::SoftSign(ib, ith_a),
-               ec = k * physics::SoftSign(ic, ith_a);
-  return sim::ClarkeComplex(ea, eb, ec);
+  const sim::AlphaBeta e = physics::SoftSignVector(ia, ib, ic, udc / ts, ith_a);
+  return Complex(e.alpha, e.beta);
 }
 
 namespace {

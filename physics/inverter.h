@@ -12,6 +12,8 @@
 
 #include <cmath>
 
+#include "physics/frames.h"
+
 namespace fluxcal::physics {
 
 // The soft sign tanh(i / i_th) of a phase current.
@@ -26,6 +28,15 @@ template <typename T>
 T DeadTimePhaseError(const T& i_a, double dead_time_s, double ts_s, double udc_v, double threshold_v,
                      double i_th_a) {
   return -((dead_time_s / ts_s) * udc_v + threshold_v) * SoftSign(i_a, i_th_a);
+}
+// The alpha-beta vector (amplitude-invariant Clarke) of the per-phase
+// voltages gain tanh(i_x / i_th): with gain -((Td / Ts) Udc + V_th) the
+// inverter's error vector; with gain Udc / Ts its signature per second of
+// dead time.
+template <typename T>
+AlphaBeta<T> SoftSignVector(const T& ia, const T& ib, const T& ic, double gain, double i_th_a) {
+  const T ea = gain * SoftSign(ia, i_th_a), eb = gain * SoftSign(ib, i_th_a), ec = gain * SoftSign(ic, i_th_a);
+  return Clarke(ea, eb, ec);
 }
 // Mean of the soft sign over a linear current ramp i0 -> i1 (see above);
 // ln cosh written as |x| + log1p(e^{-2|x|}) - ln 2 to stay finite.

@@ -6,10 +6,7 @@ namespace fluxcal::sim {
 void DeadTimeError(const PlantModel& m, double ia, double ib, double ic, double* ua, double* ub) {
   if (m.dead_time_s == 0.0 && m.threshold_v == 0.0) { *ua = *ub = 0; return; }
   const double k = -((m.dead_time_s / m.ts_s) * m.udc_v + m.threshold_v);
-  const double ea = k * physics::SoftSign(ia, m.dead_time_i_th_a);
-  const double eb = k * physics::SoftSign(ib, m.dead_time_i_th_a);
-  const double ec = k * physics::SoftSign(ic, m.dead_time_i_th_a);
-  const AlphaBeta e = Clarke(ea, eb, ec);
+  const AlphaBeta e = physics::SoftSignVector(ia, ib, ic, k, m.dead_time_i_th_a);
   *ua = e.alpha;
   *ub = e.beta;
 }

@@ -115,6 +115,10 @@ TEST(Inverter, SoftSignAndItsMeanOverARamp) {
   for (int k = 0; k < n; ++k) mean += std::tanh((i0 + (i1 - i0) * (k + 0.5) / n) / ith) / n;
   EXPECT_NEAR(MeanSoftSign(i0, i1, ith), mean, 1e-8);
   EXPECT_NEAR(MeanSoftSign(0.2, 0.2, ith), std::tanh(0.2 / ith), 1e-12);
+  // Far from zero current the vector is the hard-sign one: gain x Clarke(sign).
+  const AlphaBeta<double> e = SoftSignVector(30.0, -12.0, -18.0, 2.0, 0.5);
+  EXPECT_NEAR(e.alpha, 2.0 * 4.0 / 3.0, 1e-9);
+  EXPECT_NEAR(e.beta, 0.0, 1e-9);
 }
 
 TEST(Delay, ZohGainIsTheMeanOfTheRotatingVectorOverAPeriod) {
