@@ -103,7 +103,7 @@ double ReplaySpectrum(const io::RecordingSet& set, const std::vector<sim::Replay
     std::vector<Complex> e(w.size());
     for (size_t s = 1; s < w.size(); ++s) {
       const double ea = r.ia_a[s] - w.ia_a[s], eb = r.ib_a[s] - w.ib_a[s], ec = r.ic_a[s] - w.ic_a[s];
-      e[s] = Complex((2 * ea - eb - ec) / 3.0, (eb - ec) / kSqrt3);
+      e[s] = sim::ClarkeComplex(ea, eb, ec);
     }
     for (size_t f = 0; f < freqs.size(); ++f) {
       // DFT bin by a rotating phasor (recurrence, renormalised).

@@ -26,6 +26,10 @@
 #include "simulation/effects.h"
 #include "simulation/frames.h"
 #include "simulation/twin.h"
+#include "physics/delay.h"
+#include "physics/hf.h"
+#include "physics/inverter.h"
+#include "physics/torque.h"
 
 namespace fluxcal::diag::detail {
 
@@ -261,57 +265,16 @@ struct Model {
   }
 
   // Eqs. (E1)-(E2) of identification/inductance.h with a voltage on both
-  // sequences: V = R I0 + j w (S I0 + D conj(I1)), Vn = R I1 + j w2 (S I1 + D conj(I0)).
-  // The magnetising branch at angular frequency w, exactly: jwL alone, or
-  // with iron loss (g = 1 / R_fe > 0) in parallel, jwL (I + jw g L)^-1 (a
-  // complex symmetric matrix; it commutes with L). A symmetric 2x2 matrix M
-  // acts on a sequence's phasor as S_M I + D_M conj(I_other) with
-  // S_M = (M_dd + M_qq) / 2, D_M = (M_dd - M_qq) / 2 + j M_dq, complex entries
-  // included (derivation: docs/diagnosis.md, "Iron loss").
-  static void BranchSD(double ldd, double lqq, double ldq, double w, double g, Complex* S, Complex* D) {
-    const Complex j(0.0, 1.0);
-    Complex mdd = j * w * ldd, mqq = j * w * lqq, mdq = j * w * ldq;
-    if (g != 0.0) {
-      // N = I + jw g L; M = jwL N^-1.
-      const Complex a = 1.0 + j * w * g * ldd, b = j * w * g * ldq, d = 1.0 + j * w * g * lqq;
-      const Complex det = a * d - b * b;
-      const Complex ia = d / det, ib = -b / det, id = a / det;
-      const Complex ndd = mdd * ia + mdq * ib, ndq = mdd * ib + mdq * id, nqq = mdq * ib + mqq * id;
-      mdd = ndd; mdq = ndq; mqq = nqq;
-    }
-    *S = 0.5 * (mdd + mqq);
-    *D = 0.5 * (mdd - mqq) + j * mdq;
-  }
+  // sequences and the magnetising branch with iron loss (physics/hf.h).
   void SolvePhasors(double ldd, double lqq, double ldq, double r, Complex v, Complex vn, double w_e,
                     Complex* i0, Complex* i1, double g_fe = 0.0) const {
-    const double w2 = 2.0 * w_e - w_i;
-    Complex S1, D1, S2, D2;
-    BranchSD(ldd, lqq, ldq, w_i, g_fe, &S1, &D1);
-    BranchSD(ldd, lqq, ldq, w2, g_fe, &S2, &D2);
-    const Complex a1 = r + S1, b1 = D1, a2 = r + S2, b2 = D2;
-    Eigen::Matrix4d A;
-    A << a1.real(), -a1.imag(), b1.real(), b1.imag(),
-         a1.imag(), a1.real(), b1.imag(), -b1.real(),
-         b2.real(), b2.imag(), a2.real(), -a2.imag(),
-         b2.imag(), -b2.real(), a2.imag(), a2.real();
-    const Eigen::Vector4d x = A.partialPivLu().solve(Eigen::Vector4d(v.real(), v.imag(), vn.real(), vn.imag()));
-    *i0 = Complex(x(0), x(1));
-    *i1 = Complex(x(2), x(3));
+    physics::SolveHfPhasors(ldd, lqq, ldq, r, v, vn, w_i, w_e, g_fe, i0, i1);
   }
   // What an extra delay tau of the held (staircase) command does to the
-  // phasor of the *sampled* HF current. The current of an inductive load
-  // driven by a staircase is piecewise linear with corners at the steps; with
-  // tau = (n + a) T, 0 <= a < 1, each sample falls a fraction 1 - a into a
-  // segment, so the samples interpolate the undelayed corner values:
-  //   i(t_k) = (1 - a) i0(t_{k-n}) + a i0(t_{k-n-1})
-  //   => factor e^{-j w n T} ((1 - a) + a e^{-j w T}).
-  // Not the pure e^{-j w tau}: at half a sample the magnitude is
-  // cos(w T / 2) (-1.2 % at 500 Hz, 10 kHz), which would otherwise be fitted
-  // as a 1 % larger inductance. (R T / L << 1, as for any motor winding.)
-  Complex StaircaseDelay(double w, double tau_s) const {
-    const double q = tau_s / ts, n = std::floor(q), a = q - n;
-    return std::polar(1.0, -w * n * ts) * ((1.0 - a) + a * std::polar(1.0, -w * ts));
-  }
+  // phasor of the *sampled* HF current (physics/delay.h): not the pure
+  // e^{-j w tau}; at half a sample the magnitude is cos(w T / 2) (-1.2 % at
+  // 500 Hz, 10 kHz), which would otherwise be fitted as a 1 % larger inductance.
+  Complex StaircaseDelay(double w, double tau_s) const { return physics::StaircaseDelay(w, tau_s, ts); }
   void PredictHf(const double* const* p, const HfObs& o, Complex* i0, Complex* i1) const {
     const Complex rot = std::polar(1.0, AngleError(p, o.locked, o.theta));
     const Complex it = rot * Complex(o.id_a, o.iq_a);   // true-frame current
@@ -410,7 +373,7 @@ struct Model {
     const Complex im = MagnetisingCurrent(p, it, o.w_e, o.progress);
     double pd, pq;
     SteadyFlux(p, im, &pd, &pq, o.progress);
-    return 1.5 * pole_pairs * (pd * im.imag() - pq * im.real());
+    return physics::ElectromagneticTorque(pole_pairs, pd, pq, im.real(), im.imag());
   }
 };
 
@@ -491,7 +454,11 @@ bool PracticallySignificant(const std::vector<Z>& before, const std::vector<Z>& 
 
 // ---- observations.cc --------------------------------------------------------
 Complex DeadTimeUnit(double ia, double ib, double ic, double udc, double ts, double ith_a = kIth);
-double MeanSoftSign(double i0, double i1, double ith_a = kIth);
+// Mean of tanh(i / i_th) over a PWM period in which the current moves
+// linearly from i0 to i1 (physics/inverter.h). The HF ripple moves a phase
+// current by ~2 A within one period, as much as the soft-sign width, so the
+// start-of-period sample is not enough.
+inline double MeanSoftSign(double i0, double i1, double ith_a = kIth) { return physics::MeanSoftSign(i0, i1, ith_a); }
 absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident::HfPointResult>* ids);
 // (Re)computes every observation's dead-time and switch-threshold
 // signatures (dead*, dead_*_v) with the soft sign tanh(i / ith_a) and sets

@@ -10,6 +10,8 @@
 #include "absl/strings/str_format.h"
 #include "identification/demod.h"
 #include "identification/inductance.h"
+#include "physics/inverter.h"
+#include "physics/speed.h"
 
 namespace fluxcal::diag::detail {
 
@@ -17,20 +19,8 @@ namespace fluxcal::diag::detail {
 // units: (Udc/Ts) Clarke(tanh(i_x / i_th)) -- the command must add this to
 // hold the current when Td is not compensated.
 Complex DeadTimeUnit(double ia, double ib, double ic, double udc, double ts, double ith_a) {
-  const double k = udc / ts;
-  const double ea = k * std::tanh(ia / ith_a), eb = k * std::tanh(ib / ith_a), ec = k * std::tanh(ic / ith_a);
-  return Complex((2 * ea - eb - ec) / 3.0, (eb - ec) / kSqrt3);
-}
-
-// Mean of tanh(i/i_th) over a PWM period in which the current moves
-// linearly from i0 to i1: (i_th / (i1 - i0)) [ln cosh(i1/i_th) - ln cosh(i0/i_th)].
-// The HF ripple moves a phase current by ~2 A within one period, as much as
-// the soft-sign width, so the start-of-period sample is not enough.
-double MeanSoftSign(double i0, double i1, double ith_a) {
-  const double d = i1 - i0;
-  auto lc = [](double x) { const double a = std::abs(x); return a + std::log1p(std::exp(-2 * a)) - std::log(2.0); };
-  if (std::abs(d) < 1e-6 * ith_a) return std::tanh(0.5 * (i0 + i1) / ith_a);
-  return ith_a / d * (lc(i1 / ith_a) - lc(i0 / ith_a));
+  const sim::AlphaBeta e = physics::SoftSignVector(ia, ib, ic, udc / ts, ith_a);
+  return Complex(e.alpha, e.beta);
 }
 
 namespace {
@@ -40,7 +30,7 @@ Complex DeadTimeInterval(const io::Waveform& w, size_t s, double udc, double ts,
   const double k = udc / ts;
   const double ea = k * MeanSoftSign(w.ia_a[s], w.ia_a[e], ith_a), eb = k * MeanSoftSign(w.ib_a[s], w.ib_a[e], ith_a),
                ec = k * MeanSoftSign(w.ic_a[s], w.ic_a[e], ith_a);
-  return Complex((2 * ea - eb - ec) / 3.0, (eb - ec) / kSqrt3);
+  return sim::ClarkeComplex(ea, eb, ec);
 }
 
 }  // namespace
@@ -141,7 +131,7 @@ absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident:
     o.point = id.point;
     o.id_a = id.id_a; o.iq_a = id.iq_a;
     o.speed_rpm = std::abs(id.speed_rpm) < 5 ? 0.0 : id.speed_rpm;
-    o.w_e = o.speed_rpm == 0 ? 0.0 : id.speed_rpm * m.pole_pairs * 2 * kPi / 60;
+    o.w_e = o.speed_rpm == 0 ? 0.0 : physics::RpmToElectricalRadS(id.speed_rpm, m.pole_pairs);
     o.locked = o.speed_rpm == 0;
     o.theta = w.theta_e_rad[0];
     // The manifest lists points in recording order.
@@ -219,7 +209,7 @@ absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident:
     o.progress = set.steady_state.size() > 1 ? static_cast<double>(r) / static_cast<double>(set.steady_state.size() - 1)
                                              : 0.5;
     o.id_a = row.id_a; o.iq_a = row.iq_a; o.speed_rpm = row.speed_rpm;
-    o.w_e = row.speed_rpm * m.pole_pairs * 2 * kPi / 60;
+    o.w_e = physics::RpmToElectricalRadS(row.speed_rpm, m.pole_pairs);
     o.u = sim::ZohGain(o.w_e, m.ts) * Complex(row.ud_ref_v, row.uq_ref_v);
     o.scale = std::abs(o.u);
     // 20 mV and 0.3 % of the voltage: averaged commands, nominal Rs and

@@ -11,6 +11,7 @@
 #include "absl/strings/str_format.h"
 #include "io/csv.h"
 #include "nlohmann/json.hpp"
+#include "physics/torque.h"
 
 namespace fluxcal::fit {
 
@@ -175,7 +176,7 @@ FluxPrediction Calibration::Predict(double id, double iq) const {
     y[0] = pd; y[1] = pq; y[2] = a; y[3] = b; y[4] = c;
     y[5] = std::abs(id) > 1e-9 ? (pd - p[0]) / id : a;
     y[6] = std::abs(iq) > 1e-9 ? pq / iq : b;
-    y[7] = 1.5 * pole_pairs_ * (pd * iq - pq * id);
+    y[7] = physics::ElectromagneticTorque(pole_pairs_, pd, pq, id, iq);
   };
   double y[8];
   eval(params_, y);

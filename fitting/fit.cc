@@ -21,6 +21,9 @@
 #include "identification/identify.h"
 #include "io/flux_map.h"
 #include "fitting/surface.h"
+#include "physics/delay.h"
+#include "physics/speed.h"
+#include "physics/torque.h"
 
 namespace fluxcal::fit {
 namespace {
@@ -169,7 +172,7 @@ class TorqueResidual {
     const T* p = pp[0];
     T pd, pq;
     FamilyFlux(f_, T(id_), T(iq_), p, &pd, &pq);
-    r[0] = (1.5 * pp_ * (pd * iq_ - pq * id_) - v_) / s_;
+    r[0] = (physics::ElectromagneticTorque(pp_, pd, pq, id_, iq_) - v_) / s_;
     return true;
   }
  private:
@@ -249,7 +252,7 @@ double DataFluxScaleWb(const FitData& d) {
 // torque: voltage noise ~0.05 V plus 0.5 % for the nominal Rs and delay
 // model; a torque transducer's 0.02 N m plus 0.5 %.
 double RowFluxSigmaWb(double speed_rpm, int pole_pairs, double psi_d_wb, double psi_q_wb) {
-  const double we = std::abs(speed_rpm) * pole_pairs * 2 * kPi / 60.0;
+  const double we = physics::RpmToElectricalRadS(std::abs(speed_rpm), pole_pairs);
   return 0.05 / std::max(we, 1.0) + 0.005 * std::hypot(psi_d_wb, psi_q_wb);
 }
 double RowTorqueSigmaNm(double torque_nm) { return 0.02 + 0.005 * std::abs(torque_nm); }
@@ -751,13 +754,12 @@ Solved Solve(const Family& fam, const FitData& d, const FitOptions& o, const Eig
 void SteadyStateFlux(const SteadyStateObservation& s, int pole_pairs, std::optional<double> rs, double f_pwm_hz,
                      double* psi_d, double* psi_q) {
   const double rs_ohm = rs.value_or(0.0);   // unknown: the drop Rs i neglected (fit.h)
-  const double we = s.speed_rpm * pole_pairs * 2 * kPi / 60.0;
+  const double we = physics::RpmToElectricalRadS(s.speed_rpm, pole_pairs);
   // steady_state.csv holds the fundamental dq command of a delay-compensated
   // controller (inverse Park at theta + 1.5 w_e Ts); the zero-order hold
   // still scales the fundamental the machine sees by sin(x)/x, x = w_e Ts/2
   // (identification/demod.h, eq. (V1)); 3e-4 at 2000 rpm, 4 pole pairs.
-  const double ts = 1.0 / f_pwm_hz, x = 0.5 * we * ts;
-  const double g = std::abs(x) < 1e-12 ? 1.0 : std::sin(x) / x;
+  const double g = physics::ZohGain(we, 1.0 / f_pwm_hz);
   const std::complex<double> u = std::complex<double>(s.ud_ref_v, s.uq_ref_v) * g;
   *psi_d = (u.imag() - rs_ohm * s.iq_a) / we;
   *psi_q = -(u.real() - rs_ohm * s.id_a) / we;
@@ -873,7 +875,7 @@ void ScreenRowsByTorque(FitData& d, std::vector<size_t>* input_index, std::vecto
     if (!s.torque_nm) continue;
     double pd, pq;
     SteadyStateFlux(s, d.pole_pairs, d.rs_ohm, d.f_pwm_hz, &pd, &pq);
-    const double t_u = 1.5 * d.pole_pairs * (pd * s.iq_a - pq * s.id_a);
+    const double t_u = physics::ElectromagneticTorque(d.pole_pairs, pd, pq, s.id_a, s.iq_a);
     const double s_t_u = 1.5 * d.pole_pairs * std::hypot(s.id_a, s.iq_a) *
                          RowFluxSigmaWb(s.speed_rpm, d.pole_pairs, pd, pq);
     const double sigma = std::hypot(RowTorqueSigmaNm(*s.torque_nm), s_t_u);

@@ -9,11 +9,11 @@
 
 #include "absl/strings/str_cat.h"
 #include "identification/demod_kernels.h"
+#include "physics/delay.h"
 
 namespace fluxcal::ident {
 namespace {
 
-constexpr double kSqrt3 = 1.7320508075688772935;
 constexpr double kTwoPi = 2.0 * std::numbers::pi;
 
 absl::Status CheckRates(const PhaseSamples& s) {
@@ -187,9 +187,7 @@ absl::StatusOr<VoltageEstimate> FitCommandVoltage(const double* ualpha_v, const 
 
 Complex EffectiveVoltage(Complex v_cmd_v, double w_rad_s, double f_pwm_hz) {
   const double T = 1.0 / f_pwm_hz;
-  const double xx = 0.5 * w_rad_s * T;
-  const double gain = std::abs(xx) < 1e-12 ? 1.0 : xx / std::sin(xx);
-  return v_cmd_v * std::polar(gain, -1.5 * w_rad_s * T);
+  return v_cmd_v * std::polar(1.0 / physics::ZohGain(w_rad_s, T), -physics::ControlDelayAngle(w_rad_s, T));
 }
 
 }  // namespace fluxcal::ident

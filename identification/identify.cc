@@ -9,6 +9,7 @@
 #include "absl/strings/str_format.h"
 #include "identification/demod.h"
 #include "identification/inductance.h"
+#include "physics/speed.h"
 
 namespace fluxcal::ident {
 namespace {
@@ -91,7 +92,7 @@ absl::StatusOr<HfPointResult> IdentifyPoint(const io::RecordingSet& set, size_t 
   r.point = spec.id;
   r.id_a = lsq->fundamental_dq_a.real();
   r.iq_a = lsq->fundamental_dq_a.imag();
-  r.speed_rpm = lsq->w_e_rad_s / m.motor.pole_pairs * 60.0 / kTwoPi;
+  r.speed_rpm = physics::ElectricalRadSToRpm(lsq->w_e_rad_s, m.motor.pole_pairs);
   r.temperature_c = spec.temperature_c.value_or(25.0);
   r.v_eff_v = v_eff;
   r.periods_used = lsq->periods_used;

@@ -5,6 +5,7 @@
 #include <Eigen/Dense>
 
 #include "absl/strings/str_cat.h"
+#include "physics/hf.h"
 
 namespace fluxcal::ident {
 namespace {
@@ -104,25 +105,8 @@ absl::StatusOr<HfInductance> PaperInductance(Complex i0, Complex i1, double v, d
 
 void PredictPhasors(double ldd, double lqq, double ldq, double r, Complex v, double w,
                     double w_e, Complex* i0, Complex* i1) {
-  // Unknowns (Re I0, Im I0, Re I1, Im I1); (E1)-(E2) are real-linear in them.
-  const Complex j(0.0, 1.0);
-  const double S = 0.5 * (ldd + lqq);
-  const Complex D(0.5 * (ldd - lqq), ldq);
-  const double w2 = 2.0 * w_e - w;
-  // E1: (R + j w S) I0 + j w D conj(I1) = V;  E2: (R + j w2 S) I1 + j w2 D conj(I0) = 0.
-  const Complex a1 = r + j * w * S, b1 = j * w * D;
-  const Complex a2 = r + j * w2 * S, b2 = j * w2 * D;
-  Eigen::Matrix4d A;
-  // a*X for X = xr + j xi: real [a_r, -a_i], imag [a_i, a_r];
-  // b*conj(X): real [b_r, b_i], imag [b_i, -b_r].
-  A << a1.real(), -a1.imag(), b1.real(), b1.imag(),
-       a1.imag(), a1.real(), b1.imag(), -b1.real(),
-       b2.real(), b2.imag(), a2.real(), -a2.imag(),
-       b2.imag(), -b2.real(), a2.imag(), a2.real();
-  const Eigen::Vector4d rhs(v.real(), v.imag(), 0, 0);
-  const Eigen::Vector4d x = A.fullPivLu().solve(rhs);
-  *i0 = Complex(x(0), x(1));
-  *i1 = Complex(x(2), x(3));
+  // (E1)-(E2) without iron loss and without a negative-sequence voltage.
+  physics::SolveHfPhasors(ldd, lqq, ldq, r, v, 0.0, w, w_e, 0.0, i0, i1);
 }
 
 }  // namespace fluxcal::ident

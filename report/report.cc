@@ -16,11 +16,11 @@
 #include "report/format.h"
 #include "tables/export_rule.h"
 #include "tables/tables.h"
+#include "physics/speed.h"
 
 namespace fluxcal::report {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
 
 std::string H(const std::string& s) { return plot::Escape(s); }   // HTML text escape
 
@@ -628,7 +628,7 @@ void QuantityFigure(Page* page, const fit::Calibration& cal, const fit::FitData*
                       (drawn & 6u) ? absl::StrCat(" ", H(cov.OtherHalf()), ".") : std::string()));
 }
 
-double SpeedRpm(double we_rad_s, int pole_pairs) { return we_rad_s / pole_pairs * 60 / (2 * kPi); }
+double SpeedRpm(double we_rad_s, int pole_pairs) { return physics::ElectricalRadSToRpm(we_rad_s, pole_pairs); }
 
 // ------------------------------------------------------------ model table
 
@@ -791,7 +791,7 @@ absl::StatusOr<Report> BuildReport(const ReportInputs& in) {
     }
   }
   rep.ellipse_speed_rpm = ell_rpm;
-  const double ell_we = ell_rpm * lim.pole_pairs * 2 * kPi / 60;
+  const double ell_we = physics::RpmToElectricalRadS(ell_rpm, lim.pole_pairs);
   const PdScan pd = ScanPositiveDefinite(cal, cov);
 
   // ------------------------------------------------------------ identity
@@ -1043,7 +1043,7 @@ absl::StatusOr<Report> BuildReport(const ReportInputs& in) {
       op0[d] = tables::SolveLeastCurrent(cal, lim, dir * t0[d], 0.0);
     }
     for (size_t j = 0; j < n.size(); ++j) {
-      const double we = n[j] * lim.pole_pairs * 2 * kPi / 60;
+      const double we = physics::RpmToElectricalRadS(n[j], lim.pole_pairs);
       for (int dir : {1, -1}) {
         double t = 0;
         Source src = Source::kMeasured;
@@ -1102,8 +1102,8 @@ absl::StatusOr<Report> BuildReport(const ReportInputs& in) {
     std::vector<double> pm, pg;
     for (size_t j = 0; j < n.size(); ++j) {
       // P = T w_mech, w_mech = 2 pi n / 60.
-      pm.push_back(tm[j] * 2 * kPi * n[j] / 60 / 1e3);
-      pg.push_back(tg[j] * 2 * kPi * n[j] / 60 / 1e3);
+      pm.push_back(tm[j] * physics::RpmToMechanicalRadS(n[j]) / 1e3);
+      pg.push_back(tg[j] * physics::RpmToMechanicalRadS(n[j]) / 1e3);
     }
     plot::Style motor, gen;
     motor.colour = "#d62728";

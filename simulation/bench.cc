@@ -6,6 +6,8 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "physics/delay.h"
+#include "physics/torque.h"
 
 namespace fluxcal::sim {
 
@@ -63,7 +65,9 @@ PointRun RunPoint(const TwinConfig& cfg, const PlantModel& m, double id_ref, dou
     const double ud = m.rs_ohm * id_ref - we * pq, uq = m.rs_ohm * iq_ref + we * pd;
     const double c = std::cos(theta0), s = std::sin(theta0);
     cmd_hist.clear();
-    for (int k = 0; k < 4; ++k) cmd_hist.push_back({c * ud - s * uq, s * ud + c * uq});
+    double ual, ube;
+    InverseParkCs(ud, uq, c, s, &ual, &ube);
+    for (int k = 0; k < 4; ++k) cmd_hist.push_back({ual, ube});
   }
   std::deque<std::pair<double, double>> fb_hist;   // dq feedback for the moving average
   double fb_sum_d = 0, fb_sum_q = 0;
@@ -100,7 +104,8 @@ PointRun RunPoint(const TwinConfig& cfg, const PlantModel& m, double id_ref, dou
       Derivative(m, x, th, we, u.first, u.second, &d[0], &d[1], &d[2], &d[3], &im, &next);
       i_sample = Vec2{0.5 * (x.i_term.d + next.d), 0.5 * (x.i_term.q + next.q)};
     }
-    const double ial = c * i_sample.d - s * i_sample.q, ibe = s * i_sample.d + c * i_sample.q;
+    double ial, ibe;
+    InverseParkCs(i_sample.d, i_sample.q, c, s, &ial, &ibe);
     const Phases iph = InverseClarke(ial, ibe);
     double ia = iph.a, ib = iph.b, ic = iph.c;
     // Physics outside the catalogue acting on the sensors (interference,
@@ -157,9 +162,12 @@ PointRun RunPoint(const TwinConfig& cfg, const PlantModel& m, double id_ref, dou
     // period the command is applied in (theta + 1.5 w_e Ts): the usual ECU
     // delay compensation, so the dq command is the fundamental voltage the
     // machine sees (up to the hold's sinc gain), as steady_state.csv states.
-    const double thc = th_meas + 1.5 * we * ts;
+    const double thc = th_meas + physics::ControlDelayAngle(we, ts);
     const double cc = std::cos(thc), sc = std::sin(thc);
-    double ual = cc * ud - sc * uq + vi * inj_c, ube = sc * ud + cc * uq + vi * inj_s;
+    double ual, ube;
+    InverseParkCs(ud, uq, cc, sc, &ual, &ube);
+    ual += vi * inj_c;
+    ube += vi * inj_s;
     // Modulator: linear range of space-vector PWM, |u| <= Udc / sqrt(3)
     // of the Udc the ECU measures.
     const double umag = std::hypot(ual, ube), u_lim = m.u_max_v / m.voltage_gain;
@@ -171,8 +179,8 @@ PointRun RunPoint(const TwinConfig& cfg, const PlantModel& m, double id_ref, dou
     cmds[k] = {ual, ube};
     // What was sent to the modulator, back in the controller's dq frame
     // (differs from the PI output only when the voltage limit clipped).
-    const double ud_sent = cc * (ual - vi * inj_c) + sc * (ube - vi * inj_s);
-    const double uq_sent = -sc * (ual - vi * inj_c) + cc * (ube - vi * inj_s);
+    double ud_sent, uq_sent;
+    ParkCs(ual - vi * inj_c, ube - vi * inj_s, cc, sc, &ud_sent, &uq_sent);
     if (k >= n_settle) {
       const size_t r = k - n_settle;
       out.wave.t_s.push_back(static_cast<double>(r) * ts);
@@ -191,7 +199,7 @@ PointRun RunPoint(const TwinConfig& cfg, const PlantModel& m, double id_ref, dou
       out.mean_uq_cmd += uq_sent;
       double pd, pq;
       m.Flux(x.i.d, x.i.q, th, &pd, &pq);
-      out.mean_torque_nm += 1.5 * pp * (pd * x.i.q - pq * x.i.d);
+      out.mean_torque_nm += physics::ElectromagneticTorque(pp, pd, pq, x.i.d, x.i.q);
     }
     // --- Plant over [t_k, t_{k+1}): the command of period k-1 (one PWM
     // period late), shifted further by the sampling_delay effect.
@@ -210,11 +218,15 @@ PointRun RunPoint(const TwinConfig& cfg, const PlantModel& m, double id_ref, dou
         const double sinc = Sinc(y);
         const double cj = sinc * std::cos(th_j + y), sj = sinc * std::sin(th_j + y);
         double eal, ebe;
-        const double al = cj * x.i.d - sj * x.i.q, be = sj * x.i.d + cj * x.i.q;
-        DeadTimeError(m, al, -0.5 * al + 0.5 * kSqrt3 * be, -0.5 * al - 0.5 * kSqrt3 * be, &eal, &ebe);
+        double al, be;
+        InverseParkCs(x.i.d, x.i.q, cj, sj, &al, &be);
+        const Phases iab = InverseClarke(al, be);
+        DeadTimeError(m, iab.a, iab.b, iab.c, &eal, &ebe);
         const double ua = m.voltage_gain * u.first + eal, ub = m.voltage_gain * u.second + ebe;
-        acc_ud_app += cj * ua + sj * ub;
-        acc_uq_app += -sj * ua + cj * ub;
+        double ud_app, uq_app;
+        ParkCs(ua, ub, cj, sj, &ud_app, &uq_app);
+        acc_ud_app += ud_app;
+        acc_uq_app += uq_app;
         ++acc_app;
       }
       const State before = x;
@@ -298,7 +310,7 @@ TruthPoint MakeTruth(const TwinConfig& cfg, const PlantModel& m, const std::stri
   t.psi_pm_wb = m.p[0];
   t.ld_app_h = std::abs(idt) > 1e-6 ? (t.psi_d_wb - m.p[0]) / idt : t.ldd_h;
   t.lq_app_h = std::abs(iqt) > 1e-6 ? t.psi_q_wb / iqt : t.lqq_h;
-  t.torque_nm = 1.5 * cfg.motor.pole_pairs * (t.psi_d_wb * iqt - t.psi_q_wb * idt);
+  t.torque_nm = physics::ElectromagneticTorque(cfg.motor.pole_pairs, t.psi_d_wb, t.psi_q_wb, idt, iqt);
   return t;
 }
 

@@ -1,14 +1,12 @@
 #include "simulation/plant.h"
+#include "physics/inverter.h"
 
 namespace fluxcal::sim {
 
 void DeadTimeError(const PlantModel& m, double ia, double ib, double ic, double* ua, double* ub) {
   if (m.dead_time_s == 0.0 && m.threshold_v == 0.0) { *ua = *ub = 0; return; }
   const double k = -((m.dead_time_s / m.ts_s) * m.udc_v + m.threshold_v);
-  const double ea = k * std::tanh(ia / m.dead_time_i_th_a);
-  const double eb = k * std::tanh(ib / m.dead_time_i_th_a);
-  const double ec = k * std::tanh(ic / m.dead_time_i_th_a);
-  const AlphaBeta e = Clarke(ea, eb, ec);
+  const AlphaBeta e = physics::SoftSignVector(ia, ib, ic, k, m.dead_time_i_th_a);
   *ua = e.alpha;
   *ub = e.beta;
 }
@@ -19,7 +17,8 @@ void Derivative(const PlantModel& m, const State& x, double th, double we, doubl
   *i_out = i;
   const double c = std::cos(th), s = std::sin(th);
   // Phase currents for the dead-time error.
-  const double ial = c * i.d - s * i.q, ibe = s * i.d + c * i.q;
+  double ial, ibe;
+  InverseParkCs(i.d, i.q, c, s, &ial, &ibe);
   const Phases ph = InverseClarke(ial, ibe);
   double eal, ebe;
   DeadTimeError(m, ph.a, ph.b, ph.c, &eal, &ebe);
@@ -28,7 +27,8 @@ void Derivative(const PlantModel& m, const State& x, double th, double we, doubl
   const AlphaBeta dr = Clarke((m.dr_a_ohm + m.slope_ohm) * ph.a, (m.dr_b_ohm + m.slope_ohm) * ph.b,
                               (m.dr_c_ohm + m.slope_ohm) * ph.c);
   const double ua = m.voltage_gain * ual + eal - dr.alpha, ub = m.voltage_gain * ube + ebe - dr.beta;
-  const double ud = c * ua + s * ub, uq = -s * ua + c * ub;
+  double ud, uq;
+  ParkCs(ua, ub, c, s, &ud, &uq);
   const double k = 1.0 / (1.0 + m.rs_ohm * m.g_fe_s);
   const double ed = k * (ud - m.rs_ohm * i.d - m.r_hf_ohm * (i.d - x.lpd));
   const double eq = k * (uq - m.rs_ohm * i.q - m.r_hf_ohm * (i.q - x.lpq));

@@ -50,7 +50,7 @@ struct PlantModel {
   const BenchEffects* unmodelled = nullptr;
   int pole_pairs = 4, sector = 0;
 
-  double MechanicalAngle(double th) const { return (th + 2 * kPi * sector) / std::max(1, pole_pairs); }
+  double MechanicalAngle(double th) const { return physics::MechanicalAngle(th, sector, pole_pairs); }
   double PsiPm() const { return map ? map->Flux(0, 0, map_temperature_c).psi_d_wb + map_psi_shift_wb : p[0]; }
   void Unmodelled(double th, double* pd, double* pq, double* ldd, double* lqq, double* ldq) const {
     if (unmodelled == nullptr || unmodelled->empty()) return;

@@ -144,7 +144,8 @@ absl::StatusOr<std::vector<ReplayPoint>> ReplayOpenLoop(const io::RecordingSet& 
     double se = 0;
     for (size_t k = 1; k < n; ++k) {
       const double c = std::cos(th[k]), s = std::sin(th[k]);
-      const double a = c * x.i_term.d - s * x.i_term.q, b = s * x.i_term.d + c * x.i_term.q;
+      double a, b;
+      InverseParkCs(x.i_term.d, x.i_term.q, c, s, &a, &b);
       const Phases ph = InverseClarke(a, b);
       const double sa = fx.gain_a * ph.a + fx.offset_a_a;
       const double sb = fx.gain_b * ph.b + fx.offset_b_a;

@@ -22,6 +22,8 @@
 #include "io/sha256.h"
 #include "plot/plot.h"
 #include "tables/a2l.h"
+#include "physics/speed.h"
+#include "physics/torque.h"
 
 namespace fluxcal::tables {
 namespace {
@@ -53,10 +55,10 @@ bool SolveIqForTorque(const sim::MagneticModel& m, const MachineLimits& lim, dou
     sim::FluxLinkage F;
     sim::DifferentialInductance L;
     m.FluxAndInductance(id, s * iq, lim.temperature_c, &F, &L);
-    const double f = s * 1.5 * lim.pole_pairs * (F.psi_d_wb * s * iq - F.psi_q_wb * id) - target;
+    const double f = s * physics::ElectromagneticTorque(lim.pole_pairs, F.psi_d_wb, F.psi_q_wb, id, s * iq) - target;
     if (std::abs(f) < 1e-10 * (1.0 + target)) break;
     if (f > 0) hi = iq; else lo = iq;
-    const double d = 1.5 * lim.pole_pairs * (F.psi_d_wb + L.ldq_h * s * iq - L.lqq_h * id);
+    const double d = physics::TorqueSlopeIq(lim.pole_pairs, F.psi_d_wb, L.ldq_h, L.lqq_h, id, s * iq);
     double next = iq - f / (d > 1e-12 ? d : 1e-12);
     if (!(next > lo && next < hi)) next = 0.5 * (lo + hi);
     if (hi - lo < 1e-12) break;
@@ -106,7 +108,7 @@ double MachineLimits::UMaxV() const {
 
 double TorqueNm(const sim::MagneticModel& m, int pp, double id, double iq, double temperature_c) {
   const auto f = m.Flux(id, iq, temperature_c);
-  return 1.5 * pp * (f.psi_d_wb * iq - f.psi_q_wb * id);
+  return physics::ElectromagneticTorque(pp, f.psi_d_wb, f.psi_q_wb, id, iq);
 }
 
 double VoltageV(const sim::MagneticModel& m, const MachineLimits& lim, double id, double iq, double we) {
@@ -590,7 +592,7 @@ absl::StatusOr<Table> BuildTable(const sim::MagneticModel& m, const MachineLimit
     // the resistive drop subtracts from the voltage when generating).
     std::vector<double> tlim_motor(n.size()), tlim_gen(n.size());
     for (size_t j = 0; j < n.size(); ++j) {
-      const double we = n[j] * lim.pole_pairs * 2 * kPi / 60.0;
+      const double we = physics::RpmToElectricalRadS(n[j], lim.pole_pairs);
       tlim_motor[j] = MaxTorqueNm(m, lim, we, 1.0);
       tlim_gen[j] = spec.include_generating ? MaxTorqueNm(m, lim, we, -1.0) : 0.0;
     }
@@ -602,7 +604,7 @@ absl::StatusOr<Table> BuildTable(const sim::MagneticModel& m, const MachineLimit
       const bool have_mtpa = TrySolve(m, lim, x, 0.0, &mtpa);
       RowLoci row;
       for (size_t j = 0; j < n.size(); ++j) {
-        const double we = n[j] * lim.pole_pairs * 2 * kPi / 60.0;
+        const double we = physics::RpmToElectricalRadS(n[j], lim.pole_pairs);
         const double tlim = x < 0 ? tlim_gen[j] : tlim_motor[j];
         const auto op = SolveWithMax(m, lim, x, we, tlim, have_mtpa ? &mtpa.id_a : nullptr,
                                      x < 0 ? &clamp_gen[j] : &clamp_motor[j], &row);
@@ -1155,7 +1157,7 @@ absl::StatusOr<Exported> Export(const Table& t, Format f, const ExportOptions& o
 
 namespace {
 
-double RpmOf(double we_rad_s, int pole_pairs) { return we_rad_s / pole_pairs * 60 / (2 * kPi); }
+double RpmOf(double we_rad_s, int pole_pairs) { return physics::ElectricalRadSToRpm(we_rad_s, pole_pairs); }
 
 // Base speed: where the MTPA point of the largest motoring torque meets the
 // voltage limit (bisection; the voltage grows with speed there). 0 when the
@@ -1310,7 +1312,7 @@ std::string CurvesFigure(const sim::MagneticModel& m, const MachineLimits& lim, 
       no_voltage.clear();   // said below: no MTPV row inside the current limit
     }
   }
-  const double we = rpm * lim.pole_pairs * 2 * kPi / 60;
+  const double we = physics::RpmToElectricalRadS(rpm, lim.pole_pairs);
   const PlaneCircle circle = DrawCurrentPlane(
       &f, m, lim, field_id_lo_a, field_iq_hi_a, rpm > 0 ? we : 0.0,
       absl::StrFormat("voltage limit |u| = %.3g V at %.0f rpm%s", lim.UMaxV(), rpm, why));
