@@ -37,18 +37,25 @@ TEST(EffectModel, StaircaseDelay) {
   EXPECT_NEAR(std::abs(two - std::polar(1.0, -2 * w * T)), 0.0, 1e-12);
 }
 
-// Only the positive sequence driven: the phasors of identification's own
-// forward model (eqs. (E1)-(E2)), at standstill and at speed.
-TEST(EffectModel, SolvePhasorsMatchesIdentificationForwardModel) {
+// Only the positive sequence driven, at standstill: the phasors solved from
+// the circuit itself, independently of the kernel (physics/hf.h). With
+// i = I0 e^{jwt} + I1 e^{-jwt} and the inductance acting on the complex
+// current as Sigma i + Delta conj(i) (Sigma = (Ld + Lq) / 2, Delta =
+// (Ld - Lq) / 2 + j Ldq), v = R i + d(L i)/dt splits by e^{+-jwt} into
+//   V = (R + jw Sigma) I0 + jw Delta conj(I1),
+//   0 = jw conj(Delta) I0 + (R + jw Sigma) conj(I1).
+TEST(EffectModel, SolvePhasorsMatchesTheCircuit) {
   const Model m = TestModel();
-  for (double we : {0.0, 400.0}) {
-    Complex i0, i1, j0, j1;
-    const Complex v(5.0, 0.3);
-    m.SolvePhasors(1.8e-4, 3.6e-4, 1e-5, 0.02, v, 0.0, we, &i0, &i1);
-    ident::PredictPhasors(1.8e-4, 3.6e-4, 1e-5, 0.02, v, m.w_i, we, &j0, &j1);
-    EXPECT_NEAR(std::abs(i0 - j0), 0.0, 1e-9 * std::abs(j0)) << we;
-    EXPECT_NEAR(std::abs(i1 - j1), 0.0, 1e-9 * std::abs(j0)) << we;
-  }
+  const double ld = 1.8e-4, lq = 3.6e-4, ldq = 1e-5, r = 0.02;
+  const Complex v(5.0, 0.3);
+  Complex i0, i1;
+  m.SolvePhasors(ld, lq, ldq, r, v, 0.0, 0.0, &i0, &i1);
+  const Complex j(0.0, 1.0), sigma = 0.5 * (ld + lq), delta = Complex(0.5 * (ld - lq), ldq);
+  const Complex a = r + j * m.w_i * sigma, b = j * m.w_i * delta, c = j * m.w_i * std::conj(delta);
+  const Complex det = a * a - b * c;
+  const Complex want0 = a * v / det, want1 = std::conj(-c * v / det);
+  EXPECT_NEAR(std::abs(i0 - want0), 0.0, 1e-9 * std::abs(want0)) << i0 << " vs " << want0;
+  EXPECT_NEAR(std::abs(i1 - want1), 0.0, 1e-9 * std::abs(want0)) << i1 << " vs " << want1;
 }
 
 // Held DC voltage at standstill: Rs i; a sensor offset o (alpha-beta) holds
