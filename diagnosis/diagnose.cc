@@ -105,6 +105,20 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
     }
     return out;
   };
+  // The current model refitted without one finding (its blocks held at
+  // zero): the blocks left free and the fit.
+  struct Without {
+    std::vector<Block> free;
+    FitOut fit;
+  };
+  auto refit_without = [&](const Candidate& c, const std::vector<Block>& free_now, const Params& p) {
+    const std::vector<Block> gone = blocks_of(c);
+    Without w{without(free_now, gone), {}};
+    Params st = p;
+    for (Block b : gone) std::fill(st.b[b].begin(), st.b[b].end(), 0.0);
+    w.fit = Solve(m, st, w.free);
+    return w;
+  };
   FitOut current = base;
   const Model m_base = m;   // the baseline's magnetics (the replay "before")
   // The magnetics with the effects found so far: the set's data freed of
@@ -253,11 +267,8 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
   FitOut drop_fit;
   double drop_cost = opt.bic_threshold;
   for (size_t a = 0; accepted.size() >= 2 && a < accepted.size(); ++a) {
-    const std::vector<Block> gone = blocks_of(cands[accepted[a]]);
-    const std::vector<Block> trial = without(free, gone);
-    Params st = current.p;
-    for (Block b : gone) std::fill(st.b[b].begin(), st.b[b].end(), 0.0);
-    const FitOut f = Solve(m, st, trial);
+    const Without w = refit_without(cands[accepted[a]], free, current.p);
+    const FitOut& f = w.fit;
     if (!f.ok) continue;
     // A finding no longer material or significant beside the others goes
     // first (cost -inf); otherwise the one whose removal costs least.
@@ -338,11 +349,9 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
     for (size_t a = 0; a < accepted.size(); ++a) {
       if (cands[accepted[a]].block == kHarm) m.harm_order = cands[accepted[a]].order;
       if (Significance(cands[accepted[a]], current, m) >= opt.parameter_sigma) continue;
-      const std::vector<Block> gone = blocks_of(cands[accepted[a]]);
-      const std::vector<Block> trial = without(free, gone);
-      Params st = current.p;
-      for (Block b : gone) std::fill(st.b[b].begin(), st.b[b].end(), 0.0);
-      const FitOut f = Solve(m, st, trial);
+      const Without w = refit_without(cands[accepted[a]], free, current.p);
+      const std::vector<Block>& trial = w.free;
+      const FitOut& f = w.fit;
       if (!f.ok) continue;
       free = trial;
       rep.findings.erase(rep.findings.begin() + static_cast<long>(a));
