@@ -60,7 +60,7 @@ std::vector<sim::MotorTraits> Kinds() {
   return v;
 }
 
-TEST(OtherMachines, CleanIsNoMismatchDeadTimeAloneAndCloser) {
+TEST(OtherMachines, CleanNamesNothingDeadTimeAloneAndCloser) {
   const auto kinds = Kinds();
   ASSERT_GE(kinds.size(), 4u);
   for (const auto& t : kinds) {
