@@ -39,7 +39,7 @@ enum class Region { kMeasured, kBySymmetry, kExtrapolated };
 // "measured", "by_symmetry", "extrapolated" (JSON, proto, CSV).
 const char* RegionName(Region r);
 
-// Which halves of the iq axis the data measured (Fit decides: fit.cc,
+// Which halves of the iq axis the data measured (Fit decides: select.cc,
 // MeasuredIqOf). kUnknown: a calibration written before this was recorded
 // (no `iq_halves` in its JSON) or built without it; its |iq| box counts as
 // measured on both halves, as it always did.
@@ -74,7 +74,7 @@ struct FitSummary {
   bool usable = false;
   // The selected family's effective parameters (tr H of a penalised fit)
   // and, for a smoothing spline, the penalty weight lambda it was fitted
-  // with (fit.cc, SolveLinear): what a refit of the same surfaces with other
+  // with (solve_linear.cc, SolveLinear): what a refit of the same surfaces with other
   // unknowns beside them (diagnosis) keeps them as smooth with.
   double effective_parameters = 0, smoothing_lambda = 0;
   std::vector<std::string> candidates;   // model-selection table "name cv bic ..."

@@ -96,7 +96,7 @@ struct FitOptions {
   // precise than the model family can represent (0.2 %).
   double relative_sigma_floor = 0.002;
   double psi_pm_prior_relative_std = 0.05;
-  // Robust loss scale in standard deviations (Huber; fitting/fit.cc says why).
+  // Robust loss scale in standard deviations (Huber; fitting/solve_linear.cc says why).
   double robust_scale = 3.0;
   // Treat the differential inductance as apparent (psi = psi_pm + L i):
   // only for demonstrating the error (tests); never in production.
@@ -125,7 +125,7 @@ FitData FitDataFromFluxMap(const io::FluxMap& map, int pole_pairs, double psi_st
 // (non-finite or non-positive values, rows outside the measured region or
 // not a steady state), every candidate family fitted, the physical one with
 // the lowest cross-validation score kept; what was left out or
-// down-weighted is listed in summary.excluded with its reason (fit.cc).
+// down-weighted is listed in summary.excluded with its reason (screen.cc, select.cc).
 // The candidates are symmetric in iq (psi_d even, psi_q odd) unless the data
 // measured both halves of the iq axis (then smooth-asym too); the
 // calibration records the halves measured (Calibration::iq_halves), so a

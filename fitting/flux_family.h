@@ -26,7 +26,7 @@
 //    smoothly instead of oscillating. R is chosen by BIC.
 //  smooth / smooth-asym: the same quartic co-energy spline with ~8 spans per
 //    axis over the data box and a roughness penalty on all third derivatives
-//    of W (fit.cc, SmoothingPenalty); "smooth" is even in iq (the measured
+//    of W (surface.cc, SmoothingPenalty); "smooth" is even in iq (the measured
 //    |iq| range mirrored; older calibrations: the iq basis folded like
 //    spline<R>), "smooth-asym" lets psi_q(id, 0) differ from zero away from
 //    id = 0 (psi_q(0, 0) = 0: d is the magnet axis).
@@ -103,7 +103,7 @@ inline constexpr int kSplineDegree = 4;
 // makes the co-energy even in iq (psi_d even, psi_q odd: the machine's
 // symmetry), otherwise psi_q(id, 0) is free ("smooth-asym"), a hypothesis
 // the fit weighs by cross-validation only where the data measured both
-// halves of the iq axis (fit.cc).
+// halves of the iq axis (select.cc).
 // A symmetric smoothing spline has one of two layouts:
 //  - folded (calibrations written before `mirrored` existed): the iq basis
 //    over [-iq_hi_a, iq_hi_a] (iq_lo_a = -iq_hi_a, even spans_q) folded to

@@ -45,7 +45,7 @@ class SurfaceEvaluator {
   SplineSurface spline_;
 };
 
-// Roughness of a smoothing-spline co-energy (fit.cc, where it is derived):
+// Roughness of a smoothing-spline co-energy (solve_linear.cc, where it is derived):
 // rows of third differences of the coefficients, one column per parameter
 // (column 0, psi_pm, is zero). Empty (0 x NumParams) for other families.
 Eigen::MatrixXd SmoothingPenalty(const Family& f);

@@ -1,0 +1,85 @@
+// The fit's input adapters (fitting/fit.h): observations from
+// identification results, a set's hf_results rows or a flux map's nodes,
+// and the flux linkage a steady-state row's voltages measure.
+#include <algorithm>
+#include <cmath>
+#include <complex>
+
+#include "fitting/fit.h"
+#include "identification/identify.h"
+#include "io/flux_map.h"
+#include "physics/delay.h"
+#include "physics/speed.h"
+
+namespace fluxcal::fit {
+
+void SteadyStateFlux(const SteadyStateObservation& s, int pole_pairs, std::optional<double> rs, double f_pwm_hz,
+                     double* psi_d, double* psi_q) {
+  const double rs_ohm = rs.value_or(0.0);   // unknown: the drop Rs i neglected (fit.h)
+  const double we = physics::RpmToElectricalRadS(s.speed_rpm, pole_pairs);
+  // steady_state.csv holds the fundamental dq command of a delay-compensated
+  // controller (inverse Park at theta + 1.5 w_e Ts); the zero-order hold
+  // still scales the fundamental the machine sees by sin(x)/x, x = w_e Ts/2
+  // (identification/demod.h, eq. (V1)); 3e-4 at 2000 rpm, 4 pole pairs.
+  const double g = physics::ZohGain(we, 1.0 / f_pwm_hz);
+  const std::complex<double> u = std::complex<double>(s.ud_ref_v, s.uq_ref_v) * g;
+  *psi_d = (u.imag() - rs_ohm * s.iq_a) / we;
+  *psi_q = -(u.real() - rs_ohm * s.id_a) / we;
+}
+
+FitData FitDataFromRecording(const io::RecordingSet& set,
+                             const std::vector<ident::HfPointResult>& identified) {
+  FitData d = FitDataFromHfRows(&set.manifest, set.hf_results);
+  for (const auto& r : identified) {
+    if (!r.reliable && r.flags.size() == 1 && r.flags[0] == "clipping") continue;
+    if (!std::isfinite(r.ld_h) || !std::isfinite(r.lq_h) || !std::isfinite(r.id_a)) continue;
+    InductanceObservation o;
+    o.id_a = r.id_a; o.iq_a = r.iq_a;
+    o.ldd_h = r.ld_h; o.lqq_h = r.lq_h;
+    o.ldd_h_std = r.ld_h_std; o.lqq_h_std = r.lq_h_std;
+    if (r.has_ldq) { o.ldq_h = r.ldq_h; o.ldq_h_std = r.ldq_h_std; }
+    d.inductances.push_back(o);
+  }
+  for (const auto& s : set.steady_state) {
+    d.steady_state.push_back({s.id_a, s.iq_a, s.speed_rpm, s.ud_ref_v, s.uq_ref_v, s.torque_nm});
+  }
+  return d;
+}
+
+FitData FitDataFromHfRows(const io::Manifest* m, const std::vector<io::HfResultRow>& rows) {
+  FitData d;
+  if (m) {
+    d.serial = m->serial;
+    d.pole_pairs = m->motor.pole_pairs;
+    d.rs_ohm = m->motor.rs_ohm;
+    d.f_pwm_hz = m->drive.f_pwm_hz.value_or(m->drive.f_sample_hz);
+    d.psi_pm_prior_wb = m->motor.psi_pm_wb;
+    d.udc_v = m->drive.udc_v;
+  }
+  for (const auto& r : rows) {
+    InductanceObservation o;
+    o.id_a = r.id_a; o.iq_a = r.iq_a; o.ldd_h = r.ld_h; o.lqq_h = r.lq_h; o.ldq_h = r.ldq_h;
+    d.inductances.push_back(o);
+  }
+  return d;
+}
+
+FitData FitDataFromFluxMap(const io::FluxMap& map, int pole_pairs, double psi_std_wb) {
+  FitData d;
+  d.pole_pairs = pole_pairs;
+  const auto points = map.Points();
+  if (!(psi_std_wb > 0)) {
+    double scale = 0;
+    for (const auto& p : points) scale = std::max(scale, std::hypot(p.psi_d_wb, p.psi_q_wb));
+    psi_std_wb = 0.002 * scale;
+  }
+  for (const auto& p : points) {
+    d.fluxes.push_back({p.id_a, p.iq_a, p.psi_d_wb, p.psi_q_wb, psi_std_wb});
+    // The prior's sigma is relative to it: only a magnet flux (> 0) is one
+    // (a synchronous reluctance map has psi_d(0, 0) = 0).
+    if (p.id_a == 0 && p.iq_a == 0 && p.psi_d_wb > 0) d.psi_pm_prior_wb = p.psi_d_wb;
+  }
+  return d;
+}
+
+}  // namespace fluxcal::fit
