@@ -58,9 +58,9 @@ Box SolveBox(const fit::Calibration& cal) {
 // forces a = b: the inverse, where it exists in the (convex) box, is
 // unique, and any start that converges finds it. The one exception: the
 // cells around a point the bench measured non-positive are exempt from
-// the check (fit.cc, Screen), as the machine's map falls there; a flux
-// that such a map reaches twice has no single current, and the iteration
-// below stops where J is not positive definite, so a node is solved only
+// the check (fitting/screen.cc, Screen), as the machine's map falls
+// there; a flux that such a map reaches twice has no single current, and
+// the iteration below stops where J is not positive definite, so a node is solved only
 // if it converges before, and is marked invalid otherwise. The step is a descent
 // direction of the merit function m = |F(i) - psi*|^2 / 2 (dm/dalpha =
 // r^T J d = -|r|^2 < 0 at alpha = 0), so backtracking (alpha = 1, 1/2, ...;

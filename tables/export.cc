@@ -1,0 +1,221 @@
+// Export (tables/tables.h): the table checked and written in one format,
+// and what every format shares: the payload and its checksums, labels,
+// units, scalars, text fields and flags, the format and C type names.
+#include <zlib.h>
+
+#include <charconv>
+#include <cmath>
+#include <cstring>
+
+#include "absl/strings/ascii.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "absl/strings/str_replace.h"
+#include "io/sha256.h"
+#include "tables/a2l.h"
+#include "tables/internal_formats.h"
+#include "tables/tables.h"
+
+namespace fluxcal::tables {
+namespace internal {
+
+// std::to_chars with a precision formats as printf's "%.17g" does in the C
+// locale ([charconv.to.chars]), without printf's parsing of the format per
+// value: a 64 x 32 CDFX map writes ~10^4 of them.
+std::string Num(double v) {
+  if (!std::isfinite(v)) return absl::StrFormat("%.17g", v);
+  char buf[32];
+  const auto r = std::to_chars(buf, buf + sizeof buf, v, std::chars_format::general, 17);
+  return std::string(buf, r.ptr);
+}
+
+std::string Crc(const Table& t) { return absl::StrFormat("%08x", t.crc32); }
+
+std::vector<double> AsDoubles(const std::vector<uint8_t>& v) { return std::vector<double>(v.begin(), v.end()); }
+
+}  // namespace internal
+
+using internal::Cdfx;
+using internal::CHeader;
+using internal::Csv;
+using internal::Dcm;
+using internal::Json;
+
+const char* FluxcalVersion() { return FLUXCAL_VERSION; }
+
+std::string PayloadBytes(const Table& t) {
+  std::string out;
+  auto put = [&](const std::vector<double>& v) {
+    for (double x : v) {
+      uint64_t bits;
+      std::memcpy(&bits, &x, 8);
+      for (int b = 0; b < 8; ++b) out.push_back(static_cast<char>((bits >> (8 * b)) & 0xff));
+    }
+  };
+  for (const auto& a : t.axes) put(a.values);
+  for (const auto& o : t.outputs) put(o.values);
+  return out;
+}
+
+void Seal(Table* t) {
+  const std::string p = PayloadBytes(*t);
+  t->crc32 = static_cast<uint32_t>(::crc32(0L, reinterpret_cast<const Bytef*>(p.data()),
+                                           static_cast<uInt>(p.size())));
+  t->sha256 = io::Sha256Hex(p);
+}
+
+absl::StatusOr<Format> ParseFormat(const std::string& name) {
+  if (name == "csv") return Format::kCsv;
+  if (name == "json") return Format::kJson;
+  if (name == "h") return Format::kCHeader;
+  if (name == "cdfx") return Format::kCdfx;
+  if (name == "dcm") return Format::kDcm;
+  if (name == "a2l") return Format::kA2l;
+  return absl::InvalidArgumentError(
+      absl::StrCat("flag --format: expected csv, json, h, cdfx, dcm or a2l, got '", name, "'"));
+}
+
+std::string UnitOf(const std::string& name) {
+  auto ends = [&](const char* suf) {
+    const size_t n = std::strlen(suf);
+    return name.size() > n && name.compare(name.size() - n, n, suf) == 0;
+  };
+  if (ends("_nm")) return "Nm";
+  if (ends("_rpm")) return "rpm";
+  if (ends("_wb")) return "Wb";
+  if (ends("_ohm")) return "Ohm";
+  if (ends("_v")) return "V";
+  if (ends("_c")) return "degC";
+  if (ends("_a")) return "A";
+  return "-";
+}
+
+std::string Label(const Table& t, const std::string& name) {
+  return absl::AsciiStrToUpper(absl::StrCat("FLUXCAL_", t.kind, "_", name));
+}
+
+std::string CSymbol(const Table& t, const std::string& name) { return absl::AsciiStrToLower(Label(t, name)); }
+
+// One sentence on the axis order, the same in every format (docs/tables.md).
+std::string AxisOrder(const Table& t) {
+  if (t.axes.size() == 1) return absl::StrCat("X = ", t.axes[0].name, " (one axis)");
+  return absl::StrCat("X = ", t.axes[0].name, " (first axis), Y = ", t.axes[1].name,
+                      " (second axis); flat arrays index [ix * ", t.axes[1].values.size(), " + iy], X slowest");
+}
+
+// Text that goes into a comment: one line, no comment terminators.
+std::string OneLine(std::string s) {
+  for (auto& c : s) if (c == '\n' || c == '\r') c = ' ';
+  return absl::StrReplaceAll(s, {{"*/", "* /"}, {"--", "- -"}});
+}
+
+std::vector<Scalar> Scalars(const Table& t) {
+  const auto& l = t.limits;
+  // Rs, Udc and u_max only when they were given: an MTPA table computed
+  // without them does not state a voltage it never used.
+  std::vector<Scalar> s = {
+      {"pole_pairs", static_cast<double>(l.pole_pairs), "-", "pole pairs p of the calibration", true}};
+  if (l.rs_ohm) s.push_back({"rs_ohm", *l.rs_ohm, "Ohm", "phase resistance Rs used for the steady-state voltage", false});
+  s.push_back({"psi_pm_wb", t.psi_pm_wb, "Wb", "permanent-magnet flux linkage psi_d(0, 0) of the fitted model", false});
+  s.push_back({"i_max_a", l.i_max_a, "A", "current limit the table was computed for (peak, amplitude-invariant)", false});
+  if (l.udc_v) {
+    s.push_back({"udc_v", *l.udc_v, "V", "DC-link voltage the table was computed for", false});
+    s.push_back({"modulation_limit", l.modulation_limit, "-", "fraction of the linear SVPWM range used", false});
+    s.push_back({"u_max_v", l.UMaxV(), "V", "voltage limit m Udc / sqrt(3) (peak phase, amplitude-invariant)", false});
+  }
+  s.push_back({"temperature_c", l.temperature_c, "degC", "temperature the flux model was evaluated at", false});
+  if (t.measured_current_limit_a > 0) {
+    s.push_back({"measured_current_limit_a", t.measured_current_limit_a, "A",
+                 "current limit the identified points cover; beyond it cells are flagged extrapolated", false});
+  }
+  if (t.kind == "fw") {
+    s.push_back({"speed_max_rpm", t.speed_max_rpm, "rpm", "top of the speed axis (axis from 0 rpm)", false});
+  }
+  s.push_back({"allow_extrapolation", t.allow_extrapolation ? 1.0 : 0.0, "-",
+               "1: computed beyond the measured region on request (allow-extrapolation flag)", true});
+  s.push_back({"calibration_version", static_cast<double>(t.calibration_version), "-",
+               "stored version of the calibration", true});
+  return s;
+}
+
+std::vector<std::pair<std::string, std::string>> TextFields(const Table& t) {
+  return {{"serial", t.serial},           {"model", t.model},     {"created_utc", t.created_utc},
+          {"fluxcal_version", t.fluxcal_version}, {"verdict", t.verdict}, {"release_state", t.release_state}};
+}
+
+std::vector<std::pair<std::string, const std::vector<uint8_t>*>> Flags(const Table& t) {
+  return {{"clamped", &t.clamped},
+          {"extrapolated", &t.extrapolated},
+          {"by_symmetry", &t.by_symmetry},
+          {"not_positive_definite", &t.not_positive_definite}};
+}
+
+absl::StatusOr<CType> ParseCType(const std::string& name) {
+  for (CType ct : {CType::kDouble, CType::kFloat, CType::kInt16, CType::kInt32}) {
+    if (name == CTypeName(ct)) return ct;
+  }
+  return absl::InvalidArgumentError(
+      absl::StrCat("flag --ctype: expected double, float, int16 or int32, got '", name, "'"));
+}
+
+const char* CTypeName(CType ct) {
+  switch (ct) {
+    case CType::kFloat: return "float";
+    case CType::kInt16: return "int16";
+    case CType::kInt32: return "int32";
+    case CType::kDouble: break;
+  }
+  return "double";
+}
+
+int FixedPointBits(CType ct) { return ct == CType::kInt16 ? 16 : ct == CType::kInt32 ? 32 : 0; }
+
+absl::StatusOr<Exported> Export(const Table& t, Format f, const ExportOptions& opt) {
+  if (t.axes.empty() || t.outputs.empty()) return absl::InvalidArgumentError("table: no axes or no outputs");
+  size_t cells = 1;
+  for (const auto& a : t.axes) {
+    cells *= a.values.size();
+    for (double v : a.values) {
+      if (!std::isfinite(v)) return absl::InvalidArgumentError(absl::StrCat("table axis '", a.name, "': non-finite value"));
+    }
+  }
+  for (const auto& o : t.outputs) {
+    if (o.values.size() != cells) {
+      return absl::InvalidArgumentError(absl::StrCat("table output '", o.name, "': ", o.values.size(),
+                                                     " values for ", cells, " cells"));
+    }
+    for (double v : o.values) {
+      if (!std::isfinite(v)) return absl::InvalidArgumentError(absl::StrCat("table output '", o.name, "': non-finite value"));
+    }
+  }
+  for (const auto& [name, v] : Flags(t)) {
+    if (v->size() != cells) {
+      return absl::InvalidArgumentError(absl::StrCat("table flags '", name, "': ", v->size(), " for ", cells, " cells"));
+    }
+  }
+  Exported e;
+  const std::vector<QuantityScale> scales = QuantityScales(t, opt.ctype);
+  if ((f == Format::kCHeader || f == Format::kA2l) && FixedPointBits(opt.ctype) > 0) e.fixed_point = scales;
+  switch (f) {
+    case Format::kCsv: e.bytes = Csv(t); break;
+    case Format::kJson: e.bytes = Json(t); break;
+    case Format::kCHeader: {
+      auto h = CHeader(t, opt.ctype, scales);
+      if (!h.ok()) return h.status();
+      e.bytes = *std::move(h);
+      break;
+    }
+    case Format::kCdfx: e.bytes = Cdfx(t); break;
+    case Format::kDcm: e.bytes = Dcm(t); break;
+    case Format::kA2l: {
+      e.bytes = A2lDescription(t, opt.ctype, scales);
+      break;
+    }
+  }
+  e.payload_crc32 = t.crc32;
+  e.payload_sha256 = t.sha256;
+  e.file_sha256 = io::Sha256Hex(e.bytes);
+  return e;
+}
+
+}  // namespace fluxcal::tables

@@ -1,0 +1,319 @@
+// The operating-point solver (tables/tables.h, tables/internal_solver.h):
+// torque and voltage from flux linkage, the least-current point of a torque
+// request under the current and voltage limits, and the limit torque.
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <optional>
+
+#include "physics/torque.h"
+#include "tables/internal_numeric.h"
+#include "tables/internal_solver.h"
+#include "tables/tables.h"
+
+namespace fluxcal::tables {
+
+using internal::MinimiseScalar;
+using internal::RowLoci;
+using internal::SolveWithMax;
+using internal::TrySolve;
+
+double MachineLimits::UMaxV() const {
+  return udc_v ? modulation_limit * *udc_v / std::sqrt(3.0) : std::numeric_limits<double>::quiet_NaN();
+}
+
+double TorqueNm(const sim::MagneticModel& m, int pp, double id, double iq, double temperature_c) {
+  const auto f = m.Flux(id, iq, temperature_c);
+  return physics::ElectromagneticTorque(pp, f.psi_d_wb, f.psi_q_wb, id, iq);
+}
+
+double VoltageV(const sim::MagneticModel& m, const MachineLimits& lim, double id, double iq, double we) {
+  if (!lim.rs_ohm) return std::numeric_limits<double>::quiet_NaN();
+  const double rs = *lim.rs_ohm;
+  const auto f = m.Flux(id, iq, lim.temperature_c);
+  return std::hypot(rs * id - we * f.psi_q_wb, rs * iq + we * f.psi_d_wb);
+}
+
+namespace {
+
+// iq (sign s) on the constant-torque locus through id: T(id, iq) = t.
+// Newton with a bisection safeguard; dT/diq = 1.5 p (psi_d + Ldq iq - Lqq id).
+// `iq_guess_a` (> 0, magnitude): a start close to the root, e.g. the root at
+// a neighbouring id; otherwise the start scales linearly from the bracket.
+bool SolveIqForTorque(const sim::MagneticModel& m, const MachineLimits& lim, double id, double t,
+                      double s, double* iq_out, double iq_guess_a = 0.0) {
+  const double target = std::abs(t);
+  double lo = 0.0, hi = std::max(10.0, lim.i_max_a);
+  auto torque = [&](double iq) { return s * TorqueNm(m, lim.pole_pairs, id, s * iq, lim.temperature_c); };
+  int grow = 0;
+  double t_hi;
+  while ((t_hi = torque(hi)) < target) {
+    hi *= 2;
+    if (++grow > 8) return false;
+  }
+  double iq = iq_guess_a > lo && iq_guess_a < hi
+                  ? iq_guess_a
+                  : std::clamp(target / std::max(1e-9, t_hi) * hi, lo, hi);
+  for (int it = 0; it < 60; ++it) {
+    // One surface evaluation per iteration serves both T and dT/diq (a
+    // spline calibration shares the basis between flux and inductance).
+    sim::FluxLinkage F;
+    sim::DifferentialInductance L;
+    m.FluxAndInductance(id, s * iq, lim.temperature_c, &F, &L);
+    const double f = s * physics::ElectromagneticTorque(lim.pole_pairs, F.psi_d_wb, F.psi_q_wb, id, s * iq) - target;
+    if (std::abs(f) < 1e-10 * (1.0 + target)) break;
+    if (f > 0) hi = iq; else lo = iq;
+    const double d = physics::TorqueSlopeIq(lim.pole_pairs, F.psi_d_wb, L.ldq_h, L.lqq_h, id, s * iq);
+    double next = iq - f / (d > 1e-12 ? d : 1e-12);
+    if (!(next > lo && next < hi)) next = 0.5 * (lo + hi);
+    if (hi - lo < 1e-12) break;
+    iq = next;
+  }
+  *iq_out = s * iq;
+  return true;
+}
+
+}  // namespace
+
+namespace internal {
+
+bool TrySolve(const sim::MagneticModel& m, const MachineLimits& lim, double t, double we,
+              OperatingPoint* op, const double* mtpa_id, RowLoci* row) {
+  *op = OperatingPoint{};
+  if (t == 0.0 && we <= 0) return true;
+  const double s = t < 0 ? -1.0 : 1.0;
+  const double id_min = -lim.i_max_a;
+  if (row != nullptr && row->t != t) *row = RowLoci{t, {}};
+  // (Each locus point's Newton starts cold, from the bracket: where the
+  // torque is not monotone in iq (far beyond the measured region) a start
+  // carried over from a neighbouring point can settle on another root.)
+  auto iq_of = [&](double id, double* iq) {
+    const bool kept = row != nullptr && (id == id_min || (mtpa_id != nullptr && id == *mtpa_id));
+    if (kept) {
+      for (const auto& p : row->points) {
+        if (p.id == id) {
+          *iq = p.iq;
+          return p.ok;
+        }
+      }
+    }
+    const bool ok = SolveIqForTorque(m, lim, id, t, s, iq);
+    if (kept) row->points.push_back({id, ok, ok ? *iq : 0.0});
+    return ok;
+  };
+  auto cur2 = [&](double id) {
+    double iq;
+    if (!iq_of(id, &iq)) return 1e30;
+    return id * id + iq * iq;
+  };
+  // Unconstrained least current (MTPA) along the constant-torque locus.
+  double id = t == 0.0 ? 0.0 : (mtpa_id ? *mtpa_id : MinimiseScalar(cur2, id_min, 0.0));
+  double iq = 0.0;
+  if (t != 0.0 && !iq_of(id, &iq)) return false;
+  auto volt = [&](double d, double q) { return we > 0 ? VoltageV(m, lim, d, q, we) : 0.0; };
+  const double u_max = lim.UMaxV();
+  if (we > 0 && volt(id, iq) > u_max) {
+    // Field weakening. Along the constant-torque locus the current grows
+    // away from the MTPA point and the voltage has one minimum (the locus'
+    // MTPV point) at a more negative id; the least-current feasible point is
+    // where the voltage falls to u_max between the two.
+    auto volt_on_locus = [&](double d) {
+      double q;
+      return iq_of(d, &q) ? volt(d, q) : 1e30;
+    };
+    double lo = id_min;
+    if (volt_on_locus(lo) > u_max) {
+      lo = MinimiseScalar(volt_on_locus, id_min, id);
+      if (volt_on_locus(lo) > u_max) return false;   // beyond the MTPV limit
+    }
+    // Root of g(id) = |u(id, iq(id))| - u_max on [lo feasible, hi = MTPA]
+    // by regula falsi with the Illinois modification (Dowell & Jarratt,
+    // BIT 11, 1971): superlinear, the bracket is kept, and the answer is its
+    // feasible end. Each iq(id) starts from the roots at the bracket's ends.
+    double hi = id, q_lo;
+    if (!iq_of(lo, &q_lo)) return false;
+    double q_hi = iq;
+    double g_lo = volt(lo, q_lo) - u_max, g_hi = volt(hi, q_hi) - u_max;
+    int side = 0;
+    for (int k = 0; k < 100 && hi - lo > 2e-9 && g_lo < -1e-12 * u_max; ++k) {
+      double x = hi - g_hi * (hi - lo) / (g_hi - g_lo);
+      if (!(x > lo && x < hi)) x = 0.5 * (lo + hi);
+      double q;
+      const double guess = std::abs(q_lo + (q_hi - q_lo) * (x - lo) / (hi - lo));
+      if (!SolveIqForTorque(m, lim, x, t, s, &q, guess)) { hi = x; g_hi = 1.0; side = 0; continue; }
+      const double g = volt(x, q) - u_max;
+      if (g <= 0) {
+        lo = x; g_lo = g; q_lo = q;
+        if (side == -1) g_hi *= 0.5;
+        side = -1;
+      } else {
+        hi = x; g_hi = g; q_hi = q;
+        if (side == 1) g_lo *= 0.5;
+        side = 1;
+      }
+    }
+    id = lo;
+    iq = q_lo;
+  }
+  if (std::hypot(id, iq) > lim.i_max_a * (1 + 1e-9)) return false;
+  op->id_a = id;
+  op->iq_a = iq;
+  op->torque_nm = TorqueNm(m, lim.pole_pairs, id, iq, lim.temperature_c);
+  return true;
+}
+
+OperatingPoint SolveWithMax(const sim::MagneticModel& m, const MachineLimits& lim, double t,
+                            double we, double tmax, const double* mtpa_id,
+                            std::optional<OperatingPoint>* clamp, RowLoci* row) {
+  OperatingPoint op;
+  if (std::abs(t) <= tmax && TrySolve(m, lim, t, we, &op, mtpa_id, row)) return op;
+  if (clamp != nullptr && clamp->has_value()) return **clamp;
+  // Infeasible: deliver the largest torque of the same sign within limits.
+  const double s = t < 0 ? -1.0 : 1.0;
+  double tt = s * tmax;
+  for (int k = 0; k < 8 && !TrySolve(m, lim, tt, we, &op); ++k) tt *= 1 - 1e-6 * (1 << (2 * k));
+  op.clamped = true;
+  if (clamp != nullptr) *clamp = op;
+  return op;
+}
+
+}  // namespace internal
+
+OperatingPoint SolveLeastCurrent(const sim::MagneticModel& m, const MachineLimits& lim, double t,
+                                 double we) {
+  OperatingPoint op;
+  if (TrySolve(m, lim, t, we, &op)) return op;
+  return SolveWithMax(m, lim, t, we, MaxTorqueNm(m, lim, we, t < 0 ? -1.0 : 1.0));
+}
+
+namespace {
+
+// Whether torque request s t (t > 0) can be met within both limits: some
+// point of its constant-torque locus lies inside them, i.e. the minimum
+// over the locus of h = max(|i| / i_max, |u| / u_max) is at most 1. |i|
+// and |u| each have a single minimum along the locus (MTPA, MTPV), so h is
+// quasi-convex and the scan + golden section finds its minimum even when
+// the feasible arc is short (near the limit torque at high speed).
+// A locus point found inside both limits settles it: the search stops there
+// (a feasible request needs no more), so only an infeasible one costs the
+// whole search.
+bool LocusFeasible(const sim::MagneticModel& m, const MachineLimits& lim, double we, double s, double t) {
+  bool found = false;
+  auto h = [&](double id) {
+    if (found) return 0.0;
+    double iq;
+    if (!SolveIqForTorque(m, lim, id, t, s, &iq)) return 1e30;
+    const double c = std::hypot(id, iq) / lim.i_max_a;
+    const double v = we > 0 ? std::max(c, VoltageV(m, lim, id, iq, we) / lim.UMaxV()) : c;
+    found = v <= 1.0;
+    return v;
+  };
+  const double id = MinimiseScalar(h, -lim.i_max_a, 0.0, 24, 40);
+  return found || h(id) <= 1.0;
+}
+
+// The limit torque by bisection on the request with LocusFeasible: robust,
+// ~30 x 67 locus points. The fallback of MaxTorqueNm.
+double MaxTorqueByBisection(const sim::MagneticModel& m, const MachineLimits& lim, double we, double s) {
+  double lo = 0.0, hi = 1.0;
+  while (LocusFeasible(m, lim, we, s, hi) && hi < 1e5) { lo = hi; hi *= 2; }
+  // 26 halvings: the limit torque to ~1e-8 of its value.
+  for (int k = 0; k < 26; ++k) {
+    const double mid = 0.5 * (lo + hi);
+    if (LocusFeasible(m, lim, we, s, mid)) lo = mid; else hi = mid;
+  }
+  return lo;
+}
+
+// The limit torque as the largest s T over the feasible set {id in
+// [-i_max, 0], s iq >= 0, |i| <= i_max, |u| <= u_max}. At fixed id the
+// torque grows with |iq| (the locus solver's premise), so the best point of
+// a column is its largest feasible |iq|: on the current circle, or below it
+// the largest root of |u| = u_max. The limit torque is the maximum over id
+// of that column torque: one 1-D maximisation (coarse scan + golden
+// section) with a 1-D Newton root per column, warm-started from the last
+// column's. A column with no feasible point scores minus its least
+// (|u|^2 - u_max^2) / u_max^2, so the scan climbs towards the feasible
+// columns even when they are a narrow band (high speed).
+double MaxTorqueDirect(const sim::MagneticModel& m, const MachineLimits& lim, double we, double s) {
+  const double u_max = lim.UMaxV();
+  const bool voltage = we > 0 && lim.rs_ohm.has_value() && std::isfinite(u_max);
+  const double rs = voltage ? *lim.rs_ohm : 0.0;
+  double q_warm = -1.0;
+  // phi(q) = |u(id, s q)|^2 - u_max^2 and its slope in q.
+  auto phi = [&](double id, double q, double* slope) {
+    sim::FluxLinkage F;
+    sim::DifferentialInductance L;
+    m.FluxAndInductance(id, s * q, lim.temperature_c, &F, &L);
+    const double ud = rs * id - we * F.psi_q_wb, uq = rs * s * q + we * F.psi_d_wb;
+    // d psi_q / d iq = Lqq, d psi_d / d iq = Ldq, d iq / d q = s.
+    *slope = 2 * (ud * (-we * s * L.lqq_h) + uq * s * (rs + we * L.ldq_h));
+    return ud * ud + uq * uq - u_max * u_max;
+  };
+  auto column = [&](double id) {
+    const double qc = std::sqrt(std::max(0.0, lim.i_max_a * lim.i_max_a - id * id));
+    double q = qc;
+    if (voltage) {
+      double dc, d0;
+      const double pc = phi(id, qc, &dc);
+      if (pc > 0) {
+        // Bracket [lo feasible, hi infeasible] of the largest root below qc.
+        double lo = 0.0, hi = qc;
+        if (phi(id, 0.0, &d0) > 0) {
+          // |u| too large at both ends: a feasible |iq|, if any, lies
+          // around the minimum of |u| along the column.
+          const double qm = MinimiseScalar([&](double x) { double d; return phi(id, x, &d); }, 0.0, qc, 4, 25);
+          double dm;
+          const double pm = phi(id, qm, &dm);
+          if (pm > 0) return -pm / (u_max * u_max);
+          lo = qm;
+        }
+        double x = q_warm > lo && q_warm < hi ? q_warm : hi, dx = dc;
+        double fx = x == hi ? pc : phi(id, x, &dx);
+        for (int it = 0; it < 60 && hi - lo > 1e-13 * lim.i_max_a; ++it) {
+          if (fx > 0) hi = x; else lo = x;
+          if (std::abs(fx) < 1e-13 * u_max * u_max) break;
+          double next = dx != 0.0 ? x - fx / dx : 0.5 * (lo + hi);
+          if (!(next > lo && next < hi)) next = 0.5 * (lo + hi);
+          x = next;
+          fx = phi(id, x, &dx);
+        }
+        // The root (Newton from the infeasible end converges from above, so
+        // lo may still be the bracket's start), else the feasible side.
+        q = fx <= 0 || std::abs(fx) < 1e-13 * u_max * u_max ? x : lo;
+        q_warm = q;
+      }
+    }
+    return s * TorqueNm(m, lim.pole_pairs, id, s * q, lim.temperature_c);
+  };
+  const double id = MinimiseScalar([&](double d) { return -column(d); }, -lim.i_max_a, 0.0, 24, 40);
+  return column(id);
+}
+
+}  // namespace
+
+double MaxTorqueNm(const sim::MagneticModel& m, const MachineLimits& lim, double we,
+                   double sign) {
+  const double s = sign < 0 ? -1.0 : 1.0;
+  // The limit torque is the largest request some point of whose locus lies
+  // inside both limits. It was found by bisection on the request
+  // (MaxTorqueByBisection: ~30 x 67 locus points, each a Newton solve),
+  // which dominated the tables' time. Now it is computed directly as the
+  // largest torque of the feasible set (MaxTorqueDirect, ~67 columns) and
+  // then checked by the bisection's own test on both sides: a request
+  // 1e-7 below must be feasible and 1e-7 above must not. Where the check
+  // fails (a feasible set the column search does not resolve), the
+  // bisection decides, as before.
+  const double t = MaxTorqueDirect(m, lim, we, s);
+  constexpr double kCheck = 1e-7;
+  if (t > 0 && std::isfinite(t) && LocusFeasible(m, lim, we, s, t * (1 - kCheck)) &&
+      !LocusFeasible(m, lim, we, s, t * (1 + kCheck))) {
+    // Just inside the limit (1e-9 of it, below what the golden section
+    // resolves), so that the least-current solver at this torque finds a
+    // feasible point; the bisection ended ~1e-8 inside.
+    return t * (1 - 1e-9);
+  }
+  return MaxTorqueByBisection(m, lim, we, s);
+}
+
+}  // namespace fluxcal::tables
