@@ -249,6 +249,9 @@ nlohmann::json Calibration::ToJson() const {
               {"excluded", summary.excluded}};
   j["fit"]["effective_parameters"] = summary.effective_parameters;
   if (summary.smoothing_lambda > 0) j["fit"]["smoothing_lambda"] = summary.smoothing_lambda;
+  // Written only when not isotropic: files of older versions (no field)
+  // read back as 1, the penalty they were fitted with.
+  if (summary.smoothing_anisotropy_q != 1.0) j["fit"]["smoothing_anisotropy_q"] = summary.smoothing_anisotropy_q;
   if (summary.flux_nodes > 0) {
     auto& f = j["fit"];
     f["flux_nodes"] = summary.flux_nodes;
@@ -382,6 +385,11 @@ absl::StatusOr<Calibration> Calibration::FromJson(const nlohmann::json& j) {
       c.summary.excluded = f.value("excluded", std::vector<std::string>{});
       c.summary.effective_parameters = f.value("effective_parameters", 0.0);
       c.summary.smoothing_lambda = f.value("smoothing_lambda", 0.0);
+      c.summary.smoothing_anisotropy_q = f.value("smoothing_anisotropy_q", 1.0);
+      if (!(std::isfinite(c.summary.smoothing_anisotropy_q) && c.summary.smoothing_anisotropy_q > 0)) {
+        return absl::InvalidArgumentError(absl::StrFormat(
+            "field 'fit.smoothing_anisotropy_q': %g is not a positive finite number", c.summary.smoothing_anisotropy_q));
+      }
       // Absent before map fits reported them (and for fits without flux nodes).
       c.summary.flux_nodes = f.value("flux_nodes", 0);
       c.summary.flux_rms_relative = f.value("flux_rms_relative", 0.0);

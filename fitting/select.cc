@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <optional>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -251,12 +252,28 @@ absl::StatusOr<std::vector<Solved>> SolveCandidates(const std::vector<Family>& c
       return absl::CancelledError("fit: stopped between candidate models (cancelled by the caller)");
     }
     if (f.kind == Family::kSpline && f.spline.smoothing) {
-      // May have more coefficients than observations: the penalty decides.
-      const Eigen::MatrixXd P = SmoothingPenalty(f);
+      // May have more coefficients than observations: the penalty decides,
+      // its weight lambda and its anisotropy kappa (SmoothingPenalty) both
+      // by the restricted likelihood (Wood 2011: the marginal likelihood of
+      // the smoothing parameters of a tensor-product smooth): for each
+      // kappa on a grid of factors 9 (1/729 .. 729: a machine's two axes
+      // saturate on current scales up to ~30x apart) lambda is chosen
+      // (SolveLinear), and the kappa whose chosen fit has the best
+      // likelihood wins. The likelihoods are comparable across kappa: the
+      // penalties share their null space, so the marginal likelihood's
+      // unpenalised part is common to all of them.
       const Acceptable pd = [&](const std::vector<double>& params) {
         return CalibrationOf(d, r, f, params, {}).PhysicalOver(1.0, not_pd);
       };
-      solved.push_back(Solve(f, d, o, &P, &pd));
+      std::optional<Solved> chosen;
+      for (int e = -3; e <= 3; ++e) {
+        const double kappa = std::pow(9.0, e);
+        const Eigen::MatrixXd P = SmoothingPenalty(f, kappa);
+        Solved s = Solve(f, d, o, &P, &pd);
+        s.anisotropy_q = kappa;
+        if (!chosen || (s.usable && s.reml < chosen->reml) || !chosen->usable) chosen = std::move(s);
+      }
+      solved.push_back(std::move(*chosen));
       continue;
     }
     // A flexible family needs more observations than parameters.
@@ -279,6 +296,7 @@ void Report(const FitData& d, const FitOptions& o, const std::vector<Solved>& so
   cal.summary.termination = best->termination;
   cal.summary.usable = best->usable;
   cal.summary.smoothing_lambda = best->lambda;
+  cal.summary.smoothing_anisotropy_q = best->lambda > 0 ? best->anisotropy_q : 1.0;
   cal.summary.effective_parameters = best->k_eff;
   double rel = 0;
   int nrel = 0;

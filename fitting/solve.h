@@ -24,6 +24,12 @@ struct Solved {
   std::vector<double> params, covariance;
   double chi2 = 0, bic = 0, cv = 0, k_eff = 0;
   double lambda = 0;   // smoothing families: the roughness penalty's weight
+  double anisotropy_q = 1;   // smoothing families: SmoothingPenalty's kappa (select.cc)
+  // Smoothing families: -2 log restricted likelihood of (lambda, penalty)
+  // up to a constant common to every penalty with the same null space
+  // (solve_linear.cc, ScoreLambdas): the smaller, the better the data
+  // support this smoothing.
+  double reml = 0;
   int n_obs = 0, k = 0;
   std::string termination;
   bool usable = false;

@@ -162,64 +162,45 @@ std::vector<Trial> ScoreLambdas(const Eigen::VectorXd& dvals, const Eigen::Matri
 }
 
 // Ranks `trials` (in lambda order, as ScoreLambdas returns them) and sorts
-// them into the order of preference: (1) the GCV basin the likelihood
-// prefers (the likelihood's own minimum when GCV has no basin, below),
-// from its local minimum out to the smoothest lambda whose GCV is
-// within kGcvTolerance of it (the curve is flat there); (2) the
-// other local minima of the GCV curve, lowest first: when the
-// surface at (1) is rejected (not positive definite where
-// measured), the next candidate is another basin of the curve, not
-// the neighbour of the rejected minimum on its own slope; (3) the
-// rest in GCV order.
-// Why the likelihood picks the basin: on a 6 x 6 bench grid the GCV
-// curve often has two basins, one near interpolation (~120
-// effective parameters of 136 rows) and one smoother (~106), and
-// the first, now and then the lower, follows the noise between the
-// measured id columns; the flux, its integral, then drifts (0.95 %
-// RMS on a measured map where the smoother basin gives 0.3 %).
-// GCV scores point predictions and cannot see that; the restricted
-// likelihood is far less prone to it (Wood 2011, sec. 1; Reiss &
-// Ogden 2009, JRSS B 71(2)). It only chooses among GCV's own minima:
-// used alone it oversmoothed a PM-SyRM draw (1.6 %) and an exact
-// coarse map's bridge knee (7.2 %). Measured over 20 draws of the
-// measured map: worst 0.41 % instead of 0.95 % (docs/fitting.md).
+// them into the order of preference: (1) the restricted likelihood's
+// minimum (among the lambdas that leave enough residual dof, below), from
+// there out to the smoothest lambda whose GCV is within kGcvTolerance of
+// it (the curve is flat there); (2) the local minima of the GCV curve,
+// lowest first: when the surface at (1) is rejected (not positive definite
+// where measured), the next candidate is another basin of the curve, not
+// the neighbour of the rejected lambda on its own slope; (3) the rest in
+// GCV order.
+// Why the likelihood: on a 6 x 6 bench grid the GCV curve often has two
+// basins, one near interpolation (~120 effective parameters of 136 rows)
+// and one smoother (~106), and the first, now and then the lower, follows
+// the noise between the measured id columns; the flux, its integral, then
+// drifts, and the inductances wiggle between the measured points. GCV
+// scores point predictions and cannot see that; the restricted likelihood
+// is far less prone to it (Wood 2011, sec. 1; Reiss & Ogden 2009, JRSS B
+// 71(2)). With one isotropic weight the likelihood alone once oversmoothed
+// a PM-SyRM draw (1.6 %) and an exact coarse map's bridge knee (7.2 %), and
+// it only chose among GCV's basins; with the weight per direction
+// (SmoothingPenalty's anisotropy, chosen by the same likelihood in
+// select.cc) it no longer does, and it decides alone: over 100 bench draws
+// of five maps every draw within 0.5 % (two above before), the slope sign
+// changes of the fitted inductances a third to a quarter of GCV's
+// (docs/fitting.md, "Smoothness chosen by the likelihood").
 void RankTrials(std::vector<Trial>& trials, int n) {
   const double best_gcv =
       std::min_element(trials.begin(), trials.end(), [](const Trial& a, const Trial& c) { return a.gcv < c.gcv; })
           ->gcv;
   double tol = (1.0 + kGcvTolerance) * best_gcv;
   std::vector<int> rank(trials.size(), 2);   // trials are in lambda order here
-  int basin = -1;   // the basin of GCV with the best likelihood
+  int basin = -1;   // the restricted likelihood's minimum
   const int nt = static_cast<int>(trials.size());
   auto enough_dof = [&](int i) { return n - trials[i].tr >= kMinResidualDofShare * n; };   // see below
-  // A basin is a local minimum the curve rises out of by more than
-  // kGcvTolerance on both sides (before it falls below the minimum
-  // again); a minimum at the grid's end, or a ripple on a slope
-  // running down into interpolation, is not one. There GCV has no
-  // lambda to offer and the likelihood's own minimum decides: on a map
-  // whose one non-positive point was left out, GCV fell monotonically
-  // into a near-interpolating surface (residual chi2 6-9 on 21-25
-  // residual dof) 2.5 % RMS off in flux, where the likelihood's
-  // minimum (chi2 ~ 40 on 42) is 0.1 % off.
-  auto rises = [&](int i, int step) {   // at the grid's end: top stays gcv_i
-    double top = trials[i].gcv;
-    for (int j = i + step; j >= 0 && j < nt && trials[j].gcv >= trials[i].gcv; j += step) {
-      top = std::max(top, trials[j].gcv);
-    }
-    return top > (1.0 + kGcvTolerance) * trials[i].gcv;
-  };
-  for (int i = 0; i < nt; ++i) {
+  for (int i = 0; i < nt; ++i) {   // GCV's local minima: the fallbacks (2)
     const bool left = i == 0 || trials[i].gcv <= trials[i - 1].gcv;
     const bool right = i + 1 == nt || trials[i].gcv <= trials[i + 1].gcv;
-    if (!(left && right)) continue;
-    rank[i] = 1;
-    const bool prominent = rises(i, -1) && rises(i, +1);
-    if (prominent && enough_dof(i) && (basin < 0 || trials[i].reml < trials[basin].reml)) basin = i;
+    if (left && right) rank[i] = 1;
   }
-  if (basin < 0) {
-    for (int i = 0; i < nt; ++i) {
-      if (enough_dof(i) && (basin < 0 || trials[i].reml < trials[basin].reml)) basin = i;
-    }
+  for (int i = 0; i < nt; ++i) {
+    if (enough_dof(i) && (basin < 0 || trials[i].reml < trials[basin].reml)) basin = i;
   }
   if (basin >= 0) {
     tol = (1.0 + kGcvTolerance) * trials[basin].gcv;
@@ -249,7 +230,7 @@ void RankTrials(std::vector<Trial>& trials, int n) {
 // The roughness penalty's weight, its effective parameters tr H and the
 // coefficients it gives.
 struct LambdaChoice {
-  double lambda = 0, dof = 0;
+  double lambda = 0, dof = 0, reml = 0;
   Eigen::VectorXd params;
 };
 
@@ -285,6 +266,7 @@ LambdaChoice ChooseLambda(const LinearSystem& sys, const Eigen::VectorXd& w, con
   LambdaChoice choice;
   choice.lambda = pick->lam;
   choice.dof = pick->tr;
+  choice.reml = pick->reml;
   choice.params = pick->p;
   return choice;
 }
@@ -389,7 +371,7 @@ Solved SolveLinear(const Family& fam, Built& b, const FitOptions& o, const Eigen
     B.diagonal().array() += eps;
     chol.compute(B);
   }
-  double lambda = 0, dof = 0;
+  double lambda = 0, dof = 0, reml = 0;
   for (int it = 0; it < 30; ++it) {
     const Eigen::MatrixXd A = sys.Normal(w);
     const Eigen::VectorXd g = -(sys.Jr.transpose() * w.cwiseProduct(sys.r0));
@@ -399,6 +381,7 @@ Solved SolveLinear(const Family& fam, Built& b, const FitOptions& o, const Eigen
         LambdaChoice choice = ChooseLambda(sys, w, A, g, B, chol, acceptable);
         lambda = choice.lambda;
         dof = choice.dof;
+        reml = choice.reml;
         np = choice.params;
       } else {
         np = SolveSpd(A + lambda * B, g);
@@ -417,7 +400,9 @@ Solved SolveLinear(const Family& fam, Built& b, const FitOptions& o, const Eigen
     // lambda already bounds the resolution far coarser than that.
     if (step < (penalty != nullptr ? 1e-7 : 1e-10) * (1.0 + p.norm())) break;
   }
-  return Summarise(fam, b, sys, p, w, c2, penalty != nullptr ? &B : nullptr, lambda, dof);
+  Solved s = Summarise(fam, b, sys, p, w, c2, penalty != nullptr ? &B : nullptr, lambda, dof);
+  s.reml = reml;
+  return s;
 }
 
 }  // namespace fluxcal::fit::internal

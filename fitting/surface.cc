@@ -157,6 +157,15 @@ SurfacePoint SurfaceAt(const Family& f, const double* params, double id_a, doubl
 // constant inductance: where no data pull, the surface continues with the
 // inductance it has at the data's edge, and a strong lambda flattens
 // towards the best constant-inductance model instead of oscillating.
+// Anisotropy (kappa, surface.h): a tensor-product smooth has one weight per
+// direction (Wood 2006, Biometrics 62(4), "low-rank scale-invariant tensor
+// product smooths"): a machine saturates along iq over a few amperes where
+// its Ldd barely moves along id, and one isotropic weight must either
+// follow the q knee and let Ldd wiggle with the noise between the measured
+// id columns, or flatten the knee. Row (a, b) is scaled by kappa^((b-a)/12),
+// its square by kappa^((b-a)/6); the null space (a constant inductance) is
+// the same for every kappa. The fit chooses kappa with lambda
+// (solve_linear.cc, select.cc).
 SurfaceEvaluator::SurfaceEvaluator(const Family& f, std::vector<double> params) : f_(f), p_(std::move(params)) {
   if (f_.kind == Family::kSpline && static_cast<int>(p_.size()) == f_.NumParams()) {
     spline_ = SplineSurface(f_.spline, p_.data());
@@ -173,7 +182,7 @@ void SurfaceEvaluator::Eval(double id, double iq, double* psi_d, double* psi_q, 
   if (ldd != nullptr) FamilyInductance(f_, id, iq, p_.data(), ldd, lqq, ldq);
 }
 
-Eigen::MatrixXd SmoothingPenalty(const Family& fam) {
+Eigen::MatrixXd SmoothingPenalty(const Family& fam, double anisotropy_q) {
   if (fam.kind != Family::kSpline || !fam.spline.smoothing) return Eigen::MatrixXd(0, fam.NumParams());
   const SplineDomain& dom = fam.spline;
   const int nd = dom.NumD(), nq = dom.NumQ(), ne = dom.NumEven(), k = fam.NumParams();
@@ -189,7 +198,8 @@ Eigen::MatrixXd SmoothingPenalty(const Family& fam) {
   std::vector<Eigen::VectorXd> rows;
   for (int a = 3; a >= 0; --a) {
     const int bq = 3 - a;
-    const double scale = std::sqrt(weight[3 - a]) * std::pow(unit / hd, a) * std::pow(unit / hq, bq);
+    const double scale = std::sqrt(weight[3 - a]) * std::pow(unit / hd, a) * std::pow(unit / hq, bq) *
+                         std::pow(anisotropy_q, (bq - a) / 12.0);
     for (int i = 0; i + a < nd; ++i) {
       for (int j = 0; j + bq < nq; ++j) {
         Eigen::VectorXd row = Eigen::VectorXd::Zero(k);

@@ -45,10 +45,13 @@ class SurfaceEvaluator {
   SplineSurface spline_;
 };
 
-// Roughness of a smoothing-spline co-energy (solve_linear.cc, where it is derived):
+// Roughness of a smoothing-spline co-energy (surface.cc, where it is derived):
 // rows of third differences of the coefficients, one column per parameter
 // (column 0, psi_pm, is zero). Empty (0 x NumParams) for other families.
-Eigen::MatrixXd SmoothingPenalty(const Family& f);
+// `anisotropy_q` (kappa > 0) weighs bending along iq against bending along
+// id: the squared term of W_{d^a q^b} carries kappa^((b - a)/6), so W_qqq^2
+// counts kappa times, W_ddd^2 1/kappa times (1: isotropic in amperes).
+Eigen::MatrixXd SmoothingPenalty(const Family& f, double anisotropy_q = 1.0);
 
 }  // namespace fluxcal::fit
 
