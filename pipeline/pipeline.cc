@@ -379,6 +379,12 @@ absl::StatusOr<fit::Calibration> LoadCalibration(storage::Store& store, const st
   return *parsed;
 }
 
+absl::StatusOr<fit::Calibration> LoadCalibrationFile(const std::string& path) { return fit::LoadCalibrationFile(path); }
+
+absl::StatusOr<fit::Calibration> ParseCalibrationJson(const nlohmann::json& j) { return fit::Calibration::FromJson(j); }
+
+const char* FluxRegionName(fit::Region region) { return fit::RegionName(region); }
+
 absl::StatusOr<fit::Calibration> ParseStoredCalibration(const storage::CalibrationRow& stored) {
   const storage::CalibrationRow* row = &stored;
   const std::string& serial = stored.serial;

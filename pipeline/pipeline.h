@@ -103,6 +103,12 @@ absl::StatusOr<storage::CalibrationRow> FitSerial(storage::Store& store, const s
                                                   const CancelledFn& cancelled = {});
 
 // --- Read.
+// A calibration JSON file (fluxcal fit's output), and one already parsed.
+absl::StatusOr<fit::Calibration> LoadCalibrationFile(const std::string& path);
+absl::StatusOr<fit::Calibration> ParseCalibrationJson(const nlohmann::json& j);
+// Where a predicted point lies, as the API and `fluxcal query` name it
+// ("measured", "by_symmetry", "extrapolated").
+const char* FluxRegionName(fit::Region region);
 // A stored row's calibration JSON parsed (DataLoss when corrupt).
 absl::StatusOr<fit::Calibration> ParseStoredCalibration(const storage::CalibrationRow& row);
 absl::StatusOr<fit::Calibration> LoadCalibration(storage::Store& store, const std::string& serial, int version);

@@ -11,6 +11,8 @@
 #include "tables/tables.h"
 
 namespace fluxcal::pipeline {
+
+absl::StatusOr<report::Report> BuildReportPage(const report::ReportInputs& in) { return report::BuildReport(in); }
 namespace {
 
 constexpr char kDiagnosisFormat[] = "fluxcal.diagnosis.v1";

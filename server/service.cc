@@ -17,12 +17,13 @@
 #include "io/recording_set.h"
 #include "nlohmann/json.hpp"
 #include "pipeline/anchor.h"
+#include "pipeline/diagnose.h"
 #include "pipeline/ingest_stream.h"
 #include "pipeline/pipeline.h"
 #include "pipeline/report.h"
+#include "pipeline/signing.h"
 #include "server/reflection.h"
 #include "server/validation.h"
-#include "tables/signature.h"
 
 namespace fluxcal::server {
 
@@ -454,7 +455,7 @@ grpc::Status CalibrationServiceImpl::QueryFlux(grpc::ServerContext* ctx, const v
     v->set_psi_d_wb_std(x.psi_d_wb_std); v->set_psi_q_wb_std(x.psi_q_wb_std);
     v->set_ldd_h_std(x.ldd_h_std); v->set_lqq_h_std(x.lqq_h_std); v->set_torque_nm_std(x.torque_nm_std);
     v->set_extrapolated(x.extrapolated);
-    v->set_region(fit::RegionName(x.region));
+    v->set_region(pipeline::FluxRegionName(x.region));
     v->set_invalid(!x.valid);
     v->set_invalid_reason(x.invalid_reason);
   }
@@ -510,7 +511,7 @@ grpc::Status CalibrationServiceImpl::ExportTable(grpc::ServerContext* ctx, const
   spec.allow_extrapolation = req->allow_extrapolation();
   tables::ExportOptions options;
   if (!req->ctype().empty()) {
-    auto ct = tables::ParseCType(req->ctype());
+    auto ct = pipeline::ParseExportCType(req->ctype());
     if (!ct.ok()) return ToGrpcStatus(ct.status());
     options.ctype = *ct;
   }
@@ -527,7 +528,7 @@ grpc::Status CalibrationServiceImpl::ExportTable(grpc::ServerContext* ctx, const
   resp->set_verdict(r->verdict);
   resp->set_released(r->released);
   if (!signing_key_pem_.empty()) {
-    auto sig = tables::SignDetached(r->exported.bytes, signing_key_pem_);
+    auto sig = pipeline::SignExport(r->exported.bytes, signing_key_pem_);
     if (!sig.ok()) return ToGrpcStatus(sig.status());
     resp->set_signature(*sig);
   }
@@ -575,7 +576,7 @@ grpc::Status CalibrationServiceImpl::Diagnose(grpc::ServerContext* ctx, const v1
   if (!rep.ok()) return StoppedOr(ctx, rep.status());
   resp->set_serial(req->serial());
   resp->set_verdict(rep->verdict);
-  resp->set_report_json(diag::ToJson(*rep).dump(-1, ' ', false, nlohmann::json::error_handler_t::replace));
+  resp->set_report_json(pipeline::DiagnosisJson(*rep).dump(-1, ' ', false, nlohmann::json::error_handler_t::replace));
   for (const auto& f : rep->findings) resp->add_effects(f.effect);
   if (req->store_calibration()) {
     const auto audit = AuditFor(ctx, *who, Rpc::kDiagnose, req->serial(), nullptr);

@@ -16,7 +16,7 @@
 #include "fluxcal/v1/calibration.grpc.pb.h"
 #include "server/auth.h"
 #include "server/limits.h"
-#include "storage/store.h"
+#include "pipeline/store.h"
 
 namespace grpc {
 class Server;
