@@ -31,9 +31,6 @@
 #include "cli/support_flux_map.h"
 #include "cli/support_progress.h"
 #include "cli/support_remote.h"
-#include "fitting/calibration.h"
-#include "fitting/fit.h"
-#include "identification/identify.h"
 #include "io/csv.h"
 #include "io/recording_set.h"
 #include "io/sha256.h"
@@ -41,7 +38,6 @@
 #include "pipeline/pipeline.h"
 #include "pipeline/points.h"
 #include "pipeline/report.h"
-#include "report/report.h"
 
 namespace fluxcal::cli {
 namespace {
@@ -283,7 +279,7 @@ int RunReport(const std::vector<std::string>& argv) {
     mtime = FileMtimeUtc(cal_path);
   }
   if (!cal_json.ok()) return Fail(std::string(cal_json.status().message()));
-  auto cal = fit::Calibration::FromJson(*cal_json);
+  auto cal = pipeline::ParseCalibrationJson(*cal_json);
   if (!cal.ok()) return Fail(source + ": " + std::string(cal.status().message()));
 
   // Verdict, the findings of a diagnosed calibration and the software
@@ -337,7 +333,7 @@ int RunReport(const std::vector<std::string>& argv) {
     pipeline::AddDiagnosisDocumentToReport(*dj, *d, &in);
   }
   std::fprintf(stderr, "report: building tables and figures for %s\n", cal->serial().c_str());
-  auto rep = report::BuildReport(in);
+  auto rep = pipeline::BuildReportPage(in);
   if (!rep.ok()) return Fail(std::string(rep.status().message()));
   if (auto st = WriteNewOutput(*args, {"out", out}, rep->html); !st.ok()) return Fail(std::string(st.message()));
   PrintSummary({out, cal->serial(), in.verdict, io::Sha256Hex(rep->html), cal->version, rep->figures,
