@@ -379,6 +379,33 @@ absl::StatusOr<fit::Calibration> LoadCalibration(storage::Store& store, const st
   return *parsed;
 }
 
+absl::StatusOr<FitTolerances> RequestedTolerances(double max_rms_relative, double psi_pm_tolerance_relative) {
+  FitTolerances tol;
+  if (max_rms_relative < 0 || !std::isfinite(max_rms_relative) || psi_pm_tolerance_relative < 0 ||
+      !std::isfinite(psi_pm_tolerance_relative)) {
+    return absl::InvalidArgumentError("max_rms_relative, psi_pm_tolerance_relative: must be >= 0");
+  }
+  if (max_rms_relative > tol.max_rms_relative || psi_pm_tolerance_relative > tol.psi_pm_tolerance_relative) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("max_rms_relative, psi_pm_tolerance_relative: may only tighten the server policy (%g, %g)",
+                        tol.max_rms_relative, tol.psi_pm_tolerance_relative));
+  }
+  if (max_rms_relative > 0) tol.max_rms_relative = max_rms_relative;
+  if (psi_pm_tolerance_relative > 0) tol.psi_pm_tolerance_relative = psi_pm_tolerance_relative;
+  return tol;
+}
+
+absl::Status CheckDistinctOperatingPoints(const std::vector<IdentifiedPoint>& points) {
+  std::set<std::pair<double, double>> distinct;
+  for (const auto& r : points) distinct.insert({r.id_a, r.iq_a});
+  if (!points.empty() && static_cast<int>(distinct.size()) < kMinDistinctOperatingPoints) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "points: ", distinct.size(), " distinct operating points (id_a, iq_a); a calibration needs at least ",
+        kMinDistinctOperatingPoints, "; nothing stored"));
+  }
+  return absl::OkStatus();
+}
+
 absl::StatusOr<fit::Calibration> LoadCalibrationFile(const std::string& path) { return fit::LoadCalibrationFile(path); }
 
 absl::StatusOr<fit::Calibration> ParseCalibrationJson(const nlohmann::json& j) { return fit::Calibration::FromJson(j); }

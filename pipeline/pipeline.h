@@ -81,6 +81,17 @@ struct FitTolerances {
   double max_rms_relative = 0.02;          // fit residual vs the identified points (a map fit: flux error over its nodes)
   double psi_pm_tolerance_relative = 0.10; // vs the nominal magnet flux
 };
+// The tolerances a fit request asks for (0: the policy's, FitTolerances'
+// defaults). The policy may be tightened, never loosened: a failing run must
+// not become "pass" on request. InvalidArgument for a negative or
+// non-finite value, or one above the policy's.
+absl::StatusOr<FitTolerances> RequestedTolerances(double max_rms_relative, double psi_pm_tolerance_relative);
+// A calibration needs a grid: fewer distinct (id_a, iq_a) than this cannot
+// determine a flux surface (36 copies of one point must not "pass").
+inline constexpr int kMinDistinctOperatingPoints = 6;
+// InvalidArgument (field 'points', "nothing stored") for a non-empty run
+// with fewer than kMinDistinctOperatingPoints distinct operating points.
+absl::Status CheckDistinctOperatingPoints(const std::vector<IdentifiedPoint>& points);
 // "pass" or "fail: <reason>" for a fitted calibration, the one place that
 // judges one. psi_pm is judged against `nominal_psi_pm_wb`, else against
 // the calibration's own nominal (cal.psi_pm_nominal_wb()); with neither

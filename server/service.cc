@@ -212,15 +212,7 @@ grpc::Status CalibrationServiceImpl::IngestHfResults(grpc::ServerContext* ctx,
                                           pipeline::HfPointsSha256(rows)};
     if (auto s = pipeline::CheckStreamEnd(declared, received, "end", "points"); !s.ok()) return AtMessage(end_message, s);
   }
-  {
-    std::set<std::pair<double, double>> distinct;
-    for (const auto& r : rows) distinct.insert({r.id_a, r.iq_a});
-    if (!rows.empty() && static_cast<int>(distinct.size()) < kMinDistinctOperatingPoints) {
-      return ToGrpcStatus(absl::InvalidArgumentError(absl::StrCat(
-          "points: ", distinct.size(), " distinct operating points (id_a, iq_a); a calibration needs at least ",
-          kMinDistinctOperatingPoints, "; nothing stored")));
-    }
-  }
+  if (auto s = pipeline::CheckDistinctOperatingPoints(rows); !s.ok()) return ToGrpcStatus(s);
   std::optional<pipeline::MotorNominal> m;
   if (have_motor) m = pipeline::MotorNominal{motor.pole_pairs(), motor.rs_ohm(), motor.psi_pm_wb()};
   bool replayed = false;
@@ -349,24 +341,14 @@ grpc::Status CalibrationServiceImpl::Fit(grpc::ServerContext* ctx, const v1::Fit
   auto who = Admit(ctx, Rpc::kFit);
   if (!who.ok()) return ToGrpcStatus(who.status());
   if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
-  pipeline::FitTolerances tol;
-  if (req->max_rms_relative() < 0 || !std::isfinite(req->max_rms_relative()) ||
-      req->psi_pm_tolerance_relative() < 0 || !std::isfinite(req->psi_pm_tolerance_relative())) {
-    return ToGrpcStatus(absl::InvalidArgumentError("max_rms_relative, psi_pm_tolerance_relative: must be >= 0"));
-  }
-  // Verdict tolerances are server policy: a client may tighten them, never
-  // loosen them (a failing run must not become "pass" on request).
-  if (req->max_rms_relative() > tol.max_rms_relative || req->psi_pm_tolerance_relative() > tol.psi_pm_tolerance_relative) {
-    return ToGrpcStatus(absl::InvalidArgumentError(absl::StrFormat(
-        "max_rms_relative, psi_pm_tolerance_relative: may only tighten the server policy (%g, %g)",
-        tol.max_rms_relative, tol.psi_pm_tolerance_relative)));
-  }
-  if (req->max_rms_relative() > 0) tol.max_rms_relative = req->max_rms_relative();
-  if (req->psi_pm_tolerance_relative() > 0) tol.psi_pm_tolerance_relative = req->psi_pm_tolerance_relative();
+  // Verdict tolerances are policy (pipeline::RequestedTolerances): a client
+  // may tighten them, never loosen them.
+  auto tol = pipeline::RequestedTolerances(req->max_rms_relative(), req->psi_pm_tolerance_relative());
+  if (!tol.ok()) return ToGrpcStatus(tol.status());
   // Model and verdict are known before the store call, the version only
   // inside it: the detail is formed there from the row the pipeline stores.
   const auto audit = AuditFor(ctx, *who, Rpc::kFit, req->serial(), nullptr);
-  auto row = pipeline::FitSerial(*store_, req->serial(), req->model(), tol, &audit, CancelledBy(ctx));
+  auto row = pipeline::FitSerial(*store_, req->serial(), req->model(), *tol, &audit, CancelledBy(ctx));
   if (!row.ok()) return StoppedOr(ctx, row.status());
   AnchorAfterWrite(req->serial());
   ToProto(*row, resp->mutable_calibration());
