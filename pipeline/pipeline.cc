@@ -437,6 +437,38 @@ absl::StatusOr<QueryResult> QueryFlux(storage::Store& store, const std::string& 
   return out;
 }
 
+absl::StatusOr<storage::CalibrationRow> GetCalibrationRecord(storage::Store& store, const std::string& serial,
+                                                             int version) {
+  return store.GetCalibration(serial, version);
+}
+
+absl::StatusOr<MotorPage> ListMotorsPage(storage::Store& store, const std::string& prefix, bool only_failed,
+                                         int offset, int page_size) {
+  // One row more than the page: whether a next page exists, in one query.
+  auto rows = store.ListMotors(prefix, only_failed, offset, page_size + 1);
+  if (!rows.ok()) return rows.status();
+  MotorPage page;
+  if (static_cast<int>(rows->size()) > page_size) {
+    rows->resize(page_size);
+    page.next_offset = offset + page_size;
+  }
+  page.motors = std::move(*rows);
+  return page;
+}
+
+absl::StatusOr<std::vector<storage::HistoryRow>> MotorHistory(storage::Store& store, const std::string& serial) {
+  return store.History(serial);
+}
+
+absl::StatusOr<std::vector<storage::AuditRow>> AuditTrail(storage::Store& store, const std::string& serial) {
+  return store.AuditOf(serial);
+}
+
+absl::Status ReleaseVersion(storage::Store& store, const std::string& serial, int version,
+                            const std::string& released_by, const storage::AuditContext* audit) {
+  return store.Release(serial, version, released_by, audit);
+}
+
 absl::StatusOr<int> FlashableVersion(storage::Store& store, const std::string& serial, int version) {
   if (version == 0) {
     auto v = store.LatestReleasedVersion(serial);

@@ -131,6 +131,32 @@ struct QueryResult {
 absl::StatusOr<QueryResult> QueryFlux(storage::Store& store, const std::string& serial, int version,
                                       const std::vector<std::pair<double, double>>& points);
 
+// --- Records: what the store holds about a serial, as the service's reads
+// return it.
+// Calibration `version` of `serial` (0: the latest) as stored.
+absl::StatusOr<storage::CalibrationRow> GetCalibrationRecord(storage::Store& store, const std::string& serial,
+                                                             int version);
+// One page of the motor list: at most `page_size` motors from `offset`
+// (serials starting with `prefix`; `only_failed`: latest verdict not
+// "pass"), and the offset of the next page when there is one.
+struct MotorPage {
+  std::vector<storage::MotorSummaryRow> motors;
+  std::optional<int> next_offset;
+};
+absl::StatusOr<MotorPage> ListMotorsPage(storage::Store& store, const std::string& prefix, bool only_failed,
+                                         int offset, int page_size);
+// What happened to a serial (runs, versions, releases), oldest first, and
+// its audit trail.
+absl::StatusOr<std::vector<storage::HistoryRow>> MotorHistory(storage::Store& store, const std::string& serial);
+absl::StatusOr<std::vector<storage::AuditRow>> AuditTrail(storage::Store& store, const std::string& serial);
+
+// --- Release.
+// Releases calibration `version` of `serial` for flashing, by
+// `released_by` (its release chain link and `audit` in the same
+// transaction; storage::Store::Release says what is refused).
+absl::Status ReleaseVersion(storage::Store& store, const std::string& serial, int version,
+                            const std::string& released_by, const storage::AuditContext* audit = nullptr);
+
 // Export (ExportResult, ExportCalibration, ExportTable): pipeline/export.h.
 
 // The version a flashing station gets (ExportTable for the flasher role):

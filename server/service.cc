@@ -362,7 +362,7 @@ grpc::Status CalibrationServiceImpl::GetCalibration(grpc::ServerContext* ctx, co
   if (!who.ok()) return ToGrpcStatus(who.status());
   if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
   if (auto s = ValidateVersion(req->version()); !s.ok()) return ToGrpcStatus(s);
-  auto row = store_->GetCalibration(req->serial(), req->version());
+  auto row = pipeline::GetCalibrationRecord(*store_, req->serial(), req->version());
   if (!row.ok()) return ToGrpcStatus(row.status());
   ToProto(*row, resp);
   return grpc::Status::OK;
@@ -378,16 +378,15 @@ grpc::Status CalibrationServiceImpl::ListMotors(grpc::ServerContext* ctx, const 
   if (!token.ok()) return ToGrpcStatus(token.status());
   const int offset = *token;
   if (req->serial_prefix().size() > 64) return ToGrpcStatus(absl::InvalidArgumentError("serial_prefix: at most 64 characters"));
-  auto rows = store_->ListMotors(req->serial_prefix(), req->only_failed(), offset, size + 1);
-  if (!rows.ok()) return ToGrpcStatus(rows.status());
+  auto page = pipeline::ListMotorsPage(*store_, req->serial_prefix(), req->only_failed(), offset, size);
+  if (!page.ok()) return ToGrpcStatus(page.status());
   if (who->role == Role::kHealth) return grpc::Status::OK;   // the database answered; no data for a health check
-  for (size_t k = 0; k < rows->size() && static_cast<int>(k) < size; ++k) {
+  for (const auto& r : page->motors) {
     auto* m = resp->add_motors();
-    const auto& r = (*rows)[k];
     m->set_serial(r.serial); m->set_latest_version(r.latest_version); m->set_verdict(r.verdict);
     m->set_runs(r.runs); m->set_updated_utc(r.updated_utc);
   }
-  if (static_cast<int>(rows->size()) > size) resp->set_next_page_token(std::to_string(offset + size));
+  if (page->next_offset) resp->set_next_page_token(std::to_string(*page->next_offset));
   return grpc::Status::OK;
 }
 
@@ -396,7 +395,7 @@ grpc::Status CalibrationServiceImpl::History(grpc::ServerContext* ctx, const v1:
   auto who = Admit(ctx, Rpc::kHistory);
   if (!who.ok()) return ToGrpcStatus(who.status());
   if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
-  auto rows = store_->History(req->serial());
+  auto rows = pipeline::MotorHistory(*store_, req->serial());
   if (!rows.ok()) return ToGrpcStatus(rows.status());
   resp->set_serial(req->serial());
   for (const auto& r : *rows) {
@@ -581,7 +580,7 @@ grpc::Status CalibrationServiceImpl::Release(grpc::ServerContext* ctx, const v1:
   }
   const auto audit = AuditFor(ctx, *who, Rpc::kRelease, req->serial(),
                               [](int64_t version, bool) { return absl::StrCat("released version ", version); });
-  if (auto s = store_->Release(req->serial(), req->version(), who->name, &audit); !s.ok()) return ToGrpcStatus(s);
+  if (auto s = pipeline::ReleaseVersion(*store_, req->serial(), req->version(), who->name, &audit); !s.ok()) return ToGrpcStatus(s);
   AnchorAfterWrite(req->serial());
   resp->set_serial(req->serial());
   resp->set_version(req->version());
@@ -635,7 +634,7 @@ grpc::Status CalibrationServiceImpl::Audit(grpc::ServerContext* ctx, const v1::A
   auto who = Admit(ctx, Rpc::kAudit);
   if (!who.ok()) return ToGrpcStatus(who.status());
   if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
-  auto rows = store_->AuditOf(req->serial());
+  auto rows = pipeline::AuditTrail(*store_, req->serial());
   if (!rows.ok()) return ToGrpcStatus(rows.status());
   resp->set_serial(req->serial());
   for (const auto& r : *rows) {
