@@ -512,16 +512,16 @@ absl::StatusOr<std::vector<FleetPoint>> FleetStatistics(storage::Store& store,
       *mean = s / n;
       *sd = p.size() > 1 ? std::sqrt(std::max(0.0, (s2 - s * s / n) / (n - 1))) : 0.0;
     };
-    stats([](const fit::FluxPrediction& x) { return x.ldd_h; }, &fp.ldd_mean, &fp.ldd_std);
-    stats([](const fit::FluxPrediction& x) { return x.lqq_h; }, &fp.lqq_mean, &fp.lqq_std);
-    stats([](const fit::FluxPrediction& x) { return x.psi_d_wb; }, &fp.psi_d_mean, &fp.psi_d_std);
-    stats([](const fit::FluxPrediction& x) { return x.torque_nm; }, &fp.torque_mean, &fp.torque_std);
+    stats([](const fit::FluxPrediction& x) { return x.ldd_h; }, &fp.ldd_h_mean, &fp.ldd_h_std);
+    stats([](const fit::FluxPrediction& x) { return x.lqq_h; }, &fp.lqq_h_mean, &fp.lqq_h_std);
+    stats([](const fit::FluxPrediction& x) { return x.psi_d_wb; }, &fp.psi_d_wb_mean, &fp.psi_d_wb_std);
+    stats([](const fit::FluxPrediction& x) { return x.torque_nm; }, &fp.torque_nm_mean, &fp.torque_nm_std);
     // Outliers: any quantity more than outlier_sigma standard deviations from
     // the fleet mean (leave-one-out would be better for tiny fleets).
     for (size_t k = 0; k < p.size(); ++k) {
       auto z = [&](double v, double m, double s) { return s > 0 ? std::abs(v - m) / s : 0.0; };
-      if (z(p[k].ldd_h, fp.ldd_mean, fp.ldd_std) > outlier_sigma || z(p[k].lqq_h, fp.lqq_mean, fp.lqq_std) > outlier_sigma ||
-          z(p[k].torque_nm, fp.torque_mean, fp.torque_std) > outlier_sigma) {
+      if (z(p[k].ldd_h, fp.ldd_h_mean, fp.ldd_h_std) > outlier_sigma || z(p[k].lqq_h, fp.lqq_h_mean, fp.lqq_h_std) > outlier_sigma ||
+          z(p[k].torque_nm, fp.torque_nm_mean, fp.torque_nm_std) > outlier_sigma) {
         fp.outliers.push_back(cals[k].first);
       }
     }

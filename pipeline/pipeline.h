@@ -17,6 +17,7 @@
 #include "io/recording_set.h"
 #include "pipeline/export.h"
 #include "pipeline/points.h"
+#include "report/report.h"
 #include "storage/store.h"
 #include "tables/export_rule.h"
 #include "tables/tables.h"
@@ -168,13 +169,10 @@ absl::Status ReleaseVersion(storage::Store& store, const std::string& serial, in
 // (DataLoss otherwise: the store was changed behind the service).
 absl::StatusOr<int> FlashableVersion(storage::Store& store, const std::string& serial, int version);
 
-struct FleetPoint {
-  double id_a = 0, iq_a = 0;
-  int serials = 0;
-  double ldd_mean = 0, ldd_std = 0, lqq_mean = 0, lqq_std = 0, psi_d_mean = 0, psi_d_std = 0;
-  double torque_mean = 0, torque_std = 0;
-  std::vector<std::string> outliers;
-};
+// The fleet at one operating point: one type (report::FleetPoint, which the
+// page's fleet section takes as it is), converted only at the proto edge
+// (the service's FleetStatistics, `fluxcal report --server`).
+using FleetPoint = report::FleetPoint;
 // The operating points (id_a, iq_a) and outlier threshold (standard
 // deviations) when a caller names none: the FleetStatistics RPC's defaults
 // and the report's fleet section, so both show the same comparison.

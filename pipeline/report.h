@@ -76,9 +76,6 @@ void MergeStoredProvenance(int version, const std::string& created_utc, const st
 // page built here (`fluxcal report cal.json`).
 absl::StatusOr<report::Report> BuildReportPage(const report::ReportInputs& in);
 
-// FleetStatistics' result as the page's fleet section takes it.
-std::vector<report::FleetPoint> ToReportFleet(const std::vector<FleetPoint>& points);
-
 // Where a page's Udc came from when the caller gave it: the same words for
 // the service's page (GetReport's udc_v) and `fluxcal report --udc-v`, so
 // that both pages of one version carry the same limits section.

@@ -539,10 +539,10 @@ grpc::Status CalibrationServiceImpl::FleetStatistics(grpc::ServerContext* ctx, c
   for (const auto& s : *stats) {
     auto* p = resp->add_points();
     p->set_id_a(s.id_a); p->set_iq_a(s.iq_a); p->set_serials(s.serials);
-    p->set_ldd_h_mean(s.ldd_mean); p->set_ldd_h_std(s.ldd_std);
-    p->set_lqq_h_mean(s.lqq_mean); p->set_lqq_h_std(s.lqq_std);
-    p->set_psi_d_wb_mean(s.psi_d_mean); p->set_psi_d_wb_std(s.psi_d_std);
-    p->set_torque_nm_mean(s.torque_mean); p->set_torque_nm_std(s.torque_std);
+    p->set_ldd_h_mean(s.ldd_h_mean); p->set_ldd_h_std(s.ldd_h_std);
+    p->set_lqq_h_mean(s.lqq_h_mean); p->set_lqq_h_std(s.lqq_h_std);
+    p->set_psi_d_wb_mean(s.psi_d_wb_mean); p->set_psi_d_wb_std(s.psi_d_wb_std);
+    p->set_torque_nm_mean(s.torque_nm_mean); p->set_torque_nm_std(s.torque_nm_std);
     for (const auto& o : s.outliers) p->add_outliers(o);
   }
   return grpc::Status::OK;
