@@ -1,12 +1,16 @@
-// The application layer's rule (docs/architecture.md, issue 26 item 1):
+// The layer rules of docs/architecture.md, checked against the includes
+// (issue 26). The application layer's rule (item 1):
 // cli/ and server/ only parse, call pipeline/, format and transport. Every
 // `#include "X/..."` (or <X/...>) in their sources names X among pipeline,
 // io, their own folders and the proto-generated headers (fluxcal/v1/...);
 // a folder of this repository outside that list (fitting, tables, storage,
 // ...) fails here. Third-party headers (absl/, grpc/, nlohmann/, google/)
-// are no folder of the repository and pass. The CMake targets link
+// are no folder of the repository and pass. The CMake targets name
 // fluxcal_pipeline and fluxcal_io only (cli/CMakeLists.txt,
-// server/CMakeLists.txt), so the build refuses a call this test misses.
+// server/CMakeLists.txt); the libraries are static and share one include
+// root, so this test is what refuses a lower library's header there.
+// Below them, every library includes only the folders the graph puts
+// under it (kLayers).
 #include <filesystem>
 #include <fstream>
 #include <regex>
@@ -22,6 +26,26 @@ namespace {
 namespace fs = std::filesystem;
 
 const std::set<std::string> kAllowed = {"pipeline", "io", "cli", "server", "proto", "fluxcal"};
+
+// What each folder may include of the repository's folders besides its own
+// (docs/architecture.md's graph; "fluxcal" is the proto-generated
+// fluxcal/v1/... path): the one-way stack, checked against the sources.
+const std::vector<std::pair<std::string, std::set<std::string>>> kLayers = {
+    {"physics", {}},
+    {"plot", {}},
+    {"io", {}},
+    {"identification", {"io", "physics"}},
+    {"simulation", {"io", "physics"}},
+    {"fitting", {"identification", "io", "physics", "plot", "simulation"}},
+    {"tables", {"fitting", "io", "physics", "plot", "simulation"}},
+    {"diagnosis", {"fitting", "identification", "io", "physics", "plot", "simulation"}},
+    {"report", {"fitting", "physics", "plot", "tables"}},
+    {"storage", {"io"}},
+    {"pipeline", {"diagnosis", "fitting", "identification", "io", "physics", "plot", "report", "simulation",
+                  "storage", "tables", "fluxcal", "proto"}},
+    {"server", {"pipeline", "io", "fluxcal", "proto"}},
+    {"cli", {"pipeline", "io", "server", "fluxcal", "proto"}},
+};
 
 // The folders at the repository's root: what an include's first component
 // must be to name one of fluxcal's libraries.
@@ -39,7 +63,7 @@ struct Violation {
   std::string include;
 };
 
-std::vector<Violation> Violations(const std::string& folder) {
+std::vector<Violation> Violations(const std::string& folder, const std::set<std::string>& allowed = kAllowed) {
   const std::set<std::string> repo = RepositoryFolders();
   const std::regex include_re(R"(^\s*#\s*include\s*["<]([A-Za-z0-9_.-]+)/([^">]+)[">])");
   std::vector<Violation> out;
@@ -54,7 +78,7 @@ std::vector<Violation> Violations(const std::string& folder) {
       std::smatch m;
       if (!std::regex_search(line, m, include_re)) continue;
       const std::string top = m[1];
-      if (repo.count(top) != 0 && kAllowed.count(top) == 0) {
+      if (repo.count(top) != 0 && top != folder && allowed.count(top) == 0) {
         out.push_back({fs::relative(e.path(), FLUXCAL_SOURCE_DIR).string(), n, top + "/" + m[2].str()});
       }
     }
@@ -86,6 +110,17 @@ TEST(Layers, ServerIncludesOnlyPipelineAndIo) {
   const auto v = Violations("server");
   EXPECT_TRUE(v.empty()) << "server/ includes a library below pipeline/ (call a pipeline/ use case instead):\n"
                          << Describe(v);
+}
+
+// Every library includes only the folders below it in the graph.
+TEST(Layers, EveryFolderIncludesOnlyTheLayersBelowIt) {
+  const auto repo = RepositoryFolders();
+  for (const auto& [folder, allowed] : kLayers) {
+    if (repo.count(folder) == 0) continue;
+    const auto v = Violations(folder, allowed);
+    EXPECT_TRUE(v.empty()) << folder << "/ includes a folder docs/architecture.md does not put below it:\n"
+                           << Describe(v);
+  }
 }
 
 // The check itself: a line naming a library below pipeline/ is caught.
