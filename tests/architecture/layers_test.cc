@@ -10,7 +10,7 @@
 // server/CMakeLists.txt); the libraries are static and share one include
 // root, so this test is what refuses a lower library's header there.
 // Below them, every library includes only the folders the graph puts
-// under it (kLayers).
+// under it (kLayers), and no library includes another's internal headers.
 #include <filesystem>
 #include <fstream>
 #include <regex>
@@ -121,6 +121,51 @@ TEST(Layers, EveryFolderIncludesOnlyTheLayersBelowIt) {
     EXPECT_TRUE(v.empty()) << folder << "/ includes a folder docs/architecture.md does not put below it:\n"
                            << Describe(v);
   }
+}
+
+// A header whose declarations live in a namespace `internal` or `detail`
+// (fitting's residuals and solver steps, tables/internal_*.h,
+// diagnosis/internal.h) is its library's own: no other folder includes it
+// (its tests may).
+bool DeclaresInternalNamespace(const fs::path& header) {
+  std::ifstream in(header);
+  const std::regex ns_re(R"(^\s*namespace\s+[A-Za-z0-9_:]*::(internal|detail)\b)");
+  std::string line;
+  while (std::getline(in, line)) {
+    if (std::regex_search(line, ns_re)) return true;
+  }
+  return false;
+}
+
+TEST(Layers, InternalHeadersStayInTheirLibrary) {
+  const std::regex include_re(R"(^\s*#\s*include\s*["<]([A-Za-z0-9_.-]+)/([^">]+)[">])");
+  std::vector<Violation> v;
+  for (const auto& [folder, allowed] : kLayers) {
+    const fs::path dir = fs::path(FLUXCAL_SOURCE_DIR) / folder;
+    if (!fs::is_directory(dir)) continue;
+    for (const auto& e : fs::recursive_directory_iterator(dir)) {
+      const std::string ext = e.path().extension().string();
+      if (!e.is_regular_file() || (ext != ".cc" && ext != ".h")) continue;
+      std::ifstream in(e.path());
+      std::string line;
+      int n = 0;
+      while (std::getline(in, line)) {
+        ++n;
+        std::smatch m;
+        if (!std::regex_search(line, m, include_re) || m[1].str() == folder) continue;
+        const fs::path header = fs::path(FLUXCAL_SOURCE_DIR) / m[1].str() / m[2].str();
+        if (fs::is_regular_file(header) && DeclaresInternalNamespace(header)) {
+          v.push_back({fs::relative(e.path(), FLUXCAL_SOURCE_DIR).string(), n, m[1].str() + "/" + m[2].str()});
+        }
+      }
+    }
+  }
+  EXPECT_TRUE(v.empty()) << "a library's internal header included from another folder:\n" << Describe(v);
+}
+
+TEST(Layers, FindsTheInternalHeaders) {
+  EXPECT_TRUE(DeclaresInternalNamespace(fs::path(FLUXCAL_SOURCE_DIR) / "diagnosis" / "internal.h"));
+  EXPECT_FALSE(DeclaresInternalNamespace(fs::path(FLUXCAL_SOURCE_DIR) / "pipeline" / "pipeline.h"));
 }
 
 // The check itself: a line naming a library below pipeline/ is caught.
