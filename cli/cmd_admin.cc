@@ -15,8 +15,7 @@
 #include "cli/command.h"
 #include "nlohmann/json.hpp"
 #include "pipeline/pipeline.h"
-#include "storage/sqlite_store.h"
-#include "storage/store.h"
+#include "pipeline/store.h"
 
 namespace fluxcal::cli {
 namespace {
@@ -41,9 +40,9 @@ int Migrate(const ParsedArgs& a) {
   if (absl::StartsWith(*from, "postgres") || !std::filesystem::exists(src_path)) {
     return Fail("--from: expected an existing SQLite store (sqlite:PATH), got '" + *from + "'");
   }
-  auto src = storage::Store::Open(*from, {.create = false});
+  auto src = pipeline::OpenStore(*from, /*create=*/false);
   if (!src.ok()) return Fail(std::string(src.status().message()));
-  auto dst = storage::Store::Open(*to);
+  auto dst = pipeline::OpenStore(*to);
   if (!dst.ok()) return Fail(std::string(dst.status().message()));
   std::fprintf(stderr, "admin: migrating %s -> %s\n", (*src)->Backend().c_str(), (*dst)->Backend().c_str());
   auto r = pipeline::Migrate(**src, **dst);
@@ -79,10 +78,9 @@ int Backup(const ParsedArgs& a) {
     std::error_code ec;
     std::filesystem::remove(old, ec);
   }
-  auto store = storage::SqliteStore::Open(path, /*create=*/false);
+  auto store = pipeline::BackupSqliteStore(path, *out);
   if (!store.ok()) return Fail(std::string(store.status().message()));
-  if (auto st = (*store)->Backup(*out); !st.ok()) return Fail(std::string(st.message()));
-  auto copy = storage::Store::Open(*out);
+  auto copy = pipeline::OpenStore(*out);
   if (!copy.ok()) return Fail(std::string(copy.status().message()));
   auto h1 = pipeline::ContentHash(**store);
   auto h2 = pipeline::ContentHash(**copy);
@@ -98,7 +96,7 @@ int Hash(const ParsedArgs& a) {
   const auto db = a.Get("db");
   if (!db) return Fail("usage: fluxcal admin hash --db URL [--json]", 2);
   // Only reads: a store that does not exist is refused, not created.
-  auto store = storage::Store::Open(*db, {.create = false});
+  auto store = pipeline::OpenStore(*db, /*create=*/false);
   if (!store.ok()) return Fail("flag --db: " + std::string(store.status().message()));
   auto h = pipeline::ContentHash(**store);
   if (!h.ok()) return Fail(std::string(h.status().message()));

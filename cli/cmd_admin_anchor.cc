@@ -11,7 +11,7 @@
 #include "cli/args.h"
 #include "cli/command.h"
 #include "pipeline/anchor.h"
-#include "storage/store.h"
+#include "pipeline/store.h"
 
 namespace fluxcal::cli {
 namespace {
@@ -29,7 +29,7 @@ int RunAnchor(const std::vector<std::string>& argv) {
     std::fprintf(stderr, "usage: fluxcal admin anchor --db PATH|postgresql://... [--out FILE] [--json]\n");
     return 2;
   }
-  auto store = storage::Store::Open(*args->Get("db"), {.create = false});
+  auto store = pipeline::OpenStore(*args->Get("db"), /*create=*/false);
   if (!store.ok()) {
     std::fprintf(stderr, "fluxcal admin anchor: flag --db: %s\n", std::string(store.status().message()).c_str());
     return 1;
@@ -42,7 +42,7 @@ int RunAnchor(const std::vector<std::string>& argv) {
     return 1;
   }
   if (args->Has("json")) {
-    std::cout << pipeline::AnchorLine(*head, "snapshot", (*store)->Backend(), storage::NowUtc()) << "\n";
+    std::cout << pipeline::AnchorLine(*head, "snapshot", (*store)->Backend(), pipeline::StoreNowUtc()) << "\n";
   } else {
     std::printf("anchor %s: %zu serials", head->digest_sha256.c_str(), head->calibrations.size());
     if (head->release_seq > 0) {

@@ -15,8 +15,8 @@
 #include "nlohmann/json.hpp"
 #include <sys/stat.h>
 
+#include "pipeline/signing.h"
 #include "server/auth.h"
-#include "tables/signature.h"
 #include "io/sha256.h"
 
 namespace fluxcal::cli {
@@ -180,14 +180,14 @@ int RunKeygen(const std::vector<std::string>& argv) {
   if (auto e = CheckOverwrite(*args, {{"out", key}, {"out", pub}}); !e.empty()) {
     return Fail("keygen", absl::AlreadyExistsError(e));
   }
-  auto kp = tables::GenerateEd25519();
+  auto kp = pipeline::GenerateSigningKeyPair();
   if (!kp.ok()) return Fail("keygen", kp.status());
   const mode_t old = ::umask(077);
   auto s = WriteNewOutput(*args, {"out", key}, kp->private_pem);
   ::umask(old);
   if (!s.ok()) return Fail("keygen", s);
   if (auto s2 = WriteNewOutput(*args, {"out", pub}, kp->public_pem); !s2.ok()) return Fail("keygen", s2);
-  auto id = tables::KeyId(kp->public_pem);
+  auto id = pipeline::SigningKeyId(kp->public_pem);
   if (args->Has("json")) {
     std::cout << nlohmann::json{{"private_key", key}, {"public_key", pub}, {"key_id", id.value_or("")}}.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
   } else {

@@ -15,7 +15,7 @@
 #include "cli/command.h"
 #include "nlohmann/json.hpp"
 #include "pipeline/anchor.h"
-#include "storage/store.h"
+#include "pipeline/store.h"
 
 namespace fluxcal::cli {
 namespace {
@@ -33,7 +33,7 @@ int RunVerifyDb(const std::vector<std::string>& argv) {
     std::fprintf(stderr, "usage: fluxcal admin verify-db --db PATH|postgresql://... [--anchor FILE] [--json]\n");
     return 2;
   }
-  auto store = storage::Store::Open(*args->Get("db"), {.create = false});
+  auto store = pipeline::OpenStore(*args->Get("db"), /*create=*/false);
   if (!store.ok()) {
     std::fprintf(stderr, "fluxcal admin verify-db: flag --db: %s\n", std::string(store.status().message()).c_str());
     return 1;

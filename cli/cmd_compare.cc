@@ -18,10 +18,10 @@
 #include "cli/args.h"
 #include "cli/command.h"
 #include "cli/support_flux_map.h"
-#include "fitting/calibration.h"
 #include "io/flux_map.h"
 #include "nlohmann/json.hpp"
-#include "tables/flux_map_export.h"
+#include "pipeline/flux_map.h"
+#include "pipeline/pipeline.h"
 
 namespace fluxcal::cli {
 namespace {
@@ -73,7 +73,7 @@ int RunCompare(const std::vector<std::string>& argv) {
                 2);
   }
   const std::string cal_path = args->positional[0], map_path = args->positional[1];
-  auto cal = fit::LoadCalibrationFile(cal_path);
+  auto cal = pipeline::LoadCalibrationFile(cal_path);
   if (!cal.ok()) return Fail(std::string(cal.status().message()));
   io::FluxMapReadOptions ro;
   ro.columns = args->Has("sym") ? io::FluxMapColumns::kSymmetrised : io::FluxMapColumns::kRaw;
@@ -81,11 +81,11 @@ int RunCompare(const std::vector<std::string>& argv) {
   auto map = io::ReadFluxMapCsv(map_path, ro);
   if (!map.ok()) return Fail(std::string(map.status().message()));
   std::fprintf(stderr, "compare: map %s: %s\n", map_path.c_str(), map->convention.Describe().c_str());
-  if (!region_given) region = tables::MeasuredRegion(*cal);
+  if (!region_given) region = pipeline::MeasuredCurrentRegion(*cal);
   std::fprintf(stderr, "compare: map %s, %zu x %zu nodes; region id %g..%g A, iq %g..%g A (%s)\n", map_path.c_str(),
                map->id_a.size(), map->iq_a.size(), region.id_min_a, region.id_max_a, region.iq_min_a,
                region.iq_max_a, region_given ? "--region" : "the calibration's measured region");
-  auto c = tables::CompareWithFluxMap(*cal, *map, region);
+  auto c = pipeline::CompareWithFluxMap(*cal, *map, region);
   if (!c.ok()) return Fail(std::string(c.status().message()));
   const double worst_rel = c->psi_scale_wb > 0 ? c->max_wb / c->psi_scale_wb : 0.0;
   if (args->Has("json")) {

@@ -9,16 +9,16 @@
 #include <filesystem>
 #include <iostream>
 #include <iterator>
+#include <set>
 #include <system_error>
 
 #include "cli/args.h"
 #include "cli/command.h"
 #include "cli/support_remote.h"
-#include "diagnosis/diagnose.h"
 #include "absl/strings/str_split.h"
 #include "io/csv.h"
-#include "simulation/effects.h"
 #include "nlohmann/json.hpp"
+#include "pipeline/diagnose.h"
 
 namespace fluxcal::cli {
 namespace {
@@ -88,12 +88,12 @@ int RunDiagnose(const std::vector<std::string>& argv) {
     return 2;
   }
   if (auto t1 = args->Get("table1")) {
-    auto rows = diag::ReadTable1(*t1);
-    if (!rows.ok()) {
-      std::fprintf(stderr, "fluxcal diagnose: %s\n", std::string(rows.status().message()).c_str());
+    auto table1 = pipeline::DiagnoseTable1File(*t1);
+    if (!table1.ok()) {
+      std::fprintf(stderr, "fluxcal diagnose: %s\n", std::string(table1.status().message()).c_str());
       return 1;
     }
-    const auto r = diag::DiagnoseTable1(*rows);
+    const auto& r = *table1;
     if (args->Has("json")) {
       std::cout << nlohmann::json{{"finding", r.finding}, {"rms_before", r.rms_before}, {"rms_after", r.rms_after},
                                   {"trend_slope_per_a", r.trend_slope_per_a}, {"trend_sigma", r.trend_sigma},
@@ -153,17 +153,17 @@ int RunDiagnose(const std::vector<std::string>& argv) {
   }
   std::fprintf(stderr, "diagnose %s: %zu points, %zu steady-state rows\n", set->manifest.serial.c_str(),
                set->waveforms.size(), set->steady_state.size());
-  diag::DiagnoseOptions options;
+  std::set<std::string> excluded;
   if (auto ex = args->Get("exclude-effects")) {
     for (const std::string& name : std::vector<std::string>(absl::StrSplit(*ex, ',', absl::SkipEmpty()))) {
-      if (sim::FindEffect(name) == nullptr) {
+      if (!pipeline::IsKnownEffect(name)) {
         std::fprintf(stderr, "fluxcal diagnose: flag --exclude-effects: unknown effect '%s'\n", name.c_str());
         return 2;
       }
-      options.excluded_effects.insert(name);
+      excluded.insert(name);
     }
   }
-  auto rep = diag::Diagnose(*set, options);
+  auto rep = pipeline::DiagnoseSet(*set, excluded);
   if (!rep.ok()) {
     std::fprintf(stderr, "fluxcal diagnose: %s\n", std::string(rep.status().message()).c_str());
     return 1;
@@ -171,8 +171,7 @@ int RunDiagnose(const std::vector<std::string>& argv) {
   if (auto dir = args->Get("plots")) {
     std::error_code ec;
     std::filesystem::create_directories(*dir, ec);
-    const std::string svgs[] = {diag::ResidualMapSvg(*rep, false), diag::ResidualMapSvg(*rep, true),
-                                diag::SpectrumSvg(*rep)};
+    const auto svgs = pipeline::DiagnosisFigures(*rep);
     for (size_t k = 0; k < std::size(svgs); ++k) {
       if (auto st = WriteNewOutput(*args, {"plots", *dir + "/" + kPlotFiles[k]}, svgs[k]); !st.ok()) {
         std::fprintf(stderr, "fluxcal diagnose: %s\n", std::string(st.message()).c_str());
@@ -184,12 +183,12 @@ int RunDiagnose(const std::vector<std::string>& argv) {
   if (auto out = args->Get("calibration-out")) {
     // The diagnosed model as a calibration (fitting's families, refitted on
     // the data freed of the findings), marked with what was found.
-    auto cal = diag::DiagnosedCalibration(*rep);
-    if (!cal.ok()) {
-      std::fprintf(stderr, "fluxcal diagnose: %s\n", std::string(cal.status().message()).c_str());
+    auto marked = pipeline::DiagnosedCalibrationJson(*rep);
+    if (!marked.ok()) {
+      std::fprintf(stderr, "fluxcal diagnose: %s\n", std::string(marked.status().message()).c_str());
       return 1;
     }
-    const nlohmann::json j = diag::MarkedCalibrationJson(*rep, *cal);
+    const nlohmann::json& j = *marked;
     if (auto st = WriteNewOutput(*args, {"calibration-out", *out},
                                  j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n");
         !st.ok()) {
@@ -198,8 +197,8 @@ int RunDiagnose(const std::vector<std::string>& argv) {
     }
     std::fprintf(stderr, "diagnose: calibration (%s) in %s\n", j.value("model", std::string("?")).c_str(), out->c_str());
   }
-  if (args->Has("json")) std::cout << diag::ToJson(*rep).dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
-  else std::cout << diag::ToText(*rep);
+  if (args->Has("json")) std::cout << pipeline::DiagnosisJson(*rep).dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
+  else std::cout << pipeline::DiagnosisText(*rep);
   return 0;
 }
 

@@ -3,7 +3,7 @@
 //                [--udc-v V] [--rs-ohm R] [--allow-clamped] [--ctype double|float|int16|int32] [--allow-extrapolation]
 //                [--svg FILE] [--sign-key ED25519.key] --out FILE [--json]
 // With --sign-key, FILE.sig holds a detached Ed25519 signature
-// (tables/signature.h; `fluxcal verify FILE --pubkey KEY.pub`).
+// (pipeline/signing.h; `fluxcal verify FILE --pubkey KEY.pub`).
 // Builds an ECU lookup table from a fitted calibration and writes it with
 // limits, provenance, flags and the CRC-32 / SHA-256 of its payload (the
 // values, docs/tables.md) inside. It prints the SHA-256 of the written file
@@ -21,12 +21,12 @@
 #include "cli/args.h"
 #include "cli/command.h"
 #include "cli/support_remote.h"
-#include "fitting/calibration.h"
 #include "io/csv.h"
 #include "nlohmann/json.hpp"
 #include "io/sha256.h"
 #include "pipeline/export.h"
-#include "tables/signature.h"
+#include "pipeline/pipeline.h"
+#include "pipeline/signing.h"
 
 namespace fluxcal::cli {
 namespace {
@@ -74,11 +74,12 @@ int RunExport(const std::vector<std::string>& argv) {
     return Fail("usage: fluxcal export calibration.json --table mtpa|mtpv|fw --format "
                 "csv|json|h|cdfx|dcm|a2l [--points N] [--ctype double|float|int16|int32] [--allow-extrapolation] --out FILE", 2);
   }
-  auto cal = fit::LoadCalibrationFile(args->positional[0]);
+  auto cal = pipeline::LoadCalibrationFile(args->positional[0]);
   if (!cal.ok()) return Fail(std::string(cal.status().message()));
-  auto fmt = tables::ParseFormat(args->Get("format").value_or("csv"));
-  if (!fmt.ok()) return Fail(std::string(fmt.status().message()), 2);
-  auto ctype = tables::ParseCType(args->Get("ctype").value_or("double"));
+  if (auto fmt = pipeline::CheckExportFormat(args->Get("format").value_or("csv")); !fmt.ok()) {
+    return Fail(std::string(fmt.message()), 2);
+  }
+  auto ctype = pipeline::ParseExportCType(args->Get("ctype").value_or("double"));
   if (!ctype.ok()) return Fail(std::string(ctype.status().message()), 2);
   tables::TableSpec spec;
   spec.kind = args->Get("table").value_or("mtpa");
@@ -152,7 +153,7 @@ int RunExport(const std::vector<std::string>& argv) {
   if (auto key_path = args->Get("sign-key")) {
     auto key = io::ReadFileToString(*key_path);
     if (!key.ok()) return Fail("--sign-key " + *key_path + ": cannot read", 2);
-    auto sig = tables::SignDetached(out->bytes, *key);
+    auto sig = pipeline::SignExport(out->bytes, *key);
     if (!sig.ok()) return Fail("--sign-key: " + std::string(sig.status().message()));
     sig_path = *args->Get("out") + ".sig";
     if (auto st = WriteNewOutput(*args, {"out", sig_path}, *sig); !st.ok()) return Fail(std::string(st.message()));
@@ -187,7 +188,7 @@ int RunExport(const std::vector<std::string>& argv) {
     j["sources"] = {{"i_max_a", src(built->limits.i_max_source)}, {"udc_v", src(built->limits.udc_source)},
                     {"rs_ohm", src(built->limits.rs_source)}};
     // h and a2l in fixed point: the scale of each quantity as the file states it.
-    j["ctype"] = tables::CTypeName(*ctype);
+    j["ctype"] = pipeline::ExportCTypeName(*ctype);
     j["fixed_point"] = nlohmann::json::array();
     for (const auto& q : out->fixed_point) {
       j["fixed_point"].push_back({{"unit", q.unit}, {"arrays", q.arrays}, {"bits", q.bits}, {"lsb", q.lsb},
@@ -202,7 +203,7 @@ int RunExport(const std::vector<std::string>& argv) {
                 lim.i_max_a, u_max.c_str(), file_sha256.c_str(), crc, out->payload_sha256.c_str());
     for (const auto& q : out->fixed_point) {
       std::fprintf(to_stdout ? stderr : stdout, "  %s fixed point: %s LSB %.17g %s, offset %g (%s)\n",
-                   tables::CTypeName(*ctype), q.unit.c_str(), q.lsb, q.unit.c_str(), q.offset,
+                   pipeline::ExportCTypeName(*ctype), q.unit.c_str(), q.lsb, q.unit.c_str(), q.offset,
                    absl::StrJoin(q.arrays, ", ").c_str());
     }
   }

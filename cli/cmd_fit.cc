@@ -7,7 +7,7 @@
 // manifest or these flags, never from a default (pipeline/facts.h).
 // Identifies every waveform point (least squares), then fits the
 // flux-linkage surfaces jointly with hf_results and steady-state rows; or
-// fits them to a flux map's nodes (io/flux_map.h, fit::FitDataFromFluxMap),
+// fits them to a flux map's nodes (io/flux_map.h, pipeline/local_fit.h),
 // read in the convention the flags name (cli/support_flux_map.h) and
 // refused when implausible; the fit's summary reports its flux error over
 // the nodes (FitSummary::flux_*).
@@ -23,13 +23,11 @@
 #include "cli/command.h"
 #include "cli/support_flux_map.h"
 #include "cli/support_progress.h"
-#include "fitting/fit.h"
-#include "fitting/plot.h"
 #include "io/csv.h"
 #include "io/flux_map.h"
 #include "io/plausibility.h"
-#include "identification/identify.h"
 #include "pipeline/facts.h"
+#include "pipeline/local_fit.h"
 #include "pipeline/points.h"
 #include "nlohmann/json.hpp"
 
@@ -69,7 +67,7 @@ int RunFit(const std::vector<std::string>& argv) {
   if (auto e = CheckOutToStdout(*args); !e.empty()) return Fail(e, 2);
   // The fit's own parser, before any identification: a typo costs nothing.
   if (auto m = args->Get("model")) {
-    if (auto parsed = fit::ParseModelName(*m); !parsed.ok()) return Fail(std::string(parsed.status().message()), 2);
+    if (auto parsed = pipeline::CheckModelName(*m); !parsed.ok()) return Fail(std::string(parsed.message()), 2);
   }
   if (int pp = 0; args->Get("pole-pairs") && (!absl::SimpleAtoi(*args->Get("pole-pairs"), &pp) || pp < 1)) {
     return Fail("flag --pole-pairs: expected a positive integer", 2);
@@ -141,8 +139,7 @@ int RunFit(const std::vector<std::string>& argv) {
     auto m = io::ReadFluxMapCsv(input, ro);
     if (!m.ok()) return Fail(std::string(m.status().message()));
     std::fprintf(stderr, "fit: map %s: %s\n", input.c_str(), m->convention.Describe().c_str());
-    data = fit::FitDataFromFluxMap(*m, pole_pairs, std_wb->value_or(0.0));
-    data.serial = serial;
+    data = pipeline::FitDataFromFluxMap(*m, pole_pairs, std_wb->value_or(0.0), serial);
     source = pipeline::FactSource::kFluxMap;   // Rs and Udc: the flags', below
     std::fprintf(stderr, "fit: map %s, %zu x %zu nodes, sigma %.3g Wb per component%s\n", input.c_str(),
                  m->id_a.size(), m->iq_a.size(), data.fluxes.front().psi_std_wb,
@@ -153,8 +150,7 @@ int RunFit(const std::vector<std::string>& argv) {
     if (!set.ok()) return Fail(std::string(set.status().message()));
     // The facts before the (slow) identification: a conflict or a missing
     // fact costs nothing. Identified points do not change them.
-    fit::FitData probe = fit::FitDataFromRecording(*set, {});
-    if (auto st = pipeline::ApplyStatedFacts(stated, source, &probe); !st.ok()) return Fail(std::string(st.message()), 2);
+    if (auto st = pipeline::CheckSetFacts(*set, stated); !st.ok()) return Fail(std::string(st.message()), 2);
     ident::IdentifyOptions opt;
     opt.progress = ProgressLine("fit: identifying point").Callback();
     auto d = pipeline::FitDataFromSet(*set, opt);
@@ -163,7 +159,7 @@ int RunFit(const std::vector<std::string>& argv) {
   } else {
     auto rows = io::ReadHfResultsCsv(input);
     if (!rows.ok()) return Fail(std::string(rows.status().message()));
-    data = fit::FitDataFromHfRows(nullptr, *rows);
+    data = pipeline::FitDataFromHfResults(*rows);
     source = pipeline::FactSource::kHfResults;
   }
   std::vector<std::string> notes;
@@ -171,11 +167,10 @@ int RunFit(const std::vector<std::string>& argv) {
     return Fail(std::string(st.message()), 2);
   }
   for (const auto& n : notes) std::fprintf(stderr, "fit: %s\n", n.c_str());
-  fit::FitOptions fo;
-  fo.model = args->Get("model").value_or("auto");
+  const std::string model = args->Get("model").value_or("auto");
   std::fprintf(stderr, "fit: %zu inductance points, %zu steady-state rows, %zu flux nodes, model %s\n",
-               data.inductances.size(), data.steady_state.size(), data.fluxes.size(), fo.model.c_str());
-  auto cal = fit::Fit(data, fo);
+               data.inductances.size(), data.steady_state.size(), data.fluxes.size(), model.c_str());
+  auto cal = pipeline::FitCalibration(data, model);
   if (!cal.ok()) return Fail(std::string(cal.status().message()));
   const bool to_stdout = *args->Get("out") == "-";
   if (auto st = WriteNewOutput(*args, out_path, cal->ToJson().dump(2) + "\n"); !st.ok()) {
@@ -184,7 +179,7 @@ int RunFit(const std::vector<std::string>& argv) {
   for (const auto& c : cal->summary.candidates) std::fprintf(stderr, "fit:   %s\n", c.c_str());
   for (const auto& e : cal->summary.excluded) std::fprintf(stderr, "fit: %s\n", e.c_str());
   if (auto svg = args->Get("svg")) {
-    if (auto st = WriteNewOutput(*args, svg_path, fit::PlotFitSvg(*cal, data)); !st.ok()) {
+    if (auto st = WriteNewOutput(*args, svg_path, pipeline::FitPlotSvg(*cal, data)); !st.ok()) {
       return Fail(std::string(st.message()));
     }
     std::fprintf(stderr, "fit: plot %s\n", svg->c_str());

@@ -1,6 +1,6 @@
 // fluxcal identify <recording-set> [--method paper|lsq] [--json|--csv]
 // One row per operating point: differential inductances with standard
-// errors and quality flags (identification/identify.h).
+// errors and quality flags (pipeline/identify.h).
 #include <cmath>
 #include <cstdio>
 #include <iostream>
@@ -10,9 +10,9 @@
 #include "cli/args.h"
 #include "cli/command.h"
 #include "cli/support_progress.h"
-#include "identification/identify.h"
 #include "io/recording_set.h"
 #include "nlohmann/json.hpp"
+#include "pipeline/identify.h"
 
 namespace fluxcal::cli {
 namespace {
@@ -33,7 +33,7 @@ int RunIdentify(const std::vector<std::string>& argv) {
     return 2;
   }
   ident::IdentifyOptions opt;
-  auto method = ident::ParseMethod(args->Get("method").value_or("lsq"));
+  auto method = pipeline::ParseIdentifyMethod(args->Get("method").value_or("lsq"));
   if (!method.ok()) {
     std::fprintf(stderr, "fluxcal identify: %s\n", std::string(method.status().message()).c_str());
     return 2;
@@ -46,7 +46,7 @@ int RunIdentify(const std::vector<std::string>& argv) {
     return 1;
   }
   opt.progress = ProgressLine("identify: point").Callback();
-  auto results = ident::IdentifySet(*set, opt);
+  auto results = pipeline::IdentifyEveryPoint(*set, opt);
   if (!results.ok()) {
     std::fprintf(stderr, "fluxcal identify: %s\n", std::string(results.status().message()).c_str());
     return 1;
@@ -55,7 +55,7 @@ int RunIdentify(const std::vector<std::string>& argv) {
   if (args->Has("json")) {
     nlohmann::json j;
     j["serial"] = set->manifest.serial;
-    j["method"] = ident::MethodName(opt.method);
+    j["method"] = pipeline::IdentifyMethodName(opt.method);
     j["points"] = nlohmann::json::array();
     for (const auto& r : *results) {
       nlohmann::json p = {{"point", r.point}, {"id_a", r.id_a}, {"iq_a", r.iq_a},

@@ -19,11 +19,11 @@
 #include "absl/strings/str_split.h"
 #include "cli/args.h"
 #include "cli/command.h"
-#include "fitting/calibration.h"
 #include "io/csv.h"
 #include "io/flux_map.h"
 #include "nlohmann/json.hpp"
-#include "tables/flux_map_export.h"
+#include "pipeline/flux_map.h"
+#include "pipeline/pipeline.h"
 #include "io/sha256.h"
 
 namespace fluxcal::cli {
@@ -73,7 +73,7 @@ int RunMapExport(const std::vector<std::string>& argv) {
   if (inverse && args->Get("grid")) return Fail("--grid is the current grid of a forward map; with --inverse use --psi-grid", 2);
   if (!inverse && args->Get("psi-grid")) return Fail("--psi-grid needs --inverse", 2);
   const std::string out = *args->Get("out");
-  auto cal = fit::LoadCalibrationFile(args->positional[0]);
+  auto cal = pipeline::LoadCalibrationFile(args->positional[0]);
   if (!cal.ok()) return Fail(std::string(cal.status().message()));
 
   tables::LinearAxis a, b;
@@ -82,10 +82,8 @@ int RunMapExport(const std::vector<std::string>& argv) {
     if (!ParseGrid(*g, &a, &b)) {
       return Fail(std::string("flag --") + grid_flag + ": expected MIN:MAX:N,MIN:MAX:M, got '" + *g + "'", 2);
     }
-  } else if (inverse) {
-    tables::DefaultFluxGrid(*cal, &a, &b);
   } else {
-    tables::DefaultCurrentGrid(*cal, &a, &b);
+    pipeline::DefaultFluxMapGrid(*cal, inverse, &a, &b);
   }
 
   // Every flag checked: the overwrite rule (cli/args.h), before any work.
@@ -97,33 +95,29 @@ int RunMapExport(const std::vector<std::string>& argv) {
   if (inverse) {
     std::fprintf(stderr, "map export: inverse map on psi_d %g..%g Wb (%d) x psi_q %g..%g Wb (%d)\n", a.min, a.max,
                  a.n, b.min, b.max, b.n);
-    auto inv = tables::InvertCalibration(*cal, a, b);
+    auto inv = pipeline::ExportFluxMap(*cal, a, b, /*inverse=*/true);
     if (!inv.ok()) return Fail("flag --psi-grid: " + std::string(inv.status().message()), 2);
-    text = tables::InverseFluxMapCsv(*inv);
-    rows = inv->size();
+    text = std::move(inv->csv);
+    rows = inv->rows;
     summary["grid"] = {{"psi_d_wb", AxisJson(a)}, {"psi_q_wb", AxisJson(b)}};
     summary["valid"] = inv->valid_nodes;
     summary["invalid"] = rows - inv->valid_nodes;
   } else {
     std::fprintf(stderr, "map export: flux map on id %g..%g A (%d) x iq %g..%g A (%d)\n", a.min, a.max, a.n, b.min,
                  b.max, b.n);
-    auto m = tables::SampleCalibration(*cal, a, b);
+    auto m = pipeline::ExportFluxMap(*cal, a, b, /*inverse=*/false);
     if (!m.ok()) {
       const std::string msg(m.status().message());
       return msg.rfind("field 'grid", 0) == 0 ? Fail("flag --grid: " + msg, 2) : Fail(msg);
     }
-    auto csv = io::FluxMapCsv(m->map);
-    if (!csv.ok()) return Fail(std::string(csv.status().message()));
-    text = std::move(*csv);
-    rows = m->map.size();
+    text = std::move(m->csv);
+    rows = m->rows;
     summary["grid"] = {{"id_a", AxisJson(a)}, {"iq_a", AxisJson(b)}};
     summary["extrapolated"] = m->extrapolated;
     // What the file is in (io/flux_map.h): readers of other tools need it;
     // fluxcal's own reader detects it from the node at zero current.
     summary["convention"] = {{"axes", "fluxcal"}, {"current", "peak"}, {"flux_unit", "Vs"}};
-    const auto& ids = m->map.id_a;
-    const auto& iqs = m->map.iq_a;
-    if (std::find(ids.begin(), ids.end(), 0.0) == ids.end() || std::find(iqs.begin(), iqs.end(), 0.0) == iqs.end()) {
+    if (!m->zero_current_node) {
       std::fprintf(stderr, "map export: the grid has no node at zero current: read the file back with "
                            "--convention fluxcal (the axes cannot be detected without it)\n");
     }

@@ -13,8 +13,8 @@
 #include "cli/args.h"
 #include "cli/command.h"
 #include "cli/support_remote.h"
-#include "fitting/calibration.h"
 #include "nlohmann/json.hpp"
+#include "pipeline/pipeline.h"
 
 namespace fluxcal::cli {
 namespace {
@@ -31,7 +31,7 @@ nlohmann::json ToJson(double id, double iq, const fit::FluxPrediction& p) {
           {"psi_q_wb_std", p.psi_q_wb_std}, {"ldd_h_std", p.ldd_h_std}, {"lqq_h_std", p.lqq_h_std},
           {"ldq_h_std", p.ldq_h_std}, {"ld_app_h_std", p.ld_app_h_std}, {"lq_app_h_std", p.lq_app_h_std},
           {"torque_nm_std", p.torque_nm_std}, {"extrapolated", p.extrapolated},
-          {"region", fit::RegionName(p.region)}, {"valid", p.valid}, {"invalid_reason", p.invalid_reason}};
+          {"region", pipeline::FluxRegionName(p.region)}, {"valid", p.valid}, {"invalid_reason", p.invalid_reason}};
 }
 
 const char* kCsvHeader =
@@ -43,7 +43,7 @@ std::string CsvRow(double id, double iq, const fit::FluxPrediction& p) {
                          id, iq, p.psi_d_wb, p.psi_q_wb, p.ldd_h, p.lqq_h, p.ldq_h, p.ld_app_h,
                          p.lq_app_h, p.torque_nm, p.psi_d_wb_std, p.psi_q_wb_std, p.ldd_h_std,
                          p.lqq_h_std, p.ldq_h_std, p.torque_nm_std, p.extrapolated ? 1 : 0,
-                         fit::RegionName(p.region), p.valid ? 1 : 0);
+                         pipeline::FluxRegionName(p.region), p.valid ? 1 : 0);
 }
 
 // The text form's note on where the point lies (fit::Region).
@@ -85,7 +85,7 @@ int RunQueryLocal(const std::vector<std::string>& argv) {
     return Fail("usage: fluxcal query calibration.json (--id-a A --iq-a A | --grid "
                 "IDMIN:IDMAX:N,IQMIN:IQMAX:M) [--json|--csv]", 2);
   }
-  auto cal = fit::LoadCalibrationFile(args->positional[0]);
+  auto cal = pipeline::LoadCalibrationFile(args->positional[0]);
   if (!cal.ok()) return Fail(std::string(cal.status().message()));
   if (auto g = args->Get("grid")) {
     std::vector<std::string> axes = absl::StrSplit(*g, ',');

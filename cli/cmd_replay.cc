@@ -9,14 +9,16 @@
 // recording does not declare: the flags are the assumption). docs/simulation.md.
 #include <cmath>
 #include <cstdio>
+#include <optional>
+#include <utility>
 
 #include "absl/strings/str_format.h"
 #include "cli/args.h"
 #include "cli/command.h"
-#include "fitting/calibration.h"
 #include "io/recording_set.h"
 #include "nlohmann/json.hpp"
-#include "simulation/twin.h"
+#include "pipeline/pipeline.h"
+#include "pipeline/replay.h"
 
 namespace fluxcal::cli {
 namespace {
@@ -52,47 +54,34 @@ int RunReplay(const std::vector<std::string>& argv) {
   const bool closed = args->Has("closed-loop");
   auto set = io::ReadRecordingSet(args->positional[0]);
   if (!set.ok()) return Fail(std::string(set.status().message()));
-  auto cal = fit::LoadCalibrationFile(*args->Get("calibration"));
+  auto cal = pipeline::LoadCalibrationFile(*args->Get("calibration"));
   if (!cal.ok()) return Fail(std::string(cal.status().message()));
-  // The calibration's resistance if it has one, else the manifest's.
-  const double rs = cal->rs_ohm().value_or(set->manifest.motor.rs_ohm.value_or(0.0));
   std::fprintf(stderr, "replay: %zu points of %s through the twin (%s loop), calibration %s v%d\n",
                set->waveforms.size(), set->manifest.serial.c_str(), closed ? "closed" : "open",
                cal->family().Name().c_str(), cal->version);
-  absl::StatusOr<std::vector<sim::ReplayPoint>> rep;
-  sim::ClosedLoopReplayOptions co;
+  // The controller flags (checked positive above) and the replay itself
+  // (pipeline/replay.h).
+  pipeline::ReplayRequest request;
+  request.closed_loop = closed;
   if (closed) {
-    co.rs_ohm = rs;
-    for (const auto& [flag, target] : {std::pair<const char*, double*>{"bandwidth-hz", &co.control.bandwidth_hz},
-                                       {"ld-nominal-h", &co.control.ld_nominal_h},
-                                       {"lq-nominal-h", &co.control.lq_nominal_h},
-                                       {"settle-s", &co.settle_s}}) {
+    for (const auto& [flag, target] : {std::pair<const char*, std::optional<double>*>{"bandwidth-hz", &request.bandwidth_hz},
+                                       {"ld-nominal-h", &request.ld_nominal_h},
+                                       {"lq-nominal-h", &request.lq_nominal_h},
+                                       {"settle-s", &request.settle_s}}) {
       auto v = args->GetDouble(flag);
       if (!v.ok()) return Fail(std::string(v.status().message()), 2);
-      if (*v) {
-        if (!(**v > 0)) return Fail(absl::StrFormat("flag --%s: must be positive", flag), 2);
-        *target = **v;
-      }
+      *target = *v;
     }
-    rep = sim::ReplayClosedLoop(*set, *cal, co);
-  } else {
-    sim::ReplayOptions oo;
-    oo.rs_ohm = rs;
-    rep = sim::ReplayOpenLoop(*set, *cal, oo);
   }
+  auto rep = pipeline::ReplayRecording(*set, *cal, request);
   if (!rep.ok()) return Fail(std::string(rep.status().message()));
-  double se = 0;
-  size_t n = 0;
+  const double rs = rep->rs_ohm;
   nlohmann::json points = nlohmann::json::array();
-  for (size_t k = 0; k < rep->size(); ++k) {
-    const auto& r = (*rep)[k];
-    const auto& spec = set->manifest.points[k];
-    se += r.residual_rms_a * r.residual_rms_a * r.ia_a.size();
-    n += r.ia_a.size();
-    points.push_back({{"point", r.point}, {"id_ref_a", spec.id_ref_a}, {"iq_ref_a", spec.iq_ref_a},
-                      {"speed_rpm", spec.speed_rpm}, {"residual_rms_a", r.residual_rms_a}});
+  for (const auto& p : rep->points) {
+    points.push_back({{"point", p.point}, {"id_ref_a", p.id_ref_a}, {"iq_ref_a", p.iq_ref_a},
+                      {"speed_rpm", p.speed_rpm}, {"residual_rms_a", p.residual_rms_a}});
   }
-  const double total = n ? std::sqrt(se / n) : 0.0;
+  const double total = rep->residual_rms_a;
   if (args->Has("json")) {
     nlohmann::json j = {{"serial", set->manifest.serial},
                         {"mode", closed ? "closed_loop" : "open_loop"},
@@ -101,8 +90,8 @@ int RunReplay(const std::vector<std::string>& argv) {
                         {"residual_rms_a", total},
                         {"points", points}};
     if (closed) {
-      j["controller"] = {{"bandwidth_hz", co.control.bandwidth_hz}, {"ld_nominal_h", co.control.ld_nominal_h},
-                         {"lq_nominal_h", co.control.lq_nominal_h}, {"settle_s", co.settle_s}};
+      j["controller"] = {{"bandwidth_hz", rep->bandwidth_hz}, {"ld_nominal_h", rep->ld_nominal_h},
+                         {"lq_nominal_h", rep->lq_nominal_h}, {"settle_s", rep->settle_s}};
     }
     std::printf("%s\n", j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace).c_str());
     return 0;

@@ -31,9 +31,6 @@
 #include "cli/support_flux_map.h"
 #include "cli/support_progress.h"
 #include "cli/support_remote.h"
-#include "fitting/calibration.h"
-#include "fitting/fit.h"
-#include "identification/identify.h"
 #include "io/csv.h"
 #include "io/recording_set.h"
 #include "io/sha256.h"
@@ -41,7 +38,6 @@
 #include "pipeline/pipeline.h"
 #include "pipeline/points.h"
 #include "pipeline/report.h"
-#include "report/report.h"
 
 namespace fluxcal::cli {
 namespace {
@@ -113,7 +109,7 @@ absl::StatusOr<nlohmann::json> FetchCalibration(const std::string& server, const
 
 // --server with local extras: the service's fleet statistics at its
 // default operating points.
-absl::StatusOr<std::vector<report::FleetPoint>> FetchFleet(const std::string& server) {
+absl::StatusOr<std::vector<pipeline::FleetPoint>> FetchFleet(const std::string& server) {
   auto stub = MakeStub(server);
   if (!stub) return absl::InvalidArgumentError("--server " + server + ": cannot set up the client");
   v1::FleetStatisticsRequest req;
@@ -126,14 +122,14 @@ absl::StatusOr<std::vector<report::FleetPoint>> FetchFleet(const std::string& se
   for (const auto& p : resp.points()) {
     pipeline::FleetPoint f;
     f.id_a = p.id_a(); f.iq_a = p.iq_a(); f.serials = p.serials();
-    f.ldd_mean = p.ldd_h_mean(); f.ldd_std = p.ldd_h_std();
-    f.lqq_mean = p.lqq_h_mean(); f.lqq_std = p.lqq_h_std();
-    f.psi_d_mean = p.psi_d_wb_mean(); f.psi_d_std = p.psi_d_wb_std();
-    f.torque_mean = p.torque_nm_mean(); f.torque_std = p.torque_nm_std();
+    f.ldd_h_mean = p.ldd_h_mean(); f.ldd_h_std = p.ldd_h_std();
+    f.lqq_h_mean = p.lqq_h_mean(); f.lqq_h_std = p.lqq_h_std();
+    f.psi_d_wb_mean = p.psi_d_wb_mean(); f.psi_d_wb_std = p.psi_d_wb_std();
+    f.torque_nm_mean = p.torque_nm_mean(); f.torque_nm_std = p.torque_nm_std();
     f.outliers.assign(p.outliers().begin(), p.outliers().end());
     points.push_back(std::move(f));
   }
-  return pipeline::ToReportFleet(points);
+  return points;
 }
 
 // What every mode prints once the page is written.
@@ -262,7 +258,7 @@ int RunReport(const std::vector<std::string>& argv) {
 
   absl::StatusOr<nlohmann::json> cal_json;
   std::string source, source_fleet, mtime = "unknown";
-  std::optional<std::vector<report::FleetPoint>> fleet;
+  std::optional<std::vector<pipeline::FleetPoint>> fleet;
   if (auto server = args->Get("server")) {
     if (!local_extras) {
       return RunRemoteReport(*args, *server, cal_path, version, speed->value_or(0.0), *udc, out, args->Has("json"));
@@ -283,7 +279,7 @@ int RunReport(const std::vector<std::string>& argv) {
     mtime = FileMtimeUtc(cal_path);
   }
   if (!cal_json.ok()) return Fail(std::string(cal_json.status().message()));
-  auto cal = fit::Calibration::FromJson(*cal_json);
+  auto cal = pipeline::ParseCalibrationJson(*cal_json);
   if (!cal.ok()) return Fail(source + ": " + std::string(cal.status().message()));
 
   // Verdict, the findings of a diagnosed calibration and the software
@@ -337,7 +333,7 @@ int RunReport(const std::vector<std::string>& argv) {
     pipeline::AddDiagnosisDocumentToReport(*dj, *d, &in);
   }
   std::fprintf(stderr, "report: building tables and figures for %s\n", cal->serial().c_str());
-  auto rep = report::BuildReport(in);
+  auto rep = pipeline::BuildReportPage(in);
   if (!rep.ok()) return Fail(std::string(rep.status().message()));
   if (auto st = WriteNewOutput(*args, {"out", out}, rep->html); !st.ok()) return Fail(std::string(st.message()));
   PrintSummary({out, cal->serial(), in.verdict, io::Sha256Hex(rep->html), cal->version, rep->figures,

@@ -25,11 +25,11 @@
 #include "cli/command.h"
 #include "io/csv.h"
 #include "io/net.h"
+#include "pipeline/signing.h"
+#include "pipeline/store.h"
 #include "server/auth.h"
 #include "server/limits.h"
 #include "server/service.h"
-#include "storage/store.h"
-#include "tables/signature.h"
 
 namespace fluxcal::cli {
 namespace {
@@ -156,7 +156,7 @@ int RunServe(const std::vector<std::string>& argv) {
                  listen.c_str(), listen.c_str(), where.why.c_str());
     return 2;
   }
-  auto store = storage::Store::Open(db);
+  auto store = pipeline::OpenStore(db);
   if (!store.ok()) {
     std::fprintf(stderr, "fluxcal serve: %s\n", std::string(store.status().message()).c_str());
     return 1;
@@ -168,8 +168,8 @@ int RunServe(const std::vector<std::string>& argv) {
   std::string signing_key;
   if (!pem("signing-key", &signing_key)) return 2;
   if (!signing_key.empty()) {
-    if (auto pub = tables::PublicPemOf(signing_key); !pub.ok()) {
-      std::fprintf(stderr, "fluxcal serve: --signing-key: %s\n", std::string(pub.status().message()).c_str());
+    if (auto st = pipeline::CheckSigningKey(signing_key); !st.ok()) {
+      std::fprintf(stderr, "fluxcal serve: --signing-key: %s\n", std::string(st.message()).c_str());
       return 2;
     }
     service.set_signing_key(signing_key);

@@ -14,7 +14,7 @@
 #include "io/csv.h"
 #include "io/recording_set.h"
 #include "nlohmann/json.hpp"
-#include "simulation/twin.h"
+#include "pipeline/simulate.h"
 
 namespace fluxcal::cli {
 namespace {
@@ -47,31 +47,28 @@ int RunSimulate(const std::vector<std::string>& argv) {
     return Fail("usage: fluxcal simulate [--motor motor.json] [--plan plan.json] "
                 "[--effects k=v,...] [--second-udc-v V] [--seed N] [--serial S] [--spread] --out DIR [--force] [--json]", 2);
   }
-  sim::TwinConfig cfg;
+  pipeline::SimulationSetup setup;
   if (auto m = args->Get("motor")) {
-    if (auto st = sim::LoadMotorJson(*m, &cfg); !st.ok()) return Fail(std::string(st.message()));
+    if (auto st = setup.LoadMotorJson(*m); !st.ok()) return Fail(std::string(st.message()));
   }
   if (auto s = args->Get("seed")) {
-    if (!absl::SimpleAtoi(*s, &cfg.seed)) return Fail("flag --seed: expected an integer, got '" + *s + "'", 2);
+    uint64_t seed = 0;
+    if (!absl::SimpleAtoi(*s, &seed)) return Fail("flag --seed: expected an integer, got '" + *s + "'", 2);
+    setup.set_seed(seed);
   }
-  if (auto s = args->Get("serial")) cfg.serial = *s;
-  if (args->Has("spread")) cfg.motor = sim::PerturbForProduction(cfg.motor, cfg.seed);
-  double noise = cfg.sensors.noise_a;
+  if (auto s = args->Get("serial")) setup.set_serial(*s);
+  if (args->Has("spread")) setup.SpreadAsProduction();
   if (auto e = args->Get("effects")) {
-    if (auto st = sim::ParseEffects(*e, &cfg.effects, &noise); !st.ok()) return Fail(std::string(st.message()), 2);
+    if (auto st = setup.SetEffects(*e); !st.ok()) return Fail(std::string(st.message()), 2);
   }
-  cfg.sensors.noise_a = noise;
-  sim::Plan plan = sim::DefaultPlan();
   if (auto p = args->Get("plan")) {
-    auto pl = sim::LoadPlanJson(*p);
-    if (!pl.ok()) return Fail(std::string(pl.status().message()));
-    plan = *pl;
+    if (auto st = setup.LoadPlanJson(*p); !st.ok()) return Fail(std::string(st.message()));
   }
   auto second_udc = args->GetDouble("second-udc-v");
   if (!second_udc.ok()) return Fail(std::string(second_udc.status().message()), 2);
   if (second_udc->has_value()) {
     if (!(**second_udc > 0)) return Fail("flag --second-udc-v: must be positive", 2);
-    plan = sim::WithSecondUdc(std::move(plan), **second_udc);
+    setup.RepeatAtSecondUdc(**second_udc);
   }
   // Every flag checked: the overwrite rule (cli/args.h), before the
   // simulation: a directory with files in it, or DIR.truth.json, is
@@ -81,21 +78,21 @@ int RunSimulate(const std::vector<std::string>& argv) {
   const std::string truth = dir + ".truth.json";
   if (auto e = CheckOverwrite(*args, {{"out", dir}, {"out", truth}}); !e.empty()) return Fail(e);
   const auto t0 = std::chrono::steady_clock::now();
-  std::fprintf(stderr, "simulate: %zu points, %zu steady-state rows, effects: %s\n", plan.points.size(),
-               plan.steady_state.size(), absl::StrJoin(sim::ActiveEffectNames(cfg.effects), ",").c_str());
-  auto res = sim::Simulate(cfg, plan);
+  std::fprintf(stderr, "simulate: %zu points, %zu steady-state rows, effects: %s\n", setup.points(),
+               setup.steady_state_rows(), absl::StrJoin(setup.ActiveEffects(), ",").c_str());
+  auto res = pipeline::Simulate(setup);
   if (!res.ok()) return Fail(std::string(res.status().message()));
   const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   if (auto st = io::WriteRecordingSet(dir, res->set); !st.ok()) return Fail(std::string(st.message()));
-  if (auto st = io::WriteFileAtomically(truth, sim::TruthJson(cfg, *res)); !st.ok()) {
+  if (auto st = io::WriteFileAtomically(truth, res->truth_json); !st.ok()) {
     return Fail(std::string(st.message()));
   }
   if (res->clipped) std::fprintf(stderr, "simulate: warning: the modulator clipped in some points\n");
   std::fprintf(stderr, "simulate: wrote %s and %s in %.2f s\n", dir.c_str(), truth.c_str(), secs);
   if (args->Has("json")) {
-    nlohmann::json j = {{"set", dir}, {"truth", truth}, {"serial", cfg.serial},
-                        {"points", plan.points.size()}, {"steady_state_rows", plan.steady_state.size()},
-                        {"effects", sim::ActiveEffectNames(cfg.effects)}, {"seconds", secs},
+    nlohmann::json j = {{"set", dir}, {"truth", truth}, {"serial", setup.serial()},
+                        {"points", setup.points()}, {"steady_state_rows", setup.steady_state_rows()},
+                        {"effects", setup.ActiveEffects()}, {"seconds", secs},
                         {"clipped", res->clipped}};
     std::cout << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
   } else {

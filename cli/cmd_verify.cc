@@ -1,6 +1,6 @@
 // fluxcal verify FILE --pubkey KEY.pub [--sig FILE.sig] [--json]
 // Checks a table file against its detached Ed25519 signature
-// (tables/signature.h). Exit 0: valid; 1: not valid (the reason on stderr,
+// (pipeline/signing.h). Exit 0: valid; 1: not valid (the reason on stderr,
 // and in the JSON document); 2: usage.
 #include <cstdio>
 #include <iostream>
@@ -9,7 +9,7 @@
 #include "cli/command.h"
 #include "io/csv.h"
 #include "nlohmann/json.hpp"
-#include "tables/signature.h"
+#include "pipeline/signing.h"
 
 namespace fluxcal::cli {
 namespace {
@@ -35,12 +35,12 @@ int RunVerify(const std::vector<std::string>& argv) {
   if (!data.ok()) st = data.status();
   else if (!sig.ok()) st = absl::NotFoundError(sig_path + ": signature file not found");
   else if (!pub.ok()) st = pub.status();
-  else st = tables::VerifyDetached(*data, *sig, *pub);
+  else st = pipeline::VerifyExportSignature(*data, *sig, *pub);
   if (args->Has("json")) {
     nlohmann::json j = {{"file", file}, {"signature", sig_path}, {"valid", st.ok()}};
     if (!st.ok()) j["error"] = std::string(st.message());
     if (pub.ok()) {
-      if (auto id = tables::KeyId(*pub); id.ok()) j["key_id"] = *id;
+      if (auto id = pipeline::SigningKeyId(*pub); id.ok()) j["key_id"] = *id;
     }
     std::cout << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
   } else if (st.ok()) {

@@ -6,6 +6,12 @@
 
 namespace fluxcal::pipeline {
 
+absl::Status CheckExportFormat(const std::string& name) { return tables::ParseFormat(name).status(); }
+
+absl::StatusOr<tables::CType> ParseExportCType(const std::string& name) { return tables::ParseCType(name); }
+
+const char* ExportCTypeName(tables::CType ct) { return tables::CTypeName(ct); }
+
 absl::StatusOr<ExportResult> ExportCalibration(const fit::Calibration& cal, const tables::TableSpec& spec,
                                                const tables::ExportRequest& request, const std::string& format,
                                                const tables::ExportOptions& options) {

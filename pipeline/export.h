@@ -51,6 +51,13 @@ absl::StatusOr<ExportResult> ExportTable(storage::Store& store, const std::strin
                                          const tables::TableSpec& spec, const tables::ExportRequest& request,
                                          const std::string& format, const tables::ExportOptions& options = {});
 
+// The names an export request takes, checked as ExportCalibration checks
+// them (tables/tables.h keeps the one list of each): InvalidArgument for a
+// name not listed, saying which are.
+absl::Status CheckExportFormat(const std::string& name);
+absl::StatusOr<tables::CType> ParseExportCType(const std::string& name);
+const char* ExportCTypeName(tables::CType ct);   // "double", "float", "int16", "int32"
+
 // The figure of an exported table (`fluxcal export --svg`): the fw map as a
 // heat map of id_a; the MTPV table with MTPA beside it for reference; the
 // MTPA table with MTPV beside it. The reference table is computed for the

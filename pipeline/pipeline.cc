@@ -379,6 +379,39 @@ absl::StatusOr<fit::Calibration> LoadCalibration(storage::Store& store, const st
   return *parsed;
 }
 
+absl::StatusOr<FitTolerances> RequestedTolerances(double max_rms_relative, double psi_pm_tolerance_relative) {
+  FitTolerances tol;
+  if (max_rms_relative < 0 || !std::isfinite(max_rms_relative) || psi_pm_tolerance_relative < 0 ||
+      !std::isfinite(psi_pm_tolerance_relative)) {
+    return absl::InvalidArgumentError("max_rms_relative, psi_pm_tolerance_relative: must be >= 0");
+  }
+  if (max_rms_relative > tol.max_rms_relative || psi_pm_tolerance_relative > tol.psi_pm_tolerance_relative) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("max_rms_relative, psi_pm_tolerance_relative: may only tighten the server policy (%g, %g)",
+                        tol.max_rms_relative, tol.psi_pm_tolerance_relative));
+  }
+  if (max_rms_relative > 0) tol.max_rms_relative = max_rms_relative;
+  if (psi_pm_tolerance_relative > 0) tol.psi_pm_tolerance_relative = psi_pm_tolerance_relative;
+  return tol;
+}
+
+absl::Status CheckDistinctOperatingPoints(const std::vector<IdentifiedPoint>& points) {
+  std::set<std::pair<double, double>> distinct;
+  for (const auto& r : points) distinct.insert({r.id_a, r.iq_a});
+  if (!points.empty() && static_cast<int>(distinct.size()) < kMinDistinctOperatingPoints) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "points: ", distinct.size(), " distinct operating points (id_a, iq_a); a calibration needs at least ",
+        kMinDistinctOperatingPoints, "; nothing stored"));
+  }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<fit::Calibration> LoadCalibrationFile(const std::string& path) { return fit::LoadCalibrationFile(path); }
+
+absl::StatusOr<fit::Calibration> ParseCalibrationJson(const nlohmann::json& j) { return fit::Calibration::FromJson(j); }
+
+const char* FluxRegionName(fit::Region region) { return fit::RegionName(region); }
+
 absl::StatusOr<fit::Calibration> ParseStoredCalibration(const storage::CalibrationRow& stored) {
   const storage::CalibrationRow* row = &stored;
   const std::string& serial = stored.serial;
@@ -402,6 +435,38 @@ absl::StatusOr<QueryResult> QueryFlux(storage::Store& store, const std::string& 
   out.values.reserve(points.size());
   for (const auto& [id, iq] : points) out.values.push_back(cal->Predict(id, iq));
   return out;
+}
+
+absl::StatusOr<storage::CalibrationRow> GetCalibrationRecord(storage::Store& store, const std::string& serial,
+                                                             int version) {
+  return store.GetCalibration(serial, version);
+}
+
+absl::StatusOr<MotorPage> ListMotorsPage(storage::Store& store, const std::string& prefix, bool only_failed,
+                                         int offset, int page_size) {
+  // One row more than the page: whether a next page exists, in one query.
+  auto rows = store.ListMotors(prefix, only_failed, offset, page_size + 1);
+  if (!rows.ok()) return rows.status();
+  MotorPage page;
+  if (static_cast<int>(rows->size()) > page_size) {
+    rows->resize(page_size);
+    page.next_offset = offset + page_size;
+  }
+  page.motors = std::move(*rows);
+  return page;
+}
+
+absl::StatusOr<std::vector<storage::HistoryRow>> MotorHistory(storage::Store& store, const std::string& serial) {
+  return store.History(serial);
+}
+
+absl::StatusOr<std::vector<storage::AuditRow>> AuditTrail(storage::Store& store, const std::string& serial) {
+  return store.AuditOf(serial);
+}
+
+absl::Status ReleaseVersion(storage::Store& store, const std::string& serial, int version,
+                            const std::string& released_by, const storage::AuditContext* audit) {
+  return store.Release(serial, version, released_by, audit);
 }
 
 absl::StatusOr<int> FlashableVersion(storage::Store& store, const std::string& serial, int version) {
@@ -447,16 +512,16 @@ absl::StatusOr<std::vector<FleetPoint>> FleetStatistics(storage::Store& store,
       *mean = s / n;
       *sd = p.size() > 1 ? std::sqrt(std::max(0.0, (s2 - s * s / n) / (n - 1))) : 0.0;
     };
-    stats([](const fit::FluxPrediction& x) { return x.ldd_h; }, &fp.ldd_mean, &fp.ldd_std);
-    stats([](const fit::FluxPrediction& x) { return x.lqq_h; }, &fp.lqq_mean, &fp.lqq_std);
-    stats([](const fit::FluxPrediction& x) { return x.psi_d_wb; }, &fp.psi_d_mean, &fp.psi_d_std);
-    stats([](const fit::FluxPrediction& x) { return x.torque_nm; }, &fp.torque_mean, &fp.torque_std);
+    stats([](const fit::FluxPrediction& x) { return x.ldd_h; }, &fp.ldd_h_mean, &fp.ldd_h_std);
+    stats([](const fit::FluxPrediction& x) { return x.lqq_h; }, &fp.lqq_h_mean, &fp.lqq_h_std);
+    stats([](const fit::FluxPrediction& x) { return x.psi_d_wb; }, &fp.psi_d_wb_mean, &fp.psi_d_wb_std);
+    stats([](const fit::FluxPrediction& x) { return x.torque_nm; }, &fp.torque_nm_mean, &fp.torque_nm_std);
     // Outliers: any quantity more than outlier_sigma standard deviations from
     // the fleet mean (leave-one-out would be better for tiny fleets).
     for (size_t k = 0; k < p.size(); ++k) {
       auto z = [&](double v, double m, double s) { return s > 0 ? std::abs(v - m) / s : 0.0; };
-      if (z(p[k].ldd_h, fp.ldd_mean, fp.ldd_std) > outlier_sigma || z(p[k].lqq_h, fp.lqq_mean, fp.lqq_std) > outlier_sigma ||
-          z(p[k].torque_nm, fp.torque_mean, fp.torque_std) > outlier_sigma) {
+      if (z(p[k].ldd_h, fp.ldd_h_mean, fp.ldd_h_std) > outlier_sigma || z(p[k].lqq_h, fp.lqq_h_mean, fp.lqq_h_std) > outlier_sigma ||
+          z(p[k].torque_nm, fp.torque_nm_mean, fp.torque_nm_std) > outlier_sigma) {
         fp.outliers.push_back(cals[k].first);
       }
     }

@@ -17,6 +17,7 @@
 #include "io/recording_set.h"
 #include "pipeline/export.h"
 #include "pipeline/points.h"
+#include "report/report.h"
 #include "storage/store.h"
 #include "tables/export_rule.h"
 #include "tables/tables.h"
@@ -81,6 +82,17 @@ struct FitTolerances {
   double max_rms_relative = 0.02;          // fit residual vs the identified points (a map fit: flux error over its nodes)
   double psi_pm_tolerance_relative = 0.10; // vs the nominal magnet flux
 };
+// The tolerances a fit request asks for (0: the policy's, FitTolerances'
+// defaults). The policy may be tightened, never loosened: a failing run must
+// not become "pass" on request. InvalidArgument for a negative or
+// non-finite value, or one above the policy's.
+absl::StatusOr<FitTolerances> RequestedTolerances(double max_rms_relative, double psi_pm_tolerance_relative);
+// A calibration needs a grid: fewer distinct (id_a, iq_a) than this cannot
+// determine a flux surface (36 copies of one point must not "pass").
+inline constexpr int kMinDistinctOperatingPoints = 6;
+// InvalidArgument (field 'points', "nothing stored") for a non-empty run
+// with fewer than kMinDistinctOperatingPoints distinct operating points.
+absl::Status CheckDistinctOperatingPoints(const std::vector<IdentifiedPoint>& points);
 // "pass" or "fail: <reason>" for a fitted calibration, the one place that
 // judges one. psi_pm is judged against `nominal_psi_pm_wb`, else against
 // the calibration's own nominal (cal.psi_pm_nominal_wb()); with neither
@@ -103,6 +115,12 @@ absl::StatusOr<storage::CalibrationRow> FitSerial(storage::Store& store, const s
                                                   const CancelledFn& cancelled = {});
 
 // --- Read.
+// A calibration JSON file (fluxcal fit's output), and one already parsed.
+absl::StatusOr<fit::Calibration> LoadCalibrationFile(const std::string& path);
+absl::StatusOr<fit::Calibration> ParseCalibrationJson(const nlohmann::json& j);
+// Where a predicted point lies, as the API and `fluxcal query` name it
+// ("measured", "by_symmetry", "extrapolated").
+const char* FluxRegionName(fit::Region region);
 // A stored row's calibration JSON parsed (DataLoss when corrupt).
 absl::StatusOr<fit::Calibration> ParseStoredCalibration(const storage::CalibrationRow& row);
 absl::StatusOr<fit::Calibration> LoadCalibration(storage::Store& store, const std::string& serial, int version);
@@ -113,6 +131,32 @@ struct QueryResult {
 };
 absl::StatusOr<QueryResult> QueryFlux(storage::Store& store, const std::string& serial, int version,
                                       const std::vector<std::pair<double, double>>& points);
+
+// --- Records: what the store holds about a serial, as the service's reads
+// return it.
+// Calibration `version` of `serial` (0: the latest) as stored.
+absl::StatusOr<storage::CalibrationRow> GetCalibrationRecord(storage::Store& store, const std::string& serial,
+                                                             int version);
+// One page of the motor list: at most `page_size` motors from `offset`
+// (serials starting with `prefix`; `only_failed`: latest verdict not
+// "pass"), and the offset of the next page when there is one.
+struct MotorPage {
+  std::vector<storage::MotorSummaryRow> motors;
+  std::optional<int> next_offset;
+};
+absl::StatusOr<MotorPage> ListMotorsPage(storage::Store& store, const std::string& prefix, bool only_failed,
+                                         int offset, int page_size);
+// What happened to a serial (runs, versions, releases), oldest first, and
+// its audit trail.
+absl::StatusOr<std::vector<storage::HistoryRow>> MotorHistory(storage::Store& store, const std::string& serial);
+absl::StatusOr<std::vector<storage::AuditRow>> AuditTrail(storage::Store& store, const std::string& serial);
+
+// --- Release.
+// Releases calibration `version` of `serial` for flashing, by
+// `released_by` (its release chain link and `audit` in the same
+// transaction; storage::Store::Release says what is refused).
+absl::Status ReleaseVersion(storage::Store& store, const std::string& serial, int version,
+                            const std::string& released_by, const storage::AuditContext* audit = nullptr);
 
 // Export (ExportResult, ExportCalibration, ExportTable): pipeline/export.h.
 
@@ -125,13 +169,10 @@ absl::StatusOr<QueryResult> QueryFlux(storage::Store& store, const std::string& 
 // (DataLoss otherwise: the store was changed behind the service).
 absl::StatusOr<int> FlashableVersion(storage::Store& store, const std::string& serial, int version);
 
-struct FleetPoint {
-  double id_a = 0, iq_a = 0;
-  int serials = 0;
-  double ldd_mean = 0, ldd_std = 0, lqq_mean = 0, lqq_std = 0, psi_d_mean = 0, psi_d_std = 0;
-  double torque_mean = 0, torque_std = 0;
-  std::vector<std::string> outliers;
-};
+// The fleet at one operating point: one type (report::FleetPoint, which the
+// page's fleet section takes as it is), converted only at the proto edge
+// (the service's FleetStatistics, `fluxcal report --server`).
+using FleetPoint = report::FleetPoint;
 // The operating points (id_a, iq_a) and outlier threshold (standard
 // deviations) when a caller names none: the FleetStatistics RPC's defaults
 // and the report's fleet section, so both show the same comparison.

@@ -11,6 +11,8 @@
 #include "tables/tables.h"
 
 namespace fluxcal::pipeline {
+
+absl::StatusOr<report::Report> BuildReportPage(const report::ReportInputs& in) { return report::BuildReport(in); }
 namespace {
 
 constexpr char kDiagnosisFormat[] = "fluxcal.diagnosis.v1";
@@ -23,22 +25,6 @@ void MergeStoredProvenance(int version, const std::string& created_utc, const st
   (*j)["created_utc"] = created_utc;
   if (!verdict.empty()) (*j)["verdict"] = verdict;
   if (released) (*j)["released"] = *released ? "released for flashing" : "not released";
-}
-
-std::vector<report::FleetPoint> ToReportFleet(const std::vector<FleetPoint>& points) {
-  std::vector<report::FleetPoint> out;
-  out.reserve(points.size());
-  for (const auto& p : points) {
-    report::FleetPoint f;
-    f.id_a = p.id_a; f.iq_a = p.iq_a; f.serials = p.serials;
-    f.ldd_h_mean = p.ldd_mean; f.ldd_h_std = p.ldd_std;
-    f.lqq_h_mean = p.lqq_mean; f.lqq_h_std = p.lqq_std;
-    f.psi_d_wb_mean = p.psi_d_mean; f.psi_d_wb_std = p.psi_d_std;
-    f.torque_nm_mean = p.torque_mean; f.torque_nm_std = p.torque_std;
-    f.outliers = p.outliers;
-    out.push_back(std::move(f));
-  }
-  return out;
 }
 
 void FillReportInputsFromJson(const fit::Calibration& cal, const nlohmann::json& cal_json, report::ReportInputs* in) {
@@ -211,7 +197,7 @@ absl::StatusOr<StoredReport> BuildStoredReport(storage::Store& store, const std:
                                                         std::end(kDefaultFleetPointsA));
     auto fleet = FleetStatistics(store, points, kDefaultOutlierSigma, cancelled);
     if (!fleet.ok()) return fleet.status();
-    in.fleet = ToReportFleet(*fleet);
+    in.fleet = std::move(*fleet);
     in.fleet_source =
         "FleetStatistics of the service at its default operating points (latest calibration of every serial)";
     out.fleet_included = !in.fleet.empty();

@@ -72,8 +72,9 @@ void AddDiagnosisDocumentToReport(const nlohmann::json& doc, const std::string& 
 void MergeStoredProvenance(int version, const std::string& created_utc, const std::string& verdict,
                            std::optional<bool> released, nlohmann::json* cal_json);
 
-// FleetStatistics' result as the page's fleet section takes it.
-std::vector<report::FleetPoint> ToReportFleet(const std::vector<FleetPoint>& points);
+// The page of everything gathered in `in` (report::BuildReport), for the
+// page built here (`fluxcal report cal.json`).
+absl::StatusOr<report::Report> BuildReportPage(const report::ReportInputs& in);
 
 // Where a page's Udc came from when the caller gave it: the same words for
 // the service's page (GetReport's udc_v) and `fluxcal report --udc-v`, so

@@ -17,12 +17,13 @@
 #include "io/recording_set.h"
 #include "nlohmann/json.hpp"
 #include "pipeline/anchor.h"
+#include "pipeline/diagnose.h"
 #include "pipeline/ingest_stream.h"
 #include "pipeline/pipeline.h"
 #include "pipeline/report.h"
+#include "pipeline/signing.h"
 #include "server/reflection.h"
 #include "server/validation.h"
-#include "tables/signature.h"
 
 namespace fluxcal::server {
 
@@ -211,15 +212,7 @@ grpc::Status CalibrationServiceImpl::IngestHfResults(grpc::ServerContext* ctx,
                                           pipeline::HfPointsSha256(rows)};
     if (auto s = pipeline::CheckStreamEnd(declared, received, "end", "points"); !s.ok()) return AtMessage(end_message, s);
   }
-  {
-    std::set<std::pair<double, double>> distinct;
-    for (const auto& r : rows) distinct.insert({r.id_a, r.iq_a});
-    if (!rows.empty() && static_cast<int>(distinct.size()) < kMinDistinctOperatingPoints) {
-      return ToGrpcStatus(absl::InvalidArgumentError(absl::StrCat(
-          "points: ", distinct.size(), " distinct operating points (id_a, iq_a); a calibration needs at least ",
-          kMinDistinctOperatingPoints, "; nothing stored")));
-    }
-  }
+  if (auto s = pipeline::CheckDistinctOperatingPoints(rows); !s.ok()) return ToGrpcStatus(s);
   std::optional<pipeline::MotorNominal> m;
   if (have_motor) m = pipeline::MotorNominal{motor.pole_pairs(), motor.rs_ohm(), motor.psi_pm_wb()};
   bool replayed = false;
@@ -348,24 +341,14 @@ grpc::Status CalibrationServiceImpl::Fit(grpc::ServerContext* ctx, const v1::Fit
   auto who = Admit(ctx, Rpc::kFit);
   if (!who.ok()) return ToGrpcStatus(who.status());
   if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
-  pipeline::FitTolerances tol;
-  if (req->max_rms_relative() < 0 || !std::isfinite(req->max_rms_relative()) ||
-      req->psi_pm_tolerance_relative() < 0 || !std::isfinite(req->psi_pm_tolerance_relative())) {
-    return ToGrpcStatus(absl::InvalidArgumentError("max_rms_relative, psi_pm_tolerance_relative: must be >= 0"));
-  }
-  // Verdict tolerances are server policy: a client may tighten them, never
-  // loosen them (a failing run must not become "pass" on request).
-  if (req->max_rms_relative() > tol.max_rms_relative || req->psi_pm_tolerance_relative() > tol.psi_pm_tolerance_relative) {
-    return ToGrpcStatus(absl::InvalidArgumentError(absl::StrFormat(
-        "max_rms_relative, psi_pm_tolerance_relative: may only tighten the server policy (%g, %g)",
-        tol.max_rms_relative, tol.psi_pm_tolerance_relative)));
-  }
-  if (req->max_rms_relative() > 0) tol.max_rms_relative = req->max_rms_relative();
-  if (req->psi_pm_tolerance_relative() > 0) tol.psi_pm_tolerance_relative = req->psi_pm_tolerance_relative();
+  // Verdict tolerances are policy (pipeline::RequestedTolerances): a client
+  // may tighten them, never loosen them.
+  auto tol = pipeline::RequestedTolerances(req->max_rms_relative(), req->psi_pm_tolerance_relative());
+  if (!tol.ok()) return ToGrpcStatus(tol.status());
   // Model and verdict are known before the store call, the version only
   // inside it: the detail is formed there from the row the pipeline stores.
   const auto audit = AuditFor(ctx, *who, Rpc::kFit, req->serial(), nullptr);
-  auto row = pipeline::FitSerial(*store_, req->serial(), req->model(), tol, &audit, CancelledBy(ctx));
+  auto row = pipeline::FitSerial(*store_, req->serial(), req->model(), *tol, &audit, CancelledBy(ctx));
   if (!row.ok()) return StoppedOr(ctx, row.status());
   AnchorAfterWrite(req->serial());
   ToProto(*row, resp->mutable_calibration());
@@ -379,7 +362,7 @@ grpc::Status CalibrationServiceImpl::GetCalibration(grpc::ServerContext* ctx, co
   if (!who.ok()) return ToGrpcStatus(who.status());
   if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
   if (auto s = ValidateVersion(req->version()); !s.ok()) return ToGrpcStatus(s);
-  auto row = store_->GetCalibration(req->serial(), req->version());
+  auto row = pipeline::GetCalibrationRecord(*store_, req->serial(), req->version());
   if (!row.ok()) return ToGrpcStatus(row.status());
   ToProto(*row, resp);
   return grpc::Status::OK;
@@ -395,16 +378,15 @@ grpc::Status CalibrationServiceImpl::ListMotors(grpc::ServerContext* ctx, const 
   if (!token.ok()) return ToGrpcStatus(token.status());
   const int offset = *token;
   if (req->serial_prefix().size() > 64) return ToGrpcStatus(absl::InvalidArgumentError("serial_prefix: at most 64 characters"));
-  auto rows = store_->ListMotors(req->serial_prefix(), req->only_failed(), offset, size + 1);
-  if (!rows.ok()) return ToGrpcStatus(rows.status());
+  auto page = pipeline::ListMotorsPage(*store_, req->serial_prefix(), req->only_failed(), offset, size);
+  if (!page.ok()) return ToGrpcStatus(page.status());
   if (who->role == Role::kHealth) return grpc::Status::OK;   // the database answered; no data for a health check
-  for (size_t k = 0; k < rows->size() && static_cast<int>(k) < size; ++k) {
+  for (const auto& r : page->motors) {
     auto* m = resp->add_motors();
-    const auto& r = (*rows)[k];
     m->set_serial(r.serial); m->set_latest_version(r.latest_version); m->set_verdict(r.verdict);
     m->set_runs(r.runs); m->set_updated_utc(r.updated_utc);
   }
-  if (static_cast<int>(rows->size()) > size) resp->set_next_page_token(std::to_string(offset + size));
+  if (page->next_offset) resp->set_next_page_token(std::to_string(*page->next_offset));
   return grpc::Status::OK;
 }
 
@@ -413,7 +395,7 @@ grpc::Status CalibrationServiceImpl::History(grpc::ServerContext* ctx, const v1:
   auto who = Admit(ctx, Rpc::kHistory);
   if (!who.ok()) return ToGrpcStatus(who.status());
   if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
-  auto rows = store_->History(req->serial());
+  auto rows = pipeline::MotorHistory(*store_, req->serial());
   if (!rows.ok()) return ToGrpcStatus(rows.status());
   resp->set_serial(req->serial());
   for (const auto& r : *rows) {
@@ -454,7 +436,7 @@ grpc::Status CalibrationServiceImpl::QueryFlux(grpc::ServerContext* ctx, const v
     v->set_psi_d_wb_std(x.psi_d_wb_std); v->set_psi_q_wb_std(x.psi_q_wb_std);
     v->set_ldd_h_std(x.ldd_h_std); v->set_lqq_h_std(x.lqq_h_std); v->set_torque_nm_std(x.torque_nm_std);
     v->set_extrapolated(x.extrapolated);
-    v->set_region(fit::RegionName(x.region));
+    v->set_region(pipeline::FluxRegionName(x.region));
     v->set_invalid(!x.valid);
     v->set_invalid_reason(x.invalid_reason);
   }
@@ -510,7 +492,7 @@ grpc::Status CalibrationServiceImpl::ExportTable(grpc::ServerContext* ctx, const
   spec.allow_extrapolation = req->allow_extrapolation();
   tables::ExportOptions options;
   if (!req->ctype().empty()) {
-    auto ct = tables::ParseCType(req->ctype());
+    auto ct = pipeline::ParseExportCType(req->ctype());
     if (!ct.ok()) return ToGrpcStatus(ct.status());
     options.ctype = *ct;
   }
@@ -527,7 +509,7 @@ grpc::Status CalibrationServiceImpl::ExportTable(grpc::ServerContext* ctx, const
   resp->set_verdict(r->verdict);
   resp->set_released(r->released);
   if (!signing_key_pem_.empty()) {
-    auto sig = tables::SignDetached(r->exported.bytes, signing_key_pem_);
+    auto sig = pipeline::SignExport(r->exported.bytes, signing_key_pem_);
     if (!sig.ok()) return ToGrpcStatus(sig.status());
     resp->set_signature(*sig);
   }
@@ -557,10 +539,10 @@ grpc::Status CalibrationServiceImpl::FleetStatistics(grpc::ServerContext* ctx, c
   for (const auto& s : *stats) {
     auto* p = resp->add_points();
     p->set_id_a(s.id_a); p->set_iq_a(s.iq_a); p->set_serials(s.serials);
-    p->set_ldd_h_mean(s.ldd_mean); p->set_ldd_h_std(s.ldd_std);
-    p->set_lqq_h_mean(s.lqq_mean); p->set_lqq_h_std(s.lqq_std);
-    p->set_psi_d_wb_mean(s.psi_d_mean); p->set_psi_d_wb_std(s.psi_d_std);
-    p->set_torque_nm_mean(s.torque_mean); p->set_torque_nm_std(s.torque_std);
+    p->set_ldd_h_mean(s.ldd_h_mean); p->set_ldd_h_std(s.ldd_h_std);
+    p->set_lqq_h_mean(s.lqq_h_mean); p->set_lqq_h_std(s.lqq_h_std);
+    p->set_psi_d_wb_mean(s.psi_d_wb_mean); p->set_psi_d_wb_std(s.psi_d_wb_std);
+    p->set_torque_nm_mean(s.torque_nm_mean); p->set_torque_nm_std(s.torque_nm_std);
     for (const auto& o : s.outliers) p->add_outliers(o);
   }
   return grpc::Status::OK;
@@ -575,7 +557,7 @@ grpc::Status CalibrationServiceImpl::Diagnose(grpc::ServerContext* ctx, const v1
   if (!rep.ok()) return StoppedOr(ctx, rep.status());
   resp->set_serial(req->serial());
   resp->set_verdict(rep->verdict);
-  resp->set_report_json(diag::ToJson(*rep).dump(-1, ' ', false, nlohmann::json::error_handler_t::replace));
+  resp->set_report_json(pipeline::DiagnosisJson(*rep).dump(-1, ' ', false, nlohmann::json::error_handler_t::replace));
   for (const auto& f : rep->findings) resp->add_effects(f.effect);
   if (req->store_calibration()) {
     const auto audit = AuditFor(ctx, *who, Rpc::kDiagnose, req->serial(), nullptr);
@@ -598,7 +580,7 @@ grpc::Status CalibrationServiceImpl::Release(grpc::ServerContext* ctx, const v1:
   }
   const auto audit = AuditFor(ctx, *who, Rpc::kRelease, req->serial(),
                               [](int64_t version, bool) { return absl::StrCat("released version ", version); });
-  if (auto s = store_->Release(req->serial(), req->version(), who->name, &audit); !s.ok()) return ToGrpcStatus(s);
+  if (auto s = pipeline::ReleaseVersion(*store_, req->serial(), req->version(), who->name, &audit); !s.ok()) return ToGrpcStatus(s);
   AnchorAfterWrite(req->serial());
   resp->set_serial(req->serial());
   resp->set_version(req->version());
@@ -652,7 +634,7 @@ grpc::Status CalibrationServiceImpl::Audit(grpc::ServerContext* ctx, const v1::A
   auto who = Admit(ctx, Rpc::kAudit);
   if (!who.ok()) return ToGrpcStatus(who.status());
   if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
-  auto rows = store_->AuditOf(req->serial());
+  auto rows = pipeline::AuditTrail(*store_, req->serial());
   if (!rows.ok()) return ToGrpcStatus(rows.status());
   resp->set_serial(req->serial());
   for (const auto& r : *rows) {

@@ -1,6 +1,6 @@
 // The gRPC service: thin. Each handler converts protobuf to plain types,
-// validates (server/validation.h), makes one call into pipeline/ (or a
-// plain storage read) and maps the status in one place (ToGrpcStatus).
+// validates (server/validation.h), makes one call into pipeline/ and maps
+// the status in one place (ToGrpcStatus).
 // Stateless: everything lives in the store, so several servers may share
 // one PostgreSQL database.
 #ifndef FLUXCAL_SERVER_SERVICE_H_
@@ -16,7 +16,7 @@
 #include "fluxcal/v1/calibration.grpc.pb.h"
 #include "server/auth.h"
 #include "server/limits.h"
-#include "storage/store.h"
+#include "pipeline/store.h"
 
 namespace grpc {
 class Server;

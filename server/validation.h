@@ -16,9 +16,8 @@ namespace fluxcal::server {
 // (a few seconds, docs/performance.md) instead of letting one request take
 // minutes and gigabytes.
 inline constexpr int kMaxPointsPerStream = 10000;
-// A calibration needs a grid: fewer distinct (id_a, iq_a) than this cannot
-// determine a flux surface (36 copies of one point must not "pass").
-inline constexpr int kMinDistinctOperatingPoints = 6;
+// The fewest distinct operating points a run needs is pipeline's
+// (pipeline::kMinDistinctOperatingPoints, CheckDistinctOperatingPoints).
 // Batch queries and fleet statistics.
 inline constexpr int kMaxQueryPoints = 100000;
 inline constexpr int kMaxFleetPoints = 1000;

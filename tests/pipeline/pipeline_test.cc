@@ -843,5 +843,34 @@ TEST(Admin, SqliteBackupAndTheCommand) {
   RemoveDb(out);
 }
 
+// The fit request's tolerances and the run's grid: policy of the
+// application layer (the service only transports them).
+TEST(Pipeline, RequestedTolerancesOnlyTighten) {
+  auto d = pipeline::RequestedTolerances(0, 0);
+  ASSERT_TRUE(d.ok());
+  EXPECT_EQ(d->max_rms_relative, pipeline::FitTolerances{}.max_rms_relative);
+  EXPECT_EQ(d->psi_pm_tolerance_relative, pipeline::FitTolerances{}.psi_pm_tolerance_relative);
+  auto t = pipeline::RequestedTolerances(0.01, 0.05);
+  ASSERT_TRUE(t.ok());
+  EXPECT_EQ(t->max_rms_relative, 0.01);
+  EXPECT_EQ(t->psi_pm_tolerance_relative, 0.05);
+  auto loose = pipeline::RequestedTolerances(0.5, 0);
+  EXPECT_EQ(loose.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(loose.status().message().find("may only tighten"), std::string::npos);
+  EXPECT_EQ(pipeline::RequestedTolerances(-1, 0).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(pipeline::RequestedTolerances(0, std::nan("")).status().code(), absl::StatusCode::kInvalidArgument);
+}
+
+TEST(Pipeline, DistinctOperatingPoints) {
+  std::vector<pipeline::IdentifiedPoint> points(36);
+  for (auto& p : points) p.id_a = -10, p.iq_a = 20;
+  auto s = pipeline::CheckDistinctOperatingPoints(points);
+  EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(s.message().find("1 distinct operating points"), std::string::npos) << s.message();
+  for (int k = 0; k < pipeline::kMinDistinctOperatingPoints; ++k) points[k].iq_a = 10.0 * k;
+  EXPECT_TRUE(pipeline::CheckDistinctOperatingPoints(points).ok());
+  EXPECT_TRUE(pipeline::CheckDistinctOperatingPoints({}).ok());   // an empty run is refused elsewhere
+}
+
 }  // namespace
 }  // namespace fluxcal::pipeline

@@ -1,0 +1,14 @@
+#include "pipeline/identify.h"
+
+namespace fluxcal::pipeline {
+
+absl::StatusOr<ident::Method> ParseIdentifyMethod(const std::string& name) { return ident::ParseMethod(name); }
+
+const char* IdentifyMethodName(ident::Method method) { return ident::MethodName(method); }
+
+absl::StatusOr<std::vector<ident::HfPointResult>> IdentifyEveryPoint(const io::RecordingSet& set,
+                                                                     const ident::IdentifyOptions& options) {
+  return ident::IdentifySet(set, options);
+}
+
+}  // namespace fluxcal::pipeline

@@ -1,0 +1,29 @@
+// Identification of a recording set held here (`fluxcal identify SET`): the
+// method named on the command line, and one result per operating point.
+// The result and option types are identification/identify.h's
+// (ident::HfPointResult, ident::IdentifyOptions): they are what this use
+// case takes and returns, so this header exposes them. Identification as
+// the fit and the store use it (identified points only): pipeline/points.h.
+#ifndef FLUXCAL_PIPELINE_IDENTIFY_H_
+#define FLUXCAL_PIPELINE_IDENTIFY_H_
+
+#include <string>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "identification/identify.h"
+#include "io/recording_set.h"
+
+namespace fluxcal::pipeline {
+
+// "paper" or "lsq"; InvalidArgument naming the ones there are.
+absl::StatusOr<ident::Method> ParseIdentifyMethod(const std::string& name);
+const char* IdentifyMethodName(ident::Method method);
+
+// Every point of `set`, identified (failed points included, flagged).
+absl::StatusOr<std::vector<ident::HfPointResult>> IdentifyEveryPoint(const io::RecordingSet& set,
+                                                                     const ident::IdentifyOptions& options);
+
+}  // namespace fluxcal::pipeline
+
+#endif  // FLUXCAL_PIPELINE_IDENTIFY_H_
