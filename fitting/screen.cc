@@ -97,9 +97,9 @@ void ScreenRowsByTorque(FitData& d, std::vector<size_t>* input_index, std::vecto
 // docs/recording-format.md). The voltages of such a row average the flux
 // over whatever the current did, and the row can agree with its own torque
 // (both are averages over the same excursion): on the fixed-gain bench the
-// synchronous reluctance twin's rows at 1500 rpm, 77-100 A, read psi_q 3-7 %
-// low with their torque in agreement, the torque screen kept them, and the
-// fit was 19.8 % off (RealMaps.SelfConsistentBadRowsOnAMistunedBench).
+// synchronous reluctance twin's rows at 1500-2000 rpm, 52-100 A, read psi_q
+// 3-7 % low with their torque in agreement, the torque screen kept them, and
+// the fit was 19.8 % off (RealMaps.SelfConsistentBadRowsOnAMistunedBench).
 //  - A share of the window at the voltage limit or with the controller
 //    clamped: for that time the current was not controlled. On the twin's
 //    tuned benches every row reads 0 (RealMaps.TwinTraitMotorsEndToEnd,
