@@ -39,6 +39,16 @@ struct InductanceObservation {
 struct SteadyStateObservation {
   double id_a = 0, iq_a = 0, speed_rpm = 0, ud_ref_v = 0, uq_ref_v = 0;
   std::optional<double> torque_nm;
+  // What the bench held over the row's averaging window, as the recording's
+  // extension columns state it (docs/recording-format.md, "Rows a bench
+  // could not hold"; absent: not reported): the measured dq current's RMS
+  // deviation from its mean (A), and the shares (0..1) of the window with
+  // the modulator at its voltage limit and with the current controller
+  // clamped. The fit excludes a row the bench did not hold and widens the
+  // flux sigma of a rippled one (fitting/screen.cc, problem.cc).
+  std::optional<double> current_ripple_a{};
+  std::optional<double> voltage_limited_share{};
+  std::optional<double> controller_saturated_share{};
 };
 
 // A flux linkage known directly: a measured or FEA flux map's node

@@ -41,7 +41,11 @@ FitData FitDataFromRecording(const io::RecordingSet& set,
     d.inductances.push_back(o);
   }
   for (const auto& s : set.steady_state) {
-    d.steady_state.push_back({s.id_a, s.iq_a, s.speed_rpm, s.ud_ref_v, s.uq_ref_v, s.torque_nm});
+    SteadyStateObservation o{s.id_a, s.iq_a, s.speed_rpm, s.ud_ref_v, s.uq_ref_v, s.torque_nm};
+    o.current_ripple_a = s.current_ripple_a;
+    o.voltage_limited_share = s.voltage_limited_share;
+    o.controller_saturated_share = s.controller_saturated_share;
+    d.steady_state.push_back(o);
   }
   return d;
 }

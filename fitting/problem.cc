@@ -96,6 +96,28 @@ double RowFluxSigmaWb(double speed_rpm, int pole_pairs, double psi_d_wb, double 
 }
 double RowTorqueSigmaNm(double torque_nm) { return 0.02 + 0.005 * std::abs(torque_nm); }
 
+double DataCurrentScaleA(const FitData& d) {
+  double scale = 0;
+  for (const auto& o : d.inductances) scale = std::max(scale, std::hypot(o.id_a, o.iq_a));
+  for (const auto& f : d.fluxes) scale = std::max(scale, std::hypot(f.id_a, f.iq_a));
+  if (scale > 0) return scale;
+  for (const auto& s : d.steady_state) scale = std::max(scale, std::hypot(s.id_a, s.iq_a));
+  return scale;
+}
+
+double RowRelativeRipple(const SteadyStateObservation& s, double current_scale_a) {
+  if (!s.current_ripple_a) return 0.0;
+  const double i = std::max(std::hypot(s.id_a, s.iq_a), kRippleCurrentFloor * current_scale_a);
+  return i > 0 ? *s.current_ripple_a / i : 0.0;
+}
+
+double RowSigmaWb(const SteadyStateObservation& s, int pole_pairs, double current_scale_a, double psi_d_wb,
+                  double psi_q_wb) {
+  const double r = RowRelativeRipple(s, current_scale_a);
+  const double ripple = 0.5 * kRippleCurvature * r * r * std::hypot(psi_d_wb, psi_q_wb);
+  return std::hypot(RowFluxSigmaWb(s.speed_rpm, pole_pairs, psi_d_wb, psi_q_wb), ripple);
+}
+
 Built Build(const Family& fam, const FitData& d, const FitOptions& o) {
   Built b;
   b.params = InitialParams(fam, d);
@@ -121,10 +143,11 @@ Built Build(const Family& fam, const FitData& d, const FitOptions& o) {
       sink.Add<InductanceResidual>(true, fam, obs.id_a, obs.iq_a, L::kLdq, *obs.ldq_h, sx);
     }
   }
+  const double current_scale = DataCurrentScaleA(d);
   for (const auto& s : d.steady_state) {
     double pd, pq;
     SteadyStateFlux(s, d.pole_pairs, d.rs_ohm, d.f_pwm_hz, &pd, &pq);
-    const double sigma = RowFluxSigmaWb(s.speed_rpm, d.pole_pairs, pd, pq);
+    const double sigma = RowSigmaWb(s, d.pole_pairs, current_scale, pd, pq);
     sink.Add<FluxResidual>(true, fam, s.id_a, s.iq_a, FluxComponent::kPsiD, pd, sigma);
     sink.Add<FluxResidual>(true, fam, s.id_a, s.iq_a, FluxComponent::kPsiQ, pq, sigma);
     if (s.torque_nm) {

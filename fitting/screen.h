@@ -32,6 +32,17 @@ Consensus RowConsensus(const std::vector<double>& z);
 // against the fit of all other data (Fit, leaving one row out).
 inline constexpr double kRowTorqueOutlier = 20.0;
 
+// Rows a bench could not hold (the recording's extension columns,
+// docs/recording-format.md): a row is excluded when the modulator was at
+// its voltage limit, or the current controller clamped, for more than
+// kRowLimitedShareMax of its averaging window, or when its current ripple
+// relative to its current (RowRelativeRipple) exceeds kRowRippleMax; a
+// row whose ripple widens its flux sigma (RowSigmaWb) by kRowRippleListed
+// or more is listed as down-weighted. screen.cc says why these values.
+inline constexpr double kRowLimitedShareMax = 0.05;
+inline constexpr double kRowRippleMax = 1.0 / 3.0;
+inline constexpr double kRowRippleListed = 1.1;
+
 // A steady-state row's flux (from its voltages) against the fit's, in
 // units of its sigma: the larger component.
 double RowMisfit(const Calibration& cal, const FitData& d, const SteadyStateObservation& s);

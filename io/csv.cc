@@ -62,12 +62,19 @@ absl::Status WriteFileAtomically(const std::string& path, std::string_view conte
 
 absl::StatusOr<CsvTable> ParseNumericCsv(std::string_view text,
                                          const std::string& display_path,
-                                         const std::vector<CsvColumnSpec>& spec) {
+                                         const std::vector<CsvColumnSpec>& spec,
+                                         const std::vector<CsvColumnSpec>& extension) {
   CsvTable table;
-  table.columns.resize(spec.size());
+  table.columns.resize(spec.size() + extension.size());
   size_t pos = 0;
   size_t line_no = 0;
   bool header_seen = false;
+  // The file's columns in header order: each an index into `columns`
+  // (spec's, then extension's).
+  std::vector<size_t> column_of;
+  auto spec_of = [&](size_t column) -> const CsvColumnSpec& {
+    return column < spec.size() ? spec[column] : extension[column - spec.size()];
+  };
   // Reserve from a cheap line-count estimate to keep parsing allocation-free.
   const size_t approx_rows = static_cast<size_t>(std::count(text.begin(), text.end(), '\n'));
   for (auto& c : table.columns) c.reserve(approx_rows);
@@ -102,12 +109,24 @@ absl::StatusOr<CsvTable> ParseNumericCsv(std::string_view text,
               elsewhere ? "column out of order" : "missing column", " (header has '",
               Shorten(names[c]), "' at column ", c + 1, ")"));
         }
+        column_of.push_back(c);
       }
-      if (names.size() > spec.size()) {
-        return absl::InvalidArgumentError(absl::StrCat(
-            display_path, ":1: field '", Shorten(names[spec.size()]),
-            "': unknown column (format fluxcal.recording.v1 expects ", spec.size(),
-            " columns)"));
+      for (size_t c = spec.size(); c < names.size(); ++c) {
+        size_t e = 0;
+        while (e < extension.size() && names[c] != extension[e].name) ++e;
+        if (e == extension.size()) {
+          std::string known;
+          for (const auto& x : extension) absl::StrAppend(&known, known.empty() ? "" : ", ", x.name);
+          return absl::InvalidArgumentError(absl::StrCat(
+              display_path, ":1: field '", Shorten(names[c]),
+              "': unknown column (format fluxcal.recording.v1 expects ", spec.size(), " columns",
+              known.empty() ? std::string() : absl::StrCat(", then any of ", known), ")"));
+        }
+        if (std::find(column_of.begin(), column_of.end(), spec.size() + e) != column_of.end()) {
+          return absl::InvalidArgumentError(absl::StrCat(display_path, ":1: field '", extension[e].name,
+                                                         "': column repeated (at column ", c + 1, ")"));
+        }
+        column_of.push_back(spec.size() + e);
       }
       continue;
     }
@@ -117,27 +136,29 @@ absl::StatusOr<CsvTable> ParseNumericCsv(std::string_view text,
       return absl::InvalidArgumentError(
           absl::StrCat(display_path, ":", line_no, ": field '", spec[0].name, "': empty line"));
     }
+    const size_t cells = column_of.size();
     size_t s = 0;
-    for (size_t c = 0; c < spec.size(); ++c) {
+    for (size_t c = 0; c < cells; ++c) {
+      const CsvColumnSpec& col = spec_of(column_of[c]);
       size_t comma = line.find(',', s);
-      const bool last = (c + 1 == spec.size());
+      const bool last = (c + 1 == cells);
       if (!last && comma == std::string_view::npos) {
         return absl::InvalidArgumentError(absl::StrCat(
-            display_path, ":", line_no, ": field '", spec[c + 1].name,
-            "': missing cell (row has ", c + 1, " of ", spec.size(), " cells)"));
+            display_path, ":", line_no, ": field '", spec_of(column_of[c + 1]).name,
+            "': missing cell (row has ", c + 1, " of ", cells, " cells)"));
       }
       if (last && comma != std::string_view::npos) {
         return absl::InvalidArgumentError(absl::StrCat(
-            display_path, ":", line_no, ": field '", spec[c].name,
-            "': too many cells (expected ", spec.size(), ")"));
+            display_path, ":", line_no, ": field '", col.name,
+            "': too many cells (expected ", cells, ")"));
       }
       std::string_view cell = Trim(line.substr(s, last ? line.npos : comma - s));
       s = comma + 1;
       double v = 0.0;
       if (cell.empty()) {
-        if (!spec[c].optional_cells) {
+        if (!col.optional_cells) {
           return absl::InvalidArgumentError(absl::StrCat(
-              display_path, ":", line_no, ": field '", spec[c].name, "': empty cell"));
+              display_path, ":", line_no, ": field '", col.name, "': empty cell"));
         }
         v = std::numeric_limits<double>::quiet_NaN();
       } else {
@@ -147,21 +168,26 @@ absl::StatusOr<CsvTable> ParseNumericCsv(std::string_view text,
         auto [ptr, ec] = std::from_chars(b, e, v);
         if (ec == std::errc::result_out_of_range) {
           return absl::InvalidArgumentError(absl::StrCat(
-              display_path, ":", line_no, ": field '", spec[c].name,
+              display_path, ":", line_no, ": field '", col.name,
               "': number out of range, got '", Shorten(cell), "'"));
         }
         if (ec != std::errc() || ptr != e) {
           return absl::InvalidArgumentError(absl::StrCat(
-              display_path, ":", line_no, ": field '", spec[c].name,
+              display_path, ":", line_no, ": field '", col.name,
               "': expected a number, got '", Shorten(cell), "'"));
         }
         if (!std::isfinite(v)) {
           return absl::InvalidArgumentError(absl::StrCat(
-              display_path, ":", line_no, ": field '", spec[c].name,
+              display_path, ":", line_no, ": field '", col.name,
               "': expected a finite number, got '", Shorten(cell), "'"));
         }
       }
-      table.columns[c].push_back(v);
+      table.columns[column_of[c]].push_back(v);
+    }
+    // Extension columns the header does not list: every cell absent.
+    for (size_t e = 0; e < extension.size(); ++e) {
+      auto& column = table.columns[spec.size() + e];
+      if (column.size() == table.rows) column.push_back(std::numeric_limits<double>::quiet_NaN());
     }
     ++table.rows;
   }

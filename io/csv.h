@@ -23,11 +23,16 @@ struct CsvTable {
 };
 
 // Parses `text` (contents of `display_path`) whose header must list exactly
-// `spec` (in this order). Rejects missing/extra/reordered columns, wrong cell
-// counts, non-numeric cells, NaN/inf (literal or overflowing).
+// `spec` (in this order), followed by any of the `extension` columns (each
+// at most once, in any order; docs/recording-format.md names the known
+// ones). Rejects missing/unknown/repeated/reordered columns, wrong cell
+// counts, non-numeric cells, NaN/inf (literal or overflowing). The table
+// holds spec.size() + extension.size() columns, spec's then extension's; an
+// extension column the header does not list is all NaN.
 absl::StatusOr<CsvTable> ParseNumericCsv(std::string_view text,
                                          const std::string& display_path,
-                                         const std::vector<CsvColumnSpec>& spec);
+                                         const std::vector<CsvColumnSpec>& spec,
+                                         const std::vector<CsvColumnSpec>& extension = {});
 
 // `text` made safe to echo in a message, a log line or JSON: printable ASCII
 // and well-formed UTF-8 are kept, every other byte becomes \xNN.

@@ -309,6 +309,13 @@ const std::vector<CsvColumnSpec>& SteadyStateSpec() {
       {"torque_nm", true}, {"temperature_c", true}};
   return spec;
 }
+// The compatible extension of steady_state.csv (docs/recording-format.md,
+// "Rows a bench could not hold"): after the standard columns, in any order.
+const std::vector<CsvColumnSpec>& SteadyStateExtension() {
+  static const std::vector<CsvColumnSpec> spec = {
+      {"current_ripple_a", true}, {"voltage_limited_share", true}, {"controller_saturated_share", true}};
+  return spec;
+}
 const std::vector<CsvColumnSpec>& HfResultsSpec() {
   static const std::vector<CsvColumnSpec> spec = {
       {"id_a"}, {"iq_a"}, {"speed_rpm"}, {"ld_h"}, {"lq_h"},
@@ -461,7 +468,7 @@ class MemorySource final : public SetSource {
 };
 
 absl::StatusOr<std::vector<SteadyStateRow>> ParseSteadyState(std::string_view text, const std::string& path) {
-  auto t = ParseNumericCsv(text, path, SteadyStateSpec());
+  auto t = ParseNumericCsv(text, path, SteadyStateSpec(), SteadyStateExtension());
   if (!t.ok()) return t.status();
   std::vector<SteadyStateRow> rows(t->rows);
   for (size_t r = 0; r < t->rows; ++r) {
@@ -473,6 +480,24 @@ absl::StatusOr<std::vector<SteadyStateRow>> ParseSteadyState(std::string_view te
     o.uq_ref_v = t->columns[4][r];
     o.torque_nm = Opt(t->columns[5][r]);
     o.temperature_c = Opt(t->columns[6][r]);
+    o.current_ripple_a = Opt(t->columns[7][r]);
+    o.voltage_limited_share = Opt(t->columns[8][r]);
+    o.controller_saturated_share = Opt(t->columns[9][r]);
+    // Rows are numbered from the header (line 1); the parser allows no
+    // blank line between rows.
+    const size_t line = r + 2;
+    if (o.current_ripple_a && *o.current_ripple_a < 0) {
+      return absl::InvalidArgumentError(absl::StrFormat(
+          "%s:%d: field 'current_ripple_a': an RMS must not be negative, got %.9g A", path, line,
+          *o.current_ripple_a));
+    }
+    auto share = [&](const char* name, const std::optional<double>& v) {
+      if (!v || (*v >= 0 && *v <= 1)) return absl::OkStatus();
+      return absl::InvalidArgumentError(absl::StrFormat(
+          "%s:%d: field '%s': a share of the averaging window, expected 0..1, got %.9g", path, line, name, *v));
+    };
+    if (auto s = share("voltage_limited_share", o.voltage_limited_share); !s.ok()) return s;
+    if (auto s = share("controller_saturated_share", o.controller_saturated_share); !s.ok()) return s;
   }
   return rows;
 }
@@ -681,11 +706,23 @@ absl::Status WriteHfResultsCsv(const std::string& path, const std::vector<HfResu
 }
 
 absl::Status WriteSteadyStateCsv(const std::string& path, const std::vector<SteadyStateRow>& rows) {
-  std::string out = "id_a,iq_a,speed_rpm,ud_ref_v,uq_ref_v,torque_nm,temperature_c\n";
+  // The extension columns only when a row holds one (recording_set.h).
+  bool extended = false;
+  for (const auto& r : rows) {
+    extended |= r.current_ripple_a || r.voltage_limited_share || r.controller_saturated_share;
+  }
+  std::string out = "id_a,iq_a,speed_rpm,ud_ref_v,uq_ref_v,torque_nm,temperature_c";
+  if (extended) out += ",current_ripple_a,voltage_limited_share,controller_saturated_share";
+  out += "\n";
   for (const auto& r : rows) {
     absl::StrAppend(&out, Fmt(r.id_a), ",", Fmt(r.iq_a), ",", Fmt(r.speed_rpm), ",",
                     Fmt(r.ud_ref_v), ",", Fmt(r.uq_ref_v), ",", FmtOpt(r.torque_nm), ",",
-                    FmtOpt(r.temperature_c), "\n");
+                    FmtOpt(r.temperature_c));
+    if (extended) {
+      absl::StrAppend(&out, ",", FmtOpt(r.current_ripple_a), ",", FmtOpt(r.voltage_limited_share), ",",
+                      FmtOpt(r.controller_saturated_share));
+    }
+    out += "\n";
   }
   return WriteFileAtomically(path, out);
 }

@@ -83,6 +83,19 @@ struct SteadyStateRow {
   double id_a = 0, iq_a = 0, speed_rpm = 0, ud_ref_v = 0, uq_ref_v = 0;
   std::optional<double> torque_nm;
   std::optional<double> temperature_c;
+  // What the bench could hold over the row's averaging window, the
+  // compatible extension "Rows a bench could not hold" of
+  // docs/recording-format.md (absent: column not in the file, or cell empty):
+  //   current_ripple_a: RMS of the measured dq current vector's deviation
+  //     from its own mean over the window, A (>= 0);
+  //   voltage_limited_share: share of the window's control periods in which
+  //     the modulator limited the voltage command, 0..1;
+  //   controller_saturated_share: share of the window's control periods in
+  //     which the current controller's output or integrator sat at a limit
+  //     (clamped, anti-windup acting), 0..1.
+  std::optional<double> current_ripple_a{};
+  std::optional<double> voltage_limited_share{};
+  std::optional<double> controller_saturated_share{};
 };
 
 struct HfResultRow {
@@ -140,6 +153,10 @@ absl::Status WriteRecordingSet(const std::string& dir, const RecordingSet& set);
 bool IsValidSerial(const std::string& serial);
 
 // Standalone readers/writers of the optional tables (same validation).
+// WriteSteadyStateCsv writes the extension columns (current_ripple_a,
+// voltage_limited_share, controller_saturated_share) only when some row
+// has one of them, so a set without them is written exactly as the base
+// format's.
 absl::StatusOr<std::vector<SteadyStateRow>> ReadSteadyStateCsv(const std::string& path);
 absl::StatusOr<std::vector<HfResultRow>> ReadHfResultsCsv(const std::string& path);
 absl::Status WriteHfResultsCsv(const std::string& path, const std::vector<HfResultRow>& rows);

@@ -76,6 +76,11 @@ PointRun RunPoint(const TwinConfig& cfg, const PlantModel& m, double id_ref, dou
   double acc_ud_app = 0, acc_uq_app = 0;
   size_t acc_app = 0;
   std::vector<std::pair<double, double>> cmds(n_total + 2);
+  // The window's measured current, as its deviation from the reference
+  // (small numbers: the variance from sums stays exact), and the periods at
+  // a limit.
+  double dev_d = 0, dev_q = 0, dev2 = 0;
+  size_t limited = 0, saturated = 0;
 
   // The alpha-beta voltage held over sub-step `sub` (counted from the
   // run's start): the command of the period before (one PWM period late),
@@ -174,7 +179,12 @@ PointRun RunPoint(const TwinConfig& cfg, const PlantModel& m, double id_ref, dou
     if (umag > u_lim) {
       ual *= u_lim / umag;
       ube *= u_lim / umag;
-      if (k >= n_settle) out.clipped = true;
+      if (k >= n_settle) {
+        out.clipped = true;
+        ++limited;
+        // The PI pair's own output beyond the limit (not only the injection).
+        if (std::hypot(ud, uq) > u_lim) ++saturated;
+      }
     }
     cmds[k] = {ual, ube};
     // What was sent to the modulator, back in the controller's dq frame
@@ -195,6 +205,9 @@ PointRun RunPoint(const TwinConfig& cfg, const PlantModel& m, double id_ref, dou
       out.mean_iq_true += x.i.q;
       out.mean_id_meas += fd;
       out.mean_iq_meas += fq;
+      dev_d += fd - id_ref;
+      dev_q += fq - iq_ref;
+      dev2 += (fd - id_ref) * (fd - id_ref) + (fq - iq_ref) * (fq - iq_ref);
       out.mean_ud_cmd += ud_sent;
       out.mean_uq_cmd += uq_sent;
       double pd, pq;
@@ -248,6 +261,9 @@ PointRun RunPoint(const TwinConfig& cfg, const PlantModel& m, double id_ref, dou
   out.mean_iq_meas /= nr;
   out.mean_uq_cmd /= nr;
   out.mean_torque_nm /= nr;
+  out.current_ripple_a = std::sqrt(std::max(0.0, dev2 / nr - (dev_d / nr) * (dev_d / nr) - (dev_q / nr) * (dev_q / nr)));
+  out.voltage_limited_share = static_cast<double>(limited) / nr;
+  out.controller_saturated_share = static_cast<double>(saturated) / nr;
   const double na = static_cast<double>(std::max<size_t>(1, acc_app));
   out.avg_id /= na; out.avg_iq /= na; out.avg_psd /= na; out.avg_psq /= na;
   out.dpsd = (out.dpsd + x.psd) / (nr * ts);
@@ -452,6 +468,10 @@ absl::StatusOr<SimulationResult> Simulate(const TwinConfig& cfg, const Plan& pla
       row.uq_ref_v = run.mean_uq_cmd;
       row.torque_nm = run.mean_torque_nm + tnoise(rng);
       row.temperature_c = ss.temperature_c;
+      // What the bench held over the window (PointRun says how each is taken).
+      row.current_ripple_a = run.current_ripple_a;
+      row.voltage_limited_share = run.voltage_limited_share;
+      row.controller_saturated_share = run.controller_saturated_share;
       set.steady_state.push_back(row);
       res.truth_steady_state.push_back(MakeTruth(cfg, m, "", run.mean_id_true, run.mean_iq_true,
                                                  ss.speed_rpm, ss.temperature_c, 0.0));

@@ -23,6 +23,16 @@ struct PointRun {
   double avg_id = 0, avg_iq = 0, avg_psd = 0, avg_psq = 0, dpsd = 0, dpsq = 0;
   double mean_id_meas = 0, mean_iq_meas = 0;   // what the bench's sensors report
   bool clipped = false;
+  // What the bench held over the recorded window, as steady_state.csv's
+  // extension columns state it (docs/recording-format.md): RMS of the
+  // measured dq current's deviation from its window mean, A; share of the
+  // control periods in which the modulator limited the command; share in
+  // which the PI pair's output was clamped (its only limit is the
+  // modulator's: the same periods, less those where only the injection
+  // carried the command over the limit).
+  double current_ripple_a = 0;
+  double voltage_limited_share = 0;
+  double controller_saturated_share = 0;
 };
 
 // Optional alignment of a run with a recording (closed-loop replay): the

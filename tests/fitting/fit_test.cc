@@ -242,6 +242,67 @@ TEST(Fit, UnsteadyRowMovesNothing) {
   expect_no_row_out(*lossy);
 }
 
+// Rows a bench could not hold (the recording's extension columns,
+// docs/recording-format.md; fitting/screen.cc): a row at the voltage limit
+// or with its controller clamped for more than 5 % of its window, or with a
+// current ripple above 1/3 of its current, is excluded and listed with the
+// reason, and the fit is the fit without it; a moderately rippled row stays,
+// with its flux sigma widened, and is listed as down-weighted. The twin's
+// well-tuned bench reports every row held: none is excluded or listed.
+TEST(Fit, RowsTheBenchDidNotHoldAreExcludedAndListed) {
+  const Case& c = TwinCase();
+  ASSERT_GE(c.data.steady_state.size(), 6u);
+  for (const auto& s : c.data.steady_state) {
+    ASSERT_TRUE(s.current_ripple_a && s.voltage_limited_share && s.controller_saturated_share)
+        << "the twin writes what its bench held for every row";
+  }
+  auto base = Fit(c.data, {});
+  ASSERT_TRUE(base.ok()) << base.status();
+  for (const auto& e : base->summary.excluded) {
+    EXPECT_EQ(e.find("did not hold"), std::string::npos) << e;
+    EXPECT_EQ(e.find("current ripple"), std::string::npos) << e;
+  }
+  FitData flagged = c.data;
+  auto current = [](const SteadyStateObservation& s) { return std::hypot(s.id_a, s.iq_a); };
+  flagged.steady_state[1].voltage_limited_share = 0.4;
+  flagged.steady_state[3].controller_saturated_share = 0.2;
+  flagged.steady_state[4].current_ripple_a = 0.5 * current(flagged.steady_state[4]);
+  flagged.steady_state[5].current_ripple_a = 0.15 * current(flagged.steady_state[5]);   // moderate: kept
+  // What the flagged rows measured is wrong, self-consistently: flux and
+  // torque 10 % low together (the torque screen cannot tell).
+  for (size_t k : {1, 3, 4}) {
+    auto& s = flagged.steady_state[k];
+    s.ud_ref_v *= 0.9;
+    s.uq_ref_v *= 0.9;
+    if (s.torque_nm) *s.torque_nm *= 0.9;
+  }
+  auto fit = Fit(flagged, {});
+  ASSERT_TRUE(fit.ok()) << fit.status();
+  auto listed = [&](const std::string& row, const std::string& why, const std::string& verdict) {
+    for (const auto& e : fit->summary.excluded) {
+      if (e.find(row) != std::string::npos && e.find(why) != std::string::npos &&
+          e.find(verdict) != std::string::npos) {
+        return true;
+      }
+    }
+    return false;
+  };
+  EXPECT_TRUE(listed("steady-state row 2 ", "voltage limit for 40 %", "did not hold the row; excluded"));
+  EXPECT_TRUE(listed("steady-state row 4 ", "controller was clamped for 20 %", "did not hold the row; excluded"));
+  EXPECT_TRUE(listed("steady-state row 5 ", "is 50 % of its current", "did not hold the row; excluded"));
+  EXPECT_TRUE(listed("steady-state row 6 ", "is 15 % of its current", "down-weighted"));
+  // Excluded is as if never recorded: the fit without those three rows.
+  FitData without = flagged;
+  for (size_t k : {4, 3, 1}) without.steady_state.erase(without.steady_state.begin() + static_cast<long>(k));
+  auto want = Fit(without, {});
+  ASSERT_TRUE(want.ok()) << want.status();
+  for (const auto& t : c.sim.truth_points) {
+    const auto a = fit->Predict(t.id_true_a, t.iq_true_a), b = want->Predict(t.id_true_a, t.iq_true_a);
+    EXPECT_NEAR(a.psi_d_wb, b.psi_d_wb, 1e-9 * PsiScale(t)) << t.id;
+    EXPECT_NEAR(a.psi_q_wb, b.psi_q_wb, 1e-9 * PsiScale(t)) << t.id;
+  }
+}
+
 // Predicted steady-state voltage u = Rs i + w J psi(i) vs the recorded one.
 double WorstVoltageError(const Calibration& cal, const Case& c) {
   double worst = 0;

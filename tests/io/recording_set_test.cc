@@ -271,6 +271,96 @@ TEST_F(RecordingSetTest, SteadyStateBadCell) {
   ExpectError(absl::StatusCode::kInvalidArgument, {"steady_state.csv:3", "field 'speed_rpm'"});
 }
 
+// The compatible extension "Rows a bench could not hold"
+// (docs/recording-format.md): optional columns after the standard ones.
+// A set without them is written exactly as the base format's (7 columns).
+TEST_F(RecordingSetTest, SteadyStateWithoutExtensionWritesTheBaseHeader) {
+  const std::string text = Read("steady_state.csv");
+  EXPECT_EQ(text.substr(0, text.find('\n')), "id_a,iq_a,speed_rpm,ud_ref_v,uq_ref_v,torque_nm,temperature_c");
+  auto r = ReadRecordingSet(dir_.string());
+  ASSERT_TRUE(r.ok()) << r.status();
+  for (const auto& row : r->steady_state) {
+    EXPECT_FALSE(row.current_ripple_a || row.voltage_limited_share || row.controller_saturated_share);
+  }
+}
+
+TEST_F(RecordingSetTest, SteadyStateExtensionRoundTrip) {
+  RecordingSet set = MakeSet();
+  set.steady_state[0].current_ripple_a = 0.125;
+  set.steady_state[0].voltage_limited_share = 0.25;
+  set.steady_state[0].controller_saturated_share = 1.0;
+  set.steady_state[1].current_ripple_a = 3.5;   // the shares of row 2 unknown
+  ASSERT_TRUE(WriteRecordingSet(dir_.string(), set).ok());
+  const std::string text = Read("steady_state.csv");
+  EXPECT_EQ(text.substr(0, text.find('\n')),
+            "id_a,iq_a,speed_rpm,ud_ref_v,uq_ref_v,torque_nm,temperature_c,current_ripple_a,"
+            "voltage_limited_share,controller_saturated_share");
+  auto r = ReadRecordingSet(dir_.string());
+  ASSERT_TRUE(r.ok()) << r.status();
+  ASSERT_EQ(r->steady_state.size(), 2u);
+  const auto& a = r->steady_state[0];
+  const auto& b = r->steady_state[1];
+  EXPECT_EQ(a.current_ripple_a, 0.125);
+  EXPECT_EQ(a.voltage_limited_share, 0.25);
+  EXPECT_EQ(a.controller_saturated_share, 1.0);
+  EXPECT_DOUBLE_EQ(*a.torque_nm, 8.5);   // the standard columns unchanged
+  EXPECT_EQ(b.current_ripple_a, 3.5);
+  EXPECT_FALSE(b.voltage_limited_share.has_value());
+  EXPECT_FALSE(b.controller_saturated_share.has_value());
+  // The standalone reader reads the same.
+  auto rows = ReadSteadyStateCsv((dir_ / "steady_state.csv").string());
+  ASSERT_TRUE(rows.ok()) << rows.status();
+  EXPECT_EQ((*rows)[0].voltage_limited_share, 0.25);
+}
+
+// Any of the extension columns, in any order, each at most once.
+TEST_F(RecordingSetTest, SteadyStateExtensionSubsetInAnyOrder) {
+  Write("steady_state.csv",
+        "id_a,iq_a,speed_rpm,ud_ref_v,uq_ref_v,torque_nm,temperature_c,controller_saturated_share,current_ripple_a\n"
+        "-20,60,1000,-10.5,20.25,8.5,25,0.5,0.25\n"
+        "0,40,2000,-12.5,22.25,,,,\n");
+  auto r = ReadRecordingSet(dir_.string());
+  ASSERT_TRUE(r.ok()) << r.status();
+  EXPECT_EQ(r->steady_state[0].controller_saturated_share, 0.5);
+  EXPECT_EQ(r->steady_state[0].current_ripple_a, 0.25);
+  EXPECT_FALSE(r->steady_state[0].voltage_limited_share.has_value());
+  EXPECT_FALSE(r->steady_state[1].current_ripple_a.has_value());
+}
+
+TEST_F(RecordingSetTest, SteadyStateExtensionBadValues) {
+  const std::string header =
+      "id_a,iq_a,speed_rpm,ud_ref_v,uq_ref_v,torque_nm,temperature_c,current_ripple_a,voltage_limited_share,"
+      "controller_saturated_share\n";
+  const std::string good = "-20,60,1000,-10.5,20.25,8.5,25,0.1,0,0\n";
+  struct Case {
+    std::string row, field, what;
+  };
+  const Case cases[] = {
+      {"0,40,2000,-12.5,22.25,,,0.1,1.5,0\n", "voltage_limited_share", "0..1"},
+      {"0,40,2000,-12.5,22.25,,,0.1,0,-0.01\n", "controller_saturated_share", "0..1"},
+      {"0,40,2000,-12.5,22.25,,,-0.2,0,0\n", "current_ripple_a", "negative"},
+      {"0,40,2000,-12.5,22.25,,,0.1,half,0\n", "voltage_limited_share", "expected a number"},
+      {"0,40,2000,-12.5,22.25,,,0.1,0\n", "controller_saturated_share", "missing cell"},
+      {"0,40,2000,-12.5,22.25,,,0.1,0,0,7\n", "controller_saturated_share", "too many cells"},
+  };
+  for (const auto& c : cases) {
+    Write("steady_state.csv", header + good + c.row);
+    ExpectError(absl::StatusCode::kInvalidArgument, {"steady_state.csv:3", "field '" + c.field + "'", c.what});
+  }
+  Write("steady_state.csv", "id_a,iq_a,speed_rpm,ud_ref_v,uq_ref_v,torque_nm,temperature_c,ripple_a\n" + good);
+  ExpectError(absl::StatusCode::kInvalidArgument,
+              {"steady_state.csv:1", "field 'ripple_a'", "unknown column", "current_ripple_a"});
+  Write("steady_state.csv",
+        "id_a,iq_a,speed_rpm,ud_ref_v,uq_ref_v,torque_nm,temperature_c,current_ripple_a,current_ripple_a\n"
+        "-20,60,1000,-10.5,20.25,8.5,25,0.1,0.1\n");
+  ExpectError(absl::StatusCode::kInvalidArgument, {"steady_state.csv:1", "field 'current_ripple_a'", "repeated"});
+  // Before the standard columns is not after them.
+  Write("steady_state.csv",
+        "current_ripple_a,id_a,iq_a,speed_rpm,ud_ref_v,uq_ref_v,torque_nm,temperature_c\n"
+        "0.1,-20,60,1000,-10.5,20.25,8.5,25\n");
+  ExpectError(absl::StatusCode::kInvalidArgument, {"steady_state.csv:1", "field 'id_a'"});
+}
+
 // A non-positive inductance is well-formed data: read as it is (the fit
 // excludes it and says why); text in the field is still an error.
 TEST_F(RecordingSetTest, HfResultsNegativeInductanceIsDataTextIsNot) {

@@ -105,6 +105,43 @@ TEST(Twin, SteadyStateSatisfiesMachineEquations) {
   EXPECT_NEAR(r->set.steady_state[0].torque_nm.value(), t.torque_nm, 0.05);
 }
 
+// Every steady-state row says what the bench held over its window
+// (docs/recording-format.md, "Rows a bench could not hold"): a row the
+// tuned controller holds reads no time at a limit and a ripple of the
+// current sensors' noise; a row at a speed whose back-EMF exceeds Udc /
+// sqrt(3) reads the whole window at the voltage limit, the PI output
+// clamped there. The columns survive writing and reading the set.
+TEST(Twin, SteadyStateRowsSayWhatTheBenchHeld) {
+  TwinConfig cfg;
+  cfg.seed = 3;
+  Plan plan;
+  plan.points.clear();
+  plan.steady_state = {{-40, 60, 1500, 25}, {-20, 100, 6000, 25}};
+  auto r = Simulate(cfg, plan);
+  ASSERT_TRUE(r.ok()) << r.status();
+  ASSERT_EQ(r->set.steady_state.size(), 2u);
+  const auto& held = r->set.steady_state[0];
+  const auto& lost = r->set.steady_state[1];
+  for (const auto* row : {&held, &lost}) {
+    ASSERT_TRUE(row->current_ripple_a && row->voltage_limited_share && row->controller_saturated_share);
+  }
+  EXPECT_EQ(*held.voltage_limited_share, 0.0);
+  EXPECT_EQ(*held.controller_saturated_share, 0.0);
+  // 0.05 A of noise per phase and a 0.12 A step: about 0.1 A in dq.
+  EXPECT_GT(*held.current_ripple_a, 0.02);
+  EXPECT_LT(*held.current_ripple_a, 0.3);
+  EXPECT_GT(*lost.voltage_limited_share, 0.9);
+  EXPECT_GT(*lost.controller_saturated_share, 0.9);
+  EXPECT_LE(*lost.controller_saturated_share, *lost.voltage_limited_share);
+  const auto dir = std::filesystem::temp_directory_path() / ("fluxcal_twin_rows_" + std::to_string(::getpid()));
+  ASSERT_TRUE(io::WriteRecordingSet(dir.string(), r->set).ok());
+  auto back = io::ReadRecordingSet(dir.string());
+  std::filesystem::remove_all(dir);
+  ASSERT_TRUE(back.ok()) << back.status();
+  EXPECT_NEAR(*back->steady_state[0].current_ripple_a, *held.current_ripple_a, 1e-9);
+  EXPECT_NEAR(*back->steady_state[1].voltage_limited_share, *lost.voltage_limited_share, 1e-9);
+}
+
 // identify(simulate(motor)) on clean data, both methods, 36-point grid.
 TEST(Twin, RoundTripIdentification) {
   TwinConfig cfg;
