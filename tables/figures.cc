@@ -501,8 +501,8 @@ std::string PlotEnvelopeSvg(const std::vector<Table>& envs) {
   }
   const auto& l = t0.limits;
   const std::string title = absl::StrFormat(
-      "%s%storque-speed and power-speed envelope: current limit %.4g A, Rs %.4g ohm, modulation %.3g of linear "
-      "SVPWM%s",
+      "%s%storque-speed and power-speed envelope: current limit %.4g A, Rs %.4g ohm, u_max = %.3g x Udc / sqrt 3 "
+      "(linear SVPWM)%s",
       t0.serial, t0.serial.empty() ? "" : ": ", l.i_max_a, l.rs_ohm.value_or(0.0), l.modulation_limit,
       t0.magnet_temperature ? absl::StrFormat(", magnets at %.4g degC", t0.magnet_temperature->at_c) : "");
   return plot::PanelsSvg("envelope", title, {torque, power}, 2);
