@@ -406,7 +406,9 @@ int RegionClass(const Table& t, size_t k) {
   return 0;
 }
 
-const char* const kRegionDash[] = {"", "1.5 3", "7 4"};
+// The report page's key (report/report.cc, DashOf): solid measured,
+// dashed by symmetry, dotted extrapolated; one key for every figure.
+const char* const kRegionDash[] = {"", "8 4", "2 3"};
 
 // One envelope output (torque or power) over speed as one curve per table:
 // each run of speeds of one region class drawn in its own dash, joined to
@@ -493,9 +495,9 @@ std::string PlotEnvelopeSvg(const std::vector<Table>& envs) {
   sy.dash = kRegionDash[1];
   for (plot::Figure* f : {&torque, &power}) {
     if (ext > 0) {
-      f->Line({}, {}, ex, absl::StrFormat("dashed: extrapolated (%zu points), beyond the measured region", ext));
+      f->Line({}, {}, ex, absl::StrFormat("dotted: extrapolated (%zu points), not measured", ext));
     }
-    if (sym > 0) f->Line({}, {}, sy, absl::StrFormat("dotted: by symmetry (%zu points)", sym));
+    if (sym > 0) f->Line({}, {}, sy, absl::StrFormat("dashed: by symmetry (%zu points), mirror of the measured half", sym));
     f->Note(ext + sym > 0 ? "solid: measured region" : "every point in the measured region");
     if (none > 0) f->Note(absl::StrFormat("%zu speeds without torque (beyond reach) not drawn", none));
   }

@@ -374,8 +374,8 @@ std::string PlotMtpvSvg(const sim::MagneticModel& m, const MachineLimits& lim, c
 std::string PlotMapSvg(const Table& fw, const std::string& output_name);
 // The envelope figure: torque and power versus speed, one curve per
 // envelope table (one per Udc, labelled with its Udc), in two panels.
-// Stretches whose operating points are extrapolated are dashed, those by
-// symmetry dotted, measured ones solid; speeds with no torque (clamped)
+// Stretches whose operating points are extrapolated are dotted, those by
+// symmetry dashed, measured ones solid (the report page's key); speeds with no torque (clamped)
 // are left out of the curve and counted in a note.
 std::string PlotEnvelopeSvg(const std::vector<Table>& envelopes);
 

@@ -312,8 +312,8 @@ TEST(MagnetTemperature, ScalesPsiPmByTheStatedCoefficient) {
 }
 
 // The figure: one curve per Udc in each panel, extrapolated stretches
-// dashed and named in the legend.
-TEST(Envelope, FigureHasOneCurvePerUdcAndDashesTheExtrapolated) {
+// dotted (the report page's key) and named in the legend.
+TEST(Envelope, FigureHasOneCurvePerUdcAndDotsTheExtrapolated) {
   const fit::Calibration cal = TwinCalibration(50.0, sim::MotorParams().rs_ohm);
   TableSpec spec;
   spec.kind = "envelope";
@@ -336,21 +336,21 @@ TEST(Envelope, FigureHasOneCurvePerUdcAndDashesTheExtrapolated) {
   ASSERT_EQ(doc.Parse(svg.c_str()), tinyxml2::XML_SUCCESS) << doc.ErrorStr();
   EXPECT_NE(svg.find("Udc 40 V"), std::string::npos);
   EXPECT_NE(svg.find("Udc 60 V"), std::string::npos);
-  EXPECT_NE(svg.find("dashed: extrapolated"), std::string::npos);
-  size_t dashed = 0, solid = 0;
+  EXPECT_NE(svg.find("dotted: extrapolated"), std::string::npos);
+  size_t dotted = 0, solid = 0;
   std::function<void(const tinyxml2::XMLElement*)> walk = [&](const tinyxml2::XMLElement* e) {
     for (; e != nullptr; e = e->NextSiblingElement()) {
       const char* cls = e->Attribute("class");
       const char* d = e->Attribute("d");
       if (cls != nullptr && std::string(cls) == "line" && d != nullptr && *d != '\0') {
         const char* dash = e->Attribute("stroke-dasharray");
-        (dash != nullptr && std::string(dash) == "7 4" ? dashed : solid) += 1;
+        (dash != nullptr && std::string(dash) == "2 3" ? dotted : solid) += 1;
       }
       walk(e->FirstChildElement());
     }
   };
   walk(doc.RootElement());
-  EXPECT_GE(dashed, 4u) << "an extrapolated stretch per Udc and panel";
+  EXPECT_GE(dotted, 4u) << "an extrapolated stretch per Udc and panel";
   EXPECT_GE(solid, 4u) << "a measured stretch per Udc and panel";
 }
 
