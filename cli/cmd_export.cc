@@ -51,7 +51,7 @@ const FlagSpecs kExportFlags = {
                            "OUT_udc<V>v.EXT with labels tagged _UDC<V>V (not with --udc-v)"},
     {"magnet-temp-c", "C", "local only: tables at this magnet temperature, degC (needs the calibration's own "
                            "psi_pm temperature coefficient; refused without one)"},
-    {"rs-ohm", "R", "stator resistance, ohm (default the calibration's; fw refuses without one)"},
+    {"rs-ohm", "R", "stator resistance, ohm (default the calibration's; fw and envelope refuse without one)"},
     {"allow-clamped", "", "export a table with more than half of its cells clamped (refused otherwise)"},
     {"ctype", "T", "element type of --format h and a2l: double|float|int16|int32 (fixed point, LSB per quantity; default double)"},
     {"allow-extrapolation", "", "compute beyond the measured current region (cells flagged extrapolated)"},
