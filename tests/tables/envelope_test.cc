@@ -5,6 +5,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
+#include <fstream>
 #include <functional>
 #include <numbers>
 #include <string>
@@ -270,6 +272,49 @@ TEST(UdcAxis, TablesEqualTheSingleUdcExportsBitForBit) {
   auto refused = BuildExportTablesOverUdc(cal, TableSpec{}, both, udcs);
   ASSERT_FALSE(refused.ok());
   EXPECT_EQ(refused.status().message().rfind("flag --udc-v", 0), 0u) << refused.status();
+}
+
+// The point of the tags: the C headers of every Udc of an axis compile into
+// one C99 unit together, each array holding its own table.
+TEST(UdcAxis, HeadersOfEveryUdcCompileIntoOneUnit) {
+  if (std::system("cc --version > /dev/null 2>&1") != 0) GTEST_SKIP() << "no C compiler (cc)";
+  const fit::Calibration cal = TwinCalibration(50.0, sim::MotorParams().rs_ohm);
+  TableSpec spec;
+  spec.kind = "fw";
+  spec.points = 9;
+  spec.speed_points = 7;
+  ExportRequest req;
+  req.allow_clamped = true;
+  const std::vector<double> udcs = {40, 62.5};
+  auto axis = BuildExportTablesOverUdc(cal, spec, req, udcs);
+  ASSERT_TRUE(axis.ok()) << axis.status();
+  const std::string dir = ::testing::TempDir() + "/fluxcal_udc_axis_h";
+  ASSERT_EQ(std::system(("mkdir -p " + dir).c_str()), 0);
+  std::string prog = "#include <stdio.h>\n";
+  for (const auto& b : *axis) {
+    auto h = Export(b.table, Format::kCHeader);
+    ASSERT_TRUE(h.ok()) << h.status();
+    std::ofstream(dir + "/" + b.table.label_tag + ".h") << h->bytes;
+    prog += "#include \"" + b.table.label_tag + ".h\"\n";
+  }
+  prog += "int main(void) {\n  unsigned k;\n";
+  for (const auto& b : *axis) {
+    const std::string id = CSymbol(b.table, "id_a");
+    prog += "  for (k = 0; k < " + Label(b.table, "id_a") + "_LEN; ++k) printf(\"%.17g\\n\", " + id + "[k]);\n";
+  }
+  prog += "  return 0;\n}\n";
+  std::ofstream(dir + "/main.c") << prog;
+  const std::string cmd = "cd " + dir + " && cc -std=c99 -pedantic -Wall -Wextra -Werror main.c -o main && ./main > out.txt";
+  ASSERT_EQ(std::system(cmd.c_str()), 0) << "compiling both headers into one unit failed; see " << dir;
+  std::ifstream out(dir + "/out.txt");
+  std::vector<double> got;
+  for (double x; out >> x;) got.push_back(x);
+  std::vector<double> want;
+  for (const auto& b : *axis) {
+    want.insert(want.end(), b.table.outputs[0].values.begin(), b.table.outputs[0].values.end());
+  }
+  EXPECT_EQ(got, want);
+  EXPECT_NE((*axis)[0].table.outputs[0].values, (*axis)[1].table.outputs[0].values);
 }
 
 TEST(MagnetTemperature, RefusedWithoutTheCalibrationsCoefficient) {
