@@ -247,7 +247,7 @@ absl::StatusOr<std::vector<double>> RoundBreakpoints(double lo_value, double hi_
 // `extrapolated` flag what does not rest on measured data. Every cell's
 // `not_positive_definite` comes from m.Inductance at its operating point.
 // Errors: InvalidArgument (points, limits, kind; pole pairs or current
-// limit not given; fw without Udc or Rs; a current limit above the
+// limit not given; fw or envelope without Udc or Rs; a current limit above the
 // measured one without allow_extrapolation), FailedPrecondition (mtpv: no
 // MTPV point inside the current limit and allow_extrapolation not set).
 // MTPA and MTPV need no Udc (their points do not depend on it); the file

@@ -354,6 +354,12 @@ TEST(MagnetTemperature, ScalesPsiPmByTheStatedCoefficient) {
   bool states = false;
   for (const auto& s : Scalars(*t)) states |= s.name == "magnet_temperature_c" && s.value == 120;
   EXPECT_TRUE(states);
+  // Every format writes the magnet scalars.
+  for (Format f : {Format::kCsv, Format::kJson, Format::kCHeader, Format::kCdfx, Format::kDcm, Format::kA2l}) {
+    auto e = Export(*t, f);
+    ASSERT_TRUE(e.ok()) << e.status();
+    EXPECT_NE(absl::AsciiStrToLower(e->bytes).find("magnet_alpha_per_k"), std::string::npos) << static_cast<int>(f);
+  }
 }
 
 // The figure: one curve per Udc in each panel, extrapolated stretches
