@@ -194,6 +194,16 @@ absl::StatusOr<std::vector<BuiltExport>> BuildExportTablesOverUdc(const fit::Cal
                                                    Name(req, "udc_axis_v"), "), not both"));
   }
   if (udcs.empty()) return absl::InvalidArgumentError(absl::StrCat(Label(req, "udc_axis_v"), ": no voltage"));
+  // The axis as ParseUdcAxis accepts it: a caller that built it otherwise
+  // must not get two tables under one label.
+  for (size_t k = 0; k < udcs.size(); ++k) {
+    if (!(udcs[k] > 0 && udcs[k] <= 5000) || (k > 0 && !(udcs[k] > udcs[k - 1])) ||
+        (k > 0 && UdcTag(udcs[k]) == UdcTag(udcs[k - 1])) || k >= static_cast<size_t>(kMaxUdcAxisPoints)) {
+      return absl::InvalidArgumentError(absl::StrFormat(
+          "%s: at most %d voltages in (0, 5000] V, increasing, each with its own label (%g V at position %zu)",
+          Label(req, "udc_axis_v"), kMaxUdcAxisPoints, udcs[k], k + 1));
+    }
+  }
   std::vector<BuiltExport> out;
   for (double u : udcs) {
     ExportRequest r = req;

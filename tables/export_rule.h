@@ -8,11 +8,14 @@
 //   i_max       the request's, else the calibration's measured current
 //               limit; neither: refused naming --i-max-a / i_max_a;
 //   Udc         the request's, else the calibration's (its set's
-//               drive.udc_v); needed by fw and mtpv, refused naming
+//               drive.udc_v); needed by fw, mtpv and envelope, refused naming
 //               --udc-v / udc_v when neither states it; mtpa needs none;
 //   Rs          the request's, else the calibration's; needed by fw
-//               (the steady-state voltage), refused naming --rs-ohm /
-//               rs_ohm when neither states it.
+//               and envelope (the steady-state voltage), refused naming
+//               --rs-ohm / rs_ohm when neither states it;
+//   magnet T    unset: the flux map as it is; requested: psi_pm scaled
+//               by the calibration's own coefficient (MagnetTemperatureOf),
+//               refused while calibrations state none.
 // A table with more than kMaxClampedShare of its cells clamped is
 // refused (FailedPrecondition, saying how many cells and which limit)
 // unless allow_clamped.

@@ -219,6 +219,12 @@ TEST(UdcAxis, ParsesListsAndRangesAndRefusesTheRest) {
 // Every table of a Udc axis holds the values of the single export at its
 // voltage, bit for bit (axes, outputs, flags, payload checksums), under
 // its own labels.
+ExportRequest req_for_axis() {
+  ExportRequest r;
+  r.allow_clamped = true;
+  return r;
+}
+
 TEST(UdcAxis, TablesEqualTheSingleUdcExportsBitForBit) {
   const fit::Calibration cal = TwinCalibration(50.0, sim::MotorParams().rs_ohm);
   const std::vector<double> udcs = {40, 50, 60};
@@ -266,6 +272,12 @@ TEST(UdcAxis, TablesEqualTheSingleUdcExportsBitForBit) {
         }
       }
     }
+  }
+  // An axis built by hand is held to ParseUdcAxis' rules: no two tables
+  // under one label.
+  for (const std::vector<double>& bad : std::vector<std::vector<double>>{{50, 40}, {50, 50.0000001}, {0, 50}}) {
+    auto r = BuildExportTablesOverUdc(cal, TableSpec{}, req_for_axis(), bad);
+    EXPECT_FALSE(r.ok()) << bad[0] << ", " << bad[1];
   }
   ExportRequest both;
   both.udc_v = 50;
