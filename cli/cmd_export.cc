@@ -1,6 +1,6 @@
-// fluxcal export calibration.json --table mtpa|mtpv|fw --format csv|json|h|cdfx|dcm|a2l
+// fluxcal export calibration.json --table mtpa|mtpv|fw|envelope --format csv|json|h|cdfx|dcm|a2l
 //                [--points N] [--speed-points M] [--speed-max-rpm R] [--i-max-a A]
-//                [--udc-v V] [--rs-ohm R] [--allow-clamped] [--ctype double|float|int16|int32] [--allow-extrapolation]
+//                [--udc-v V | --udc-axis-v V1,V2,...|LO:HI:N] [--magnet-temp-c C] [--rs-ohm R] [--allow-clamped] [--ctype double|float|int16|int32] [--allow-extrapolation]
 //                [--svg FILE] [--sign-key ED25519.key] --out FILE [--json]
 // With --sign-key, FILE.sig holds a detached Ed25519 signature
 // (pipeline/signing.h; `fluxcal verify FILE --pubkey KEY.pub`).
@@ -40,14 +40,18 @@ int Fail(const std::string& m, int code = 1) {
 // --svg and --sign-key are local only, --server and --version remote only.
 const FlagSpecs kExportFlags = {
     {"out", "FILE", "table file to write (required; - for stdout)"},
-    {"table", "T", "mtpa|mtpv|fw (default mtpa)"},
+    {"table", "T", "mtpa|mtpv|fw|envelope (default mtpa; envelope: max torque and power over speed)"},
     {"format", "F", "csv|json|h|cdfx|dcm|a2l (default csv)"},
     {"points", "N", "at most N rows of a curve / torque axis of the fw map, round breakpoints (default 64)"},
-    {"speed-points", "N", "fw: at most N round speeds on the speed axis (default 32)"},
-    {"speed-max-rpm", "RPM", "fw: speed axis range 0..RPM, mechanical rpm (default 6000)"},
+    {"speed-points", "N", "fw, envelope: at most N round speeds on the speed axis (default 32)"},
+    {"speed-max-rpm", "RPM", "fw, envelope: speed axis range 0..RPM, mechanical rpm (default 6000)"},
     {"i-max-a", "A", "current limit, A peak (default the measured limit of the calibration)"},
-    {"udc-v", "V", "DC-link voltage, V (default the calibration's; fw and mtpv refuse without one)"},
-    {"rs-ohm", "R", "stator resistance, ohm (default the calibration's; fw refuses without one)"},
+    {"udc-v", "V", "DC-link voltage, V (default the calibration's; fw, mtpv and envelope refuse without one)"},
+    {"udc-axis-v", "LIST", "local only: a Udc axis, V1,V2,... or LO:HI:N volts: one table per Udc, written to "
+                           "OUT_udc<V>v.EXT with labels tagged _UDC<V>V (not with --udc-v)"},
+    {"magnet-temp-c", "C", "local only: tables at this magnet temperature, degC (needs the calibration's own "
+                           "psi_pm temperature coefficient; refused without one)"},
+    {"rs-ohm", "R", "stator resistance, ohm (default the calibration's; fw and envelope refuse without one)"},
     {"allow-clamped", "", "export a table with more than half of its cells clamped (refused otherwise)"},
     {"ctype", "T", "element type of --format h and a2l: double|float|int16|int32 (fixed point, LSB per quantity; default double)"},
     {"allow-extrapolation", "", "compute beyond the measured current region (cells flagged extrapolated)"},
@@ -59,10 +63,102 @@ const FlagSpecs kExportFlags = {
     kForceFlag,
 };
 
+// --udc-axis-v: one export per Udc through the pipeline, each file named
+// and checked as a single export's (UdcAxisPath, the overwrite rule), the
+// figure (--svg) one envelope over every Udc, or one figure per Udc file
+// for the other tables.
+int RunUdcAxisExport(const ParsedArgs& args, const fit::Calibration& cal, const tables::TableSpec& spec,
+                     const tables::ExportRequest& request, const std::vector<double>& udcs, tables::CType ctype) {
+  const std::string out_file = *args.Get("out"), svg = args.Get("svg").value_or("");
+  const std::string format = args.Get("format").value_or("csv");
+  std::vector<OutputPath> outputs;
+  for (double u : udcs) {
+    outputs.push_back({"out", pipeline::UdcAxisPath(out_file, u)});
+    outputs.push_back({"out", pipeline::UdcAxisPath(out_file, u) + ".sig"});
+    if (!svg.empty() && spec.kind != "envelope") outputs.push_back({"svg", pipeline::UdcAxisPath(svg, u)});
+  }
+  if (!svg.empty() && spec.kind == "envelope") outputs.push_back({"svg", svg});
+  if (auto e = CheckOverwrite(args, outputs); !e.empty()) return Fail(e);
+  std::fprintf(stderr, "export: building %s tables at %zu DC-link voltages for %s\n", spec.kind.c_str(), udcs.size(),
+               spec.serial.c_str());
+  tables::ExportOptions options;
+  options.ctype = ctype;
+  auto built = pipeline::ExportCalibrationOverUdc(cal, spec, request, udcs, format, options);
+  if (!built.ok()) return Fail(std::string(built.status().message()), ExitCodeFor(built.status()));
+  std::optional<std::string> key;
+  if (auto key_path = args.Get("sign-key")) {
+    auto k = io::ReadFileToString(*key_path);
+    if (!k.ok()) return Fail("--sign-key " + *key_path + ": cannot read", 2);
+    key = *k;
+  }
+  nlohmann::json files = nlohmann::json::array();
+  std::vector<const pipeline::ExportResult*> envelopes;
+  for (const auto& b : *built) {
+    const pipeline::ExportResult& r = b.result;
+    const std::string path = pipeline::UdcAxisPath(out_file, b.udc_v);
+    if (r.clamped.clamped > 0) {
+      std::fprintf(stderr, "export: warning: Udc %g V: %zu of %zu cells (%.1f %%) clamped: %s%s\n", b.udc_v,
+                   r.clamped.clamped, r.clamped.cells, 100 * r.clamped.share, r.clamped.why.c_str(),
+                   r.clamped.share > tables::kMaxClampedShare ? " (exported on --allow-clamped)" : "");
+    }
+    if (auto st = WriteNewOutput(args, {"out", path}, r.exported.bytes); !st.ok()) return Fail(std::string(st.message()));
+    std::string sig_path;
+    if (key) {
+      auto sig = pipeline::SignExport(r.exported.bytes, *key);
+      if (!sig.ok()) return Fail("--sign-key: " + std::string(sig.status().message()));
+      sig_path = path + ".sig";
+      if (auto st = WriteNewOutput(args, {"out", sig_path}, *sig); !st.ok()) return Fail(std::string(st.message()));
+    } else {
+      std::error_code ec;
+      std::filesystem::remove(path + ".sig", ec);
+    }
+    if (!svg.empty() && spec.kind != "envelope") {
+      if (auto st = WriteNewOutput(args, {"svg", pipeline::UdcAxisPath(svg, b.udc_v)},
+                                   pipeline::ExportFigureSvg(cal, spec, r));
+          !st.ok()) {
+        return Fail(std::string(st.message()));
+      }
+    }
+    envelopes.push_back(&r);
+    auto written = io::ReadFileToString(path);
+    if (!written.ok()) return Fail(std::string(written.status().message()));
+    char crc[16];
+    std::snprintf(crc, sizeof crc, "%08x", r.exported.payload_crc32);
+    const std::string file_sha256 = io::Sha256Hex(*written);
+    files.push_back({{"out", path}, {"udc_v", b.udc_v}, {"label_tag", r.table.label_tag}, {"cells", r.clamped.cells},
+                     {"clamped_cells", r.clamped.clamped}, {"clamped_share", r.clamped.share},
+                     {"extrapolated_cells", r.extrapolated_cells}, {"u_max_v", r.limits.limits.UMaxV()},
+                     {"sha256", file_sha256}, {"payload_crc32", crc}, {"payload_sha256", r.exported.payload_sha256},
+                     {"bytes", written->size()}, {"signature", sig_path}});
+    if (!args.Has("json")) {
+      std::printf("%s: %s table at Udc %g V (labels %s), %zu cells (%zu clamped at limits, %d extrapolated)\n"
+                  "  sha256 %s (file)\n  payload_crc32 %s payload_sha256 %s (values, docs/tables.md)\n",
+                  path.c_str(), spec.kind.c_str(), b.udc_v, tables::Label(r.table, "*").c_str(), r.clamped.cells,
+                  r.clamped.clamped, r.extrapolated_cells, file_sha256.c_str(), crc, r.exported.payload_sha256.c_str());
+    }
+  }
+  if (!svg.empty() && spec.kind == "envelope") {
+    if (auto st = WriteNewOutput(args, {"svg", svg}, pipeline::EnvelopeFigureSvg(envelopes)); !st.ok()) {
+      return Fail(std::string(st.message()));
+    }
+  }
+  if (args.Has("json")) {
+    const auto& lim = built->front().result.limits;
+    nlohmann::json j = {{"table", spec.kind}, {"format", format}, {"serial", spec.serial},
+                        {"calibration_version", spec.calibration_version}, {"udc_axis_v", udcs},
+                        {"i_max_a", lim.limits.i_max_a},
+                        {"rs_ohm", lim.limits.rs_ohm ? nlohmann::json(*lim.limits.rs_ohm) : nlohmann::json()},
+                        {"ctype", pipeline::ExportCTypeName(ctype)}, {"files", files}, {"svg", svg}};
+    j["sources"] = {{"i_max_a", lim.i_max_source}, {"udc_v", "--udc-axis-v"}, {"rs_ohm", lim.rs_source}};
+    std::cout << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
+  }
+  return 0;
+}
+
 int RunExport(const std::vector<std::string>& argv) {
   for (const auto& a : argv) {
     if (a == "--server" || a.rfind("--server=", 0) == 0) {
-      return RunRemoteExport(argv, WithoutFlags(kExportFlags, {"svg", "sign-key"}));
+      return RunRemoteExport(argv, WithoutFlags(kExportFlags, {"svg", "sign-key", "udc-axis-v", "magnet-temp-c"}));
     }
   }
   auto args = ParseArgs(argv, WithoutFlags(kExportFlags, {"server", "version"}));
@@ -71,7 +167,7 @@ int RunExport(const std::vector<std::string>& argv) {
   const bool to_stdout = args->Get("out").value_or("") == "-";
   if (to_stdout && args->Get("sign-key")) return Fail("--sign-key writes OUT.sig: give --out FILE, not --out -", 2);
   if (args->positional.size() != 1 || !args->Get("out")) {
-    return Fail("usage: fluxcal export calibration.json --table mtpa|mtpv|fw --format "
+    return Fail("usage: fluxcal export calibration.json --table mtpa|mtpv|fw|envelope --format "
                 "csv|json|h|cdfx|dcm|a2l [--points N] [--ctype double|float|int16|int32] [--allow-extrapolation] --out FILE", 2);
   }
   auto cal = pipeline::LoadCalibrationFile(args->positional[0]);
@@ -113,6 +209,20 @@ int RunExport(const std::vector<std::string>& argv) {
     if (!v.ok()) return Fail(std::string(v.status().message()), 2);
     *dst = *v;
   }
+  if (auto v = args->GetDouble("magnet-temp-c"); !v.ok()) {
+    return Fail(std::string(v.status().message()), 2);
+  } else {
+    request.magnet_temp_c = *v;
+  }
+  std::optional<std::vector<double>> udc_axis;
+  if (auto a = args->Get("udc-axis-v")) {
+    if (request.udc_v) return Fail("flags --udc-v and --udc-axis-v: give one Udc or a Udc axis, not both", 2);
+    if (to_stdout) return Fail("--udc-axis-v writes one file per Udc: give --out FILE, not --out -", 2);
+    auto axis = pipeline::ParseUdcAxis(*a);
+    if (!axis.ok()) return Fail(std::string(axis.status().message()), 2);
+    udc_axis = *axis;
+  }
+  if (udc_axis) return RunUdcAxisExport(*args, *cal, spec, request, *udc_axis, *ctype);
   // Every flag checked: the overwrite rule (cli/args.h), before any work.
   // OUT.sig counts as an output whether or not this export signs: a
   // signature left from an earlier table would vouch for bytes no longer there.
@@ -120,8 +230,13 @@ int RunExport(const std::vector<std::string>& argv) {
   const OutputPath out_path{"out", out_file}, svg_path{"svg", args->Get("svg").value_or("")};
   const OutputPath sig_path_out{"out", to_stdout ? "" : out_file + ".sig"};
   if (auto e = CheckOverwrite(*args, {out_path, sig_path_out, svg_path}); !e.empty()) return Fail(e);
-  std::fprintf(stderr, "export: building %s table (at most %d points) for %s\n", spec.kind.c_str(), spec.points,
-               spec.serial.c_str());
+  if (spec.kind == "envelope") {
+    std::fprintf(stderr, "export: building envelope table (at most %d speeds) for %s\n", spec.speed_points,
+                 spec.serial.c_str());
+  } else {
+    std::fprintf(stderr, "export: building %s table (at most %d points) for %s\n", spec.kind.c_str(), spec.points,
+                 spec.serial.c_str());
+  }
   tables::ExportOptions options;
   options.ctype = *ctype;
   // The one export path (pipeline/export.h), the service's too.
@@ -212,8 +327,8 @@ int RunExport(const std::vector<std::string>& argv) {
 
 }  // namespace
 
-FLUXCAL_REGISTER_COMMAND("export", "export MTPA / MTPV / field-weakening tables for ECU flashing", RunExport,
-                         "fluxcal export calibration.json --out FILE [--force] [--table mtpa|mtpv|fw] [--format csv|json|h|cdfx|dcm|a2l] [flags]\n"
+FLUXCAL_REGISTER_COMMAND("export", "export MTPA / MTPV / field-weakening / envelope tables for ECU flashing", RunExport,
+                         "fluxcal export calibration.json --out FILE [--force] [--table mtpa|mtpv|fw|envelope] [--format csv|json|h|cdfx|dcm|a2l] [flags]\n"
                          "fluxcal export SERIAL --server ADDR [--version N] --out FILE [--force] [--table T] [--format F] [flags]",
                          kExportFlags);
 

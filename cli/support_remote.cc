@@ -272,7 +272,7 @@ int RunRemoteExport(const std::vector<std::string>& argv, const FlagSpecs& flags
   auto args = ParseArgs(argv, flags);
   if (!args.ok()) std::fprintf(stderr, "fluxcal export: %s\n", std::string(args.status().message()).c_str());
   if (!args.ok() || args->positional.size() != 1 || !args->Get("out")) {
-    std::fprintf(stderr, "usage: fluxcal export SERIAL --server ADDR --table mtpa|mtpv|fw --format "
+    std::fprintf(stderr, "usage: fluxcal export SERIAL --server ADDR --table mtpa|mtpv|fw|envelope --format "
                          "csv|json|h|cdfx|dcm|a2l [--points N] [--version N] [--ctype double|float|int16|int32] [--allow-extrapolation] "
                          "--out FILE [--json]\n");
     return 2;

@@ -12,15 +12,12 @@ absl::StatusOr<tables::CType> ParseExportCType(const std::string& name) { return
 
 const char* ExportCTypeName(tables::CType ct) { return tables::CTypeName(ct); }
 
-absl::StatusOr<ExportResult> ExportCalibration(const fit::Calibration& cal, const tables::TableSpec& spec,
-                                               const tables::ExportRequest& request, const std::string& format,
-                                               const tables::ExportOptions& options) {
-  // The format first: a wrong name costs no table.
-  auto fmt = tables::ParseFormat(format);
-  if (!fmt.ok()) return fmt.status();
-  auto built = tables::BuildExportTable(cal, spec, request);
-  if (!built.ok()) return built.status();
-  auto e = tables::Export(built->table, *fmt, options);
+namespace {
+
+// A built table written as `fmt`, with its counts.
+absl::StatusOr<ExportResult> Write(tables::BuiltExport* built, tables::Format fmt,
+                                   const tables::ExportOptions& options) {
+  auto e = tables::Export(built->table, fmt, options);
   if (!e.ok()) return e.status();
   ExportResult r;
   r.exported = std::move(*e);
@@ -32,6 +29,54 @@ absl::StatusOr<ExportResult> ExportCalibration(const fit::Calibration& cal, cons
   r.table = std::move(built->table);
   r.limits = std::move(built->limits);
   return r;
+}
+
+}  // namespace
+
+absl::StatusOr<ExportResult> ExportCalibration(const fit::Calibration& cal, const tables::TableSpec& spec,
+                                               const tables::ExportRequest& request, const std::string& format,
+                                               const tables::ExportOptions& options) {
+  // The format first: a wrong name costs no table.
+  auto fmt = tables::ParseFormat(format);
+  if (!fmt.ok()) return fmt.status();
+  auto built = tables::BuildExportTable(cal, spec, request);
+  if (!built.ok()) return built.status();
+  return Write(&*built, *fmt, options);
+}
+
+absl::StatusOr<std::vector<UdcAxisExport>> ExportCalibrationOverUdc(const fit::Calibration& cal,
+                                                                    const tables::TableSpec& spec,
+                                                                    const tables::ExportRequest& request,
+                                                                    const std::vector<double>& udc_axis_v,
+                                                                    const std::string& format,
+                                                                    const tables::ExportOptions& options) {
+  auto fmt = tables::ParseFormat(format);
+  if (!fmt.ok()) return fmt.status();
+  auto built = tables::BuildExportTablesOverUdc(cal, spec, request, udc_axis_v);
+  if (!built.ok()) return built.status();
+  std::vector<UdcAxisExport> out;
+  for (size_t k = 0; k < built->size(); ++k) {
+    auto r = Write(&(*built)[k], *fmt, options);
+    if (!r.ok()) return r.status();
+    out.push_back({udc_axis_v[k], *std::move(r)});
+  }
+  return out;
+}
+
+std::string UdcAxisPath(const std::string& path, double udc_v) {
+  const std::string tag = "_" + tables::UdcTag(udc_v);
+  const size_t slash = path.find_last_of('/');
+  const size_t dot = path.find_last_of('.');
+  const bool has_ext = dot != std::string::npos && dot > 0 && (slash == std::string::npos || dot > slash + 1);
+  return has_ext ? path.substr(0, dot) + tag + path.substr(dot) : path + tag;
+}
+
+absl::StatusOr<std::vector<double>> ParseUdcAxis(const std::string& text) { return tables::ParseUdcAxis(text); }
+
+std::string EnvelopeFigureSvg(const std::vector<const ExportResult*>& envelopes) {
+  std::vector<tables::Table> t;
+  for (const auto* e : envelopes) t.push_back(e->table);
+  return tables::PlotEnvelopeSvg(t);
 }
 
 absl::StatusOr<ExportResult> ExportTable(storage::Store& store, const std::string& serial, int version,
@@ -64,8 +109,10 @@ std::string ExportFigureSvg(const fit::Calibration& cal, const tables::TableSpec
   const tables::Table& table = exported.table;
   const tables::MachineLimits& lim = exported.limits.limits;
   if (spec.kind == "fw") return tables::PlotMapSvg(table, "id_a");
+  if (spec.kind == "envelope") return tables::PlotEnvelopeSvg({table});
   tables::TableSpec ms = spec;
   ms.measured_current_limit_a = table.measured_current_limit_a;   // as the export rule set it
+  ms.magnet_temperature = table.magnet_temperature;
   ms.kind = "mtpa";
   auto mtpa = spec.kind == "mtpa" ? absl::StatusOr<tables::Table>(table) : tables::BuildTable(cal, lim, ms);
   if (spec.kind == "mtpv") {

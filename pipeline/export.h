@@ -9,6 +9,7 @@
 #define FLUXCAL_PIPELINE_EXPORT_H_
 
 #include <string>
+#include <vector>
 
 #include "absl/status/statusor.h"
 #include "fitting/calibration.h"
@@ -58,12 +59,39 @@ absl::Status CheckExportFormat(const std::string& name);
 absl::StatusOr<tables::CType> ParseExportCType(const std::string& name);
 const char* ExportCTypeName(tables::CType ct);   // "double", "float", "int16", "int32"
 
-// The figure of an exported table (`fluxcal export --svg`): the fw map as a
+// The figure of an exported table (`fluxcal export --svg`): the envelope
+// as torque and power over speed; the fw map as a
 // heat map of id_a; the MTPV table with MTPA beside it for reference; the
 // MTPA table with MTPV beside it. The reference table is computed for the
 // same limits as `exported` and left out when it cannot be (e.g. no MTPV
 // point inside the current limit). `spec` is the one given to the export.
 std::string ExportFigureSvg(const fit::Calibration& cal, const tables::TableSpec& spec, const ExportResult& exported);
+
+// A Udc axis (`fluxcal export --udc-axis-v 250,300,350`, docs/tables.md
+// "Tables over Udc"): one export per DC-link voltage, each the table of
+// ExportCalibration at that voltage (the same values, bit for bit) with its
+// labels tagged by the voltage (FLUXCAL_FW_UDC300V_ID_A) and written to its
+// own file (UdcAxisPath). request.udc_v must be unset. Errors as
+// ExportCalibration's, the first refusal naming its Udc.
+struct UdcAxisExport {
+  double udc_v = 0;
+  ExportResult result;
+};
+absl::StatusOr<std::vector<UdcAxisExport>> ExportCalibrationOverUdc(const fit::Calibration& cal,
+                                                                    const tables::TableSpec& spec,
+                                                                    const tables::ExportRequest& request,
+                                                                    const std::vector<double>& udc_axis_v,
+                                                                    const std::string& format,
+                                                                    const tables::ExportOptions& options = {});
+// The file of one Udc of an axis: `path` with `_<UdcTag>` before its
+// extension ("fw.h" -> "fw_udc300v.h", "out/fw" -> "out/fw_udc300v").
+std::string UdcAxisPath(const std::string& path, double udc_v);
+// The Udc axis as `--udc-axis-v` gives it (tables::ParseUdcAxis).
+absl::StatusOr<std::vector<double>> ParseUdcAxis(const std::string& text);
+
+// The envelope figure of envelope tables, one curve per table (one per Udc
+// of an axis): tables::PlotEnvelopeSvg.
+std::string EnvelopeFigureSvg(const std::vector<const ExportResult*>& envelopes);
 
 }  // namespace fluxcal::pipeline
 

@@ -1014,67 +1014,32 @@ absl::StatusOr<Report> BuildReport(const ReportInputs& in) {
   b += "</section>\n";
 
   // ------------------------------------------------------------ envelope
-  // The torque-speed envelope as the field-weakening table reaches it: at
-  // each of its speeds the limit torque (motoring and generating) is what
-  // its clamped cells deliver (the solver clamps a request to the limit
-  // torque at that speed, tables::MaxTorqueNm), and where no row of a
-  // direction was clamped, the standstill limit while its point is inside
-  // the voltage limit, else tables::MaxTorqueNm itself. A dedicated
-  // envelope table of the tables library, when there is one, replaces this
-  // reading (env_n, tm, tg and their sources are all the figures need).
-  // The limit torque per speed of the fw table, motoring (tm) and
-  // generating (tg), and where its operating point lies.
+  // The torque-speed envelope of the tables library (the `fluxcal export
+  // --table envelope` table, tables::BuildTable kind "envelope"), over the
+  // field-weakening table's speeds: at each speed the largest torque within
+  // both limits, motoring (tm) and generating (tg), and where its operating
+  // point lies.
   std::vector<double> env_n, tm, tg;
   std::vector<Source> sm, sg;
   if (voltage) {
-    const auto& fw = tabs["fw"];
-    const auto& tq = fw.axes[0].values;
-    env_n = fw.axes[1].values;
-    const auto& n = env_n;
-    tm.resize(n.size()), tg.resize(n.size()), sm.resize(n.size()), sg.resize(n.size());
-    // The standstill limit per direction and its operating point: at any
-    // speed where that point is inside the voltage limit, it is the limit
-    // there too (the limit torque never exceeds the standstill one).
-    double t0[2];
-    tables::OperatingPoint op0[2];
-    for (int d = 0; d < 2; ++d) {
-      const double dir = d == 0 ? 1.0 : -1.0;
-      t0[d] = tables::MaxTorqueNm(cal, lim, 0.0, dir);
-      op0[d] = tables::SolveLeastCurrent(cal, lim, dir * t0[d], 0.0);
-    }
-    for (size_t j = 0; j < n.size(); ++j) {
-      const double we = physics::RpmToElectricalRadS(n[j], lim.pole_pairs);
-      for (int dir : {1, -1}) {
-        double t = 0;
-        Source src = Source::kMeasured;
-        bool found = false;
-        // The row of the largest request in this direction (its clamped
-        // cell is the limit point; unclamped, the nearest point to it).
-        size_t row = 0;
-        for (size_t i = 0; i < tq.size(); ++i) {
-          if (dir * tq[i] > dir * tq[row]) row = i;
-        }
-        for (size_t i = 0; i < tq.size() && !found; ++i) {
-          const size_t c = i * n.size() + j;
-          if (dir * tq[i] <= 0 || !fw.clamped[c]) continue;
-          const double id = fw.outputs[0].values[c], iq = fw.outputs[1].values[c];
-          t = tables::TorqueNm(cal, lim.pole_pairs, id, iq, lim.temperature_c);
-          src = cov.At(id, iq);
-          found = true;
-        }
-        const int d = dir > 0 ? 0 : 1;
-        if (!found && tables::VoltageV(cal, lim, op0[d].id_a, op0[d].iq_a, we) <= lim.UMaxV()) {
-          t = dir * t0[d];
-          src = cov.At(op0[d].id_a, op0[d].iq_a);
-          found = true;
-        }
-        if (!found) {
-          t = dir * tables::MaxTorqueNm(cal, lim, we, dir);
-          const size_t c = row * n.size() + j;
-          src = cov.At(fw.outputs[0].values[c], fw.outputs[1].values[c]);
-        }
-        (dir > 0 ? tm : tg)[j] = t;
-        (dir > 0 ? sm : sg)[j] = src;
+    tables::TableSpec es = spec;
+    es.kind = "envelope";
+    es.allow_extrapolation = false;
+    for (const bool generating : {false, true}) {
+      es.envelope_generating = generating;
+      auto env = tables::BuildTable(cal, lim, es);
+      if (!env.ok()) {
+        return absl::InvalidArgumentError(
+            absl::StrCat(in.calibration_path, ": envelope table: ", env.status().message()));
+      }
+      env_n = env->axes[0].values;
+      auto& t = generating ? tg : tm;
+      auto& src = generating ? sg : sm;
+      t.assign(env_n.size(), 0.0);
+      src.assign(env_n.size(), Source::kMeasured);
+      for (size_t j = 0; j < env_n.size(); ++j) {
+        t[j] = env->outputs[2].values[j];
+        src[j] = cov.At(env->outputs[0].values[j], env->outputs[1].values[j]);
       }
     }
   }
@@ -1132,9 +1097,8 @@ absl::StatusOr<Report> BuildReport(const ReportInputs& in) {
     SourceKey(&fp, drawn, cov);
     const std::string cap = absl::StrFormat(
         "At each speed of the field-weakening table (%s .. %s, %zu speeds), the largest torque within the current "
-        "limit %s and the voltage limit %s (Udc %s): where a request row was clamped, the torque its clamped cell "
-        "delivers; below the speed where the standstill limit point meets the voltage limit, that limit; elsewhere "
-        "tables::MaxTorqueNm, the limit the table clamps to.",
+        "limit %s and the voltage limit %s (Udc %s): the envelope table (fluxcal export --table envelope), the "
+        "limit the field-weakening table clamps to; MTPA below base speed, field weakening and MTPV above.",
         Num(n.front(), kSpeedRpm), Num(n.back(), kSpeedRpm, "rpm"), n.size(), Num(lim.i_max_a, kCurrentA, "A"),
         Num(lim.UMaxV(), kVoltageV, "V"), Num(*lim.udc_v, kVoltageV, "V"));
     page.Figure(ft, H(cap) + ((drawn & 6u) ? " " + H(cov.OtherHalf()) + "." : ""));

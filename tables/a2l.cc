@@ -42,6 +42,7 @@ std::string Quantity(const std::string& unit) {
   if (unit == "rpm") return "speed_rpm";
   if (unit == "Wb") return "flux_wb";
   if (unit == "V") return "voltage_v";
+  if (unit == "W") return "power_w";
   if (unit == "Ohm") return "resistance_ohm";
   if (unit == "degC") return "temperature_c";
   if (unit == "-") return "dimensionless";
@@ -292,7 +293,8 @@ std::string A2lWriter::Write() {
 
   // Assembled: comment, PROJECT > HEADER, MODULE > MOD_PAR, MOD_COMMON,
   // COMPU_METHOD, RECORD_LAYOUT, then the objects above.
-  const std::string kind = absl::AsciiStrToUpper(t_.kind);
+  const std::string kind =
+      absl::AsciiStrToUpper(absl::StrCat(t_.kind, t_.label_tag.empty() ? "" : "_", t_.label_tag));
   std::string s = absl::StrFormat(
       "/* fluxcal %s table: ASAM MCD-2 MC (ASAP2) 1.71 description of the C header that\n"
       " * `fluxcal export --format h --ctype %s` writes for the same table.\n",

@@ -56,10 +56,11 @@ absl::Status CheckRequest(const MachineLimits& lim, const TableSpec& spec) {
       (lim.rs_ohm && !(*lim.rs_ohm >= 0 && std::isfinite(*lim.rs_ohm)))) {
     return absl::InvalidArgumentError("limits: udc_v must be positive and rs_ohm non-negative when given");
   }
-  if (spec.kind == "fw" && !lim.HasVoltageLimit()) {
+  if ((spec.kind == "fw" || spec.kind == "envelope") && !lim.HasVoltageLimit()) {
     // u = Rs i + w J psi against m Udc / sqrt(3): neither may be assumed.
     return absl::InvalidArgumentError(absl::StrCat(
-        "table fw: the field-weakening map needs the voltage limit: ",
+        "table ", spec.kind, ": the ", spec.kind == "fw" ? "field-weakening map" : "torque-speed envelope",
+        " needs the voltage limit: ",
         !lim.udc_v ? "the DC-link voltage udc_v (--udc-v)" : "", !lim.udc_v && !lim.rs_ohm ? " and " : "",
         !lim.rs_ohm ? "the stator resistance rs_ohm (--rs-ohm)" : "", " not known"));
   }
@@ -79,6 +80,8 @@ Table NewTable(const sim::MagneticModel& m, const MachineLimits& lim, const Tabl
   const double meas = spec.measured_current_limit_a;
   Table t;
   t.kind = spec.kind;
+  t.label_tag = spec.label_tag;
+  t.magnet_temperature = spec.magnet_temperature;
   t.serial = spec.serial;
   t.calibration_version = spec.calibration_version;
   t.model = spec.model;
@@ -90,7 +93,7 @@ Table NewTable(const sim::MagneticModel& m, const MachineLimits& lim, const Tabl
   // The permanent-magnet flux linkage as the model gives it (psi_d at zero
   // current), whatever the model family's parameterisation.
   t.psi_pm_wb = m.Flux(0.0, 0.0, lim.temperature_c).psi_d_wb;
-  t.speed_max_rpm = spec.kind == "fw" ? spec.speed_max_rpm : 0.0;
+  t.speed_max_rpm = spec.kind == "fw" || spec.kind == "envelope" ? spec.speed_max_rpm : 0.0;
   t.measured_current_limit_a = meas > 0 ? meas : 0.0;
   t.allow_extrapolation = spec.allow_extrapolation;
   return t;
@@ -261,6 +264,44 @@ absl::Status FwRows(const sim::MagneticModel& m, const MachineLimits& lim, const
   return absl::OkStatus();
 }
 
+// The envelope: per round speed, the largest motoring torque inside both
+// limits (MaxTorqueNm) and its operating point, the least-current point of
+// that torque under the limits (SolveWithMax with the limit as its
+// maximum: the MTPA point below base speed, on the voltage limit above).
+absl::Status EnvelopeRows(const sim::MagneticModel& m, const MachineLimits& lim, const TableSpec& spec,
+                          Table* out) {
+  Table& t = *out;
+  if (!(spec.speed_max_rpm > 0) || !std::isfinite(spec.speed_max_rpm)) {
+    return absl::InvalidArgumentError("flag --speed-max-rpm: must be positive");
+  }
+  auto n_axis = RoundBreakpoints(0.0, spec.speed_max_rpm, spec.speed_points, "--speed-points");
+  if (!n_axis.ok()) return n_axis.status();
+  const auto& n = *n_axis;
+  t.speed_max_rpm = n.back();
+  Output id{"id_a", {}}, iq{"iq_a", {}}, tq{"torque_nm", {}}, pw{"power_w", {}};
+  const double sign = spec.envelope_generating ? -1.0 : 1.0;
+  for (double rpm : n) {
+    const double we = physics::RpmToElectricalRadS(rpm, lim.pole_pairs);
+    const double tlim = MaxTorqueNm(m, lim, we, sign);
+    OperatingPoint op;
+    bool none = !(tlim > 0);
+    if (!none) {
+      op = SolveWithMax(m, lim, sign * tlim, we, tlim);
+      none = !(sign * op.torque_nm > 0);
+    }
+    if (none) op = OperatingPoint{};
+    id.values.push_back(op.id_a);
+    iq.values.push_back(op.iq_a);
+    // The torque the point delivers (within 1e-9 of the limit torque).
+    tq.values.push_back(op.torque_nm);
+    pw.values.push_back(op.torque_nm * rpm * 2 * kPi / 60.0);
+    t.clamped.push_back(none);
+  }
+  t.axes = {{"speed_rpm", n}};
+  t.outputs = {id, iq, tq, pw};
+  return absl::OkStatus();
+}
+
 // Each cell's flags. Extrapolated: the operating point of the cell lies
 // beyond the measured current limit `meas` (the disc the identified points
 // cover), or outside a calibration's measured region and its mirror image.
@@ -273,7 +314,9 @@ void FlagCells(const sim::MagneticModel& m, const MachineLimits& lim, double mea
   Table& t = *out;
   const auto& idv = t.outputs[0].values;
   const auto& iqv = t.outputs[1].values;
-  const auto* cal = dynamic_cast<const fit::Calibration*>(&m);
+  // A table at another magnet temperature keeps its calibration's regions.
+  const auto* scaled = dynamic_cast<const MagnetScaledModel*>(&m);
+  const auto* cal = dynamic_cast<const fit::Calibration*>(scaled != nullptr ? &scaled->base() : &m);
   t.extrapolated.assign(idv.size(), 0);
   t.by_symmetry.assign(idv.size(), 0);
   t.not_positive_definite.assign(idv.size(), 0);
@@ -290,6 +333,31 @@ void FlagCells(const sim::MagneticModel& m, const MachineLimits& lim, double mea
 }
 
 }  // namespace
+
+MagnetScaledModel::MagnetScaledModel(const sim::MagneticModel& base, const MagnetTemperature& t)
+    : base_(base), t_(t) {}
+
+sim::FluxLinkage MagnetScaledModel::Flux(double id, double iq, double temperature_c) const {
+  sim::FluxLinkage f = base_.Flux(id, iq, temperature_c);
+  f.psi_d_wb += (t_.Scale() - 1.0) * base_.Flux(0.0, 0.0, temperature_c).psi_d_wb;
+  return f;
+}
+
+sim::DifferentialInductance MagnetScaledModel::Inductance(double id, double iq, double temperature_c) const {
+  return base_.Inductance(id, iq, temperature_c);
+}
+
+void MagnetScaledModel::FluxAndInductance(double id, double iq, double temperature_c, sim::FluxLinkage* flux,
+                                          sim::DifferentialInductance* inductance) const {
+  base_.FluxAndInductance(id, iq, temperature_c, flux, inductance);
+  flux->psi_d_wb += (t_.Scale() - 1.0) * base_.Flux(0.0, 0.0, temperature_c).psi_d_wb;
+}
+
+std::string UdcTag(double udc_v) {
+  std::string s = absl::StrFormat("%.6g", udc_v);
+  for (auto& c : s) c = c == '.' ? 'p' : c;
+  return absl::StrCat("udc", s, "v");
+}
 
 absl::StatusOr<std::vector<double>> RoundBreakpoints(double lo, double hi, int max_points, const std::string& flag) {
   if (!std::isfinite(lo) || !std::isfinite(hi) || !(hi > lo)) {
@@ -333,9 +401,21 @@ absl::StatusOr<std::vector<double>> RoundBreakpoints(double lo, double hi, int m
   return absl::InternalError(absl::StrCat(flag, ": no round step found"));
 }
 
-absl::StatusOr<Table> BuildTable(const sim::MagneticModel& m, const MachineLimits& lim,
+absl::StatusOr<Table> BuildTable(const sim::MagneticModel& m_in, const MachineLimits& lim,
                                  const TableSpec& spec) {
   if (absl::Status st = CheckRequest(lim, spec); !st.ok()) return st;
+  std::optional<MagnetScaledModel> scaled;
+  if (spec.magnet_temperature) {
+    const MagnetTemperature& mt = *spec.magnet_temperature;
+    if (!std::isfinite(mt.alpha_per_k) || !std::isfinite(mt.at_c) || !std::isfinite(mt.reference_c) ||
+        !(mt.Scale() > 0)) {
+      return absl::InvalidArgumentError(absl::StrFormat(
+          "flag --magnet-temp-c: %.6g degC with the coefficient %.6g /K from %.6g degC gives no positive magnet flux",
+          mt.at_c, mt.alpha_per_k, mt.reference_c));
+    }
+    scaled.emplace(m_in, mt);
+  }
+  const sim::MagneticModel& m = scaled ? *scaled : m_in;
   const double meas = spec.measured_current_limit_a;
   Table t = NewTable(m, lim, spec);
   const double tmax = MaxTorqueNm(m, lim, 0.0);
@@ -346,8 +426,11 @@ absl::StatusOr<Table> BuildTable(const sim::MagneticModel& m, const MachineLimit
     rows = MtpvRows(m, lim, spec, &t);
   } else if (spec.kind == "fw") {
     rows = FwRows(m, lim, spec, tmax, &t);
+  } else if (spec.kind == "envelope") {
+    rows = EnvelopeRows(m, lim, spec, &t);
   } else {
-    return absl::InvalidArgumentError(absl::StrCat("flag --table: expected mtpa, mtpv or fw, got '", spec.kind, "'"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("flag --table: expected mtpa, mtpv, fw or envelope, got '", spec.kind, "'"));
   }
   if (!rows.ok()) return rows;
   FlagCells(m, lim, meas, &t);
@@ -374,6 +457,17 @@ ClampSummary SummariseClamped(const Table& t) {
         "the voltage limit u_max %.4g V (Udc %.4g V, Rs %.4g ohm) leaves less torque than requested from %.0f rpm "
         "on (%zu of %zu speeds up to %.0f rpm; current limit %.4g A)",
         l.UMaxV(), l.udc_v.value_or(0.0), l.rs_ohm.value_or(0.0), n[first], n.size() - first, n.size(), n.back(),
+        l.i_max_a);
+  } else if (t.kind == "envelope" && t.axes.size() == 1) {
+    const auto& n = t.axes[0].values;
+    size_t first = n.size();
+    for (size_t k = 0; k < t.clamped.size(); ++k) {
+      if (t.clamped[k]) first = std::min(first, k);
+    }
+    c.why = absl::StrFormat(
+        "no torque is available from %.0f rpm on: the voltage limit u_max %.4g V (Udc %.4g V, Rs %.4g ohm) is "
+        "reached at zero torque (%zu of %zu speeds up to %.0f rpm; current limit %.4g A)",
+        n[first], l.UMaxV(), l.udc_v.value_or(0.0), l.rs_ohm.value_or(0.0), n.size() - first, n.size(), n.back(),
         l.i_max_a);
   } else if (t.kind == "mtpv") {
     c.why = absl::StrFormat("the MTPV points of those fluxes lie beyond the current limit %.4g A", l.i_max_a);

@@ -87,11 +87,13 @@ std::string UnitOf(const std::string& name) {
   if (ends("_v")) return "V";
   if (ends("_c")) return "degC";
   if (ends("_a")) return "A";
+  if (ends("_w")) return "W";
   return "-";
 }
 
 std::string Label(const Table& t, const std::string& name) {
-  return absl::AsciiStrToUpper(absl::StrCat("FLUXCAL_", t.kind, "_", name));
+  return absl::AsciiStrToUpper(
+      absl::StrCat("FLUXCAL_", t.kind, t.label_tag.empty() ? "" : "_", t.label_tag, "_", name));
 }
 
 std::string CSymbol(const Table& t, const std::string& name) { return absl::AsciiStrToLower(Label(t, name)); }
@@ -128,7 +130,17 @@ std::vector<Scalar> Scalars(const Table& t) {
     s.push_back({"measured_current_limit_a", t.measured_current_limit_a, "A",
                  "current limit the identified points cover; beyond it cells are flagged extrapolated", false});
   }
-  if (t.kind == "fw") {
+  if (t.magnet_temperature) {
+    const MagnetTemperature& mt = *t.magnet_temperature;
+    s.push_back({"magnet_temperature_c", mt.at_c, "degC", "magnet temperature the table was computed for", false});
+    s.push_back({"magnet_reference_c", mt.reference_c, "degC",
+                 "magnet temperature of the calibration's flux map", false});
+    s.push_back({"magnet_alpha_per_k", mt.alpha_per_k, "1/K",
+                 "the calibration's relative change of psi_pm per kelvin", false});
+    s.push_back({"psi_pm_scale", mt.Scale(), "-",
+                 "psi_pm at magnet_temperature_c over psi_pm of the flux map: 1 + alpha (T - T_ref)", false});
+  }
+  if (t.kind == "fw" || t.kind == "envelope") {
     s.push_back({"speed_max_rpm", t.speed_max_rpm, "rpm", "top of the speed axis (axis from 0 rpm)", false});
   }
   s.push_back({"allow_extrapolation", t.allow_extrapolation ? 1.0 : 0.0, "-",

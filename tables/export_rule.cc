@@ -3,7 +3,10 @@
 #include <cmath>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/numbers.h"
 #include "absl/strings/str_format.h"
+#include "absl/strings/str_split.h"
+#include "absl/strings/ascii.h"
 
 namespace fluxcal::tables {
 namespace {
@@ -24,9 +27,9 @@ std::string Label(const ExportRequest& r, const char* field) {
 
 absl::StatusOr<ExportLimits> ResolveExportLimits(const fit::Calibration& cal, const std::string& kind,
                                                  const ExportRequest& req) {
-  if (kind != "mtpa" && kind != "mtpv" && kind != "fw") {
+  if (kind != "mtpa" && kind != "mtpv" && kind != "fw" && kind != "envelope") {
     return absl::InvalidArgumentError(absl::StrCat(req.names_flags ? "flag --table" : "table",
-                                                   ": expected mtpa, mtpv or fw, got '", kind, "'"));
+                                                   ": expected mtpa, mtpv, fw or envelope, got '", kind, "'"));
   }
   struct Check {
     const char* field;
@@ -60,7 +63,7 @@ absl::StatusOr<ExportLimits> ResolveExportLimits(const fit::Calibration& cal, co
         Label(req, "i_max_a"), cal.id_min_a(), cal.id_max_a(), cal.iq_min_a(), cal.iq_max_a()));
   }
   // Udc and Rs: the request's, else the calibration's.
-  const bool needs_udc = kind != "mtpa", needs_rs = kind == "fw";
+  const bool needs_udc = kind != "mtpa", needs_rs = kind == "fw" || kind == "envelope";
   auto take = [&](const char* field, const std::optional<double>& given, const std::optional<double>& known,
                   const char* unit, std::optional<double>* dst, std::string* source) {
     if (given) {
@@ -84,7 +87,7 @@ absl::StatusOr<ExportLimits> ResolveExportLimits(const fit::Calibration& cal, co
   }
   if (needs_rs && !lim.rs_ohm) {
     return absl::InvalidArgumentError(absl::StrCat(
-        Label(req, "rs_ohm"), ": the fw table needs the steady-state voltage u = Rs i + w J psi and the calibration "
+        Label(req, "rs_ohm"), ": the ", kind, " table needs the steady-state voltage u = Rs i + w J psi and the calibration "
         "states no Rs (its data came without motor.rs_ohm); give the stator resistance, ohm"));
   }
   for (const auto& o : overridden) out.overridden += (out.overridden.empty() ? "" : "; ") + o;
@@ -99,6 +102,11 @@ absl::StatusOr<BuiltExport> BuildExportTable(const fit::Calibration& cal, TableS
   if (spec.calibration_version == 0) spec.calibration_version = cal.version;
   if (spec.model.empty()) spec.model = cal.family().Name();
   spec.measured_current_limit_a = cal.MeasuredCurrentLimitA();
+  if (req.magnet_temp_c) {
+    auto mt = MagnetTemperatureOf(cal, *req.magnet_temp_c, req);
+    if (!mt.ok()) return mt.status();
+    spec.magnet_temperature = *mt;
+  }
   auto t = BuildTable(cal, limits->limits, spec);
   if (!t.ok()) return t.status();
   BuiltExport out;
@@ -107,7 +115,7 @@ absl::StatusOr<BuiltExport> BuildExportTable(const fit::Calibration& cal, TableS
     const auto& c = out.clamped;
     std::string check;
     const auto& lim = limits->limits;
-    if (spec.kind == "fw") {
+    if (spec.kind == "fw" || spec.kind == "envelope") {
       check = absl::StrFormat("check Udc (%g V, from %s) and %s against the machine", lim.udc_v.value_or(0.0),
                               limits->udc_source, Name(req, "speed_max_rpm"));
     } else {
@@ -120,6 +128,97 @@ absl::StatusOr<BuiltExport> BuildExportTable(const fit::Calibration& cal, TableS
   }
   out.table = std::move(*t);
   out.limits = std::move(*limits);
+  return out;
+}
+
+absl::StatusOr<MagnetTemperature> MagnetTemperatureOf(const fit::Calibration& cal, double at_c,
+                                                      const ExportRequest& req) {
+  if (!std::isfinite(at_c) || at_c < -60 || at_c > 250) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("%s: %g degC is no magnet temperature (-60 .. 250 degC)", Label(req, "magnet_temp_c"), at_c));
+  }
+  // fit::Calibration states no magnet temperature coefficient and no
+  // temperature of its flux map: refused rather than assumed.
+  return absl::InvalidArgumentError(absl::StrFormat(
+      "%s: the calibration of %s states no magnet temperature coefficient and no magnet temperature of its flux "
+      "map, so a table at %g degC would rest on an assumed one (NdFeB is about -0.1 %%/K, but the magnet's own "
+      "grade decides); export at the calibration's temperature (without %s), or fit the motor at the magnet "
+      "temperature the table is for",
+      Label(req, "magnet_temp_c"), cal.serial(), at_c, Name(req, "magnet_temp_c")));
+}
+
+absl::StatusOr<std::vector<double>> ParseUdcAxis(const std::string& text, const std::string& flag) {
+  std::vector<double> v;
+  auto bad = [&](const std::string& why) {
+    return absl::InvalidArgumentError(absl::StrCat("flag ", flag, ": '", text, "': ", why,
+                                                   " (a list 250,300,350 or a range LO:HI:N, V)"));
+  };
+  auto num = [](absl::string_view s, double* x) { return absl::SimpleAtod(s, x) && std::isfinite(*x); };
+  if (text.find(':') != std::string::npos) {
+    std::vector<absl::string_view> p = absl::StrSplit(text, ':');
+    double lo, hi;
+    int n;
+    if (p.size() != 3 || !num(p[0], &lo) || !num(p[1], &hi) || !absl::SimpleAtoi(p[2], &n)) {
+      return bad("expected LO:HI:N");
+    }
+    if (n < 2 || n > kMaxUdcAxisPoints || !(hi > lo)) {
+      return bad(absl::StrFormat("a range needs LO < HI and 2 <= N <= %d", kMaxUdcAxisPoints));
+    }
+    for (int k = 0; k < n; ++k) v.push_back(k == n - 1 ? hi : lo + (hi - lo) * k / (n - 1));
+  } else {
+    for (absl::string_view s : absl::StrSplit(text, ',')) {
+      double x;
+      if (!num(absl::StripAsciiWhitespace(s), &x)) return bad(absl::StrCat("'", s, "' is not a number"));
+      v.push_back(x);
+    }
+  }
+  if (v.size() > static_cast<size_t>(kMaxUdcAxisPoints)) {
+    return bad(absl::StrFormat("at most %d voltages", kMaxUdcAxisPoints));
+  }
+  for (size_t k = 0; k < v.size(); ++k) {
+    if (!(v[k] > 0 && v[k] <= 5000)) return bad(absl::StrFormat("%g V is not in (0, 5000] V", v[k]));
+    if (k > 0 && !(v[k] > v[k - 1])) return bad("the voltages must increase");
+    if (k > 0 && UdcTag(v[k]) == UdcTag(v[k - 1])) {
+      return bad(absl::StrFormat("%s and %s have the same label (%s)", absl::StrFormat("%.17g", v[k - 1]),
+                                 absl::StrFormat("%.17g", v[k]), UdcTag(v[k])));
+    }
+  }
+  return v;
+}
+
+absl::StatusOr<std::vector<BuiltExport>> BuildExportTablesOverUdc(const fit::Calibration& cal, const TableSpec& spec,
+                                                                  const ExportRequest& req,
+                                                                  const std::vector<double>& udcs) {
+  if (req.udc_v) {
+    return absl::InvalidArgumentError(absl::StrCat(Label(req, "udc_v"), ": give one Udc or a Udc axis (",
+                                                   Name(req, "udc_axis_v"), "), not both"));
+  }
+  if (udcs.empty()) return absl::InvalidArgumentError(absl::StrCat(Label(req, "udc_axis_v"), ": no voltage"));
+  // The axis as ParseUdcAxis accepts it: a caller that built it otherwise
+  // must not get two tables under one label.
+  for (size_t k = 0; k < udcs.size(); ++k) {
+    if (!(udcs[k] > 0 && udcs[k] <= 5000) || (k > 0 && !(udcs[k] > udcs[k - 1])) ||
+        (k > 0 && UdcTag(udcs[k]) == UdcTag(udcs[k - 1])) || k >= static_cast<size_t>(kMaxUdcAxisPoints)) {
+      return absl::InvalidArgumentError(absl::StrFormat(
+          "%s: at most %d voltages in (0, 5000] V, increasing, each with its own label (%g V at position %zu)",
+          Label(req, "udc_axis_v"), kMaxUdcAxisPoints, udcs[k], k + 1));
+    }
+  }
+  std::vector<BuiltExport> out;
+  for (double u : udcs) {
+    ExportRequest r = req;
+    r.udc_v = u;
+    TableSpec s = spec;
+    s.label_tag = UdcTag(u);
+    auto b = BuildExportTable(cal, s, r);
+    if (!b.ok()) {
+      // The voltage after the message, so that a refusal naming a flag
+      // still starts with it (the CLI's exit code rule).
+      return absl::Status(b.status().code(), absl::StrFormat("%s (at Udc %g V of %s)", b.status().message(), u,
+                                                             Name(req, "udc_axis_v")));
+    }
+    out.push_back(*std::move(b));
+  }
   return out;
 }
 

@@ -8,11 +8,14 @@
 //   i_max       the request's, else the calibration's measured current
 //               limit; neither: refused naming --i-max-a / i_max_a;
 //   Udc         the request's, else the calibration's (its set's
-//               drive.udc_v); needed by fw and mtpv, refused naming
+//               drive.udc_v); needed by fw, mtpv and envelope, refused naming
 //               --udc-v / udc_v when neither states it; mtpa needs none;
 //   Rs          the request's, else the calibration's; needed by fw
-//               (the steady-state voltage), refused naming --rs-ohm /
-//               rs_ohm when neither states it.
+//               and envelope (the steady-state voltage), refused naming
+//               --rs-ohm / rs_ohm when neither states it;
+//   magnet T    unset: the flux map as it is; requested: psi_pm scaled
+//               by the calibration's own coefficient (MagnetTemperatureOf),
+//               refused while calibrations state none.
 // A table with more than kMaxClampedShare of its cells clamped is
 // refused (FailedPrecondition, saying how many cells and which limit)
 // unless allow_clamped.
@@ -21,6 +24,7 @@
 
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "absl/status/statusor.h"
 #include "fitting/calibration.h"
@@ -31,6 +35,10 @@ namespace fluxcal::tables {
 // What the caller of an export states; unset: the calibration's.
 struct ExportRequest {
   std::optional<double> i_max_a, udc_v, rs_ohm;
+  // The magnet temperature to compute the table at (--magnet-temp-c,
+  // degC); unset: the calibration's flux map as it is. Needs the
+  // calibration's own temperature coefficient (MagnetTemperatureOf).
+  std::optional<double> magnet_temp_c;
   bool allow_clamped = false;
   // How errors name the inputs: command-line flags (--udc-v) or the RPC's
   // request fields (udc_v).
@@ -65,6 +73,36 @@ struct BuiltExport {
 // taken from `cal` when empty / 0.
 absl::StatusOr<BuiltExport> BuildExportTable(const fit::Calibration& cal, TableSpec spec,
                                              const ExportRequest& request);
+
+// The magnet temperature `at_c` under the calibration's own coefficient
+// of psi_pm and the temperature its flux map holds (tables.h,
+// MagnetTemperature). A calibration carries neither today (fit::Calibration
+// states pole pairs, Rs, Udc and the nominal psi_pm, no magnet
+// temperature or coefficient), so this refuses, InvalidArgument naming
+// --magnet-temp-c / magnet_temp_c, what is missing and why no textbook
+// coefficient is put in its place. The one place to read them once a
+// calibration states them.
+absl::StatusOr<MagnetTemperature> MagnetTemperatureOf(const fit::Calibration& cal, double at_c,
+                                                      const ExportRequest& request);
+
+// A Udc axis (docs/tables.md, "Tables over Udc"): the DC-link voltages
+// of `--udc-axis-v`, written as a list "250,300,350,400" or a range
+// "LO:HI:N" (N evenly spaced voltages from LO to HI, N >= 2). At most
+// kMaxUdcAxisPoints, each in (0, 5000] V, strictly increasing, and no two
+// with the same label tag (UdcTag). InvalidArgument naming `flag` otherwise.
+inline constexpr int kMaxUdcAxisPoints = 32;
+absl::StatusOr<std::vector<double>> ParseUdcAxis(const std::string& text, const std::string& flag = "--udc-axis-v");
+
+// One BuildExportTable per voltage of `udc_axis_v`, each with request.udc_v
+// the voltage and its labels tagged with it (UdcTag: FLUXCAL_FW_UDC300V_ID_A),
+// so that the tables can sit side by side in one ECU build. Each table's
+// values are those of the single export at that Udc (the same
+// computation); request.udc_v must be unset (InvalidArgument: the axis
+// replaces it). The first refusal (e.g. mostly clamped at the lowest Udc)
+// is returned, naming its Udc.
+absl::StatusOr<std::vector<BuiltExport>> BuildExportTablesOverUdc(const fit::Calibration& cal, const TableSpec& spec,
+                                                                  const ExportRequest& request,
+                                                                  const std::vector<double>& udc_axis_v);
 
 }  // namespace fluxcal::tables
 

@@ -396,4 +396,118 @@ std::string PlotMapSvg(const Table& fw, const std::string& output_name) {
   return f.Svg();
 }
 
+namespace {
+
+// Where a cell's operating point stands: 0 measured, 1 by symmetry,
+// 2 extrapolated.
+int RegionClass(const Table& t, size_t k) {
+  if (k < t.extrapolated.size() && t.extrapolated[k]) return 2;
+  if (k < t.by_symmetry.size() && t.by_symmetry[k]) return 1;
+  return 0;
+}
+
+// The report page's key (report/report.cc, DashOf): solid measured,
+// dashed by symmetry, dotted extrapolated; one key for every figure.
+const char* const kRegionDash[] = {"", "8 4", "2 3"};
+
+// One envelope output (torque or power) over speed as one curve per table:
+// each run of speeds of one region class drawn in its own dash, joined to
+// the next run at their shared speed so that the curve has no gap; clamped
+// speeds (no torque) are left out.
+void EnvelopeCurves(plot::Figure* f, const std::vector<Table>& envs, const std::string& output, double scale) {
+  for (size_t i = 0; i < envs.size(); ++i) {
+    const Table& t = envs[i];
+    const Output* o = nullptr;
+    for (const auto& out : t.outputs) if (out.name == output) o = &out;
+    if (o == nullptr || t.axes.size() != 1) continue;
+    const auto& n = t.axes[0].values;
+    const std::string label = t.limits.udc_v ? absl::StrFormat("Udc %.4g V", *t.limits.udc_v) : "envelope";
+    bool labelled = false;
+    size_t k = 0;
+    while (k < n.size()) {
+      if (k < t.clamped.size() && t.clamped[k]) { ++k; continue; }
+      const int cls = RegionClass(t, k);
+      std::vector<double> x, y;
+      size_t e = k;
+      while (e < n.size() && !(e < t.clamped.size() && t.clamped[e]) && RegionClass(t, e) == cls) {
+        x.push_back(n[e]);
+        y.push_back(o->values[e] * scale);
+        ++e;
+      }
+      // Joined to the next run (its first point) when that is drawn too.
+      if (e < n.size() && !(e < t.clamped.size() && t.clamped[e])) {
+        x.push_back(n[e]);
+        y.push_back(o->values[e] * scale);
+      }
+      plot::Style st;
+      st.colour = plot::Palette(static_cast<int>(i));
+      st.width_px = 2.0;
+      st.dash = kRegionDash[cls];
+      // One legend entry per Udc, on its first solid stretch, or its first
+      // stretch when none is solid.
+      bool any_solid = false;
+      for (size_t q = 0; q < n.size(); ++q) {
+        if (!(q < t.clamped.size() && t.clamped[q]) && RegionClass(t, q) == 0) any_solid = true;
+      }
+      const bool take = !labelled && (cls == 0 || !any_solid);
+      if (x.size() == 1) {
+        f->Scatter(x, y, st, take ? label : "");
+      } else {
+        f->Line(x, y, st, take ? label : "");
+      }
+      labelled |= take;
+      k = e;
+    }
+  }
+}
+
+}  // namespace
+
+std::string PlotEnvelopeSvg(const std::vector<Table>& envs) {
+  if (envs.empty()) return "";
+  const Table& t0 = envs.front();
+  plot::Figure torque("envelope-torque", 620, 440), power("envelope-power", 620, 440);
+  torque.SetTitle("maximum torque over speed");
+  torque.SetXLabel("speed [rpm]");
+  torque.SetYLabel("torque [N m]");
+  power.SetTitle("maximum power over speed");
+  power.SetXLabel("speed [rpm]");
+  power.SetYLabel("power [kW]");
+  for (plot::Figure* f : {&torque, &power}) {
+    f->SetLegendBelow(true);
+    f->SetXRange(0, t0.speed_max_rpm > 0 ? t0.speed_max_rpm : 1);
+  }
+  EnvelopeCurves(&torque, envs, "torque_nm", 1.0);
+  EnvelopeCurves(&power, envs, "power_w", 1e-3);
+  // What the dashes mean, and what is not drawn.
+  size_t ext = 0, sym = 0, none = 0;
+  for (const auto& t : envs) {
+    for (size_t k = 0; k < t.clamped.size(); ++k) {
+      if (t.clamped[k]) { ++none; continue; }
+      const int c = RegionClass(t, k);
+      ext += c == 2;
+      sym += c == 1;
+    }
+  }
+  plot::Style ex, sy;
+  ex.colour = sy.colour = "#555555";
+  ex.dash = kRegionDash[2];
+  sy.dash = kRegionDash[1];
+  for (plot::Figure* f : {&torque, &power}) {
+    if (ext > 0) {
+      f->Line({}, {}, ex, absl::StrFormat("dotted: extrapolated (%zu points), not measured", ext));
+    }
+    if (sym > 0) f->Line({}, {}, sy, absl::StrFormat("dashed: by symmetry (%zu points), mirror of the measured half", sym));
+    f->Note(ext + sym > 0 ? "solid: measured region" : "every point in the measured region");
+    if (none > 0) f->Note(absl::StrFormat("%zu speeds without torque (beyond reach) not drawn", none));
+  }
+  const auto& l = t0.limits;
+  const std::string title = absl::StrFormat(
+      "%s%storque-speed and power-speed envelope: current limit %.4g A, Rs %.4g ohm, u_max = %.3g x Udc / sqrt 3 "
+      "(linear SVPWM)%s",
+      t0.serial, t0.serial.empty() ? "" : ": ", l.i_max_a, l.rs_ohm.value_or(0.0), l.modulation_limit,
+      t0.magnet_temperature ? absl::StrFormat(", magnets at %.4g degC", t0.magnet_temperature->at_c) : "");
+  return plot::PanelsSvg("envelope", title, {torque, power}, 2);
+}
+
 }  // namespace fluxcal::tables

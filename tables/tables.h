@@ -41,6 +41,22 @@ struct MachineLimits {
   double UMaxV() const;
 };
 
+// Magnet temperature (docs/tables.md, "Magnet temperature"): the magnet
+// flux linkage of permanent magnets falls with temperature, for NdFeB by
+// about 0.1 %/K (remanence coefficient alpha_Br about -0.1 %/K; sintered
+// NdFeB datasheets give -0.09 to -0.12 %/K). A table at magnet temperature
+// T is computed from the calibration's flux map with psi_pm scaled to
+//   psi_pm(T) = psi_pm(T_ref) (1 + alpha (T - T_ref)),
+// i.e. psi_d shifted by (scale - 1) psi_d(0, 0) at every current, the
+// inductances unchanged (the iron's saturation by the magnet is not
+// modelled). alpha and T_ref must be the calibration's own (a measured
+// or datasheet coefficient it states); none is invented.
+struct MagnetTemperature {
+  double alpha_per_k = 0;       // relative change of psi_pm per kelvin (e.g. -0.001)
+  double reference_c = 25;      // temperature the calibration's flux map holds
+  double at_c = 25;             // the table's magnet temperature
+  double Scale() const { return 1.0 + alpha_per_k * (at_c - reference_c); }
+};
 struct Axis {
   std::string name;    // e.g. "torque_nm", "speed_rpm", "psi_wb"
   std::vector<double> values;
@@ -60,7 +76,11 @@ inline constexpr char kReleaseUnknown[] = "unknown (local export, release store 
 inline constexpr char kVerdictUnknown[] = "unknown";
 
 struct Table {
-  std::string kind;    // "mtpa", "mtpv", "fw"
+  std::string kind;    // "mtpa", "mtpv", "fw", "envelope"
+  // "" (the default) or a tag that joins the kind in every label
+  // (FLUXCAL_FW_UDC300V_ID_A, the A2L project and the C include guard):
+  // the tables of a Udc axis (UdcTag) live side by side in one ECU build.
+  std::string label_tag;
   // Provenance: written into every export format (docs/tables.md).
   std::string serial;
   int calibration_version = 0;
@@ -76,6 +96,9 @@ struct Table {
   double speed_max_rpm = 0.0;           // fw: top of the speed axis [0, max]; 0 for mtpa/mtpv
   double measured_current_limit_a = 0;  // 0: not known (no measured region was given)
   bool allow_extrapolation = false;
+  // Set when the table was computed at a stated magnet temperature
+  // (TableSpec::magnet_temperature): written as scalars.
+  std::optional<MagnetTemperature> magnet_temperature;
   std::vector<Axis> axes;
   std::vector<Output> outputs;
   std::vector<uint8_t> clamped;        // per cell: 1 where the request exceeded the limits
@@ -131,10 +154,10 @@ std::vector<std::pair<std::string, const std::vector<uint8_t>*>> Flags(const Tab
 // range (the torque axis a step or less short of T_max, so that no row asks
 // for more than the machine gives).
 struct TableSpec {
-  std::string kind = "mtpa";        // mtpa | mtpv | fw
+  std::string kind = "mtpa";        // mtpa | mtpv | fw | envelope
   int points = 64;                  // at most this many rows of a curve / torque axis of the map
-  int speed_points = 32;            // fw: at most this many speeds
-  double speed_max_rpm = 6000.0;    // fw: speed axis range [0, max]
+  int speed_points = 32;            // fw, envelope: at most this many speeds
+  double speed_max_rpm = 6000.0;    // fw, envelope: speed axis range [0, max]
   bool include_generating = true;   // negative torque rows (mtpa, fw)
   std::string serial;
   int calibration_version = 0;
@@ -150,6 +173,14 @@ struct TableSpec {
   // whose MTPV point lies inside the current limit (FailedPrecondition when
   // there is none). true: computed anyway, cells flagged `extrapolated`.
   bool allow_extrapolation = false;
+  // Unset: the model as it is. Set: psi_pm scaled to this magnet
+  // temperature (MagnetScaledModel) before anything is computed.
+  std::optional<MagnetTemperature> magnet_temperature;
+  // "" or the tag joining the kind in every label (Table::label_tag).
+  std::string label_tag;
+  // envelope: the generating limit (negative torque and power) instead of
+  // the motoring one (the report page draws both).
+  bool envelope_generating = false;
 };
 
 double TorqueNm(const sim::MagneticModel& m, int pole_pairs, double id_a, double iq_a,
@@ -200,12 +231,23 @@ PlaneCircle DrawCurrentPlane(plot::Figure* f, const sim::MagneticModel& m, const
 absl::StatusOr<std::vector<double>> RoundBreakpoints(double lo_value, double hi_value, int max_points,
                                                      const std::string& flag = "--points");
 
+// The torque-speed envelope (kind "envelope"): over round speeds in
+// [0, speed_max_rpm] (at most speed_points), the largest motoring torque
+// inside both the current and the voltage limit (MaxTorqueNm: the MTPA
+// point below base speed, field weakening and MTPV above) and its
+// operating point. Outputs id_a, iq_a (the point), torque_nm and power_w
+// (= torque x mechanical speed); a speed at which no torque is available
+// (beyond the machine's reach at this Udc) is flagged clamped, torque 0.
+// With spec.envelope_generating the generating limit instead (torque and
+// power negative; the resistive drop then helps). Needs the voltage limit
+// (Udc and Rs), as the fw map.
+//
 // When `m` is a fit::Calibration, each cell's operating point is placed in
 // its measured region (Calibration::RegionOf): `by_symmetry` and
 // `extrapolated` flag what does not rest on measured data. Every cell's
 // `not_positive_definite` comes from m.Inductance at its operating point.
 // Errors: InvalidArgument (points, limits, kind; pole pairs or current
-// limit not given; fw without Udc or Rs; a current limit above the
+// limit not given; fw or envelope without Udc or Rs; a current limit above the
 // measured one without allow_extrapolation), FailedPrecondition (mtpv: no
 // MTPV point inside the current limit and allow_extrapolation not set).
 // MTPA and MTPV need no Udc (their points do not depend on it); the file
@@ -330,6 +372,33 @@ std::string PlotMtpvSvg(const sim::MagneticModel& m, const MachineLimits& lim, c
 // torque request, a colour bar with round ticks along its length, a cross
 // on each clamped cell and a square on each extrapolated one.
 std::string PlotMapSvg(const Table& fw, const std::string& output_name);
+// The envelope figure: torque and power versus speed, one curve per
+// envelope table (one per Udc, labelled with its Udc), in two panels.
+// Stretches whose operating points are extrapolated are dotted, those by
+// symmetry dashed, measured ones solid (the report page's key); speeds with no torque (clamped)
+// are left out of the curve and counted in a note.
+std::string PlotEnvelopeSvg(const std::vector<Table>& envelopes);
+
+// The label tag of a Udc-axis table: "udc300v", "udc312p5v" (a decimal
+// point as 'p'), for Table::label_tag.
+std::string UdcTag(double udc_v);
+
+// `base` with its magnet flux scaled (MagnetTemperature above). The table
+// cells' regions are still those of `base` when it is a fit::Calibration
+// (BuildTable looks through the wrapper).
+class MagnetScaledModel : public sim::MagneticModel {
+ public:
+  MagnetScaledModel(const sim::MagneticModel& base, const MagnetTemperature& t);
+  sim::FluxLinkage Flux(double id_a, double iq_a, double temperature_c = 25.0) const override;
+  sim::DifferentialInductance Inductance(double id_a, double iq_a, double temperature_c = 25.0) const override;
+  void FluxAndInductance(double id_a, double iq_a, double temperature_c, sim::FluxLinkage* flux,
+                         sim::DifferentialInductance* inductance) const override;
+  const sim::MagneticModel& base() const { return base_; }
+  const MagnetTemperature& temperature() const { return t_; }
+ private:
+  const sim::MagneticModel& base_;
+  MagnetTemperature t_;
+};
 
 }  // namespace fluxcal::tables
 

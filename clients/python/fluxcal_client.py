@@ -391,8 +391,9 @@ class Client:
     def export_table(self, serial, table="mtpa", fmt="csv", points=0, version=0, **limits):
         """ExportTableResponse: data (the file's bytes), crc32, sha256, version,
         verdict, cells, clamped_cells. `limits`: speed_points, speed_max_rpm,
-        i_max_a, udc_v, rs_ohm (0 or absent: the calibration's; fw and mtpv
-        need a Udc from somewhere), allow_clamped."""
+        i_max_a, udc_v, rs_ohm (0 or absent: the calibration's; fw, mtpv and
+        envelope need a Udc from somewhere), allow_clamped. `table`: mtpa,
+        mtpv, fw or envelope."""
         req = self.pb.ExportTableRequest(serial=serial, version=version, table=table, format=fmt, points=points,
                                          **limits)
         return self._call("ExportTable", serial, self.stub.ExportTable, req)

@@ -12,6 +12,7 @@
 #include <filesystem>
 #include <fstream>
 
+#include "absl/strings/ascii.h"
 #include "absl/strings/str_format.h"
 #include "fitting/fit.h"
 #include "gtest/gtest.h"
@@ -227,6 +228,50 @@ TEST(Pipeline, ExportTakesTheCalibrationsFactsOrTheRequests) {
 // calibration without a measured current circle, both refuse and name the
 // input to give (the CLI's behaviour, documented in docs/tables.md); the
 // service used to export it at 150 A.
+// A Udc axis (docs/tables.md, "Tables over Udc"): each file of the axis
+// carries the single export's values at its voltage (the same payload),
+// under labels tagged with it, and the envelope goes through the stored
+// path as the local one.
+TEST(Pipeline, UdcAxisExportsAreTheSingleExportsPerUdc) {
+  auto store = storage::Store::Open(":memory:");
+  ASSERT_TRUE(store.ok());
+  ASSERT_TRUE(IngestHfRun(**store, "IPM-U", "st", kMotor, Grid(1.0)).ok());
+  ASSERT_TRUE(FitSerial(**store, "IPM-U", "analytic", {}).ok());
+  auto cal = LoadCalibration(**store, "IPM-U", 1);
+  ASSERT_TRUE(cal.ok()) << cal.status();
+  tables::TableSpec spec;
+  spec.points = 12;
+  spec.speed_points = 8;
+  tables::ExportRequest req;
+  req.rs_ohm = 0.011;
+  req.allow_clamped = true;
+  for (const char* kind : {"fw", "envelope"}) {
+    spec.kind = kind;
+    auto axis = ExportCalibrationOverUdc(*cal, spec, req, {40, 60}, "dcm");
+    ASSERT_TRUE(axis.ok()) << kind << ": " << axis.status();
+    ASSERT_EQ(axis->size(), 2u);
+    for (const auto& a : *axis) {
+      tables::ExportRequest one = req;
+      one.udc_v = a.udc_v;
+      auto single = ExportCalibration(*cal, spec, one, "dcm");
+      ASSERT_TRUE(single.ok()) << single.status();
+      EXPECT_EQ(a.result.exported.payload_sha256, single->exported.payload_sha256) << kind << " at " << a.udc_v;
+      EXPECT_EQ(a.result.table.outputs[0].values, single->table.outputs[0].values);
+      const std::string label = absl::StrFormat("FLUXCAL_%s_UDC%gV_ID_A", absl::AsciiStrToUpper(kind), a.udc_v);
+      EXPECT_NE(a.result.exported.bytes.find(label), std::string::npos) << label;
+    }
+    tables::ExportRequest rpc = req;
+    rpc.names_flags = false;
+    rpc.udc_v = 60;
+    auto stored = ExportTable(**store, "IPM-U", 1, spec, rpc, "csv");
+    ASSERT_TRUE(stored.ok()) << stored.status();
+    EXPECT_EQ(stored->exported.payload_sha256, (*axis)[1].result.exported.payload_sha256) << kind;
+  }
+  EXPECT_EQ(UdcAxisPath("out/fw.h", 300), "out/fw_udc300v.h");
+  EXPECT_EQ(UdcAxisPath("out.d/fw", 312.5), "out.d/fw_udc312p5v");
+  EXPECT_EQ(UdcAxisPath(".fw", 48), ".fw_udc48v");
+}
+
 TEST(Pipeline, LocalAndStoredExportsAreOnePath) {
   auto store = storage::Store::Open(":memory:");
   ASSERT_TRUE(store.ok());

@@ -250,10 +250,37 @@ void CrossCheck(const Table& t, CType ct) {
 }
 
 TEST(A2lExport, CrossChecksWithCHeaderCdfxAndDcm) {
-  for (const char* kind : {"mtpa", "fw", "mtpv"}) {
+  for (const char* kind : {"mtpa", "fw", "mtpv", "envelope"}) {
     const Table t = TwinTable(kind);
     if (t.axes.empty()) continue;
     for (CType ct : {CType::kDouble, CType::kInt16, CType::kInt32, CType::kFloat}) CrossCheck(t, ct);
+  }
+}
+
+// The tables of a Udc axis carry the voltage in every label; the A2L of
+// each still matches its C header, CDFX and DCM (docs/tables.md, "Tables
+// over Udc").
+TEST(A2lExport, UdcAxisTablesCrossCheckUnderTheirTaggedLabels) {
+  for (const char* kind : {"fw", "envelope"}) {
+    TableSpec spec;
+    spec.kind = kind;
+    spec.points = 9;
+    spec.speed_points = 7;
+    ExportRequest req;
+    req.allow_clamped = true;
+    auto axis = BuildExportTablesOverUdc(Twin(), spec, req, {40, 62.5});
+    ASSERT_TRUE(axis.ok()) << axis.status();
+    for (const auto& b : *axis) {
+      EXPECT_FALSE(b.table.label_tag.empty());
+      for (CType ct : {CType::kDouble, CType::kInt16}) CrossCheck(b.table, ct);
+      auto e = Export(b.table, Format::kA2l);
+      ASSERT_TRUE(e.ok());
+      auto file = ar::ReadA2l(e->bytes);
+      ASSERT_TRUE(file.ok()) << file.status();
+      EXPECT_NE(file->modules[0].FindCharacteristic(Label(b.table, "id_a")), nullptr) << Label(b.table, "id_a");
+    }
+    EXPECT_EQ(Label((*axis)[1].table, "id_a"), std::string("FLUXCAL_") + (std::string(kind) == "fw" ? "FW" : "ENVELOPE") +
+                                                   "_UDC62P5V_ID_A");
   }
 }
 

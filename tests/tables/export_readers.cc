@@ -48,9 +48,10 @@ std::vector<std::string> AxisNames(const std::string& order) {
 
 }  // namespace
 
-// "FLUXCAL_FW_ID_A" -> "id_a".
+// "FLUXCAL_FW_ID_A" -> "id_a" ("FLUXCAL_FW_UDC300V_ID_A" of a Udc axis' table).
 std::string Local(const Table& t, const std::string& ident) {
-  const std::string prefix = absl::AsciiStrToLower(absl::StrCat("fluxcal_", t.kind, "_"));
+  const std::string prefix = absl::AsciiStrToLower(
+      absl::StrCat("fluxcal_", t.kind, "_", t.label_tag, t.label_tag.empty() ? "" : "_"));
   std::string s = absl::AsciiStrToLower(ident);
   return absl::StartsWith(s, prefix) ? s.substr(prefix.size()) : s;
 }

@@ -65,6 +65,26 @@ Table MtpvExtrapolated() {
   return *t;
 }
 
+// The envelope of one Udc of an axis (labels tagged with it), at a magnet
+// temperature, beyond the measured current limit on request: every
+// format's readers meet the tag, the magnet scalars and extrapolated cells.
+Table EnvelopeTagged() {
+  static const sim::AnalyticMotor m{[] { sim::MotorParams p; p.sat.g_cross_h = 3e-5; return p; }()};
+  TableSpec spec;
+  spec.kind = "envelope";
+  spec.speed_points = 9;
+  spec.speed_max_rpm = 8000;
+  spec.serial = "IPM-T-3";
+  spec.model = "analytic";
+  spec.measured_current_limit_a = 150;
+  spec.allow_extrapolation = true;
+  spec.label_tag = UdcTag(50);
+  spec.magnet_temperature = MagnetTemperature{-0.0011, 25, 80};
+  auto t = BuildTable(m, TwinLimits(180), spec);
+  EXPECT_TRUE(t.ok()) << t.status();
+  return *t;
+}
+
 void ExpectSame(const Parsed& want, const Parsed& got, const std::string& what) {
   EXPECT_EQ(got.scalars, want.scalars) << what << ": scalars (limits, machine constants)";
   EXPECT_EQ(got.text, want.text) << what << ": provenance, verdict, release state";
@@ -75,7 +95,7 @@ void ExpectSame(const Parsed& want, const Parsed& got, const std::string& what) 
 }
 
 TEST(ExportRoundTrip, AllFiveFormatsCarryTheSameTable) {
-  for (const Table& t : {Fw(), MtpvExtrapolated()}) {
+  for (const Table& t : {Fw(), MtpvExtrapolated(), EnvelopeTagged()}) {
     const Parsed want = Expected(t);
     int flagged = 0;
     for (double f : want.arrays.at("clamped")) flagged += f != 0;
@@ -153,7 +173,7 @@ TEST(ExportRoundTrip, CdfxValidatesAgainstTheSubsetDtd) {
   }
   const std::string dir = ::testing::TempDir();
   int k = 0;
-  for (const Table& t : {Fw(), MtpvExtrapolated()}) {
+  for (const Table& t : {Fw(), MtpvExtrapolated(), EnvelopeTagged()}) {
     auto e = Export(t, Format::kCdfx);
     ASSERT_TRUE(e.ok());
     const std::string path = dir + "/fluxcal_dtd_" + std::to_string(k++) + ".cdfx";

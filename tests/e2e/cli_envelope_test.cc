@@ -1,0 +1,129 @@
+// The envelope and the Udc axis end to end through `fluxcal export`
+// (docs/tables.md, "The envelope", "Tables over Udc", "Magnet
+// temperature"), on the published Baldor EOL set (data/real/baldor_eol,
+// 540 V DC link in its manifest):
+//  - `--table envelope --udc-axis-v` writes one file per Udc and one
+//    figure with a curve per Udc;
+//  - each file's values are the single export's at that Udc, bit for bit
+//    (the payload SHA-256 the files carry);
+//  - torque never rises with speed and never falls with Udc;
+//  - --magnet-temp-c is refused: the calibration states no coefficient.
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "gtest/gtest.h"
+#include "nlohmann/json.hpp"
+#include "tests/e2e/fluxcal_run.h"
+
+namespace fluxcal::e2e {
+namespace {
+
+namespace fs = std::filesystem;
+
+bool Has(const std::string& text, const std::string& what) { return text.find(what) != std::string::npos; }
+
+std::string Read(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  return std::string((std::istreambuf_iterator<char>(in)), {});
+}
+
+// Column `name` of a table CSV (comment lines skipped).
+std::vector<double> Column(const std::string& path, const std::string& name) {
+  std::ifstream in(path);
+  std::string line;
+  std::vector<double> v;
+  int col = -1;
+  while (std::getline(in, line)) {
+    if (line.empty() || line[0] == '#') continue;
+    std::stringstream ss(line);
+    std::string cell;
+    std::vector<std::string> cells;
+    while (std::getline(ss, cell, ',')) cells.push_back(cell);
+    if (col < 0) {
+      for (size_t k = 0; k < cells.size(); ++k) {
+        if (cells[k] == name) col = static_cast<int>(k);
+      }
+      if (col < 0) return {};
+      continue;
+    }
+    v.push_back(std::stod(cells[static_cast<size_t>(col)]));
+  }
+  return v;
+}
+
+TEST(EnvelopeCli, UdcAxisFilesEqualSingleExportsAndTheFigureHasACurvePerUdc) {
+  const std::string set = std::string(FLUXCAL_SOURCE_DIR) + "/data/real/baldor_eol";
+  ASSERT_TRUE(fs::exists(set + "/manifest.json")) << "in-repo fixture missing: " << set;
+  const fs::path dir = fs::temp_directory_path() / ("fluxcal_envelope_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  auto path = [&](const std::string& name) { return (dir / name).string(); };
+  const std::string cal = path("c.json");
+  ASSERT_EQ(RunFluxcal("fit " + set + " --out " + cal).code, 0);
+
+  const std::vector<int> udcs = {300, 400, 540};
+  const RunResult axis = RunFluxcal("export " + cal + " --table envelope --udc-axis-v 300,400,540 --out " +
+                                    path("env.csv") + " --svg " + path("env.svg") + " --json");
+  ASSERT_EQ(axis.code, 0) << axis.err;
+  const auto j = nlohmann::json::parse(axis.out);
+  ASSERT_EQ(j["files"].size(), udcs.size());
+  std::vector<std::vector<double>> torque;
+  for (size_t k = 0; k < udcs.size(); ++k) {
+    const std::string file = path("env_udc" + std::to_string(udcs[k]) + "v.csv");
+    EXPECT_EQ(j["files"][k]["out"], file);
+    ASSERT_TRUE(fs::exists(file));
+    // The single export at this Udc: the same values.
+    const RunResult one = RunFluxcal("export " + cal + " --table envelope --udc-v " + std::to_string(udcs[k]) +
+                                     " --out " + path("one_" + std::to_string(udcs[k]) + ".csv") + " --json");
+    ASSERT_EQ(one.code, 0) << one.err;
+    const auto o = nlohmann::json::parse(one.out);
+    EXPECT_EQ(j["files"][k]["payload_sha256"], o["payload_sha256"]) << udcs[k] << " V";
+    EXPECT_EQ(Column(file, "torque_nm"), Column(path("one_" + std::to_string(udcs[k]) + ".csv"), "torque_nm"));
+    torque.push_back(Column(file, "torque_nm"));
+    const auto& t = torque.back();
+    ASSERT_GT(t.size(), 10u);
+    for (size_t i = 1; i < t.size(); ++i) {
+      EXPECT_LE(t[i], t[i - 1] * (1 + 1e-6)) << udcs[k] << " V: torque rises at row " << i;
+    }
+    if (k > 0) {
+      for (size_t i = 0; i < t.size(); ++i) {
+        EXPECT_GE(t[i], torque[k - 1][i] * (1 - 1e-6)) << "row " << i << ": " << udcs[k] << " V below "
+                                                       << udcs[k - 1] << " V";
+      }
+    }
+  }
+  // At 300 V the envelope is far below the 540 V one at the top speed.
+  EXPECT_LT(torque[0].back(), 0.5 * torque[2].back());
+  const std::string svg = Read(path("env.svg"));
+  for (int u : udcs) EXPECT_TRUE(Has(svg, "Udc " + std::to_string(u) + " V")) << u;
+
+  // A field-weakening header per Udc, labels carrying the voltage.
+  const RunResult fw = RunFluxcal("export " + cal + " --table fw --format h --udc-axis-v 400:540:2 --out " +
+                                  path("fw.h") + " --json");
+  ASSERT_EQ(fw.code, 0) << fw.err;
+  const auto f = nlohmann::json::parse(fw.out);
+  ASSERT_EQ(f["files"].size(), 2u);
+  EXPECT_TRUE(Has(Read(path("fw_udc540v.h")), "fluxcal_fw_udc540v_id_a["));
+  const RunResult fw540 = RunFluxcal("export " + cal + " --table fw --format h --out " + path("fw540.h") + " --json");
+  ASSERT_EQ(fw540.code, 0) << fw540.err;
+  EXPECT_EQ(f["files"][1]["payload_sha256"], nlohmann::json::parse(fw540.out)["payload_sha256"]);
+
+  // Refusals: a magnet temperature without the calibration's coefficient,
+  // one Udc and an axis together, an axis to stdout.
+  const RunResult hot = RunFluxcal("export " + cal + " --table envelope --magnet-temp-c 120 --out " + path("hot.csv"));
+  EXPECT_EQ(hot.code, 2) << hot.err;
+  EXPECT_TRUE(Has(hot.err, "flag --magnet-temp-c: the calibration of REAL-baldor-7 states no magnet temperature "
+                           "coefficient")) << hot.err;
+  EXPECT_FALSE(fs::exists(path("hot.csv")));
+  EXPECT_EQ(RunFluxcal("export " + cal + " --udc-v 540 --udc-axis-v 300,400 --out " + path("x.csv")).code, 2);
+  EXPECT_EQ(RunFluxcal("export " + cal + " --udc-axis-v 300,400 --out -").code, 2);
+  fs::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace fluxcal::e2e
