@@ -53,6 +53,18 @@ std::string CalibrationRowSha256(const std::string& prev_sha256, const Calibrati
   return io::Sha256Hex(buf);
 }
 
+std::string ConversionRowSha256(const std::string& link_row_sha256, const ConversionRow& x,
+                                const CalibrationRow& converted) {
+  // The link it was converted under, what the JSON was and when, as the
+  // "previous hash" of the converted row's own hash: the same framing.
+  std::string buf;
+  auto put = [&](const std::string& field) { absl::StrAppend(&buf, field.size(), ":", field, ";"); };
+  put(link_row_sha256);
+  put(x.json_sha256);
+  put(x.converted_utc);
+  return CalibrationRowSha256(io::Sha256Hex(buf), converted);
+}
+
 std::optional<ConvertedVersion> ConvertStoredJson(const CalibrationRow& row, const ChainRow* link,
                                                   const JsonToModelFn& to_model, const std::string& now_utc) {
   if (!to_model || link == nullptr || row.calibration_json.empty() || !row.model_pb.empty()) return std::nullopt;
@@ -63,8 +75,8 @@ std::optional<ConvertedVersion> ConvertStoredJson(const CalibrationRow& row, con
   out.row = row;
   out.row.calibration_json.clear();
   out.row.model_pb = std::move(*model);
-  out.record = {row.serial, row.version, io::Sha256Hex(row.calibration_json),
-                CalibrationRowSha256(link->row_sha256, out.row), now_utc};
+  out.record = {row.serial, row.version, io::Sha256Hex(row.calibration_json), "", now_utc};
+  out.record.row_sha256 = ConversionRowSha256(link->row_sha256, out.record, out.row);
   return out;
 }
 
@@ -151,10 +163,10 @@ constexpr char kReleasedCalChanged[] = ": the released calibration version chang
 constexpr char kConvertedChanged[] = ": row changed after the v8 migration converted it to binary";
 
 // A converted version (ConversionRow) checks when the row is binary and the
-// record's hash, over the link it was converted under and the row, recomputes.
+// record's hash (ConversionRowSha256) recomputes.
 bool ConversionVerifies(const ConversionRow& x, const ChainRow& link, const CalibrationRow& row) {
   return !row.model_pb.empty() && row.calibration_json.empty() &&
-         CalibrationRowSha256(link.row_sha256, row) == x.row_sha256;
+         ConversionRowSha256(link.row_sha256, x, row) == x.row_sha256;
 }
 
 std::string NotPass(const std::string& verdict) {

@@ -83,8 +83,8 @@ struct CalibrationRow {
 // The record of one version the v8 migration converted from JSON to binary
 // (ConvertStoredJson). Its chain link hashed the JSON text, which is gone;
 // the record says what that text was (json_sha256) and links the converted
-// row to the link: row_sha256 = CalibrationRowSha256(the link's row_sha256,
-// the converted row), so VerifyChains recomputes it as it recomputes a link.
+// row to the link: row_sha256 = ConversionRowSha256 (below), so VerifyChains
+// recomputes it as it recomputes a link.
 struct ConversionRow {
   std::string serial;
   int version = 0;
@@ -271,6 +271,12 @@ std::string NowUtc();
 // always did. Version 1 (or the first version written with schema v6) has
 // prev_sha256 "".
 std::string CalibrationRowSha256(const std::string& prev_sha256, const CalibrationRow& row);
+
+// The hash of a conversion record: CalibrationRowSha256(SHA-256 over the
+// link's row_sha256, json_sha256 and converted_utc, each length-prefixed;
+// the converted row). An edit of the row or of the record shows.
+std::string ConversionRowSha256(const std::string& link_row_sha256, const ConversionRow& record,
+                                const CalibrationRow& converted);
 
 // The v8 migration of one version stored as JSON, written once for both
 // backends: converted (the row with model_pb and calibration_json "", and

@@ -293,6 +293,17 @@ TEST_P(MigrationTest, OldJsonRowsConvertAndStillVerify) {
   ASSERT_EQ(report->problems.size(), 1u);
   EXPECT_EQ(report->problems[0], "IPM-OLD v1: row changed after the v8 migration converted it to binary");
   EXPECT_EQ(storage::VerifyReleasedVersion(**store, "IPM-OLD", 1).code(), absl::StatusCode::kDataLoss);
+  // So is an edited conversion record.
+  if (pg) {
+    ASSERT_TRUE(raw("ALTER TABLE calibration_conversions DISABLE TRIGGER conversions_no_update"));
+  } else {
+    ASSERT_TRUE(raw("DROP TRIGGER conversions_no_update"));
+  }
+  ASSERT_TRUE(raw("UPDATE calibration_conversions SET json_sha256 = 'x' WHERE version = 2"));
+  report = storage::VerifyChains(**store);
+  ASSERT_TRUE(report.ok());
+  ASSERT_EQ(report->problems.size(), 2u);
+  EXPECT_EQ(report->problems[1], "IPM-OLD v2: row changed after the v8 migration converted it to binary");
   store->reset();
   if (!path.empty()) {
     for (auto sfx : {"", "-wal", "-shm"}) fs::remove(path + sfx);
