@@ -280,6 +280,37 @@ TEST_P(MigrationTest, OldJsonRowsConvertAndStillVerify) {
   EXPECT_TRUE(report->problems.empty()) << report->problems.front();
   EXPECT_EQ(report->chained, 4);
 
+  // `fluxcal admin migrate` to the other backend carries the conversion
+  // records along: the copy verifies as the source does.
+  {
+    std::string copy_url, copy_path;
+    if (pg) {
+      copy_path = (fs::temp_directory_path() / ("fluxcal_codec_copy_" + std::to_string(::getpid()) + ".db")).string();
+      for (auto sfx : {"", "-wal", "-shm"}) fs::remove(copy_path + sfx);
+      copy_url = copy_path;
+    } else {
+      cluster = fluxcal::testing::SharedPgCluster(&why);
+      if (cluster != nullptr && cluster->CreateDatabase("codec_copy")) copy_url = cluster->Url("codec_copy");
+    }
+    if (!copy_url.empty()) {
+      auto copy = OpenStore(copy_url);
+      ASSERT_TRUE(copy.ok()) << copy.status();
+      auto moved = Migrate(**store, **copy);
+      ASSERT_TRUE(moved.ok()) << moved.status();
+      auto copied = storage::VerifyChains(**copy);
+      ASSERT_TRUE(copied.ok()) << copied.status();
+      EXPECT_TRUE(copied->problems.empty()) << copied->problems.front();
+      EXPECT_EQ(copied->converted, 2);
+      EXPECT_EQ(copied->chained, 4);
+      auto back = LoadCalibration(**copy, "IPM-OLD", 1);
+      ASSERT_TRUE(back.ok()) << back.status();
+      EXPECT_TRUE(EncodeCalibration(*back) == EncodeCalibration(*LoadCalibration(**store, "IPM-OLD", 1)));
+    }
+    if (!copy_path.empty()) {
+      for (auto sfx : {"", "-wal", "-shm"}) fs::remove(copy_path + sfx);
+    }
+  }
+
   // A converted row edited behind the service is found.
   if (pg) {
     ASSERT_TRUE(raw("ALTER TABLE calibrations DISABLE TRIGGER calibrations_no_update"));
