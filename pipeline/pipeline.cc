@@ -318,12 +318,13 @@ namespace {
 
 // Parsed calibrations, by serial and version, keyed on the version's chain
 // hash (storage::CalibrationRowSha256: SHA-256 over every stored field).
-// Parsing dominates a query once calibrations carry a smoothing spline's
-// 145 x 145 covariance (~0.5 MB of JSON: QueryFlux p50 went from 0.7 to
-// 8 ms), and so does moving that text out of PostgreSQL; stored rows never
-// change (append-only, hash-chained), so a hit needs only the tiny chain
-// link. Rows from before the chain (schema < 6) are compared by their
-// text instead. At most kCachedCalibrations entries, the least recently
+// Parsing dominated a query once calibrations carried a smoothing spline's
+// covariance as ~0.5 MB of JSON (QueryFlux p50 went from 0.7 to 8 ms);
+// since schema v8 a version is ~40 kB of binary that decodes in ~0.3 ms
+// (docs/performance.md), and a hit still saves moving it out of the
+// database: stored rows never change (append-only, hash-chained), so a hit
+// needs only the tiny chain link. Rows from before the chain (schema < 6)
+// are compared by their content instead. At most kCachedCalibrations entries, the least recently
 // used evicted.
 constexpr size_t kCachedCalibrations = 64;
 struct CachedCalibration {
