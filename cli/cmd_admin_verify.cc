@@ -50,6 +50,7 @@ int RunVerifyDb(const std::vector<std::string>& argv) {
     nlohmann::json j = {{"intact", intact},
                         {"chained", rep->chained},
                         {"unchained", rep->unchained},
+                        {"converted", rep->converted},
                         {"releases_chained", rep->releases_chained},
                         {"problems", rep->problems}};
     if (!anchor.empty()) {
@@ -60,6 +61,8 @@ int RunVerifyDb(const std::vector<std::string>& argv) {
   } else {
     std::printf("%s: %d calibration versions chained, %d from before the chain, %d releases chained", intact ? "intact" : "TAMPERED",
                 rep->chained, rep->unchained, rep->releases_chained);
+    // Versions the v8 migration converted to binary (docs/security.md).
+    if (rep->converted > 0) std::printf(" (%d versions checked through their v8 conversion record)", rep->converted);
     if (!anchor.empty()) std::printf(", %d anchored heads unchanged", rep->anchored);
     std::printf("%s\n", intact ? "" : ":");
     for (const auto& p : rep->problems) std::printf("  %s\n", p.c_str());

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
+#include <limits>
 #include <sstream>
 
 #include <Eigen/Dense>
@@ -21,8 +22,32 @@ Calibration::Calibration(std::string serial, Family family, std::vector<double> 
     : serial_(std::move(serial)), family_(family), params_(std::move(params)),
       covariance_(std::move(covariance)), pole_pairs_(pole_pairs), rs_ohm_(rs_ohm),
       id_min_a_(id_min_a), id_max_a_(id_max_a), iq_min_a_(iq_min_a), iq_max_a_(iq_max_a) {
+  RoundCovariance();
   if (family_.kind == Family::kSpline && static_cast<int>(params_.size()) == family_.NumParams()) {
     spline_ = SplineSurface(family_.spline, params_.data());
+  }
+}
+
+void Calibration::RoundCovariance() {
+  // The covariance is kept symmetric and at float precision (24-bit
+  // significand, ~7 significant digits): it only ever becomes standard
+  // deviations (Predict), and an uncertainty is not known to more than a
+  // few digits, so nothing is lost; what is gained is that the stored
+  // binary form (its upper triangle as float32, pipeline/calibration_codec.h)
+  // holds the calibration exactly, and JSON -> binary -> JSON reads back
+  // bit for bit. The fit and FromJson both construct through here: the one
+  // place this happens. Symmetric: the mean of (r, c) and (c, r), which is
+  // either of them when they agree; beyond the float range: +-inf.
+  const size_t n = params_.size();
+  if (covariance_.size() != n * n) return;
+  for (size_t r = 0; r < n; ++r) {
+    for (size_t c = r; c < n; ++c) {
+      const double m = 0.5 * (covariance_[r * n + c] + covariance_[c * n + r]);
+      const double f = std::abs(m) > std::numeric_limits<float>::max()
+                           ? std::copysign(std::numeric_limits<double>::infinity(), m)
+                           : static_cast<double>(static_cast<float>(m));
+      covariance_[r * n + c] = covariance_[c * n + r] = f;
+    }
   }
 }
 

@@ -2,7 +2,10 @@
 // of one motor serial, their parameter covariance and the measured region.
 // Implements sim::MagneticModel, so the twin can replay it and the table
 // generators can use it directly. Serialises to JSON and back exactly
-// (format "fluxcal.calibration.v1"; doubles written with 17 digits).
+// (format "fluxcal.calibration.v1"; doubles written with 17 digits). The
+// parameter covariance is held at float precision (symmetric, each entry
+// rounded to float when the calibration is constructed: by the fit and by
+// FromJson), so its binary form (pipeline/calibration_codec.h) is exact.
 //
 // It carries what the set (or the flags of `fluxcal fit`) stated about the
 // machine and drive: pole pairs (always known: a fit refuses without
@@ -171,6 +174,9 @@ class Calibration : public sim::MagneticModel {
   static absl::StatusOr<Calibration> FromJson(const nlohmann::json& j);
 
  private:
+  // The covariance made symmetric and rounded to float (calibration.cc says why).
+  void RoundCovariance();
+
   std::string serial_;
   Family family_;
   std::vector<double> params_, covariance_;

@@ -12,6 +12,7 @@
 #include "absl/strings/str_join.h"
 #include "absl/strings/str_format.h"
 #include "nlohmann/json.hpp"
+#include "pipeline/calibration_codec.h"
 #include "pipeline/ingest_stream.h"
 #include "pipeline/recording_archive.h"
 #include "io/sha256.h"
@@ -293,7 +294,9 @@ absl::StatusOr<storage::CalibrationRow> FitSerial(storage::Store& store, const s
   row.rms_relative = cal->summary.rms_relative;
   row.verdict = Verdict(*cal, motor->psi_pm_wb > 0 ? std::optional<double>(motor->psi_pm_wb) : std::nullopt,
                         pts->size(), unreliable, tol);
-  row.calibration_json = cal->ToJson().dump();
+  // Stored as the binary model (pipeline/calibration_codec.h); the JSON is
+  // its view (StoredRowView).
+  row.model_pb = EncodeCalibration(*cal);
   // An audit row without its own detail says what was stored.
   storage::AuditContext fit_audit;
   if (audit != nullptr) {
@@ -306,7 +309,7 @@ absl::StatusOr<storage::CalibrationRow> FitSerial(storage::Store& store, const s
   }
   auto version = store.AddCalibration(row, audit != nullptr ? &fit_audit : nullptr);
   if (!version.ok()) return version.status();
-  return store.GetCalibration(serial, *version);
+  return StoredRowView(store, serial, *version);
 }
 
 // ---------------------------------------------------------------- read
@@ -315,12 +318,13 @@ namespace {
 
 // Parsed calibrations, by serial and version, keyed on the version's chain
 // hash (storage::CalibrationRowSha256: SHA-256 over every stored field).
-// Parsing dominates a query once calibrations carry a smoothing spline's
-// 145 x 145 covariance (~0.5 MB of JSON: QueryFlux p50 went from 0.7 to
-// 8 ms), and so does moving that text out of PostgreSQL; stored rows never
-// change (append-only, hash-chained), so a hit needs only the tiny chain
-// link. Rows from before the chain (schema < 6) are compared by their
-// text instead. At most kCachedCalibrations entries, the least recently
+// Parsing dominated a query once calibrations carried a smoothing spline's
+// covariance as ~0.5 MB of JSON (QueryFlux p50 went from 0.7 to 8 ms);
+// since schema v8 a version is ~40 kB of binary that decodes in ~0.3 ms
+// (docs/performance.md), and a hit still saves moving it out of the
+// database: stored rows never change (append-only, hash-chained), so a hit
+// needs only the tiny chain link. Rows from before the chain (schema < 6)
+// are compared by their content instead. At most kCachedCalibrations entries, the least recently
 // used evicted.
 constexpr size_t kCachedCalibrations = 64;
 struct CachedCalibration {
@@ -369,7 +373,8 @@ absl::StatusOr<fit::Calibration> LoadCalibration(storage::Store& store, const st
   if (!row.ok()) return row.status();
   const bool chained = link.ok() && link->version == row->version;
   const std::string content =
-      chained ? absl::StrCat(store.Backend(), ":", link->row_sha256) : row->calibration_json;
+      chained ? absl::StrCat(store.Backend(), ":", link->row_sha256)
+              : (row->model_pb.empty() ? row->calibration_json : row->model_pb);
   if (!chained) {
     if (auto hit = CacheLookup({serial, row->version}, content)) return *hit;
   }
@@ -413,6 +418,15 @@ absl::StatusOr<fit::Calibration> ParseCalibrationJson(const nlohmann::json& j) {
 const char* FluxRegionName(fit::Region region) { return fit::RegionName(region); }
 
 absl::StatusOr<fit::Calibration> ParseStoredCalibration(const storage::CalibrationRow& stored) {
+  if (!stored.model_pb.empty()) {
+    auto cal = DecodeCalibration(stored.model_pb);
+    if (!cal.ok()) {
+      return absl::DataLossError(
+          absl::StrCat("stored calibration of ", stored.serial, " is corrupt: ", cal.status().message()));
+    }
+    cal->version = stored.version;   // the version it is stored under
+    return cal;
+  }
   const storage::CalibrationRow* row = &stored;
   const std::string& serial = stored.serial;
   nlohmann::json j;
@@ -437,9 +451,18 @@ absl::StatusOr<QueryResult> QueryFlux(storage::Store& store, const std::string& 
   return out;
 }
 
+absl::StatusOr<storage::CalibrationRow> StoredRowView(storage::Store& store, const std::string& serial, int version) {
+  auto row = store.GetCalibration(serial, version);
+  if (!row.ok()) return row.status();
+  auto text = StoredCalibrationJsonText(*row);
+  if (!text.ok()) return text.status();
+  row->calibration_json = std::move(*text);
+  return row;
+}
+
 absl::StatusOr<storage::CalibrationRow> GetCalibrationRecord(storage::Store& store, const std::string& serial,
                                                              int version) {
-  return store.GetCalibration(serial, version);
+  return StoredRowView(store, serial, version);
 }
 
 absl::StatusOr<MotorPage> ListMotorsPage(storage::Store& store, const std::string& prefix, bool only_failed,
@@ -491,10 +514,7 @@ absl::StatusOr<std::vector<FleetPoint>> FleetStatistics(storage::Store& store,
   std::vector<std::pair<std::string, fit::Calibration>> cals;
   for (const auto& r : *rows) {
     if (cancelled && cancelled()) return absl::CancelledError("fleet statistics: cancelled by the caller");
-    nlohmann::json j = nlohmann::json::parse(r.calibration_json, nullptr, false);
-    if (j.is_discarded()) continue;
-    j["version"] = r.version;
-    auto c = fit::Calibration::FromJson(j);
+    auto c = ParseStoredCalibration(r);
     if (c.ok()) cals.push_back({r.serial, std::move(*c)});
   }
   std::vector<FleetPoint> out;
@@ -560,7 +580,10 @@ absl::StatusOr<storage::CalibrationRow> StoreDiagnosedCalibration(storage::Store
   row.rms_relative = cal->summary.rms_relative;
   row.verdict = Verdict(*cal, motor->psi_pm_wb > 0 ? std::optional<double>(motor->psi_pm_wb) : std::nullopt,
                         report.corrected_data.inductances.size(), 0, tol);
-  row.calibration_json = diag::MarkedCalibrationJson(report, *cal).dump();
+  // The diagnosis block travels in the binary model's extra_json.
+  auto model = CalibrationJsonToModel(diag::MarkedCalibrationJson(report, *cal).dump());
+  if (!model.ok()) return model.status();
+  row.model_pb = std::move(*model);
   storage::AuditContext a;
   if (audit != nullptr) {
     a = *audit;
@@ -573,7 +596,7 @@ absl::StatusOr<storage::CalibrationRow> StoreDiagnosedCalibration(storage::Store
   }
   auto version = store.AddCalibration(row, audit != nullptr ? &a : nullptr);
   if (!version.ok()) return version.status();
-  return store.GetCalibration(serial, *version);
+  return StoredRowView(store, serial, *version);
 }
 
 absl::StatusOr<diag::DiagnosisReport> DiagnoseStored(storage::Store& store, const std::string& serial,
@@ -626,7 +649,9 @@ absl::StatusOr<std::string> ContentHash(storage::Store& store) {
     absl::StrAppend(&dump, "calibration\t", c.serial, "\t", c.version, "\t", c.run_id, "\t", c.created_utc, "\t",
                     c.model, "\t");
     d(c.psi_pm_wb); d(c.rms_relative);
-    absl::StrAppend(&dump, c.verdict, "\t", io::Sha256Hex(c.calibration_json), "\n");
+    // The content as stored: the binary model, or the JSON of a version
+    // the v8 migration left as JSON.
+    absl::StrAppend(&dump, c.verdict, "\t", io::Sha256Hex(c.calibration_json), "\t", io::Sha256Hex(c.model_pb), "\n");
   }
   // Text fields are length-prefixed: free text (audit detail) may hold tabs.
   auto t = [&](const std::string& v) { absl::StrAppend(&dump, v.size(), ":", v, "\t"); };
@@ -708,6 +733,9 @@ absl::StatusOr<MigrateResult> Migrate(storage::Store& from, storage::Store& to) 
   auto release_chain = from.AllReleaseLinks();
   if (!release_chain.ok()) return release_chain.status();
   if (auto s = to.ImportTrail(*releases, *audit, *chain, *release_chain); !s.ok()) return s;
+  auto conversions = from.AllConversions();
+  if (!conversions.ok()) return conversions.status();
+  if (auto s = to.ImportConversions(*conversions); !s.ok()) return s;
   out.releases = static_cast<int>(releases->size());
   out.audit_rows = static_cast<int>(audit->size());
   out.chain_links = static_cast<int>(chain->size());

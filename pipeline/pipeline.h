@@ -134,7 +134,14 @@ absl::StatusOr<QueryResult> QueryFlux(storage::Store& store, const std::string& 
 
 // --- Records: what the store holds about a serial, as the service's reads
 // return it.
-// Calibration `version` of `serial` (0: the latest) as stored.
+// A stored version with its JSON view: calibration_json holds the JSON
+// (fluxcal.calibration.v1) of the binary model the row stores
+// (pipeline/calibration_codec.h), or the JSON as stored for a version the
+// v8 migration left as JSON. FitSerial and StoreDiagnosedCalibration return
+// this too: the service's replies and `fluxcal query` show JSON.
+absl::StatusOr<storage::CalibrationRow> StoredRowView(storage::Store& store, const std::string& serial, int version);
+// Calibration `version` of `serial` (0: the latest) as stored, with its
+// JSON view (StoredRowView).
 absl::StatusOr<storage::CalibrationRow> GetCalibrationRecord(storage::Store& store, const std::string& serial,
                                                              int version);
 // One page of the motor list: at most `page_size` motors from `offset`

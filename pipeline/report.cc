@@ -7,6 +7,7 @@
 #include "absl/strings/str_cat.h"
 #include "diagnosis/diagnose.h"
 #include "io/sha256.h"
+#include "pipeline/calibration_codec.h"
 #include "pipeline/points.h"
 #include "tables/tables.h"
 
@@ -168,11 +169,9 @@ absl::StatusOr<StoredReport> BuildStoredReport(storage::Store& store, const std:
   if (!row.ok()) return row.status();
   auto released = store.IsReleased(serial, row->version);
   if (!released.ok()) return released.status();
-  nlohmann::json j = nlohmann::json::parse(row->calibration_json, nullptr, false);
-  if (j.is_discarded() || !j.is_object()) {
-    return absl::DataLossError(
-        absl::StrCat("stored calibration of ", serial, " version ", row->version, " is corrupt: not a JSON object"));
-  }
+  auto stored = StoredCalibrationJson(*row);
+  if (!stored.ok()) return stored.status();
+  nlohmann::json j = std::move(*stored);
   MergeStoredProvenance(row->version, row->created_utc, row->verdict, *released, &j);
   auto cal = fit::Calibration::FromJson(j);
   if (!cal.ok()) {

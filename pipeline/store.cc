@@ -1,5 +1,6 @@
 #include "pipeline/store.h"
 
+#include "pipeline/calibration_codec.h"
 #include "storage/sqlite_store.h"
 
 namespace fluxcal::pipeline {
@@ -7,11 +8,13 @@ namespace fluxcal::pipeline {
 absl::StatusOr<std::unique_ptr<storage::Store>> OpenStore(const std::string& url, bool create) {
   storage::Store::OpenOptions options;
   options.create = create;
+  // The v8 migration converts stored JSON with the calibration codec.
+  options.json_to_model = CalibrationJsonToModel;
   return storage::Store::Open(url, options);
 }
 
 absl::StatusOr<std::unique_ptr<storage::Store>> BackupSqliteStore(const std::string& path, const std::string& out) {
-  auto store = storage::SqliteStore::Open(path, /*create=*/false);
+  auto store = storage::SqliteStore::Open(path, /*create=*/false, CalibrationJsonToModel);
   if (!store.ok()) return store.status();
   if (auto st = (*store)->Backup(out); !st.ok()) return st;
   return std::unique_ptr<storage::Store>(std::move(*store));

@@ -148,10 +148,34 @@ CREATE TRIGGER release_chain_no_truncate BEFORE TRUNCATE ON release_chain
 CREATE TRIGGER chain_no_truncate BEFORE TRUNCATE ON calibration_chain
   FOR EACH STATEMENT EXECUTE FUNCTION fluxcal_chain_append_only();
 )sql",
+    // v8: calibration versions stored as the binary fitted model
+    // (fluxcal.v1.CalibrationModel) instead of decimal JSON; the versions
+    // already stored are converted by the migration itself
+    // (PostgresStore::Migrate, ConvertStoredJson), each with its record.
+    // model_pb is stored as is (STORAGE EXTERNAL: the binary does not
+    // compress, so TOAST need not try).
+    R"sql(
+ALTER TABLE calibrations ADD COLUMN model_pb BYTEA;
+ALTER TABLE calibrations ALTER COLUMN model_pb SET STORAGE EXTERNAL;
+CREATE TABLE calibration_conversions (
+  serial TEXT NOT NULL,
+  version INTEGER NOT NULL,
+  json_sha256 TEXT NOT NULL,
+  row_sha256 TEXT NOT NULL,
+  converted_utc TEXT NOT NULL,
+  PRIMARY KEY (serial, version),
+  FOREIGN KEY (serial, version) REFERENCES calibrations(serial, version));
+CREATE TRIGGER conversions_no_update BEFORE UPDATE OR DELETE ON calibration_conversions
+  FOR EACH ROW EXECUTE FUNCTION fluxcal_chain_append_only();
+CREATE TRIGGER conversions_no_truncate BEFORE TRUNCATE ON calibration_conversions
+  FOR EACH STATEMENT EXECUTE FUNCTION fluxcal_chain_append_only();
+)sql",
 };
 
 // The migration after which releases are chained.
 constexpr int kReleaseChainVersion = 7;
+// The migration that converts stored JSON to the binary model.
+constexpr int kBinaryModelVersion = 8;
 
 // Any constants: the advisory locks that serialise migrations, and appends
 // to the one release chain, across servers.
@@ -174,6 +198,8 @@ Param I(int64_t v) { return {std::to_string(v), false}; }
 Param D(double v) { return {absl::StrFormat("%.17g", v), false}; }
 Param Null() { return {std::nullopt, false}; }
 Param B(const std::vector<uint8_t>& b) { return {std::string(b.begin(), b.end()), true}; }
+// A bytea from a string of bytes; NULL when empty.
+Param BytesOrNull(const std::string& b) { return b.empty() ? Param{std::nullopt, false} : Param{b, true}; }
 
 absl::Status PgError(PGconn* c, const PGresult* r, std::string_view what) {
   const char* state = r ? PQresultErrorField(r, PG_DIAG_SQLSTATE) : nullptr;
@@ -221,14 +247,41 @@ bool IsNull(const PGresult* r, int row, int col) { return PQgetisnull(r, row, co
 
 constexpr char kCalCols[] =
     "SELECT serial, version, COALESCE(run_id, 0), created_utc, model, psi_pm_wb, rms_relative, verdict, "
-    "calibration_json FROM calibrations ";
+    "calibration_json, model_pb FROM calibrations ";
+
+// A bytea column of a text-format result (hex, "\\x0a1b..").
+std::string Bytes(const PGresult* r, int row, int col) {
+  if (IsNull(r, row, col)) return std::string();
+  size_t n = 0;
+  unsigned char* b = PQunescapeBytea(reinterpret_cast<const unsigned char*>(PQgetvalue(r, row, col)), &n);
+  if (b == nullptr) return std::string();
+  std::string out(reinterpret_cast<const char*>(b), n);
+  PQfreemem(b);
+  return out;
+}
 
 CalibrationRow ReadCal(const PGresult* r, int i) {
   CalibrationRow c;
   c.serial = Text(r, i, 0); c.version = static_cast<int>(Int(r, i, 1)); c.run_id = Int(r, i, 2);
   c.created_utc = Text(r, i, 3); c.model = Text(r, i, 4); c.psi_pm_wb = Double(r, i, 5);
   c.rms_relative = Double(r, i, 6); c.verdict = Text(r, i, 7); c.calibration_json = Text(r, i, 8);
+  c.model_pb = Bytes(r, i, 9);
   return c;
+}
+
+constexpr char kConversionCols[] =
+    "SELECT serial, version, json_sha256, row_sha256, converted_utc FROM calibration_conversions ";
+
+ConversionRow ReadConversion(const PGresult* r, int i) {
+  return {Text(r, i, 0), static_cast<int>(Int(r, i, 1)), Text(r, i, 2), Text(r, i, 3), Text(r, i, 4)};
+}
+
+absl::Status InsertConversion(PGconn* c, const ConversionRow& x) {
+  return Exec(c,
+              "INSERT INTO calibration_conversions (serial, version, json_sha256, row_sha256, converted_utc) "
+              "VALUES ($1,$2,$3,$4,$5)",
+              {T(x.serial), I(x.version), T(x.json_sha256), T(x.row_sha256), T(x.converted_utc)})
+      .status();
 }
 
 // COPY text format: backslash, tab, newline and carriage return escaped.
@@ -339,12 +392,62 @@ absl::Status AppendReleaseLink(PGconn* c, const ReleaseRow& r) {
       .status();
 }
 
+// The v8 migration's data step inside the migration's transaction on `c`:
+// every version stored as JSON converted where ConvertStoredJson allows,
+// with its record and one audit row (SqliteStore::ConvertStoredJsonLocked
+// is the same on SQLite).
+absl::Status ConvertStoredJsonIn(PGconn* c, const JsonToModelFn& json_to_model) {
+  auto keys = Exec(c, "SELECT serial, version FROM calibrations ORDER BY serial COLLATE \"C\", version");
+  if (!keys.ok()) return keys.status();
+  const int n = PQntuples(keys->get());
+  if (n == 0 || !json_to_model) return absl::OkStatus();
+  // Versions are immutable; the migration is the one sanctioned rewrite,
+  // its trigger off only inside this transaction.
+  if (auto r = Exec(c, "ALTER TABLE calibrations DISABLE TRIGGER calibrations_no_update"); !r.ok()) return r.status();
+  const std::string now = NowUtc();
+  const std::string sql = absl::StrCat(kCalCols, "WHERE serial = $1 AND version = $2");
+  int converted = 0;
+  std::string digest;
+  for (int i = 0; i < n; ++i) {
+    const std::string serial = Text(keys->get(), i, 0);
+    const int64_t version = Int(keys->get(), i, 1);
+    auto q = Exec(c, sql.c_str(), {T(serial), I(version)});
+    if (!q.ok()) return q.status();
+    if (PQntuples(q->get()) == 0) continue;
+    const CalibrationRow row = ReadCal(q->get(), 0);
+    auto l = Exec(c, "SELECT serial, version, prev_sha256, row_sha256 FROM calibration_chain "
+                     "WHERE serial = $1 AND version = $2",
+                  {T(serial), I(version)});
+    if (!l.ok()) return l.status();
+    std::optional<ChainRow> link;
+    if (PQntuples(l->get()) > 0) {
+      link = ChainRow{Text(l->get(), 0, 0), static_cast<int>(Int(l->get(), 0, 1)), Text(l->get(), 0, 2),
+                      Text(l->get(), 0, 3)};
+    }
+    auto conv = ConvertStoredJson(row, link ? &*link : nullptr, json_to_model, now);
+    if (!conv) continue;
+    if (auto r = Exec(c, "UPDATE calibrations SET calibration_json = '', model_pb = $1 WHERE serial = $2 AND version = $3",
+                      {BytesOrNull(conv->row.model_pb), T(serial), I(version)});
+        !r.ok()) {
+      return r.status();
+    }
+    if (auto st = InsertConversion(c, conv->record); !st.ok()) return st;
+    const ConversionRow& x = conv->record;
+    absl::StrAppend(&digest, x.serial, "\t", x.version, "\t", x.json_sha256, "\t", x.row_sha256, "\n");
+    ++converted;
+  }
+  if (auto r = Exec(c, "ALTER TABLE calibrations ENABLE TRIGGER calibrations_no_update"); !r.ok()) return r.status();
+  AuditContext audit;
+  audit.row = {0, "", "fluxcal", "admin", "", "", "migrate", "", ConversionAuditDetail(converted, n, digest)};
+  return InsertAudit(c, &audit, 0, false);
+}
+
 }  // namespace
 
 const std::vector<std::string>& PostgresMigrations() { return kPostgresMigrations; }
 
 absl::StatusOr<std::unique_ptr<PostgresStore>> PostgresStore::Open(const std::string& url_in, int max_connections,
-                                                                   bool create) {
+                                                                   bool create, JsonToModelFn json_to_model) {
   // A database that does not answer must fail a call, not hang it: bound
   // the connect unless the URI says otherwise.
   std::string url = url_in;
@@ -352,7 +455,7 @@ absl::StatusOr<std::unique_ptr<PostgresStore>> PostgresStore::Open(const std::st
     url += url.find('?') == std::string::npos ? "?connect_timeout=5" : "&connect_timeout=5";
   }
   std::unique_ptr<PostgresStore> s(new PostgresStore(url, std::max(1, max_connections)));
-  if (auto st = s->Migrate(create); !st.ok()) return st;
+  if (auto st = s->Migrate(create, json_to_model); !st.ok()) return st;
   return s;
 }
 
@@ -417,7 +520,7 @@ absl::Status PostgresStore::WithTransaction(const std::function<absl::Status(PGc
   });
 }
 
-absl::Status PostgresStore::Migrate(bool create) {
+absl::Status PostgresStore::Migrate(bool create, const JsonToModelFn& json_to_model) {
   return WithTransaction([&](PGconn* c) -> absl::Status {
     if (auto r = Exec(c, "SELECT pg_advisory_xact_lock($1)", {I(kMigrationLock)}); !r.ok()) return r.status();
     if (!create) {
@@ -450,6 +553,9 @@ absl::Status PostgresStore::Migrate(bool create) {
                                Text(q->get(), i, 3)};
           if (auto st = AppendReleaseLink(c, row); !st.ok()) return st;
         }
+      }
+      if (v + 1 == kBinaryModelVersion) {
+        if (auto st = ConvertStoredJsonIn(c, json_to_model); !st.ok()) return st;
       }
       if (auto r = Exec(c, "INSERT INTO schema_version (version) VALUES ($1)", {I(v + 1)}); !r.ok()) return r.status();
     }
@@ -742,9 +848,10 @@ absl::StatusOr<int> PostgresStore::AddCalibration(const CalibrationRow& cr, cons
     row.created_utc = NowUtc();
     auto ins = Exec(c,
                     "INSERT INTO calibrations (serial, version, run_id, created_utc, model, psi_pm_wb, rms_relative, "
-                    "verdict, calibration_json) VALUES ($1,$2,$3,$4,$5,$6,$7,$8,$9)",
+                    "verdict, calibration_json, model_pb) VALUES ($1,$2,$3,$4,$5,$6,$7,$8,$9,$10)",
                     {T(cr.serial), I(version), cr.run_id ? I(cr.run_id) : Null(), T(row.created_utc), T(cr.model),
-                     D(cr.psi_pm_wb), D(cr.rms_relative), T(cr.verdict), T(cr.calibration_json)});
+                     D(cr.psi_pm_wb), D(cr.rms_relative), T(cr.verdict), T(cr.calibration_json),
+                     BytesOrNull(cr.model_pb)});
     if (!ins.ok()) return ins.status();
     auto prev = Exec(c, "SELECT row_sha256 FROM calibration_chain WHERE serial = $1 ORDER BY version DESC LIMIT 1",
                      {T(cr.serial)});
@@ -974,11 +1081,47 @@ absl::Status PostgresStore::ImportCalibration(const CalibrationRow& cr) {
   return WithTransaction([&](PGconn* c) -> absl::Status {
     return Exec(c,
                 "INSERT INTO calibrations (serial, version, run_id, created_utc, model, psi_pm_wb, rms_relative, "
-                "verdict, calibration_json) VALUES ($1,$2,$3,$4,$5,$6,$7,$8,$9)",
+                "verdict, calibration_json, model_pb) VALUES ($1,$2,$3,$4,$5,$6,$7,$8,$9,$10)",
                 {T(cr.serial), I(cr.version), cr.run_id ? I(cr.run_id) : Null(), T(cr.created_utc), T(cr.model),
-                 D(cr.psi_pm_wb), D(cr.rms_relative), T(cr.verdict), T(cr.calibration_json)})
+                 D(cr.psi_pm_wb), D(cr.rms_relative), T(cr.verdict), T(cr.calibration_json),
+                 BytesOrNull(cr.model_pb)})
         .status();
   });
+}
+
+absl::Status PostgresStore::ImportConversions(const std::vector<ConversionRow>& conversions) {
+  return WithTransaction([&](PGconn* c) -> absl::Status {
+    for (const auto& x : conversions) {
+      if (auto st = InsertConversion(c, x); !st.ok()) return st;
+    }
+    return absl::OkStatus();
+  });
+}
+
+absl::StatusOr<std::vector<ConversionRow>> PostgresStore::AllConversions() {
+  std::vector<ConversionRow> out;
+  auto st = WithConn([&](PGconn* c) -> absl::Status {
+    const std::string sql = absl::StrCat(kConversionCols, "ORDER BY serial COLLATE \"C\", version");
+    auto q = Exec(c, sql.c_str());
+    if (!q.ok()) return q.status();
+    for (int i = 0; i < PQntuples(q->get()); ++i) out.push_back(ReadConversion(q->get(), i));
+    return absl::OkStatus();
+  });
+  if (!st.ok()) return st;
+  return out;
+}
+
+absl::StatusOr<std::optional<ConversionRow>> PostgresStore::Conversion(const std::string& serial, int version) {
+  std::optional<ConversionRow> out;
+  auto st = WithConn([&](PGconn* c) -> absl::Status {
+    const std::string sql = absl::StrCat(kConversionCols, "WHERE serial = $1 AND version = $2");
+    auto q = Exec(c, sql.c_str(), {T(serial), I(version)});
+    if (!q.ok()) return q.status();
+    if (PQntuples(q->get()) > 0) out = ReadConversion(q->get(), 0);
+    return absl::OkStatus();
+  });
+  if (!st.ok()) return st;
+  return out;
 }
 
 absl::StatusOr<std::vector<ReleaseRow>> PostgresStore::AllReleases() {

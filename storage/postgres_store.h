@@ -32,7 +32,7 @@ class PostgresStore final : public Store {
   // `create` false: the database must hold a fluxcal store already
   // (Store::OpenOptions).
   static absl::StatusOr<std::unique_ptr<PostgresStore>> Open(const std::string& url, int max_connections = 16,
-                                                             bool create = true);
+                                                             bool create = true, JsonToModelFn json_to_model = {});
   ~PostgresStore() override;
 
   std::string Backend() const override { return "postgresql"; }
@@ -55,6 +55,9 @@ class PostgresStore final : public Store {
   absl::StatusOr<std::vector<AuditRow>> AuditOf(const std::string& serial) override;
   absl::StatusOr<std::vector<ChainRow>> AllChainRows() override;
   absl::StatusOr<ChainRow> ChainLink(const std::string& serial, int version) override;
+  absl::StatusOr<std::vector<ConversionRow>> AllConversions() override;
+  absl::StatusOr<std::optional<ConversionRow>> Conversion(const std::string& serial, int version) override;
+  absl::Status ImportConversions(const std::vector<ConversionRow>& conversions) override;
   absl::StatusOr<std::vector<HfPointRow>> LatestRunPoints(const std::string& serial, int64_t* run_id) override;
   absl::StatusOr<int> AddCalibration(const CalibrationRow& row, const AuditContext* audit = nullptr) override;
   absl::StatusOr<CalibrationRow> GetCalibration(const std::string& serial, int version) override;
@@ -88,7 +91,7 @@ class PostgresStore final : public Store {
   absl::Status WithConn(const std::function<absl::Status(PGconn*)>& fn);
   // BEGIN ... COMMIT around fn; ROLLBACK when fn fails.
   absl::Status WithTransaction(const std::function<absl::Status(PGconn*)>& fn);
-  absl::Status Migrate(bool create);
+  absl::Status Migrate(bool create, const JsonToModelFn& json_to_model);
   absl::StatusOr<std::vector<ReleaseLinkRow>> ReleaseLinks(const std::string& where, const std::vector<std::string>& args);
 
   std::string url_;

@@ -130,16 +130,45 @@ CREATE TRIGGER release_chain_no_update BEFORE UPDATE ON release_chain
 CREATE TRIGGER release_chain_no_delete BEFORE DELETE ON release_chain
   BEGIN SELECT RAISE(ABORT, 'the release chain is append-only'); END;
 )sql",
+    // v8: calibration versions stored as the binary fitted model
+    // (fluxcal.v1.CalibrationModel, ~45 kB for the largest family) instead
+    // of decimal JSON (0.3-0.5 MB); calibration_json stays for versions
+    // stored before and not converted ('' for the others). The migration
+    // converts the versions already stored (SqliteStore::Migrate,
+    // ConvertStoredJson) and records each conversion: the JSON its chain
+    // link hashed is gone, the record links the converted row to that link.
+    R"sql(
+ALTER TABLE calibrations ADD COLUMN model_pb BLOB;
+CREATE TABLE calibration_conversions (
+  serial TEXT NOT NULL,
+  version INTEGER NOT NULL,
+  json_sha256 TEXT NOT NULL,
+  row_sha256 TEXT NOT NULL,
+  converted_utc TEXT NOT NULL,
+  PRIMARY KEY (serial, version),
+  FOREIGN KEY (serial, version) REFERENCES calibrations(serial, version));
+CREATE TRIGGER conversions_no_update BEFORE UPDATE ON calibration_conversions
+  BEGIN SELECT RAISE(ABORT, 'the conversion records are append-only'); END;
+CREATE TRIGGER conversions_no_delete BEFORE DELETE ON calibration_conversions
+  BEGIN SELECT RAISE(ABORT, 'the conversion records are append-only'); END;
+)sql",
 };
 
 // The migration after which releases are chained.
 constexpr int kReleaseChainVersion = 7;
+// The migration that converts stored JSON to the binary model.
+constexpr int kBinaryModelVersion = 8;
+
+SqlValue BlobOrNull(const std::string& bytes) {
+  return bytes.empty() ? SqlValue(nullptr) : SqlValue(std::vector<uint8_t>(bytes.begin(), bytes.end()));
+}
 
 }  // namespace
 
 const std::vector<std::string>& SqliteMigrations() { return kSqliteMigrations; }
 
-absl::StatusOr<std::unique_ptr<SqliteStore>> SqliteStore::Open(const std::string& path, bool create) {
+absl::StatusOr<std::unique_ptr<SqliteStore>> SqliteStore::Open(const std::string& path, bool create,
+                                                               JsonToModelFn json_to_model) {
   // A read-only caller's path must already be a fluxcal store.
   auto db = Database::Open(path, create, create ? "" : "schema_version");
   if (!db.ok() && !create && db.status().code() == absl::StatusCode::kNotFound &&
@@ -148,11 +177,11 @@ absl::StatusOr<std::unique_ptr<SqliteStore>> SqliteStore::Open(const std::string
   }
   if (!db.ok()) return db.status();
   std::unique_ptr<SqliteStore> s(new SqliteStore(path, std::move(*db)));
-  if (auto st = s->Migrate(); !st.ok()) return st;
+  if (auto st = s->Migrate(json_to_model); !st.ok()) return st;
   return s;
 }
 
-absl::Status SqliteStore::Migrate() {
+absl::Status SqliteStore::Migrate(const JsonToModelFn& json_to_model) {
   std::lock_guard<std::mutex> lock(write_mu_);
   if (auto st = writer_->Exec("CREATE TABLE IF NOT EXISTS schema_version (version INTEGER NOT NULL)"); !st.ok()) return st;
   return writer_->Transaction([&]() -> absl::Status {
@@ -182,6 +211,9 @@ absl::Status SqliteStore::Migrate() {
         for (const auto& r : existing) {
           if (auto st = AppendReleaseLinkLocked(r); !st.ok()) return st;
         }
+      }
+      if (v + 1 == kBinaryModelVersion) {
+        if (auto st = ConvertStoredJsonLocked(json_to_model); !st.ok()) return st;
       }
       auto ins = writer_->Prepare("INSERT INTO schema_version (version) VALUES (?)");
       if (!ins.ok()) return ins.status();
@@ -293,19 +325,9 @@ absl::Status SqliteStore::AppendReleaseLinkLocked(const ReleaseRow& r) {
   if (*lr) {
     calibration_sha = l->Text(0);
   } else {
-    auto c = writer_->Prepare(
-        "SELECT serial, version, COALESCE(run_id, 0), created_utc, model, psi_pm_wb, rms_relative, verdict, "
-        "calibration_json FROM calibrations WHERE serial = ? AND version = ?");
-    if (!c.ok()) return c.status();
-    if (auto s = c->BindAll({r.serial, int64_t{r.version}}); !s.ok()) return s;
-    auto cr = c->Step();
-    if (!cr.ok()) return cr.status();
-    if (!*cr) return absl::NotFoundError(absl::StrCat("serial '", r.serial, "' has no calibration version ", r.version));
-    CalibrationRow row;
-    row.serial = c->Text(0); row.version = static_cast<int>(c->Int(1)); row.run_id = c->Int(2);
-    row.created_utc = c->Text(3); row.model = c->Text(4); row.psi_pm_wb = c->Double(5);
-    row.rms_relative = c->Double(6); row.verdict = c->Text(7); row.calibration_json = c->Text(8);
-    calibration_sha = VersionSha256(row, nullptr);
+    auto row = CalibrationLocked(r.serial, r.version);
+    if (!row.ok()) return row.status();
+    calibration_sha = VersionSha256(*row, nullptr);
   }
   // BEGIN IMMEDIATE holds the file's write lock: the newest link cannot
   // move under us, also across processes.
@@ -505,10 +527,11 @@ absl::StatusOr<int> SqliteStore::AddCalibration(const CalibrationRow& c, const A
     row.created_utc = NowUtc();
     auto ins = writer_->Prepare(
         "INSERT INTO calibrations (serial, version, run_id, created_utc, model, psi_pm_wb, rms_relative, verdict, "
-        "calibration_json) VALUES (?,?,?,?,?,?,?,?,?)");
+        "calibration_json, model_pb) VALUES (?,?,?,?,?,?,?,?,?,?)");
     if (!ins.ok()) return ins.status();
     if (auto s = ins->BindAll({c.serial, int64_t{version}, c.run_id ? SqlValue(c.run_id) : SqlValue(nullptr),
-                               row.created_utc, c.model, c.psi_pm_wb, c.rms_relative, c.verdict, c.calibration_json});
+                               row.created_utc, c.model, c.psi_pm_wb, c.rms_relative, c.verdict, c.calibration_json,
+                               BlobOrNull(c.model_pb)});
         !s.ok()) {
       return s;
     }
@@ -538,12 +561,140 @@ CalibrationRow ReadCal(const Statement& q) {
   c.serial = q.Text(0); c.version = static_cast<int>(q.Int(1)); c.run_id = q.Int(2);
   c.created_utc = q.Text(3); c.model = q.Text(4); c.psi_pm_wb = q.Double(5);
   c.rms_relative = q.Double(6); c.verdict = q.Text(7); c.calibration_json = q.Text(8);
+  if (!q.IsNull(9)) {
+    const auto b = q.Blob(9);
+    c.model_pb.assign(b.begin(), b.end());
+  }
   return c;
 }
 constexpr char kCalCols[] =
     "SELECT serial, version, COALESCE(run_id, 0), created_utc, model, psi_pm_wb, rms_relative, verdict, "
-    "calibration_json FROM calibrations ";
+    "calibration_json, model_pb FROM calibrations ";
 }  // namespace
+
+absl::StatusOr<CalibrationRow> SqliteStore::CalibrationLocked(const std::string& serial, int version) {
+  auto c = writer_->Prepare(absl::StrCat(kCalCols, "WHERE serial = ? AND version = ?"));
+  if (!c.ok()) return c.status();
+  if (auto s = c->BindAll({serial, int64_t{version}}); !s.ok()) return s;
+  auto cr = c->Step();
+  if (!cr.ok()) return cr.status();
+  if (!*cr) return absl::NotFoundError(absl::StrCat("serial '", serial, "' has no calibration version ", version));
+  return ReadCal(*c);
+}
+
+absl::Status SqliteStore::ConvertStoredJsonLocked(const JsonToModelFn& json_to_model) {
+  // Inside the migration's transaction. The keys first (rows are read and
+  // converted one at a time: a fleet's JSON need not fit in memory).
+  std::vector<std::pair<std::string, int64_t>> keys;
+  {
+    auto q = writer_->Prepare("SELECT serial, version FROM calibrations ORDER BY serial, version");
+    if (!q.ok()) return q.status();
+    while (true) {
+      auto r = q->Step();
+      if (!r.ok()) return r.status();
+      if (!*r) break;
+      keys.push_back({q->Text(0), q->Int(1)});
+    }
+  }
+  if (keys.empty() || !json_to_model) return absl::OkStatus();
+  // Versions are immutable; the migration is the one sanctioned rewrite,
+  // in the same transaction as the trigger's removal and return.
+  if (auto st = writer_->Exec("DROP TRIGGER calibrations_no_update"); !st.ok()) return st;
+  const std::string now = NowUtc();
+  int converted = 0;
+  std::string digest;
+  for (const auto& [serial, version] : keys) {
+    auto row = CalibrationLocked(serial, static_cast<int>(version));
+    if (!row.ok()) return row.status();
+    std::optional<ChainRow> link;
+    {
+      auto l = writer_->Prepare(
+          "SELECT serial, version, prev_sha256, row_sha256 FROM calibration_chain WHERE serial = ? AND version = ?");
+      if (!l.ok()) return l.status();
+      if (auto s = l->BindAll({serial, version}); !s.ok()) return s;
+      auto lr = l->Step();
+      if (!lr.ok()) return lr.status();
+      if (*lr) link = ChainRow{l->Text(0), static_cast<int>(l->Int(1)), l->Text(2), l->Text(3)};
+    }
+    auto conv = ConvertStoredJson(*row, link ? &*link : nullptr, json_to_model, now);
+    if (!conv) continue;
+    auto up = writer_->Prepare(
+        "UPDATE calibrations SET calibration_json = '', model_pb = ? WHERE serial = ? AND version = ?");
+    if (!up.ok()) return up.status();
+    if (auto s = up->BindAll({BlobOrNull(conv->row.model_pb), serial, version}); !s.ok()) return s;
+    if (auto r = up->Step(); !r.ok()) return r.status();
+    const ConversionRow& x = conv->record;
+    auto ins = writer_->Prepare(
+        "INSERT INTO calibration_conversions (serial, version, json_sha256, row_sha256, converted_utc) "
+        "VALUES (?,?,?,?,?)");
+    if (!ins.ok()) return ins.status();
+    if (auto s = ins->BindAll({x.serial, int64_t{x.version}, x.json_sha256, x.row_sha256, x.converted_utc}); !s.ok()) {
+      return s;
+    }
+    if (auto r = ins->Step(); !r.ok()) return r.status();
+    absl::StrAppend(&digest, x.serial, "\t", x.version, "\t", x.json_sha256, "\t", x.row_sha256, "\n");
+    ++converted;
+  }
+  if (auto st = writer_->Exec(
+          "CREATE TRIGGER calibrations_no_update BEFORE UPDATE ON calibrations "
+          "BEGIN SELECT RAISE(ABORT, 'calibration versions are immutable'); END;");
+      !st.ok()) {
+    return st;
+  }
+  // The audit trail says what the migration did, with a digest of its records.
+  AuditContext audit;
+  audit.row = {0, "", "fluxcal", "admin", "", "", "migrate", "",
+               ConversionAuditDetail(converted, static_cast<int>(keys.size()), digest)};
+  return InsertAuditLocked(&audit, 0, false);
+}
+
+absl::StatusOr<std::vector<ConversionRow>> SqliteStore::ConversionsLocked(const std::string& where,
+                                                                         const std::vector<SqlValue>& args) {
+  auto q = writer_->Prepare(absl::StrCat(
+      "SELECT serial, version, json_sha256, row_sha256, converted_utc FROM calibration_conversions ", where));
+  if (!q.ok()) return q.status();
+  if (auto s = q->BindAll(args); !s.ok()) return s;
+  std::vector<ConversionRow> out;
+  while (true) {
+    auto r = q->Step();
+    if (!r.ok()) return r.status();
+    if (!*r) break;
+    out.push_back({q->Text(0), static_cast<int>(q->Int(1)), q->Text(2), q->Text(3), q->Text(4)});
+  }
+  return out;
+}
+
+absl::StatusOr<std::vector<ConversionRow>> SqliteStore::AllConversions() {
+  std::lock_guard<std::mutex> lock(write_mu_);
+  return ConversionsLocked("ORDER BY serial, version", {});
+}
+
+absl::StatusOr<std::optional<ConversionRow>> SqliteStore::Conversion(const std::string& serial, int version) {
+  std::lock_guard<std::mutex> lock(write_mu_);
+  auto v = ConversionsLocked("WHERE serial = ? AND version = ?", {serial, int64_t{version}});
+  if (!v.ok()) return v.status();
+  if (v->empty()) return std::optional<ConversionRow>();
+  return std::optional<ConversionRow>(v->front());
+}
+
+absl::Status SqliteStore::ImportConversions(const std::vector<ConversionRow>& conversions) {
+  std::lock_guard<std::mutex> lock(write_mu_);
+  return writer_->Transaction([&]() -> absl::Status {
+    auto ins = writer_->Prepare(
+        "INSERT INTO calibration_conversions (serial, version, json_sha256, row_sha256, converted_utc) "
+        "VALUES (?,?,?,?,?)");
+    if (!ins.ok()) return ins.status();
+    for (const auto& x : conversions) {
+      if (auto s = ins->BindAll({x.serial, int64_t{x.version}, x.json_sha256, x.row_sha256, x.converted_utc});
+          !s.ok()) {
+        return s;
+      }
+      if (auto r = ins->Step(); !r.ok()) return r.status();
+      (void)ins->Reset();
+    }
+    return absl::OkStatus();
+  });
+}
 
 absl::StatusOr<CalibrationRow> SqliteStore::GetCalibration(const std::string& serial, int version) {
   std::lock_guard<std::mutex> lock(write_mu_);
@@ -787,10 +938,11 @@ absl::Status SqliteStore::ImportCalibration(const CalibrationRow& c) {
   return writer_->Transaction([&]() -> absl::Status {
     auto ins = writer_->Prepare(
         "INSERT INTO calibrations (serial, version, run_id, created_utc, model, psi_pm_wb, rms_relative, verdict, "
-        "calibration_json) VALUES (?,?,?,?,?,?,?,?,?)");
+        "calibration_json, model_pb) VALUES (?,?,?,?,?,?,?,?,?,?)");
     if (!ins.ok()) return ins.status();
     if (auto s = ins->BindAll({c.serial, int64_t{c.version}, c.run_id ? SqlValue(c.run_id) : SqlValue(nullptr),
-                               c.created_utc, c.model, c.psi_pm_wb, c.rms_relative, c.verdict, c.calibration_json});
+                               c.created_utc, c.model, c.psi_pm_wb, c.rms_relative, c.verdict, c.calibration_json,
+                               BlobOrNull(c.model_pb)});
         !s.ok()) {
       return s;
     }

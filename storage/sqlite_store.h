@@ -19,7 +19,9 @@ namespace fluxcal::storage {
 class SqliteStore final : public Store {
  public:
   // `create` false: see Store::OpenOptions.
-  static absl::StatusOr<std::unique_ptr<SqliteStore>> Open(const std::string& path, bool create = true);
+  // `json_to_model`: the v8 migration's converter (Store::OpenOptions).
+  static absl::StatusOr<std::unique_ptr<SqliteStore>> Open(const std::string& path, bool create = true,
+                                                           JsonToModelFn json_to_model = {});
 
   std::string Backend() const override { return "sqlite"; }
   absl::StatusOr<int> SchemaVersion() override;
@@ -41,6 +43,9 @@ class SqliteStore final : public Store {
   absl::StatusOr<std::vector<AuditRow>> AuditOf(const std::string& serial) override;
   absl::StatusOr<std::vector<ChainRow>> AllChainRows() override;
   absl::StatusOr<ChainRow> ChainLink(const std::string& serial, int version) override;
+  absl::StatusOr<std::vector<ConversionRow>> AllConversions() override;
+  absl::StatusOr<std::optional<ConversionRow>> Conversion(const std::string& serial, int version) override;
+  absl::Status ImportConversions(const std::vector<ConversionRow>& conversions) override;
   absl::StatusOr<std::vector<HfPointRow>> LatestRunPoints(const std::string& serial, int64_t* run_id) override;
   absl::StatusOr<int> AddCalibration(const CalibrationRow& row, const AuditContext* audit = nullptr) override;
   absl::StatusOr<CalibrationRow> GetCalibration(const std::string& serial, int version) override;
@@ -72,7 +77,13 @@ class SqliteStore final : public Store {
 
  private:
   SqliteStore(std::string path, std::unique_ptr<Database> writer) : path_(std::move(path)), writer_(std::move(writer)) {}
-  absl::Status Migrate();
+  absl::Status Migrate(const JsonToModelFn& json_to_model);
+  // The v8 migration's data step: every version stored as JSON converted
+  // where ConvertStoredJson allows, with its record and one audit row.
+  absl::Status ConvertStoredJsonLocked(const JsonToModelFn& json_to_model);
+  absl::StatusOr<CalibrationRow> CalibrationLocked(const std::string& serial, int version);
+  absl::StatusOr<std::vector<ConversionRow>> ConversionsLocked(const std::string& where,
+                                                               const std::vector<SqlValue>& args);
   // Appends the link of release `r` to the release chain, inside the
   // caller's transaction (Release, and the v7 migration for releases
   // stored before it).

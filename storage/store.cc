@@ -26,12 +26,12 @@ std::string NowUtc() {
 
 absl::StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& url, const OpenOptions& options) {
   if (absl::StartsWith(url, "postgresql://") || absl::StartsWith(url, "postgres://")) {
-    auto s = PostgresStore::Open(url, 16, options.create);
+    auto s = PostgresStore::Open(url, 16, options.create, options.json_to_model);
     if (!s.ok()) return s.status();
     return std::unique_ptr<Store>(std::move(*s));
   }
   const std::string path = absl::StartsWith(url, "sqlite:") ? url.substr(7) : url;
-  auto s = SqliteStore::Open(path, options.create);
+  auto s = SqliteStore::Open(path, options.create, options.json_to_model);
   if (!s.ok()) return s.status();
   return std::unique_ptr<Store>(std::move(*s));
 }
@@ -49,7 +49,42 @@ std::string CalibrationRowSha256(const std::string& prev_sha256, const Calibrati
   put(absl::StrFormat("%.17g", r.rms_relative));
   put(r.verdict);
   put(r.calibration_json);
+  if (!r.model_pb.empty()) put(r.model_pb);
   return io::Sha256Hex(buf);
+}
+
+std::string ConversionRowSha256(const std::string& link_row_sha256, const ConversionRow& x,
+                                const CalibrationRow& converted) {
+  // The link it was converted under, what the JSON was and when, as the
+  // "previous hash" of the converted row's own hash: the same framing.
+  std::string buf;
+  auto put = [&](const std::string& field) { absl::StrAppend(&buf, field.size(), ":", field, ";"); };
+  put(link_row_sha256);
+  put(x.json_sha256);
+  put(x.converted_utc);
+  return CalibrationRowSha256(io::Sha256Hex(buf), converted);
+}
+
+std::optional<ConvertedVersion> ConvertStoredJson(const CalibrationRow& row, const ChainRow* link,
+                                                  const JsonToModelFn& to_model, const std::string& now_utc) {
+  if (!to_model || link == nullptr || row.calibration_json.empty() || !row.model_pb.empty()) return std::nullopt;
+  if (CalibrationRowSha256(link->prev_sha256, row) != link->row_sha256) return std::nullopt;
+  auto model = to_model(row.calibration_json);
+  if (!model.ok() || model->empty()) return std::nullopt;
+  ConvertedVersion out;
+  out.row = row;
+  out.row.calibration_json.clear();
+  out.row.model_pb = std::move(*model);
+  out.record = {row.serial, row.version, io::Sha256Hex(row.calibration_json), "", now_utc};
+  out.record.row_sha256 = ConversionRowSha256(link->row_sha256, out.record, out.row);
+  return out;
+}
+
+std::string ConversionAuditDetail(int converted, int versions, const std::string& records) {
+  return absl::StrCat("schema v8: ", converted, " of ", versions,
+                      " calibration versions converted from JSON to the binary model (calibration_conversions; the "
+                      "others stay JSON and verify as before); records sha256 ",
+                      io::Sha256Hex(records));
 }
 
 std::string VersionSha256(const CalibrationRow& row, const ChainRow* link) {
@@ -125,6 +160,14 @@ constexpr char kReleaseUnlinked[] = ": release without a chain link (inserted ar
 constexpr char kReleaseChanged[] = ": release changed after it was stored";
 constexpr char kReleaseChainBroken[] = ": release chain broken (a release before it was changed or removed)";
 constexpr char kReleasedCalChanged[] = ": the released calibration version changed after its release";
+constexpr char kConvertedChanged[] = ": row changed after the v8 migration converted it to binary";
+
+// A converted version (ConversionRow) checks when the row is binary and the
+// record's hash (ConversionRowSha256) recomputes.
+bool ConversionVerifies(const ConversionRow& x, const ChainRow& link, const CalibrationRow& row) {
+  return !row.model_pb.empty() && row.calibration_json.empty() &&
+         ConversionRowSha256(link.row_sha256, x, row) == x.row_sha256;
+}
 
 std::string NotPass(const std::string& verdict) {
   return absl::StrCat(": released with verdict '", verdict, "' (only 'pass' is ever released by the service)");
@@ -139,6 +182,10 @@ absl::StatusOr<ChainReport> VerifyChains(Store& store, const ChainHead* anchor, 
   if (!links.ok()) return links.status();
   std::map<std::pair<std::string, int>, ChainRow> by_key;
   for (auto& l : *links) by_key[{l.serial, l.version}] = l;
+  auto conversions = store.AllConversions();
+  if (!conversions.ok()) return conversions.status();
+  std::map<std::pair<std::string, int>, ConversionRow> converted;
+  for (auto& x : *conversions) converted[{x.serial, x.version}] = x;
   ChainReport rep;
   std::string serial, prev;
   bool chained_seen = false;
@@ -166,7 +213,14 @@ absl::StatusOr<ChainReport> VerifyChains(Store& store, const ChainHead* anchor, 
     chained_seen = true;
     const ChainRow& l = it->second;
     if (l.prev_sha256 != prev) rep.problems.push_back(Cal(c.serial, c.version) + kCalChainBroken);
-    if (CalibrationRowSha256(l.prev_sha256, c) != l.row_sha256) {
+    if (auto x = converted.find({c.serial, c.version}); x != converted.end()) {
+      if (!ConversionVerifies(x->second, l, c)) {
+        rep.problems.push_back(Cal(c.serial, c.version) + kConvertedChanged);
+      } else {
+        ++rep.chained;
+        ++rep.converted;
+      }
+    } else if (CalibrationRowSha256(l.prev_sha256, c) != l.row_sha256) {
       rep.problems.push_back(Cal(c.serial, c.version) + kRowChanged);
     } else {
       ++rep.chained;
@@ -291,7 +345,13 @@ absl::Status VerifyReleasedVersion(Store& store, const std::string& serial, int 
   auto link = store.ChainLink(serial, version);
   if (!link.ok() && link.status().code() != absl::StatusCode::kNotFound) return link.status();
   if (link.ok()) {
-    if (CalibrationRowSha256(link->prev_sha256, *row) != link->row_sha256) return data_loss(kRowChanged);
+    auto conversion = store.Conversion(serial, version);
+    if (!conversion.ok()) return conversion.status();
+    if (conversion->has_value()) {
+      if (!ConversionVerifies(**conversion, *link, *row)) return data_loss(kConvertedChanged);
+    } else if (CalibrationRowSha256(link->prev_sha256, *row) != link->row_sha256) {
+      return data_loss(kRowChanged);
+    }
     auto before = version > 1 ? store.ChainLink(serial, version - 1) : absl::NotFoundError("first version");
     if (!before.ok() && before.status().code() != absl::StatusCode::kNotFound) return before.status();
     if (link->prev_sha256 != (before.ok() ? before->row_sha256 : std::string())) return data_loss(kCalChainBroken);

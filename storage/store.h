@@ -32,7 +32,7 @@
 
 namespace fluxcal::storage {
 
-inline constexpr int kSchemaVersion = 7;
+inline constexpr int kSchemaVersion = 8;
 
 struct MotorRow {
   std::string serial;
@@ -64,13 +64,37 @@ struct RecordingRow {
   std::vector<uint8_t> zlib_data;
 };
 
+// One calibration version. Its content is one of (the store does not read
+// either; pipeline/calibration_codec.h does):
+//  - model_pb: the binary fitted model (fluxcal.v1.CalibrationModel), what
+//    every version is stored as since schema v8 (calibration_json "");
+//  - calibration_json: the decimal JSON every version was stored as before
+//    v8, kept only for a version the v8 migration did not convert (no chain
+//    link, a link that did not verify, or JSON the codec could not read).
 struct CalibrationRow {
   std::string serial;
   int version = 0;
   int64_t run_id = 0;
   std::string created_utc, model, verdict, calibration_json;
   double psi_pm_wb = 0, rms_relative = 0;
+  std::string model_pb;   // bytes; "" for a version stored as JSON
 };
+
+// The record of one version the v8 migration converted from JSON to binary
+// (ConvertStoredJson). Its chain link hashed the JSON text, which is gone;
+// the record says what that text was (json_sha256) and links the converted
+// row to the link: row_sha256 = ConversionRowSha256 (below), so VerifyChains
+// recomputes it as it recomputes a link.
+struct ConversionRow {
+  std::string serial;
+  int version = 0;
+  std::string json_sha256, row_sha256, converted_utc;
+};
+
+// The codec the v8 migration converts stored JSON with (the store knows no
+// calibration format: pipeline::OpenStore passes pipeline/calibration_codec.h's
+// CalibrationJsonToModel). An error leaves that version as JSON.
+using JsonToModelFn = std::function<absl::StatusOr<std::string>(const std::string& calibration_json)>;
 
 struct MotorSummaryRow {
   std::string serial, verdict, updated_utc;
@@ -133,6 +157,10 @@ class Store {
     // fluxcal's schema_version table, is NotFound naming it, and nothing
     // is created. An existing store is still migrated to kSchemaVersion.
     bool create = true;
+    // The v8 migration's converter; unset: versions stored as JSON stay JSON
+    // (readable as before; only stores opened through the storage library
+    // alone, i.e. its tests, do that).
+    JsonToModelFn json_to_model;
   };
   // Opens (creating, unless options.create is false) a store and applies
   // pending migrations in order:
@@ -198,6 +226,10 @@ class Store {
   // The chain link of one calibration version (0: the latest chained one);
   // NotFound when it has none. A cheap stand-in for the row's content.
   virtual absl::StatusOr<ChainRow> ChainLink(const std::string& serial, int version) = 0;
+  // The v8 conversion records: all, by serial and version; one version's
+  // (nullopt when it was not converted).
+  virtual absl::StatusOr<std::vector<ConversionRow>> AllConversions() = 0;
+  virtual absl::StatusOr<std::optional<ConversionRow>> Conversion(const std::string& serial, int version) = 0;
 
   virtual absl::StatusOr<std::vector<MotorSummaryRow>> ListMotors(const std::string& prefix, bool only_failed,
                                                                   int offset, int limit) = 0;
@@ -226,14 +258,43 @@ class Store {
   virtual absl::Status ImportTrail(const std::vector<ReleaseRow>& releases, const std::vector<AuditRow>& audit,
                                    const std::vector<ChainRow>& chain,
                                    const std::vector<ReleaseLinkRow>& release_chain) = 0;
+  // Conversion records as they are (one transaction, after the calibrations).
+  virtual absl::Status ImportConversions(const std::vector<ConversionRow>& conversions) = 0;
 };
 
 std::string NowUtc();
 
 // The chain hash of a calibration row: SHA-256 (OpenSSL) over `prev_sha256`
-// and every stored field, each length-prefixed, doubles as %.17g. Version 1
-// (or the first version written with schema v6) has prev_sha256 "".
+// and every stored field, each length-prefixed, doubles as %.17g, and, for
+// a row stored as binary (model_pb not empty; schema v8), model_pb as one
+// more field after calibration_json (""): a row stored as JSON hashes as it
+// always did. Version 1 (or the first version written with schema v6) has
+// prev_sha256 "".
 std::string CalibrationRowSha256(const std::string& prev_sha256, const CalibrationRow& row);
+
+// The hash of a conversion record: CalibrationRowSha256(SHA-256 over the
+// link's row_sha256, json_sha256 and converted_utc, each length-prefixed;
+// the converted row). An edit of the row or of the record shows.
+std::string ConversionRowSha256(const std::string& link_row_sha256, const ConversionRow& record,
+                                const CalibrationRow& converted);
+
+// The v8 migration of one version stored as JSON, written once for both
+// backends: converted (the row with model_pb and calibration_json "", and
+// its ConversionRow) only when its chain link verifies against the JSON as
+// stored and `to_model` reads it; nullopt otherwise: the row stays JSON and
+// verify-db judges it exactly as before (an unverifiable row keeps its
+// evidence; a version from before the chain keeps the hash its release
+// names).
+struct ConvertedVersion {
+  CalibrationRow row;
+  ConversionRow record;
+};
+std::optional<ConvertedVersion> ConvertStoredJson(const CalibrationRow& row, const ChainRow* link,
+                                                  const JsonToModelFn& to_model, const std::string& now_utc);
+// The audit detail of the v8 migration: how many of how many versions it
+// converted, and the SHA-256 of `records` ("serial\tversion\tjson_sha256\t
+// row_sha256\n" per conversion, in (serial, version) order).
+std::string ConversionAuditDetail(int converted, int versions, const std::string& records);
 // The hash that stands for one stored calibration version (a release and
 // an anchor name it): its chain link's row_sha256, or, for a version
 // stored before the chain (schema < 6, no link), CalibrationRowSha256("",
@@ -273,6 +334,9 @@ std::string ChainHeadDigest(const ChainHead& head);
 struct ChainReport {
   int chained = 0;                     // versions whose link checks
   int unchained = 0;                   // versions stored before the chain existed (schema < 6)
+  // Of `chained`: versions converted from JSON by the v8 migration, checked
+  // through their ConversionRow (the JSON their link hashed is not kept).
+  int converted = 0;
   int releases_chained = 0;            // releases whose link checks
   // Compared with an anchor: the calibration heads and release head it
   // names that were found as anchored.

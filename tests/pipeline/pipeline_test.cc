@@ -731,7 +731,7 @@ TEST(Admin, AnchorAndVerifyDbFindWhatTheChainsAloneMiss) {
       << vout;
   // A failing version made flashable behind the service.
   ASSERT_TRUE(raw("INSERT INTO calibrations SELECT serial, 2, run_id, created_utc, model, psi_pm_wb, rms_relative, "
-                  "'fail: psi_pm', calibration_json FROM calibrations WHERE serial = 'IPM-AN-1' AND version = 1; "
+                  "'fail: psi_pm', calibration_json, model_pb FROM calibrations WHERE serial = 'IPM-AN-1' AND version = 1; "
                   "INSERT INTO releases (serial, version, released_by, released_utc) "
                   "VALUES ('IPM-AN-1', 2, 'someone', '2030-01-01T00:00:00Z')"));
   auto [irc, iout] = run(bin + " admin verify-db --db " + db);
