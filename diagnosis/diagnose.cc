@@ -546,6 +546,8 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
     const double f_inj = set.manifest.injection ? set.manifest.injection->frequency_hz : 0.0;
     auto before = ReplayModel(set, m_base, base.p, m_base.harm_order);
     auto after = ReplayModel(set, m, current.p, m.harm_order);
+    if (before.ok()) LeaveOutUnheldPoints(ids, &*before);
+    if (after.ok()) LeaveOutUnheldPoints(ids, &*after);
     if (before.ok()) {
       rep.waveform_rms_before_a = ReplaySpectrum(set, *before, rep.spectrum_hz, &rep.spectrum_before_a);
       for (auto& w : WaveformMismatches(AnalyseWaveforms(set, *before, m.pole_pairs), m.pole_pairs, f_inj,

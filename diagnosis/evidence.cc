@@ -88,6 +88,17 @@ bool ReplayRanAway(const io::Waveform& w, const sim::ReplayPoint& r) {
   return sim_peak > 10.0 * rec_peak + 1.0;
 }
 
+void LeaveOutUnheldPoints(const std::vector<ident::HfPointResult>& ids, std::vector<sim::ReplayPoint>* replay) {
+  for (auto& r : *replay) {
+    for (const auto& id : ids) {
+      if (id.point != r.point || id.failure.empty()) continue;
+      r.ia_a.clear();
+      r.ib_a.clear();
+      r.ic_a.clear();
+    }
+  }
+}
+
 double ReplaySpectrum(const io::RecordingSet& set, const std::vector<sim::ReplayPoint>& replay,
                       const std::vector<double>& freqs, std::vector<double>* spectrum) {
   spectrum->assign(freqs.size(), 0.0);
@@ -97,7 +108,7 @@ double ReplaySpectrum(const io::RecordingSet& set, const std::vector<sim::Replay
   for (size_t k = 0; k < replay.size(); ++k) {
     const auto& r = replay[k];
     const auto& w = set.waveforms[k];
-    if (ReplayRanAway(w, r)) continue;
+    if (r.ia_a.size() != w.size() || ReplayRanAway(w, r)) continue;   // left out (LeaveOutUnheldPoints)
     se += r.residual_rms_a * r.residual_rms_a * 3.0 * (w.size() - 1);
     n_all += 3 * (w.size() - 1);
     std::vector<Complex> e(w.size());

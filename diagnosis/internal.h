@@ -491,6 +491,16 @@ absl::StatusOr<std::vector<sim::ReplayPoint>> ReplayModel(const io::RecordingSet
 // about the recording: its currents non-finite or above ten times the
 // recorded peak. Such a point is left out of the spectra and the locator.
 bool ReplayRanAway(const io::Waveform& w, const sim::ReplayPoint& r);
+// A point the identification reports failed is one the bench did not hold
+// (no HF response left to invert: the controller at the voltage limit, the
+// current far from its reference); its waveform says what the bench did,
+// not what the machine is, and no model of the machine reproduces it. Its
+// replay is emptied here, and the spectra and the locator skip it
+// (ReplaySpectrum, AnalyseWaveforms): the identification already reports
+// the point. (A bench losing 13 of 40 points of a machine with strong cross
+// saturation put 600 A replay residuals and "unexplained" lines at three of
+// them into a clean recording's diagnosis.)
+void LeaveOutUnheldPoints(const std::vector<ident::HfPointResult>& ids, std::vector<sim::ReplayPoint>* replay);
 double ReplaySpectrum(const io::RecordingSet& set, const std::vector<sim::ReplayPoint>& replay,
                       const std::vector<double>& freqs, std::vector<double>* spectrum);
 

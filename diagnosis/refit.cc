@@ -10,6 +10,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "ceres/ceres.h"
+#include "fitting/calibration.h"
 
 namespace fluxcal::diag::detail {
 
@@ -300,6 +301,35 @@ double Bic(double rss, double k_eff, int n) {
 
 }  // namespace
 
+// Whether the surfaces of `p` are positive definite over the box the HF
+// points span, on a 13 x 13 grid (as the fit requires of its candidates,
+// fitting/select.cc): a refit whose surfaces bend Lqq negative between two
+// measured levels drives the open-loop replay (evidence.cc) into a flux
+// that two currents share, and it runs away (a bridge-knee machine's clean
+// recording: Lqq -0.4 mH at 26 % below its top current, the replay at
+// 1e40 A). Only the surfaces are judged, so the penalty weight of a refit
+// is chosen among physical ones.
+bool SurfacesPositiveDefinite(const Model& m, const Params& p) {
+  if (m.hf.empty()) return true;
+  double id_lo = m.hf[0].id_a, id_hi = id_lo, iq_lo = m.hf[0].iq_a, iq_hi = iq_lo;
+  for (const auto& h : m.hf) {
+    id_lo = std::min(id_lo, h.id_a);
+    id_hi = std::max(id_hi, h.id_a);
+    iq_lo = std::min(iq_lo, h.iq_a);
+    iq_hi = std::max(iq_hi, h.iq_a);
+  }
+  const fit::SurfaceEvaluator surf(m.surf, p.b[kBase]);
+  for (int i = 0; i <= 12; ++i) {
+    for (int j = 0; j <= 12; ++j) {
+      const double id = id_lo + (id_hi - id_lo) * i / 12.0, iq = iq_lo + (iq_hi - iq_lo) * j / 12.0;
+      double ldd, lqq, ldq;
+      surf.Eval(id, iq, nullptr, nullptr, &ldd, &lqq, &ldq);
+      if (!fit::NotPositiveDefiniteReason(ldd, lqq, ldq).empty()) return false;
+    }
+  }
+  return true;
+}
+
 // A damped Gauss-Newton (Levenberg-Marquardt) on the penalised objective
 //   J(x) = |r(x)|^2 + lambda |R c|^2,
 // x the free parameters, c the surfaces' coefficients. The penalty weight
@@ -409,7 +439,14 @@ FitOut Solve(const Model& m, const Params& start, const std::vector<Block>& free
         const double rss = (lin.r - JM * w).squaredNorm();
         const double k_eff = (d.array() / (d.array() + lam)).sum();
         const double bic = Bic(rss, k_eff, rows);
-        if (bic < best) { best = bic; best_lam = lam; }
+        if (bic >= best) continue;
+        // The linearised step to this lambda's solution, judged physical
+        // before it is preferred (SurfacesPositiveDefinite).
+        Params pl = out.p;
+        L.Scatter(x - M * w, m, &pl);
+        if (!SurfacesPositiveDefinite(m, pl)) continue;
+        best = bic;
+        best_lam = lam;
       }
       if (best_lam != lambda) {
         lambda = best_lam;

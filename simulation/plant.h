@@ -104,18 +104,43 @@ struct PlantModel {
   }
   // i(psi) by Newton from a warm start; converges in 2-3 steps because the
   // model is smooth and the start is the previous sub-step's current.
+  // Damped (backtracking on |psi - psi(i)|^2, Nocedal & Wright, Numerical
+  // Optimization, 2nd ed., alg. 3.1): the Newton step J^-1 r is a descent
+  // direction of that norm wherever J is invertible, so halving it until
+  // the residual falls always ends. Where the HF current ellipse sweeps
+  // through a knee (a bridge-knee machine at 60 A: Lqq falls 10x within a
+  // few amperes) the full step from the previous current overshot past the
+  // measured region, into a fitted surface's continuation with Ldd < 0, and
+  // the replay ran away (1e40 A within 50 ms). A full step that reduces the
+  // residual, and every tiny one, is taken as before: the iterates of a
+  // converging solve are unchanged bit for bit.
   Vec2 Current(double psd, double psq, double th, Vec2 guess) const {
     Vec2 i = guess;
+    double pd, pq;
+    Flux(i.d, i.q, th, &pd, &pq);
     for (int it = 0; it < 20; ++it) {
-      double pd, pq, a, b, c;
-      Flux(i.d, i.q, th, &pd, &pq);
+      double a, b, c;
       Jacobian(i.d, i.q, th, &a, &b, &c);
       const double rd = psd - pd, rq = psq - pq;
       const double det = a * b - c * c;
       const double dd = (b * rd - c * rq) / det, dq = (a * rq - c * rd) / det;
-      i.d += dd;
-      i.q += dq;
-      if (std::abs(dd) + std::abs(dq) < 1e-12 * (1.0 + std::abs(i.d) + std::abs(i.q))) break;
+      if (!std::isfinite(dd) || !std::isfinite(dq)) break;
+      const double size = std::abs(dd) + std::abs(dq), scale = 1.0 + std::abs(i.d) + std::abs(i.q);
+      if (size < 1e-12 * scale) {
+        i.d += dd;
+        i.q += dq;
+        break;
+      }
+      const double r2 = rd * rd + rq * rq;
+      double t = 1.0;
+      Vec2 next = i;
+      for (int halvings = 0; halvings < 40; ++halvings, t *= 0.5) {
+        next = Vec2{i.d + t * dd, i.q + t * dq};
+        Flux(next.d, next.q, th, &pd, &pq);
+        const double n2 = (psd - pd) * (psd - pd) + (psq - pq) * (psq - pq);
+        if (n2 < r2 || t * size < 1e-9 * scale) break;
+      }
+      i = next;
     }
     return i;
   }
