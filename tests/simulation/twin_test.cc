@@ -374,11 +374,14 @@ TEST(Effects, PositionSensorHarmonicBendsTheReading) {
 }
 
 // A machine whose Lqq falls 10x through a bridge knee, held at (-60, 80) A
-// where Lqq is 0.084 mH: the fixed gains tuned at 0.35 mH put the q loop's
-// crossover past what the one-period feedback average allows and it
-// oscillates into the voltage limit (no injection left to identify); the
+// where Lqq is 0.084 mH, on a bench whose fixed gains were tuned at
+// 0.35 mH: the q loop's crossover is 4x what it was designed for. The
 // gains scheduled on the motor's own inductance hold the point and the
-// identification reads its Lqq.
+// identification reads its Lqq within 2 %; the fixed gains either lose the
+// point (no injection left to identify) or read it worse. (They lost it
+// every time while the plant's flux-to-current Newton took full steps and
+// overshot the knee, simulation/plant.h; with the damped Newton they hold
+// this point, 4.4 % off.)
 TEST(Twin, ScheduledGainsHoldABridgeKneeMotor) {
   MotorTraits bridge;
   for (const auto& t : RealLikeMotors(100.0, 0.15)) {
@@ -388,6 +391,7 @@ TEST(Twin, ScheduledGainsHoldABridgeKneeMotor) {
   const auto plan = SmallPlan({Pt("p0", -60.0, 80.0)});
   const TraitMotor truth(bridge);
   const double lqq_true = truth.Inductance(-60.0, 80.0).lqq_h;
+  double fixed_error = 0;   // |Lqq / truth - 1| with fixed gains, 1 when the point was lost
   for (bool scheduled : {false, true}) {
     TwinConfig cfg;
     cfg.seed = 5;
@@ -400,13 +404,14 @@ TEST(Twin, ScheduledGainsHoldABridgeKneeMotor) {
     ASSERT_TRUE(ids.ok()) << ids.status();
     const auto& p = ids->front();
     if (!scheduled) {
-      EXPECT_FALSE(p.failure.empty()) << "fixed gains held the point (Lqq " << p.lq_h << ")";
+      fixed_error = p.failure.empty() ? std::abs(p.lq_h / lqq_true - 1.0) : 1.0;
       continue;
     }
     ASSERT_TRUE(p.failure.empty()) << p.failure;
     EXPECT_NEAR(p.id_a, -60.0, 0.5);
     EXPECT_NEAR(p.iq_a, 80.0, 0.5);
     EXPECT_NEAR(p.lq_h / lqq_true, 1.0, 0.02);
+    EXPECT_LT(std::abs(p.lq_h / lqq_true - 1.0), fixed_error) << "the scheduled gains read Lqq no better";
   }
 }
 
