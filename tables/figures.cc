@@ -21,15 +21,10 @@ constexpr double kPi = std::numbers::pi;
 
 double RpmOf(double we_rad_s, int pole_pairs) { return physics::ElectricalRadSToRpm(we_rad_s, pole_pairs); }
 
-// Base speed: where the MTPA point of the largest motoring torque meets the
-// voltage limit (bisection; the voltage grows with speed there). 0 when the
-// limit is below the resistive drop already at standstill.
-double BaseSpeedRadS(const sim::MagneticModel& m, const MachineLimits& lim, const Table& mtpa) {
-  size_t kmax = 0;
-  for (size_t k = 0; k < mtpa.axes[0].values.size(); ++k) {
-    if (mtpa.axes[0].values[k] > mtpa.axes[0].values[kmax]) kmax = k;
-  }
-  const double id = mtpa.outputs[0].values[kmax], iq = mtpa.outputs[1].values[kmax];
+// Speed [rad/s electrical] at which the voltage limit passes through (id,
+// iq): the voltage grows with speed there. 0 when no speed reaches it (the
+// resistive drop alone exceeds u_max).
+double SpeedAtVoltageLimitRadS(const sim::MagneticModel& m, const MachineLimits& lim, double id, double iq) {
   double lo = 0, hi = 1e6;
   if (VoltageV(m, lim, id, iq, lo) >= lim.UMaxV()) return 0;
   if (VoltageV(m, lim, id, iq, hi) < lim.UMaxV()) return hi;
@@ -38,6 +33,17 @@ double BaseSpeedRadS(const sim::MagneticModel& m, const MachineLimits& lim, cons
     (VoltageV(m, lim, id, iq, mid) < lim.UMaxV() ? lo : hi) = mid;
   }
   return lo;
+}
+
+// Base speed: where the MTPA point of the largest motoring torque meets the
+// voltage limit (bisection; the voltage grows with speed there). 0 when the
+// limit is below the resistive drop already at standstill.
+double BaseSpeedRadS(const sim::MagneticModel& m, const MachineLimits& lim, const Table& mtpa) {
+  size_t kmax = 0;
+  for (size_t k = 0; k < mtpa.axes[0].values.size(); ++k) {
+    if (mtpa.axes[0].values[k] > mtpa.axes[0].values[kmax]) kmax = k;
+  }
+  return SpeedAtVoltageLimitRadS(m, lim, mtpa.outputs[0].values[kmax], mtpa.outputs[1].values[kmax]);
 }
 
 // The motoring rows of an MTPA or MTPV table as points of its curve, with
@@ -80,20 +86,6 @@ plot::Style ExtrapolatedStyle(double size_px) {
   return MarkStyle(plot::Marker::kSquare, "#ffffff", "#000000", size_px);
 }
 
-
-// Speed [rad/s electrical] at which the voltage limit passes through (id,
-// iq): the voltage grows with speed there. 0 when no speed reaches it (the
-// resistive drop alone exceeds u_max).
-double SpeedAtVoltageLimitRadS(const sim::MagneticModel& m, const MachineLimits& lim, double id, double iq) {
-  double lo = 0, hi = 1e6;
-  if (VoltageV(m, lim, id, iq, lo) >= lim.UMaxV()) return 0;
-  if (VoltageV(m, lim, id, iq, hi) < lim.UMaxV()) return hi;
-  for (int k = 0; k < 80; ++k) {
-    const double mid = 0.5 * (lo + hi);
-    (VoltageV(m, lim, id, iq, mid) < lim.UMaxV() ? lo : hi) = mid;
-  }
-  return lo;
-}
 
 // The speed whose voltage limit a curves figure draws (0: none), the
 // legend's reason for it, or why none is drawn.
