@@ -131,7 +131,11 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
     FitOut fit;
   };
   auto refreshed = [&](const Model& mm, const FitOut& ff, const std::vector<Block>& free_blocks) -> std::optional<Refreshed> {
-    auto cal = fit::Fit(CorrectedFitData(set, mm, ff.p, ids));
+    // The baseline's anisotropy kept (fit::FitOptions): the machine's axes
+    // do not change with a finding, and it is one penalty instead of seven.
+    fit::FitOptions fo;
+    fo.smoothing_anisotropy_q = mm.surf_anisotropy_q;
+    auto cal = fit::Fit(CorrectedFitData(set, mm, ff.p, ids), fo);
     if (!cal.ok()) return std::nullopt;
     Refreshed r{mm, {}};
     SetSurfaces(*cal, &r.model);

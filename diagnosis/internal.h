@@ -158,6 +158,7 @@ struct Model {
   // calibration's; each refit chooses its own (refit.cc, Solve).
   Eigen::MatrixXd surf_R;
   double surf_lambda = 0;
+  double surf_anisotropy_q = 1;   // the calibration's SmoothingPenalty kappa
   double surf_k_eff = 0;                // effective parameters of the surfaces (BIC)
   int BlockSize(int b) const { return b == kBase ? surf.NumParams() : kBlockSize[b]; }
   // psi_pm at the kPsi block (magnet_temperature), relative to nominal;

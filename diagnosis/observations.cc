@@ -256,6 +256,7 @@ void SetSurfaces(const fit::Calibration& cal, Model* m) {
   const int k = m->surf.NumParams();
   m->surf_R.resize(0, k);
   m->surf_lambda = cal.summary.smoothing_lambda;
+  m->surf_anisotropy_q = cal.summary.smoothing_anisotropy_q;
   const Eigen::MatrixXd P = fit::SmoothingPenalty(m->surf, cal.summary.smoothing_anisotropy_q);
   if (m->surf_lambda > 0 && P.rows() > 0) {
     // lambda |P c|^2 = lambda |R c|^2 with R the Cholesky factor of

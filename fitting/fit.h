@@ -111,6 +111,12 @@ struct FitOptions {
   // Treat the differential inductance as apparent (psi = psi_pm + L i):
   // only for demonstrating the error (tests); never in production.
   bool differential_as_apparent = false;
+  // The smoothing splines' penalty anisotropy kappa (surface.h,
+  // SmoothingPenalty): unset, the fit chooses it by the restricted
+  // likelihood over its grid (select.cc); set, that kappa alone (a caller
+  // refitting the same machine's data, e.g. the diagnosis after each
+  // finding, keeps the one its baseline chose: one penalty, not seven).
+  std::optional<double> smoothing_anisotropy_q;
   // Polled before each candidate family: true stops the fit with Cancelled
   // (a server's client deadline passed).
   std::function<bool()> cancelled;

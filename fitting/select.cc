@@ -265,9 +265,14 @@ absl::StatusOr<std::vector<Solved>> SolveCandidates(const std::vector<Family>& c
       const Acceptable pd = [&](const std::vector<double>& params) {
         return CalibrationOf(d, r, f, params, {}).PhysicalOver(1.0, not_pd);
       };
+      std::vector<double> kappas;
+      if (o.smoothing_anisotropy_q && std::isfinite(*o.smoothing_anisotropy_q) && *o.smoothing_anisotropy_q > 0) {
+        kappas.push_back(*o.smoothing_anisotropy_q);
+      } else {
+        for (int e = -3; e <= 3; ++e) kappas.push_back(std::pow(9.0, e));
+      }
       std::optional<Solved> chosen;
-      for (int e = -3; e <= 3; ++e) {
-        const double kappa = std::pow(9.0, e);
+      for (const double kappa : kappas) {
         const Eigen::MatrixXd P = SmoothingPenalty(f, kappa);
         Solved s = Solve(f, d, o, &P, &pd);
         s.anisotropy_q = kappa;

@@ -463,3 +463,30 @@ TEST(Fit, HfResultsAloneKeepPsiQLevelAndTorque) {
 
 }  // namespace
 }  // namespace fluxcal::fit
+
+namespace fluxcal::fit {
+namespace {
+// The smoothing spline's anisotropy: chosen by the likelihood on its grid
+// unless the caller fixes it (FitOptions::smoothing_anisotropy_q, what the
+// diagnosis does after each finding); fixed, the calibration carries that
+// value, and its JSON round trip keeps it.
+TEST(Fit, SmoothingAnisotropyChosenOrAsGiven) {
+  const Case& c = TwinCase();
+  FitOptions o;
+  o.model = "smooth";
+  auto chosen = Fit(c.data, o);
+  ASSERT_TRUE(chosen.ok()) << chosen.status();
+  const double k = chosen->summary.smoothing_anisotropy_q;
+  bool on_grid = false;
+  for (int e = -3; e <= 3; ++e) on_grid |= std::abs(k / std::pow(9.0, e) - 1) < 1e-12;
+  EXPECT_TRUE(on_grid) << k;
+  o.smoothing_anisotropy_q = k == 9.0 ? 1.0 / 9.0 : 9.0;
+  auto fixed = Fit(c.data, o);
+  ASSERT_TRUE(fixed.ok()) << fixed.status();
+  EXPECT_EQ(fixed->summary.smoothing_anisotropy_q, *o.smoothing_anisotropy_q);
+  auto back = Calibration::FromJson(fixed->ToJson());
+  ASSERT_TRUE(back.ok()) << back.status();
+  EXPECT_EQ(back->summary.smoothing_anisotropy_q, *o.smoothing_anisotropy_q);
+}
+}  // namespace
+}  // namespace fluxcal::fit
