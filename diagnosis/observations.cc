@@ -270,7 +270,12 @@ void SetSurfaces(const fit::Calibration& cal, Model* m) {
 
 absl::Status InitSurfaces(const io::RecordingSet& set, const std::vector<ident::HfPointResult>& ids, Model* m) {
   const fit::FitData data = fit::FitDataFromRecording(set, ids);
-  auto cal = fit::Fit(data);
+  // Small-signal (fit::FitOptions::large_signal_hf): the joint model
+  // predicts each HF point from the surfaces' Jacobian at its mean current
+  // (observations.cc), so its surfaces are the fit of that same model.
+  fit::FitOptions fo;
+  fo.large_signal_hf = false;
+  auto cal = fit::Fit(data, fo);
   if (!cal.ok()) {
     return absl::Status(cal.status().code(),
                         absl::StrCat("diagnosis: the set's own calibration (the baseline's magnetics) could not be "

@@ -12,6 +12,7 @@
 #define FLUXCAL_FITTING_FIT_H_
 
 #include <functional>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -29,11 +30,23 @@ struct FluxMap;
 
 namespace fluxcal::fit {
 
+struct HfOrbitWeights;   // fitting/inductance_residual.h
+
 struct InductanceObservation {
   double id_a = 0, iq_a = 0;
   double ldd_h = 0, lqq_h = 0;
   std::optional<double> ldq_h;
   double ldd_h_std = 0, lqq_h_std = 0, ldq_h_std = 0;
+  // The radius of the flux circle the point's rotating-voltage injection
+  // drove, |V| / w_i (physics/hf_orbit.h), Wb; unset where the source does
+  // not say (the point is then taken as small-signal: the Jacobian at
+  // (id, iq)). Set, Fit predicts the point as what the injection measures,
+  // the describing function over the current's orbit (docs/fitting.md,
+  // "Large-signal HF").
+  std::optional<double> hf_flux_radius_wb;
+  // That orbit, computed by Fit from its first pass where the radius is
+  // set; given without a radius, it is used as it is.
+  std::shared_ptr<const HfOrbitWeights> hf_orbit;
 };
 
 struct SteadyStateObservation {
@@ -117,6 +130,12 @@ struct FitOptions {
   // refitting the same machine's data, e.g. the diagnosis after each
   // finding, keeps the one its baseline chose: one penalty, not seven).
   std::optional<double> smoothing_anisotropy_q;
+  // Predict HF points whose injection's flux radius is known as the
+  // describing function over their orbit (InductanceObservation::
+  // hf_flux_radius_wb): a second pass on the first pass's orbits. False: the
+  // small-signal Jacobian at every point's mean current (callers whose own
+  // forward model is small-signal, e.g. the diagnosis' phasor replays).
+  bool large_signal_hf = true;
   // Polled before each candidate family: true stops the fit with Cancelled
   // (a server's client deadline passed).
   std::function<bool()> cancelled;

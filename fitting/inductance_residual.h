@@ -3,9 +3,26 @@
 #ifndef FLUXCAL_FITTING_INDUCTANCE_RESIDUAL_H_
 #define FLUXCAL_FITTING_INDUCTANCE_RESIDUAL_H_
 
+#include <array>
+#include <memory>
+#include <vector>
+
 #include "ceres/ceres.h"
 #include "fitting/dynamic_cost.h"
+#include "fitting/fit.h"
 #include "fitting/flux_family.h"
+
+namespace fluxcal::fit {
+
+// The HF orbit of an observation (physics/hf_orbit.h): the currents along
+// the injection's flux circle and the describing function's weights, so
+// that (Ldd, Lqq, Ldq)[c] = sum_k weights[c][k] . psi(currents_a[k]).
+struct HfOrbitWeights {
+  std::vector<std::array<double, 2>> currents_a;
+  std::array<std::vector<std::array<double, 2>>, 3> weights;
+};
+
+}  // namespace fluxcal::fit
 
 namespace fluxcal::fit::internal {
 
@@ -15,22 +32,40 @@ enum class InductanceComponent { kLdd, kLqq, kLdq };
 // co-energy at the observation's (id, iq) (flux_family.h): Ldd = dpsi_d/did,
 // Lqq = dpsi_q/diq, Ldq = dpsi_d/diq = dpsi_q/did. The HF injection measures
 // the differential inductance (docs/fitting.md), not psi / i.
+// With the observation's HF orbit (`orbit`, set where the injection's flux
+// radius is known), L_model is what the injection measures on the family's
+// surfaces: the describing function over the orbit,
+//   L_model[c] = sum_k W_k[c] . psi(i_k)   (physics/hf_orbit.h),
+// still linear in the family's coefficients.
 class InductanceResidual {
  public:
   InductanceResidual(const Family& family, double id_a, double iq_a, InductanceComponent component,
-                     double inductance_h, double sigma_h)
+                     double inductance_h, double sigma_h, std::shared_ptr<const HfOrbitWeights> orbit = nullptr)
       : family_(family), id_a_(id_a), iq_a_(iq_a), component_(component), inductance_h_(inductance_h),
-        sigma_h_(sigma_h) {}
+        sigma_h_(sigma_h), orbit_(std::move(orbit)) {}
 
   // num_params: family.NumParams(), the size of the one parameter block.
   static ceres::CostFunction* Create(const Family& family, double id_a, double iq_a, InductanceComponent component,
-                                     double inductance_h, double sigma_h, int num_params) {
-    return DynamicCost(new InductanceResidual(family, id_a, iq_a, component, inductance_h, sigma_h), num_params);
+                                     double inductance_h, double sigma_h, std::shared_ptr<const HfOrbitWeights> orbit,
+                                     int num_params) {
+    return DynamicCost(new InductanceResidual(family, id_a, iq_a, component, inductance_h, sigma_h, std::move(orbit)),
+                       num_params);
   }
 
   template <typename T>
   bool operator()(const T* const* parameters, T* residual) const {
     const T* p = parameters[0];
+    if (orbit_) {
+      const auto& w = orbit_->weights[static_cast<int>(component_)];
+      T model(0.0);
+      for (size_t k = 0; k < orbit_->currents_a.size(); ++k) {
+        T psi_d, psi_q;
+        FamilyFlux(family_, T(orbit_->currents_a[k][0]), T(orbit_->currents_a[k][1]), p, &psi_d, &psi_q);
+        model += psi_d * w[k][0] + psi_q * w[k][1];
+      }
+      residual[0] = (model - inductance_h_) / sigma_h_;
+      return true;
+    }
     T ldd, lqq, ldq;
     FamilyInductance(family_, T(id_a_), T(iq_a_), p, &ldd, &lqq, &ldq);
     const T model =
@@ -44,6 +79,7 @@ class InductanceResidual {
   const double id_a_, iq_a_;
   const InductanceComponent component_;
   const double inductance_h_, sigma_h_;
+  const std::shared_ptr<const HfOrbitWeights> orbit_;
 };
 
 }  // namespace fluxcal::fit::internal

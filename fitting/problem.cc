@@ -135,12 +135,12 @@ Built Build(const Family& fam, const FitData& d, const FitOptions& o) {
       sink.Add<ApparentResidual>(true, fam, obs.id_a, obs.iq_a, L::kLqq, obs.lqq_h, sq);
       continue;
     }
-    sink.Add<InductanceResidual>(true, fam, obs.id_a, obs.iq_a, L::kLdd, obs.ldd_h, sd);
-    sink.Add<InductanceResidual>(true, fam, obs.id_a, obs.iq_a, L::kLqq, obs.lqq_h, sq);
+    sink.Add<InductanceResidual>(true, fam, obs.id_a, obs.iq_a, L::kLdd, obs.ldd_h, sd, obs.hf_orbit);
+    sink.Add<InductanceResidual>(true, fam, obs.id_a, obs.iq_a, L::kLqq, obs.lqq_h, sq, obs.hf_orbit);
     if (obs.ldq_h) {
       const double mean = 0.5 * (obs.ldd_h + obs.lqq_h);
       const double sx = std::max(obs.ldq_h_std, o.relative_sigma_floor * mean);
-      sink.Add<InductanceResidual>(true, fam, obs.id_a, obs.iq_a, L::kLdq, *obs.ldq_h, sx);
+      sink.Add<InductanceResidual>(true, fam, obs.id_a, obs.iq_a, L::kLdq, *obs.ldq_h, sx, obs.hf_orbit);
     }
   }
   const double current_scale = DataCurrentScaleA(d);

@@ -12,6 +12,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "fitting/flux_error.h"
+#include "fitting/large_signal.h"
 #include "fitting/solve.h"
 #include "fitting/surface.h"
 #include "io/flux_map.h"
@@ -306,7 +307,7 @@ void Report(const FitData& d, const FitOptions& o, const std::vector<Solved>& so
   double rel = 0;
   int nrel = 0;
   for (const auto& obs : d.inductances) {
-    const auto L = cal.Inductance(obs.id_a, obs.iq_a);
+    const auto L = PredictedInductance(cal, obs);
     rel += std::pow(L.ldd_h / obs.ldd_h - 1, 2) + std::pow(L.lqq_h / obs.lqq_h - 1, 2);
     nrel += 2;
   }
@@ -327,7 +328,7 @@ void Report(const FitData& d, const FitOptions& o, const std::vector<Solved>& so
   // count fully.
   for (size_t k = 0; k < d.inductances.size(); ++k) {
     const auto& obs = d.inductances[k];
-    const auto L = cal.Inductance(obs.id_a, obs.iq_a);
+    const auto L = PredictedInductance(cal, obs);
     const double sd = std::max(obs.ldd_h_std, o.relative_sigma_floor * obs.ldd_h);
     const double sq = std::max(obs.lqq_h_std, o.relative_sigma_floor * obs.lqq_h);
     const double zd = (L.ldd_h - obs.ldd_h) / sd, zq = (L.lqq_h - obs.lqq_h) / sq;
@@ -353,7 +354,7 @@ void Report(const FitData& d, const FitOptions& o, const std::vector<Solved>& so
 
 absl::StatusOr<Calibration> FitScreened(const FitData& d, std::vector<std::string> excluded,
                                         const std::vector<Calibration::Box>& not_pd, const FitOptions& o,
-                                        int* down_weighted) {
+                                        int* down_weighted, double* selected_cv) {
   if (d.inductances.size() < 3 && d.steady_state.size() < 3 && d.fluxes.size() < 3) {
     return absl::InvalidArgumentError(absl::StrCat(
         "field 'points': need at least 3 usable identified points to fit, got ", d.inductances.size(),
@@ -384,6 +385,7 @@ absl::StatusOr<Calibration> FitScreened(const FitData& d, std::vector<std::strin
   if (best == nullptr) return absl::InternalError("no model family converged to a physical surface");
   Calibration cal = CalibrationOf(d, region, best->family, best->params, best->covariance);
   Report(d, o, solved, physical, best, std::move(excluded), down_weighted, &cal);
+  if (selected_cv != nullptr) *selected_cv = best->cv;
   return cal;
 }
 

@@ -19,10 +19,11 @@ namespace fluxcal::fit::internal {
 // positive definite (Screen). Errors: InvalidArgument (fewer than 3 usable
 // observations of every kind, a model name ParseModelName refuses, too few
 // observations for any family), Cancelled (o.cancelled), Internal (no
-// family converged to a physical surface).
+// family converged to a physical surface). *selected_cv: the kept family's
+// cross-validation score (what Fit compares the HF forward models by).
 absl::StatusOr<Calibration> FitScreened(const FitData& d, std::vector<std::string> excluded,
                                         const std::vector<Calibration::Box>& not_pd, const FitOptions& o,
-                                        int* down_weighted = nullptr);
+                                        int* down_weighted = nullptr, double* selected_cv = nullptr);
 
 }  // namespace fluxcal::fit::internal
 

@@ -16,6 +16,7 @@
 // The figure of merit is the issue's: RMS flux error over the map's nodes
 // inside the sampled region, relative to the largest |psi| there.
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -30,6 +31,7 @@
 #include "gtest/gtest.h"
 #include "identification/identify.h"
 #include "io/csv.h"
+#include "physics/hf_orbit.h"
 #include "simulation/trait_motor.h"
 #include "simulation/twin.h"
 
@@ -360,7 +362,14 @@ TEST(RealMaps, TwinTraitMotorsEndToEnd) {
       ASSERT_TRUE(e.ok) << t.name;
       std::printf("twin seed %d %-14s %-12s flux RMS %.3f %% max %.3f %%\n", seed, t.name.c_str(), e.family.c_str(),
                   100 * e.rms, 100 * e.max);
-      EXPECT_LT(e.rms, 0.005) << t.name << " seed " << seed;
+      // ipm-bridge: 0.30 % with the small-signal HF model, 0.52-0.57 %
+      // with the large-signal one (its inductances 3.9 -> 1.0 % RMS,
+      // LargeSignalHfIsWhatTheInjectionMeasures): the knee at 15 A lies
+      // between the plan's iq = 0 and 20 A rows, where no point sees the
+      // surface, and psi_q there is the integral of an Lqq that falls 3x;
+      // the small-signal fit's wiggles (Lqq +-14 %) happened to integrate
+      // closer. docs/fitting.md, "Large-signal HF".
+      EXPECT_LT(e.rms, t.name == "ipm-bridge" ? 0.006 : 0.005) << t.name << " seed " << seed;
     }
   }
 }
@@ -428,6 +437,98 @@ TEST(RealMaps, SelfConsistentBadRowsOnAMistunedBench) {
     std::printf("mistuned bench %-13s %d failed, %-12s flux RMS %.3f %% max %.3f %%\n", t.name.c_str(), e.failed,
                 e.family.c_str(), 100 * e.rms, 100 * e.max);
     EXPECT_LT(e.rms, 0.015);
+  }
+}
+
+// Large-signal HF (physics/hf_orbit.h, docs/fitting.md): the default
+// injection (5 V at 500 Hz, a flux circle of 1.6 mWb) drives the current of
+// these machines over 10-50 A about each point, across the saturation
+// knees. What the identification reports is the describing function over
+// that orbit, not the Jacobian at the point's mean current: on the bridge
+// knee and on the reluctance machine's d-axis knee the identified values
+// sit 10-16 standard deviations off the machine's small-signal ones (chi^2
+// 244 and 101 per point) and at the noise of its describing function (1.5,
+// 1.9). The fit that predicts the points so (FitOptions::large_signal_hf,
+// the default) gets the machine's inductances over the box closer: 3.9 ->
+// 1.0 % and 1.4 -> 0.8 % RMS (on the other trait machines: negative slope
+// 41 -> 8 %, deep saturation 9.7 -> 8.4 %, PM-SyRM 1.16 -> 1.23 %, surface
+// magnet 0.16 -> 0.44 %). Its flux error is in TwinTraitMotorsEndToEnd and
+// OtherKindsEndToEnd.
+TEST(RealMaps, LargeSignalHfIsWhatTheInjectionMeasures) {
+  std::vector<sim::MotorTraits> motors;
+  for (const auto& t : sim::RealLikeMotors(100.0, 0.15)) if (t.name == "ipm-bridge") motors.push_back(t);
+  for (const auto& t : sim::OtherKindMotors(100.0, 0.15)) if (t.name == "syrm") motors.push_back(t);
+  ASSERT_EQ(motors.size(), 2u);
+  for (const auto& t : motors) {
+    sim::TwinConfig cfg;
+    cfg.seed = 31;
+    cfg.serial = "TRAIT-" + t.name;
+    cfg.motor.sat.psi_pm_wb = t.psi_pm_wb;
+    const auto machine = std::make_shared<sim::TraitMotor>(t);
+    cfg.magnetics = machine;
+    cfg.control.gain_scheduled = true;
+    auto r = sim::Simulate(cfg, sim::DefaultPlan());
+    ASSERT_TRUE(r.ok()) << r.status();
+    auto ids = ident::IdentifySet(r->set, {});
+    ASSERT_TRUE(ids.ok()) << ids.status();
+    const FitData data = FitDataFromRecording(r->set, *ids);
+    // The identified values against the machine's small-signal and
+    // describing-function values: chi^2 per point of the worse axis.
+    auto map = [&](double id, double iq, double* psi, double* l) {
+      const auto f = machine->Flux(id, iq);
+      const auto L = machine->Inductance(id, iq);
+      psi[0] = f.psi_d_wb; psi[1] = f.psi_q_wb;
+      l[0] = L.ldd_h; l[1] = L.lqq_h; l[2] = L.ldq_h;
+    };
+    double chi2_small = 0, chi2_large = 0;
+    int n = 0;
+    for (const auto& o : data.inductances) {
+      ASSERT_TRUE(o.hf_flux_radius_wb.has_value());
+      std::vector<std::array<double, 2>> orbit;
+      std::array<std::vector<std::array<double, 2>>, 3> w;
+      if (!physics::HfOrbit(map, o.id_a, o.iq_a, *o.hf_flux_radius_wb, &orbit) ||
+          !physics::DescribingWeights(orbit, &w)) {
+        continue;
+      }
+      double large[2] = {0, 0};
+      for (size_t k = 0; k < orbit.size(); ++k) {
+        double psi[2], l[3];
+        map(orbit[k][0], orbit[k][1], psi, l);
+        for (int c = 0; c < 2; ++c) large[c] += w[c][k][0] * psi[0] + w[c][k][1] * psi[1];
+      }
+      const auto small = machine->Inductance(o.id_a, o.iq_a);
+      chi2_small += std::max(std::pow((o.ldd_h - small.ldd_h) / o.ldd_h_std, 2),
+                             std::pow((o.lqq_h - small.lqq_h) / o.lqq_h_std, 2));
+      chi2_large += std::max(std::pow((o.ldd_h - large[0]) / o.ldd_h_std, 2),
+                             std::pow((o.lqq_h - large[1]) / o.lqq_h_std, 2));
+      ++n;
+    }
+    ASSERT_GE(n, 30) << t.name;
+    // The fitted inductances against the machine's over the plan's box.
+    auto inductance_rms = [&](const Calibration& cal) {
+      double e = 0;
+      int m = 0;
+      for (double id = -100; id <= 0; id += 10) {
+        for (double iq = 0; iq <= 100; iq += 10) {
+          const auto a = cal.Inductance(id, iq), b = machine->Inductance(id, iq);
+          e += std::pow(a.ldd_h / b.ldd_h - 1, 2) + std::pow(a.lqq_h / b.lqq_h - 1, 2);
+          m += 2;
+        }
+      }
+      return std::sqrt(e / m);
+    };
+    FitOptions small_signal;
+    small_signal.large_signal_hf = false;
+    auto cal_small = Fit(data, small_signal);
+    auto cal_large = Fit(data, {});
+    ASSERT_TRUE(cal_small.ok() && cal_large.ok()) << t.name;
+    const double e_small = inductance_rms(*cal_small), e_large = inductance_rms(*cal_large);
+    std::printf("%-10s chi2 per point: small-signal %.1f, describing %.2f; inductance RMS small-signal fit %.2f %%, "
+                "large-signal fit %.2f %%\n",
+                t.name.c_str(), chi2_small / n, chi2_large / n, 100 * e_small, 100 * e_large);
+    EXPECT_GT(chi2_small / n, 50.0) << t.name;
+    EXPECT_LT(chi2_large / n, 3.0) << t.name;
+    EXPECT_LT(e_large, 0.7 * e_small) << t.name;
   }
 }
 

@@ -3,7 +3,9 @@
 // soft sign and the controller timing, and that every template takes a
 // ceres::Jet.
 #include <cmath>
+#include <array>
 #include <complex>
+#include <vector>
 
 #include <ceres/jet.h>
 #include <gtest/gtest.h>
@@ -12,6 +14,7 @@
 #include "physics/delay.h"
 #include "physics/frames.h"
 #include "physics/hf.h"
+#include "physics/hf_orbit.h"
 #include "physics/inverter.h"
 #include "physics/speed.h"
 #include "physics/torque.h"
@@ -201,6 +204,74 @@ TEST(Jet, EveryTemplateDifferentiates) {
   const double x = 0.5 * 2 * kPi * 500 * 1e-4;
   EXPECT_NEAR(g.v[0], 0.5e-4 * (std::cos(x) / x - std::sin(x) / (x * x)), 1e-12);
   EXPECT_NEAR(MechanicalAngle(J(0.5, 0), 1, 4).v[0], 0.25, 1e-12);
+}
+
+}  // namespace
+}  // namespace fluxcal::physics
+
+// The describing function over the HF orbit (physics/hf_orbit.h).
+namespace fluxcal::physics {
+namespace {
+
+// A linear machine, cross-coupled: the injection measures its inductance
+// exactly, at any amplitude.
+TEST(HfOrbit, LinearMachineMeasuresItsInductance) {
+  const double ldd = 2e-4, lqq = 5e-4, ldq = -3e-5;
+  auto map = [&](double id, double iq, double* psi, double* l) {
+    psi[0] = 0.05 + ldd * id + ldq * iq;
+    psi[1] = ldq * id + lqq * iq;
+    l[0] = ldd; l[1] = lqq; l[2] = ldq;
+  };
+  std::vector<std::array<double, 2>> orbit;
+  ASSERT_TRUE(HfOrbit(map, -40.0, 60.0, 2e-3, &orbit));
+  std::array<std::vector<std::array<double, 2>>, 3> w;
+  ASSERT_TRUE(DescribingWeights(orbit, &w));
+  double mean_d = 0, mean_q = 0, l[3] = {0, 0, 0};
+  for (size_t k = 0; k < orbit.size(); ++k) {
+    double psi[2], jac[3];
+    map(orbit[k][0], orbit[k][1], psi, jac);
+    for (int c = 0; c < 3; ++c) l[c] += w[c][k][0] * psi[0] + w[c][k][1] * psi[1];
+    mean_d += orbit[k][0] / orbit.size();
+    mean_q += orbit[k][1] / orbit.size();
+  }
+  EXPECT_NEAR(mean_d, -40.0, 1e-9);
+  EXPECT_NEAR(mean_q, 60.0, 1e-9);
+  EXPECT_NEAR(l[0], ldd, 1e-12);
+  EXPECT_NEAR(l[1], lqq, 1e-12);
+  EXPECT_NEAR(l[2], ldq, 1e-12);
+}
+
+// One saturating axis, psi_d = L x + c x^2/2 + d x^3/6 (x = id - i0): the
+// measured Ldd is L + d a^2/8 - c^2 a^2/(8 L) to O(a^4) (the series in the
+// header), a = rho / L (1, 2, 4 A here); the linear q axis is measured as
+// it is.
+TEST(HfOrbit, SaturatingAxisFollowsTheSeries) {
+  const double L = 1e-3, c = -5e-5, d = -5e-6, lq = 2e-3, i0 = -30.0;
+  auto map = [&](double id, double iq, double* psi, double* l) {
+    const double x = id - i0;
+    psi[0] = 0.1 + L * x + c * x * x / 2 + d * x * x * x / 6;
+    psi[1] = lq * iq;
+    l[0] = L + c * x + d * x * x / 2; l[1] = lq; l[2] = 0.0;
+  };
+  for (double rho : {1e-3, 2e-3, 4e-3}) {
+    std::vector<std::array<double, 2>> orbit;
+    ASSERT_TRUE(HfOrbit(map, i0, 10.0, rho, &orbit));
+    std::array<std::vector<std::array<double, 2>>, 3> w;
+    ASSERT_TRUE(DescribingWeights(orbit, &w));
+    double l[3] = {0, 0, 0};
+    for (size_t k = 0; k < orbit.size(); ++k) {
+      double psi[2], jac[3];
+      map(orbit[k][0], orbit[k][1], psi, jac);
+      for (int m = 0; m < 3; ++m) l[m] += w[m][k][0] * psi[0] + w[m][k][1] * psi[1];
+    }
+    const double a = rho / L;
+    const double series = d * a * a / 8 - c * c * a * a / (8 * L);
+    // The O(a^4) remainder: ~1 % of the correction at a = 1 A, growing as a^2.
+    EXPECT_NEAR(l[0] - L, series, (rho < 1.5e-3 ? 0.01 : 0.1) * std::abs(series)) << "rho " << rho;
+    EXPECT_GT(std::abs(series), 5e-4 * L) << "the case must test something";
+    EXPECT_NEAR(l[1], lq, 1e-12);
+    EXPECT_NEAR(l[2], 0.0, 1e-12);
+  }
 }
 
 }  // namespace

@@ -1,0 +1,76 @@
+#include "fitting/large_signal.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <memory>
+
+#include "fitting/inductance_residual.h"
+#include "physics/hf_orbit.h"
+
+namespace fluxcal::fit::internal {
+
+namespace {
+
+// The calibration as physics/hf_orbit.h's map: flux and (Ldd, Lqq, Ldq).
+void MapAt(const Calibration& cal, double id, double iq, double* psi, double* l) {
+  sim::FluxLinkage f;
+  sim::DifferentialInductance L;
+  cal.FluxAndInductance(id, iq, 25.0, &f, &L);
+  psi[0] = f.psi_d_wb;
+  psi[1] = f.psi_q_wb;
+  l[0] = L.ldd_h;
+  l[1] = L.lqq_h;
+  l[2] = L.ldq_h;
+}
+
+// sum_k W_k[c] . psi(i_k) on `cal`.
+void Describing(const Calibration& cal, const HfOrbitWeights& w, double* large) {
+  for (int c = 0; c < 3; ++c) large[c] = 0.0;
+  for (size_t k = 0; k < w.currents_a.size(); ++k) {
+    double psi[2], l[3];
+    MapAt(cal, w.currents_a[k][0], w.currents_a[k][1], psi, l);
+    for (int c = 0; c < 3; ++c) large[c] += w.weights[c][k][0] * psi[0] + w.weights[c][k][1] * psi[1];
+  }
+}
+
+}  // namespace
+
+sim::DifferentialInductance PredictedInductance(const Calibration& cal, const InductanceObservation& obs) {
+  if (!obs.hf_orbit) return cal.Inductance(obs.id_a, obs.iq_a);
+  double large[3];
+  Describing(cal, *obs.hf_orbit, large);
+  return {large[0], large[1], large[2]};
+}
+
+int AttachHfOrbits(const Calibration& first, double sigma_floor, FitData* d) {
+  auto map = [&](double id, double iq, double* psi, double* l) { MapAt(first, id, iq, psi, l); };
+  int attached = 0;
+  for (auto& obs : d->inductances) {
+    if (!obs.hf_flux_radius_wb || !(*obs.hf_flux_radius_wb > 0)) continue;
+    obs.hf_orbit.reset();
+    auto w = std::make_shared<HfOrbitWeights>();
+    if (!physics::HfOrbit(map, obs.id_a, obs.iq_a, *obs.hf_flux_radius_wb, &w->currents_a) ||
+        !physics::DescribingWeights(w->currents_a, &w->weights)) {
+      continue;
+    }
+    // What the orbit changes on the first pass's surfaces, in sigmas.
+    double large[3];
+    Describing(first, *w, large);
+    double psi[2], small[3];
+    map(obs.id_a, obs.iq_a, psi, small);
+    const double mean = 0.5 * (std::abs(obs.ldd_h) + std::abs(obs.lqq_h));
+    const double sigma[3] = {std::max(obs.ldd_h_std, sigma_floor * std::abs(obs.ldd_h)),
+                             std::max(obs.lqq_h_std, sigma_floor * std::abs(obs.lqq_h)),
+                             std::max(obs.ldq_h_std, sigma_floor * mean)};
+    if (!std::all_of(large, large + 3, [](double v) { return std::isfinite(v); })) continue;
+    bool material = false;
+    for (int c = 0; c < 3; ++c) material |= std::abs(large[c] - small[c]) > kLargeSignalMaterialSigma * sigma[c];
+    if (!material) continue;
+    obs.hf_orbit = std::move(w);
+    ++attached;
+  }
+  return attached;
+}
+
+}  // namespace fluxcal::fit::internal
