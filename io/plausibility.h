@@ -1,7 +1,7 @@
 // Physical plausibility limits of what fluxcal accepts, in one place: the
 // service checks every request against them (server/validation.cc) and the
-// flux-map reader every map (io/flux_map.cc), so a value the service refuses
-// is refused from a file too, with the same bound in the message.
+// flux-map reader every map (io/flux_map_conform.cc), so a value the service
+// refuses is refused from a file too, with the same bound in the message.
 //
 // The limits bound a traction or industrial PMSM generously (SI units):
 // phase currents below 10 kA, speeds below 100 000 rpm, magnet flux linkage

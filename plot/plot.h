@@ -107,6 +107,10 @@ struct HeatOptions {
   std::vector<std::string> cell_titles;
 };
 
+namespace internal {
+struct Render;   // the layout and drawing of one figure (plot/internal.h)
+}  // namespace internal
+
 class Figure {
  public:
   // id: unique within the page (letters, digits, '-').
@@ -172,6 +176,7 @@ class Figure {
   size_t LegendEntries() const { return legend_.size(); }
 
  private:
+  friend struct internal::Render;
   friend std::string PanelsSvg(const std::string&, const std::string&, const std::vector<Figure>&, int);
   struct Mark {
     enum Kind { kLine, kScatter, kContour, kLabel, kBars } kind;

@@ -20,7 +20,7 @@ mkdir -p "$OUT" "$OUT/corpus"
 ABSL_LIBS=$(pkg-config --libs absl_status absl_statusor absl_strings absl_str_format)
 set -x
 "$CXX" -std=c++20 -O1 -g -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=undefined \
-  -I. io/csv.cc io/recording_set.cc tests/fuzz/recording_fuzz.cc tests/fuzz/libfuzzer_main.cc \
+  -I. io/csv.cc io/manifest.cc io/recording_set.cc tests/fuzz/recording_fuzz.cc tests/fuzz/libfuzzer_main.cc \
   $ABSL_LIBS -o "$OUT/recording_fuzzer"
 set +x
 ARGS=(-artifact_prefix=tests/fuzz/corpus/crash- -print_final_stats=1 -max_len=65536)

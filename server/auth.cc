@@ -74,7 +74,7 @@ std::string_view RpcName(Rpc r) {
 bool RoleMayCall(Role role, Rpc rpc) {
   if (role == Role::kAdmin) return true;
   // A health check proves the server and its database answer; ListMotors
-  // answers a health identity with no rows (server/service.cc).
+  // answers a health identity with no rows (server/read_rpcs.cc).
   if (role == Role::kHealth) return rpc == Rpc::kListMotors;
   switch (rpc) {
     case Rpc::kIngestHfResults:
