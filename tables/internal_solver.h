@@ -17,11 +17,38 @@ namespace fluxcal::tables::internal {
 // field-weakening row asks for again: its MTPA point and its end at
 // -i_max. A locus point depends on the request and id only (the solve is
 // deterministic), so the row keeps them; TrySolve looks them up by exact id.
+//
+// A row also carries what the fast field-weakening solve (FwNewton in
+// solver.cc) needs: whether it may be tried (`fast`), the torque below
+// which it may (`fast_below`: SolveWithMax keeps it away from the limit
+// torque, where the robust solve decides feasibility at the edge), and the
+// last voltage-limited cell of the row (`warm`), the start for the next
+// speed's cell: the cells of a row move little from one speed to the next.
 struct RowLoci {
   double t = std::numeric_limits<double>::quiet_NaN();
   struct Point { double id; bool ok; double iq; };
   std::vector<Point> points;
+  bool fast = false;
+  double fast_below = 0.0;
+  bool warm = false;
+  double warm_id = 0.0, warm_iq = 0.0;
 };
+
+// The limit torque at one speed (MaxTorqueNm) and, when the direct
+// maximisation found it (`direct`), its point (id, iq): the largest torque
+// of the feasible set is reached there.
+struct LimitTorque {
+  double t = 0.0;
+  bool direct = false;
+  double id = 0.0, iq = 0.0;
+};
+
+// MaxTorqueNm at each of the electrical speeds `we` (rad/s, >= 0) for the
+// torque sign `sign`, with its point where the direct maximisation found it.
+// Where the speed's voltage limit admits the standstill limit torque's point,
+// the limit torque is the standstill one (see solver.cc).
+std::vector<LimitTorque> LimitTorques(const sim::MagneticModel& m, const MachineLimits& lim,
+                                      const std::vector<double>& we, double sign);
 
 // Least-current point for torque t under the limits; false if infeasible.
 // `mtpa_id` (optional): the least-current id of this torque without a

@@ -13,6 +13,7 @@
 
 namespace fluxcal::tables {
 
+using internal::LimitTorque;
 using internal::MinimiseScalar;
 using internal::RowLoci;
 using internal::SolveWithMax;
@@ -73,6 +74,106 @@ bool SolveIqForTorque(const sim::MagneticModel& m, const MachineLimits& lim, dou
   return true;
 }
 
+// The least-current point of torque t on the voltage limit |u| = u_max, by
+// a 2-D Newton on F = (T(id, iq) - t, |u(id, iq)|^2 - u_max^2) from a nearby
+// start (the row's cell at the previous speed, or its MTPA point). The
+// robust solve (TrySolve) reaches the same point as the root along the
+// constant-torque locus of g(id) = |u(id, iq(id))| - u_max by regula falsi,
+// each step a locus solve (~10-20 of them, and ~60 more for the locus' MTPV
+// point where its end at -i_max violates the voltage limit); here it is ~3-5
+// surface evaluations and one locus solve for the check.
+// The answer is accepted only where it is the point the robust solve finds:
+//  - converged: T = t as tightly as a locus solve, |u|^2 = u_max^2 to 1e-10;
+//  - on the branch of the locus that the robust solve follows: the locus
+//    solve from its cold start at id* gives the same iq (beyond the measured
+//    region the torque is not monotone in iq, and a start carried over from
+//    another point can settle on another root; this catches it);
+//  - inside the robust solve's bracket: -i_max <= id* <= `id_hi` (the MTPA
+//    point's id when known);
+//  - on the MTPA side of the locus' MTPV point: along the locus towards
+//    larger id the voltage rises (dg/did > 0) and the current falls
+//    (d|i|^2/did < 0). |u| and |i| each have one minimum along the locus
+//    (the robust solve's own premise), so g has one root between the MTPV
+//    and the MTPA point, and the voltage at the MTPA point exceeds u_max:
+//    this root is the robust solve's.
+// Otherwise false, and the caller solves robustly.
+bool FwNewton(const sim::MagneticModel& m, const MachineLimits& lim, double t, double we, double s, double id0,
+              double iq0, double id_hi, double* id_out, double* iq_out) {
+  const double u_max = lim.UMaxV(), u2 = u_max * u_max;
+  const double rs = *lim.rs_ohm;   // a voltage limit (we > 0 in field weakening) has Rs
+  const double k = 1.5 * lim.pole_pairs;
+  double id = id0, iq = iq0;
+  for (int it = 0; it < 16; ++it) {
+    sim::FluxLinkage F;
+    sim::DifferentialInductance L;
+    m.FluxAndInductance(id, iq, lim.temperature_c, &F, &L);
+    const double f1 = physics::ElectromagneticTorque(lim.pole_pairs, F.psi_d_wb, F.psi_q_wb, id, iq) - t;
+    const double ud = rs * id - we * F.psi_q_wb, uq = rs * iq + we * F.psi_d_wb;
+    const double f2 = ud * ud + uq * uq - u2;
+    // Jacobian, with d psi_d/d id = Ldd, d psi_d/d iq = d psi_q/d id = Ldq,
+    // d psi_q/d iq = Lqq: T = 1.5 p (psi_d iq - psi_q id) and
+    // u = (Rs id - we psi_q, Rs iq + we psi_d).
+    const double t_d = k * (L.ldd_h * iq - F.psi_q_wb - L.ldq_h * id);
+    const double t_q = physics::TorqueSlopeIq(lim.pole_pairs, F.psi_d_wb, L.ldq_h, L.lqq_h, id, iq);
+    const double g_d = 2 * (ud * (rs - we * L.ldq_h) + uq * we * L.ldd_h);
+    const double g_q = 2 * (-ud * we * L.lqq_h + uq * (rs + we * L.ldq_h));
+    if (std::abs(f1) < 1e-10 * (1.0 + std::abs(t)) && std::abs(f2) <= 1e-10 * u2) {
+      if (!(s * iq > -1e-9 && id >= -lim.i_max_a && id <= id_hi && t_q > 0)) return false;
+      // Along the locus diq/did = -T_d / T_q.
+      const double diq = -t_d / t_q;
+      if (!(g_d + g_q * diq > 0) || !(id + iq * diq < 0)) return false;
+      double iq_cold;
+      if (!SolveIqForTorque(m, lim, id, t, s, &iq_cold) ||
+          !(std::abs(iq_cold - iq) <= 1e-6 * (1.0 + std::abs(iq)))) {
+        return false;
+      }
+      // iq as the robust solve gives it: from the locus solve at id.
+      *id_out = id;
+      *iq_out = iq_cold;
+      return true;
+    }
+    const double det = t_d * g_q - t_q * g_d;
+    if (!(std::abs(det) > 0) || !std::isfinite(det)) return false;
+    // J (dd, dq) = -F by Cramer's rule; a step longer than a quarter of the
+    // current limit is shortened (a start far off, not a converging one).
+    double dd = (t_q * f2 - g_q * f1) / det, dq = (g_d * f1 - t_d * f2) / det;
+    const double len = std::hypot(dd, dq), cap = 0.25 * lim.i_max_a;
+    if (!std::isfinite(len)) return false;
+    if (len > cap) { dd *= cap / len; dq *= cap / len; }
+    id += dd;
+    iq += dq;
+  }
+  return false;
+}
+
+}  // namespace
+
+namespace {
+
+// TrySolve's field-weakening step by FwNewton, from the row's last
+// voltage-limited cell and, failing that, from the MTPA point (id_mtpa,
+// iq_mtpa). 1: solved, *op set; 0: the point lies beyond the current limit
+// (TrySolve's false); -1: not settled, solve robustly. Within 1e-6 of the
+// current limit the robust solve decides (its root may differ from this one
+// by its bracket, ~1e-9 A, which must not flip the decision).
+int FastFieldWeakening(const sim::MagneticModel& m, const MachineLimits& lim, double t, double we, double s,
+                       double id_mtpa, double iq_mtpa, RowLoci* row, OperatingPoint* op) {
+  double id = 0.0, iq = 0.0;
+  const bool ok = (row->warm && FwNewton(m, lim, t, we, s, row->warm_id, row->warm_iq, id_mtpa, &id, &iq)) ||
+                  FwNewton(m, lim, t, we, s, id_mtpa, iq_mtpa, id_mtpa, &id, &iq);
+  if (!ok) return -1;
+  const double r = std::hypot(id, iq) / lim.i_max_a - (1 + 1e-9);
+  if (std::abs(r) < 1e-6) return -1;
+  row->warm = true;
+  row->warm_id = id;
+  row->warm_iq = iq;
+  if (r > 0) return 0;
+  op->id_a = id;
+  op->iq_a = iq;
+  op->torque_nm = TorqueNm(m, lim.pole_pairs, id, iq, lim.temperature_c);
+  return 1;
+}
+
 }  // namespace
 
 namespace internal {
@@ -83,7 +184,11 @@ bool TrySolve(const sim::MagneticModel& m, const MachineLimits& lim, double t, d
   if (t == 0.0 && we <= 0) return true;
   const double s = t < 0 ? -1.0 : 1.0;
   const double id_min = -lim.i_max_a;
-  if (row != nullptr && row->t != t) *row = RowLoci{t, {}};
+  if (row != nullptr && row->t != t) {
+    row->t = t;
+    row->points.clear();
+    row->warm = false;
+  }
   // (Each locus point's Newton starts cold, from the bracket: where the
   // torque is not monotone in iq (far beyond the measured region) a start
   // carried over from a neighbouring point can settle on another root.)
@@ -113,6 +218,12 @@ bool TrySolve(const sim::MagneticModel& m, const MachineLimits& lim, double t, d
   auto volt = [&](double d, double q) { return we > 0 ? VoltageV(m, lim, d, q, we) : 0.0; };
   const double u_max = lim.UMaxV();
   if (we > 0 && volt(id, iq) > u_max) {
+    // The fast solve first (FwNewton), from the row's last voltage-limited
+    // cell, else from the MTPA point; away from the limit torque only.
+    if (row != nullptr && row->fast && std::abs(t) < row->fast_below) {
+      int verdict = FastFieldWeakening(m, lim, t, we, s, id, iq, row, op);
+      if (verdict >= 0) return verdict == 1;
+    }
     // Field weakening. Along the constant-torque locus the current grows
     // away from the MTPA point and the voltage has one minimum (the locus'
     // MTPV point) at a more negative id; the least-current feasible point is
@@ -154,6 +265,11 @@ bool TrySolve(const sim::MagneticModel& m, const MachineLimits& lim, double t, d
     }
     id = lo;
     iq = q_lo;
+    if (row != nullptr) {
+      row->warm = true;
+      row->warm_id = id;
+      row->warm_iq = iq;
+    }
   }
   if (std::hypot(id, iq) > lim.i_max_a * (1 + 1e-9)) return false;
   op->id_a = id;
@@ -166,6 +282,10 @@ OperatingPoint SolveWithMax(const sim::MagneticModel& m, const MachineLimits& li
                             double we, double tmax, const double* mtpa_id,
                             std::optional<OperatingPoint>* clamp, RowLoci* row) {
   OperatingPoint op;
+  // The fast field-weakening solve stays 1e-6 below the limit torque: there
+  // the feasible arc of the locus shrinks to a point and the robust solve
+  // decides feasibility.
+  if (row != nullptr) row->fast_below = tmax * (1 - 1e-6);
   if (std::abs(t) <= tmax && TrySolve(m, lim, t, we, &op, mtpa_id, row)) return op;
   if (clamp != nullptr && clamp->has_value()) return **clamp;
   // Infeasible: deliver the largest torque of the same sign within limits.
@@ -197,14 +317,19 @@ namespace {
 // A locus point found inside both limits settles it: the search stops there
 // (a feasible request needs no more), so only an infeasible one costs the
 // whole search.
+// h at one locus point (the locus solve from its cold start at id).
+double LocusPointH(const sim::MagneticModel& m, const MachineLimits& lim, double we, double s, double t, double id) {
+  double iq;
+  if (!SolveIqForTorque(m, lim, id, t, s, &iq)) return 1e30;
+  const double c = std::hypot(id, iq) / lim.i_max_a;
+  return we > 0 ? std::max(c, VoltageV(m, lim, id, iq, we) / lim.UMaxV()) : c;
+}
+
 bool LocusFeasible(const sim::MagneticModel& m, const MachineLimits& lim, double we, double s, double t) {
   bool found = false;
   auto h = [&](double id) {
     if (found) return 0.0;
-    double iq;
-    if (!SolveIqForTorque(m, lim, id, t, s, &iq)) return 1e30;
-    const double c = std::hypot(id, iq) / lim.i_max_a;
-    const double v = we > 0 ? std::max(c, VoltageV(m, lim, id, iq, we) / lim.UMaxV()) : c;
+    const double v = LocusPointH(m, lim, we, s, t, id);
     found = v <= 1.0;
     return v;
   };
@@ -235,11 +360,12 @@ double MaxTorqueByBisection(const sim::MagneticModel& m, const MachineLimits& li
 // column's. A column with no feasible point scores minus its least
 // (|u|^2 - u_max^2) / u_max^2, so the scan climbs towards the feasible
 // columns even when they are a narrow band (high speed).
-double MaxTorqueDirect(const sim::MagneticModel& m, const MachineLimits& lim, double we, double s) {
+LimitTorque MaxTorqueDirect(const sim::MagneticModel& m, const MachineLimits& lim, double we, double s) {
   const double u_max = lim.UMaxV();
   const bool voltage = we > 0 && lim.rs_ohm.has_value() && std::isfinite(u_max);
   const double rs = voltage ? *lim.rs_ohm : 0.0;
   double q_warm = -1.0;
+  double q_last = 0.0;   // the last column's |iq| (its point, with the torque)
   // phi(q) = |u(id, s q)|^2 - u_max^2 and its slope in q.
   auto phi = [&](double id, double q, double* slope) {
     sim::FluxLinkage F;
@@ -265,7 +391,10 @@ double MaxTorqueDirect(const sim::MagneticModel& m, const MachineLimits& lim, do
           const double qm = MinimiseScalar([&](double x) { double d; return phi(id, x, &d); }, 0.0, qc, 4, 25);
           double dm;
           const double pm = phi(id, qm, &dm);
-          if (pm > 0) return -pm / (u_max * u_max);
+          if (pm > 0) {
+            q_last = qm;
+            return -pm / (u_max * u_max);
+          }
           lo = qm;
         }
         double x = q_warm > lo && q_warm < hi ? q_warm : hi, dx = dc;
@@ -284,17 +413,24 @@ double MaxTorqueDirect(const sim::MagneticModel& m, const MachineLimits& lim, do
         q_warm = q;
       }
     }
+    q_last = q;
     return s * TorqueNm(m, lim.pole_pairs, id, s * q, lim.temperature_c);
   };
   const double id = MinimiseScalar([&](double d) { return -column(d); }, -lim.i_max_a, 0.0, 24, 40);
-  return column(id);
+  LimitTorque r;
+  r.t = column(id);
+  r.direct = true;
+  r.id = id;
+  r.iq = s * q_last;
+  return r;
 }
 
 }  // namespace
 
-double MaxTorqueNm(const sim::MagneticModel& m, const MachineLimits& lim, double we,
-                   double sign) {
-  const double s = sign < 0 ? -1.0 : 1.0;
+namespace {
+
+// MaxTorqueNm with its point: MaxTorqueDirect, checked.
+LimitTorque CheckedLimitTorque(const sim::MagneticModel& m, const MachineLimits& lim, double we, double s) {
   // The limit torque is the largest request some point of whose locus lies
   // inside both limits. It was found by bisection on the request
   // (MaxTorqueByBisection: ~30 x 67 locus points, each a Newton solve),
@@ -304,16 +440,59 @@ double MaxTorqueNm(const sim::MagneticModel& m, const MachineLimits& lim, double
   // 1e-7 below must be feasible and 1e-7 above must not. Where the check
   // fails (a feasible set the column search does not resolve), the
   // bisection decides, as before.
-  const double t = MaxTorqueDirect(m, lim, we, s);
+  // The request below is shown feasible by one locus point when it can be:
+  // the point of its locus at the maximum's id is inside both limits there
+  // (its |iq| is below the maximum's, where the column is feasible), and
+  // one point inside both limits is what LocusFeasible's search looks for.
+  LimitTorque d = MaxTorqueDirect(m, lim, we, s);
   constexpr double kCheck = 1e-7;
-  if (t > 0 && std::isfinite(t) && LocusFeasible(m, lim, we, s, t * (1 - kCheck)) &&
+  const double t = d.t;
+  if (t > 0 && std::isfinite(t) &&
+      (LocusPointH(m, lim, we, s, t * (1 - kCheck), d.id) <= 1.0 || LocusFeasible(m, lim, we, s, t * (1 - kCheck))) &&
       !LocusFeasible(m, lim, we, s, t * (1 + kCheck))) {
     // Just inside the limit (1e-9 of it, below what the golden section
     // resolves), so that the least-current solver at this torque finds a
     // feasible point; the bisection ended ~1e-8 inside.
-    return t * (1 - 1e-9);
+    d.t = t * (1 - 1e-9);
+    return d;
   }
-  return MaxTorqueByBisection(m, lim, we, s);
+  LimitTorque b;
+  b.t = MaxTorqueByBisection(m, lim, we, s);
+  return b;
 }
+
+}  // namespace
+
+double MaxTorqueNm(const sim::MagneticModel& m, const MachineLimits& lim, double we,
+                   double sign) {
+  return CheckedLimitTorque(m, lim, we, sign < 0 ? -1.0 : 1.0).t;
+}
+
+namespace internal {
+
+std::vector<LimitTorque> LimitTorques(const sim::MagneticModel& m, const MachineLimits& lim,
+                                      const std::vector<double>& we, double sign) {
+  const double s = sign < 0 ? -1.0 : 1.0;
+  // At standstill only the current limit binds. The feasible set at a speed
+  // (inside the current circle and the voltage limit) is part of the one at
+  // standstill, so its largest torque is at most the standstill one; where
+  // the standstill maximum's point also meets this speed's voltage limit,
+  // it is in the set and the limit torque is the standstill one (below base
+  // speed: one voltage evaluation instead of a maximisation and its checks).
+  const LimitTorque still = CheckedLimitTorque(m, lim, 0.0, s);
+  const double u_max = lim.UMaxV();
+  std::vector<LimitTorque> out;
+  out.reserve(we.size());
+  for (double w : we) {
+    if (w <= 0 || (still.direct && lim.HasVoltageLimit() && VoltageV(m, lim, still.id, still.iq, w) <= u_max)) {
+      out.push_back(still);
+    } else {
+      out.push_back(CheckedLimitTorque(m, lim, w, s));
+    }
+  }
+  return out;
+}
+
+}  // namespace internal
 
 }  // namespace fluxcal::tables
