@@ -259,9 +259,9 @@ absl::Status FwRows(const sim::MagneticModel& m, const MachineLimits& lim, const
     RowLoci row;
     row.fast = !(spec.measured_current_limit_a > 0) || lim.i_max_a <= spec.measured_current_limit_a * (1 + 1e-9);
     for (size_t j = 0; j < n.size(); ++j) {
-      const double tlim = x < 0 ? tlim_gen[j].t : tlim_motor[j].t;
-      const auto op = SolveWithMax(m, lim, x, we_axis[j], tlim, have_mtpa ? &mtpa.id_a : nullptr,
-                                   x < 0 ? &clamp_gen[j] : &clamp_motor[j], &row);
+      const LimitTorque& tlim = x < 0 ? tlim_gen[j] : tlim_motor[j];
+      const auto op = SolveWithMax(m, lim, x, we_axis[j], tlim.t, have_mtpa ? &mtpa.id_a : nullptr,
+                                   x < 0 ? &clamp_gen[j] : &clamp_motor[j], &row, &tlim);
       id.values.push_back(op.id_a);
       iq.values.push_back(op.iq_a);
       t.clamped.push_back(op.clamped);

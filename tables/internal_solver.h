@@ -61,9 +61,12 @@ bool TrySolve(const sim::MagneticModel& m, const MachineLimits& lim, double t, d
 // `clamp` (optional): the clamped point of this speed and torque sign, once
 // computed; it depends on nothing else, so a field-weakening column
 // computes it once for all the requests beyond its limit torque.
+// `limit` (optional): the limit torque's point at this speed (LimitTorques),
+// where a row solved fast (RowLoci::fast) starts the clamped point's solve.
 OperatingPoint SolveWithMax(const sim::MagneticModel& m, const MachineLimits& lim, double t,
                             double we, double tmax, const double* mtpa_id = nullptr,
-                            std::optional<OperatingPoint>* clamp = nullptr, RowLoci* row = nullptr);
+                            std::optional<OperatingPoint>* clamp = nullptr, RowLoci* row = nullptr,
+                            const LimitTorque* limit = nullptr);
 
 }  // namespace fluxcal::tables::internal
 

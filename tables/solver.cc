@@ -150,20 +150,29 @@ bool FwNewton(const sim::MagneticModel& m, const MachineLimits& lim, double t, d
 
 namespace {
 
+// Whether TrySolve's current-limit test (|i| <= i_max (1 + 1e-9)) decides
+// the same at FwNewton's root as at the robust solve's, given `r`, the
+// root's |i| minus that threshold. The robust solve ends within its bracket
+// (2e-9 A in id) of the same root, which moves |i| by less than that; 5
+// times it, 1e-8 A, from the threshold the answers agree. (A clamped point
+// at a corner of the limits, where the limit torque's point is on both the
+// current and the voltage limit, lies ~1e-9 of i_max inside: e.g. 2e-8 A at
+// 18 A.)
+bool CurrentLimitSettled(double r) { return std::abs(r) > 1e-8; }
+
 // TrySolve's field-weakening step by FwNewton, from the row's last
 // voltage-limited cell and, failing that, from the MTPA point (id_mtpa,
 // iq_mtpa). 1: solved, *op set; 0: the point lies beyond the current limit
-// (TrySolve's false); -1: not settled, solve robustly. Within 1e-6 of the
-// current limit the robust solve decides (its root may differ from this one
-// by its bracket, ~1e-9 A, which must not flip the decision).
+// (TrySolve's false); -1: not settled, solve robustly (also where
+// CurrentLimitSettled is not).
 int FastFieldWeakening(const sim::MagneticModel& m, const MachineLimits& lim, double t, double we, double s,
                        double id_mtpa, double iq_mtpa, RowLoci* row, OperatingPoint* op) {
   double id = 0.0, iq = 0.0;
   const bool ok = (row->warm && FwNewton(m, lim, t, we, s, row->warm_id, row->warm_iq, id_mtpa, &id, &iq)) ||
                   FwNewton(m, lim, t, we, s, id_mtpa, iq_mtpa, id_mtpa, &id, &iq);
   if (!ok) return -1;
-  const double r = std::hypot(id, iq) / lim.i_max_a - (1 + 1e-9);
-  if (std::abs(r) < 1e-6) return -1;
+  const double r = std::hypot(id, iq) - lim.i_max_a * (1 + 1e-9);
+  if (!CurrentLimitSettled(r)) return -1;
   row->warm = true;
   row->warm_id = id;
   row->warm_iq = iq;
@@ -280,7 +289,7 @@ bool TrySolve(const sim::MagneticModel& m, const MachineLimits& lim, double t, d
 
 OperatingPoint SolveWithMax(const sim::MagneticModel& m, const MachineLimits& lim, double t,
                             double we, double tmax, const double* mtpa_id,
-                            std::optional<OperatingPoint>* clamp, RowLoci* row) {
+                            std::optional<OperatingPoint>* clamp, RowLoci* row, const LimitTorque* limit) {
   OperatingPoint op;
   // The fast field-weakening solve stays 1e-6 below the limit torque: there
   // the feasible arc of the locus shrinks to a point and the robust solve
@@ -291,6 +300,31 @@ OperatingPoint SolveWithMax(const sim::MagneticModel& m, const MachineLimits& li
   // Infeasible: deliver the largest torque of the same sign within limits.
   const double s = t < 0 ? -1.0 : 1.0;
   double tt = s * tmax;
+  // The clamped point: the least-current point of the limit torque. Where
+  // the limit torque's point is a corner of the limits (on the current
+  // circle and the voltage limit), the voltage limit crosses the torque's
+  // locus there (well-conditioned) and FwNewton from the limit's point
+  // finds the clamped point next to it (checks as for a cell); the robust
+  // solve's first step, the MTPA point of this torque (~60 locus solves),
+  // is not needed: the checks place the root on its field-weakening side.
+  // Elsewhere the limit is the locus' MTPV point, where the voltage limit
+  // touches the locus: the root is ill-conditioned (1e-9 in torque moves it
+  // by ~1e-6), and the robust solve's answer is kept.
+  if (row != nullptr && row->fast && limit != nullptr && limit->direct && we > 0 &&
+      std::hypot(limit->id, limit->iq) >= lim.i_max_a * (1 - 1e-6)) {
+    double id, iq;
+    if (FwNewton(m, lim, tt, we, s, limit->id, limit->iq, 0.0, &id, &iq)) {
+      const double r = std::hypot(id, iq) - lim.i_max_a * (1 + 1e-9);
+      if (r < 0 && CurrentLimitSettled(r)) {
+        op.id_a = id;
+        op.iq_a = iq;
+        op.torque_nm = TorqueNm(m, lim.pole_pairs, id, iq, lim.temperature_c);
+        op.clamped = true;
+        if (clamp != nullptr) *clamp = op;
+        return op;
+      }
+    }
+  }
   for (int k = 0; k < 8 && !TrySolve(m, lim, tt, we, &op); ++k) tt *= 1 - 1e-6 * (1 << (2 * k));
   op.clamped = true;
   if (clamp != nullptr) *clamp = op;
