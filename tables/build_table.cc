@@ -238,11 +238,19 @@ absl::Status FwRows(const sim::MagneticModel& m, const MachineLimits& lim, const
   Output id{"id_a", {}}, iq{"iq_a", {}};
   // Limit torque per speed, motoring and generating (they differ at speed:
   // the resistive drop subtracts from the voltage when generating).
+  // The fast solves (RowLoci, LimitTorques) only within the measured current
+  // limit: beyond it (--i-max-a above it with --allow-extrapolation) the
+  // extrapolated surface breaks the premises their checks rest on (torque
+  // monotone in iq, one voltage minimum along a locus): a locus may cross
+  // the voltage limit several times, and the robust solve's choice among
+  // those crossings is kept there.
+  const double meas = spec.measured_current_limit_a;
+  const bool fast = !(meas > 0) || lim.i_max_a <= meas * (1 + 1e-9);
   std::vector<double> we_axis(n.size());
   for (size_t j = 0; j < n.size(); ++j) we_axis[j] = physics::RpmToElectricalRadS(n[j], lim.pole_pairs);
-  const std::vector<LimitTorque> tlim_motor = LimitTorques(m, lim, we_axis, 1.0);
+  const std::vector<LimitTorque> tlim_motor = LimitTorques(m, lim, we_axis, 1.0, fast);
   const std::vector<LimitTorque> tlim_gen =
-      spec.include_generating ? LimitTorques(m, lim, we_axis, -1.0) : std::vector<LimitTorque>(n.size());
+      spec.include_generating ? LimitTorques(m, lim, we_axis, -1.0, fast) : std::vector<LimitTorque>(n.size());
   // The clamped point per speed and torque sign (SolveWithMax).
   std::vector<std::optional<OperatingPoint>> clamp_motor(n.size()), clamp_gen(n.size());
   for (double x : tq) {
@@ -251,13 +259,8 @@ absl::Status FwRows(const sim::MagneticModel& m, const MachineLimits& lim, const
     const bool have_mtpa = TrySolve(m, lim, x, 0.0, &mtpa);
     // The row's cells move little from one speed to the next: each
     // voltage-limited one starts the next speed's fast solve (RowLoci).
-    // Only within the measured current limit: beyond it (--i-max-a above
-    // it with --allow-extrapolation) the extrapolated surface breaks the
-    // premise the fast solve's checks rest on (one voltage minimum along a
-    // locus) and a locus may cross the voltage limit several times; the
-    // robust solve's choice among those crossings is kept there.
     RowLoci row;
-    row.fast = !(spec.measured_current_limit_a > 0) || lim.i_max_a <= spec.measured_current_limit_a * (1 + 1e-9);
+    row.fast = fast;
     for (size_t j = 0; j < n.size(); ++j) {
       const LimitTorque& tlim = x < 0 ? tlim_gen[j] : tlim_motor[j];
       const auto op = SolveWithMax(m, lim, x, we_axis[j], tlim.t, have_mtpa ? &mtpa.id_a : nullptr,

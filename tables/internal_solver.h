@@ -46,9 +46,11 @@ struct LimitTorque {
 // MaxTorqueNm at each of the electrical speeds `we` (rad/s, >= 0) for the
 // torque sign `sign`, with its point where the direct maximisation found it.
 // Where the speed's voltage limit admits the standstill limit torque's point,
-// the limit torque is the standstill one (see solver.cc).
+// the limit torque is the standstill one (see solver.cc). `fast`: a limit at
+// a corner of the limits starts the next speed's (CornerLimit), whose check
+// warm-starts its locus solves; only within the measured current limit.
 std::vector<LimitTorque> LimitTorques(const sim::MagneticModel& m, const MachineLimits& lim,
-                                      const std::vector<double>& we, double sign);
+                                      const std::vector<double>& we, double sign, bool fast);
 
 // Least-current point for torque t under the limits; false if infeasible.
 // `mtpa_id` (optional): the least-current id of this torque without a

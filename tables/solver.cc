@@ -342,6 +342,18 @@ OperatingPoint SolveLeastCurrent(const sim::MagneticModel& m, const MachineLimit
 
 namespace {
 
+// h at one locus point: the locus solve from its cold start at id, or from
+// `iq_guess` (> 0, magnitude) when given; *iq_found (optional): the root's
+// magnitude.
+double LocusPointH(const sim::MagneticModel& m, const MachineLimits& lim, double we, double s, double t, double id,
+                   double iq_guess = 0.0, double* iq_found = nullptr) {
+  double iq;
+  if (!SolveIqForTorque(m, lim, id, t, s, &iq, iq_guess)) return 1e30;
+  if (iq_found != nullptr) *iq_found = std::abs(iq);
+  const double c = std::hypot(id, iq) / lim.i_max_a;
+  return we > 0 ? std::max(c, VoltageV(m, lim, id, iq, we) / lim.UMaxV()) : c;
+}
+
 // Whether torque request s t (t > 0) can be met within both limits: some
 // point of its constant-torque locus lies inside them, i.e. the minimum
 // over the locus of h = max(|i| / i_max, |u| / u_max) is at most 1. |i|
@@ -351,19 +363,19 @@ namespace {
 // A locus point found inside both limits settles it: the search stops there
 // (a feasible request needs no more), so only an infeasible one costs the
 // whole search.
-// h at one locus point (the locus solve from its cold start at id).
-double LocusPointH(const sim::MagneticModel& m, const MachineLimits& lim, double we, double s, double t, double id) {
-  double iq;
-  if (!SolveIqForTorque(m, lim, id, t, s, &iq)) return 1e30;
-  const double c = std::hypot(id, iq) / lim.i_max_a;
-  return we > 0 ? std::max(c, VoltageV(m, lim, id, iq, we) / lim.UMaxV()) : c;
-}
-
-bool LocusFeasible(const sim::MagneticModel& m, const MachineLimits& lim, double we, double s, double t) {
+// `warm`: each locus solve starts from the root at the last point searched
+// (the golden section's points lie close together) instead of cold. Only
+// where the torque is monotone in iq (within the measured region), so that
+// the root is the same: beyond it a carried-over start can settle on
+// another root. (Any root is a point of the locus, so a point it finds
+// inside both limits proves feasibility either way.)
+bool LocusFeasible(const sim::MagneticModel& m, const MachineLimits& lim, double we, double s, double t,
+                   bool warm = false) {
   bool found = false;
+  double q_last = 0.0;
   auto h = [&](double id) {
     if (found) return 0.0;
-    const double v = LocusPointH(m, lim, we, s, t, id);
+    const double v = LocusPointH(m, lim, we, s, t, id, warm ? q_last : 0.0, &q_last);
     found = v <= 1.0;
     return v;
   };
@@ -473,12 +485,13 @@ namespace {
 // the point of its locus at the maximum's id is inside both limits there
 // (its |iq| is below the maximum's, where the column is feasible), and one
 // point inside both limits is what LocusFeasible's search looks for.
-bool PassesLimitCheck(const sim::MagneticModel& m, const MachineLimits& lim, double we, double s, LimitTorque* d) {
+bool PassesLimitCheck(const sim::MagneticModel& m, const MachineLimits& lim, double we, double s, LimitTorque* d,
+                      bool warm = false) {
   constexpr double kCheck = 1e-7;
   const double t = d->t;
   if (t > 0 && std::isfinite(t) &&
       (LocusPointH(m, lim, we, s, t * (1 - kCheck), d->id) <= 1.0 || LocusFeasible(m, lim, we, s, t * (1 - kCheck))) &&
-      !LocusFeasible(m, lim, we, s, t * (1 + kCheck))) {
+      !LocusFeasible(m, lim, we, s, t * (1 + kCheck), warm)) {
     d->t = t * (1 - 1e-9);
     return true;
   }
@@ -566,7 +579,7 @@ double MaxTorqueNm(const sim::MagneticModel& m, const MachineLimits& lim, double
 namespace internal {
 
 std::vector<LimitTorque> LimitTorques(const sim::MagneticModel& m, const MachineLimits& lim,
-                                      const std::vector<double>& we, double sign) {
+                                      const std::vector<double>& we, double sign, bool fast) {
   const double s = sign < 0 ? -1.0 : 1.0;
   // At standstill only the current limit binds. The feasible set at a speed
   // (inside the current circle and the voltage limit) is part of the one at
@@ -587,8 +600,8 @@ std::vector<LimitTorque> LimitTorques(const sim::MagneticModel& m, const Machine
       continue;
     }
     LimitTorque c;
-    if (corner != nullptr && lim.HasVoltageLimit() && CornerLimit(m, lim, w, s, corner->id, corner->iq, &c) &&
-        PassesLimitCheck(m, lim, w, s, &c)) {
+    if (fast && corner != nullptr && lim.HasVoltageLimit() && CornerLimit(m, lim, w, s, corner->id, corner->iq, &c) &&
+        PassesLimitCheck(m, lim, w, s, &c, true)) {
       out.push_back(c);
     } else {
       out.push_back(CheckedLimitTorque(m, lim, w, s));
