@@ -58,7 +58,9 @@ std::string Cdfx(const Table& t) {
     for (size_t i = 0; i < n0; ++i) {
       if (map) absl::StrAppend(&s, in, "      <VG>\n");
       for (size_t j = 0; j < n1; ++j) {
-        absl::StrAppend(&s, in, map ? "        " : "      ", "<V>", Num(vals[i * n1 + j]), "</V>\n");
+        absl::StrAppend(&s, in, map ? "        " : "      ", "<V>");
+        AppendNum(&s, vals[i * n1 + j]);
+        s += "</V>\n";
       }
       if (map) absl::StrAppend(&s, in, "      </VG>\n");
     }

@@ -23,10 +23,19 @@ namespace internal {
 // locale ([charconv.to.chars]), without printf's parsing of the format per
 // value: a 64 x 32 CDFX map writes ~10^4 of them.
 std::string Num(double v) {
-  if (!std::isfinite(v)) return absl::StrFormat("%.17g", v);
+  std::string s;
+  AppendNum(&s, v);
+  return s;
+}
+
+void AppendNum(std::string* out, double v) {
+  if (!std::isfinite(v)) {
+    out->append(absl::StrFormat("%.17g", v));
+    return;
+  }
   char buf[32];
   const auto r = std::to_chars(buf, buf + sizeof buf, v, std::chars_format::general, 17);
-  return std::string(buf, r.ptr);
+  out->append(buf, r.ptr);
 }
 
 std::string Crc(const Table& t) { return absl::StrFormat("%08x", t.crc32); }
