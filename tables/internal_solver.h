@@ -70,6 +70,13 @@ OperatingPoint SolveWithMax(const sim::MagneticModel& m, const MachineLimits& li
                             std::optional<OperatingPoint>* clamp = nullptr, RowLoci* row = nullptr,
                             const LimitTorque* limit = nullptr);
 
+// The fast field-weakening solve (solver.cc): the least-current point of
+// torque t on the voltage limit by a 2-D Newton from (id0, iq0), accepted
+// only where its checks place it at the robust solve's root (id <= id_hi,
+// the MTPA point's id when known); false otherwise.
+bool FwNewton(const sim::MagneticModel& m, const MachineLimits& lim, double t, double we, double s, double id0,
+              double iq0, double id_hi, double* id_out, double* iq_out);
+
 }  // namespace fluxcal::tables::internal
 
 #endif  // FLUXCAL_TABLES_INTERNAL_SOLVER_H_

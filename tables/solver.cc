@@ -13,6 +13,7 @@
 
 namespace fluxcal::tables {
 
+using internal::FwNewton;
 using internal::LimitTorque;
 using internal::MinimiseScalar;
 using internal::RowLoci;
@@ -73,6 +74,10 @@ bool SolveIqForTorque(const sim::MagneticModel& m, const MachineLimits& lim, dou
   *iq_out = s * iq;
   return true;
 }
+
+}  // namespace
+
+namespace internal {
 
 // The least-current point of torque t on the voltage limit |u| = u_max, by
 // a 2-D Newton on F = (T(id, iq) - t, |u(id, iq)|^2 - u_max^2) from a nearby
@@ -146,9 +151,10 @@ bool FwNewton(const sim::MagneticModel& m, const MachineLimits& lim, double t, d
   return false;
 }
 
-}  // namespace
+}  // namespace internal
 
 namespace {
+
 
 // Whether TrySolve's current-limit test (|i| <= i_max (1 + 1e-9)) decides
 // the same at FwNewton's root as at the robust solve's, given `r`, the
