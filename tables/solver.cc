@@ -155,12 +155,12 @@ bool FwNewton(const sim::MagneticModel& m, const MachineLimits& lim, double t, d
 
 namespace {
 
-
 // Whether TrySolve's current-limit test (|i| <= i_max (1 + 1e-9)) decides
 // the same at FwNewton's root as at the robust solve's, given `r`, the
 // root's |i| minus that threshold. The robust solve ends within its bracket
-// (2e-9 A in id) of the same root, which moves |i| by less than that; 5
-// times it, 1e-8 A, from the threshold the answers agree. (A clamped point
+// (2e-9 A in id) of the same root, which moves |i| by that times the slope
+// of |i| along the locus (of order one where a cell meets the current
+// limit); 1e-8 A from the threshold the answers agree. (A clamped point
 // at a corner of the limits, where the limit torque's point is on both the
 // current and the voltage limit, lies ~1e-9 of i_max inside: e.g. 2e-8 A at
 // 18 A.)
