@@ -24,6 +24,7 @@ using internal::LimitTorque;
 using internal::LimitTorques;
 using internal::Linspace;
 using internal::MinimiseScalar;
+using internal::MtpaNewton;
 using internal::RowLoci;
 using internal::SolveWithMax;
 using internal::TrySolve;
@@ -253,10 +254,28 @@ absl::Status FwRows(const sim::MagneticModel& m, const MachineLimits& lim, const
       spec.include_generating ? LimitTorques(m, lim, we_axis, -1.0, fast) : std::vector<LimitTorque>(n.size());
   // The clamped point per speed and torque sign (SolveWithMax).
   std::vector<std::optional<OperatingPoint>> clamp_motor(n.size()), clamp_gen(n.size());
+  // The previous row's MTPA point, the start of the next row's MtpaNewton.
+  OperatingPoint mtpa_prev;
+  bool have_prev = false;
   for (double x : tq) {
-    // The MTPA point of this torque row is the same at every speed.
+    // The MTPA point of this torque row is the same at every speed. Fast
+    // (MtpaNewton) from the previous row's of the same sign, checked;
+    // otherwise, near the current limit (TrySolve's test there, as for a
+    // cell: CurrentLimitSettled) and for the first row of each sign the
+    // robust solve.
     OperatingPoint mtpa;
-    const bool have_mtpa = TrySolve(m, lim, x, 0.0, &mtpa);
+    bool have_mtpa = false, solved = false;
+    double id_f, iq_f;
+    if (fast && x != 0.0 && have_prev && mtpa_prev.iq_a * x > 0 &&
+        MtpaNewton(m, lim, x, x < 0 ? -1.0 : 1.0, mtpa_prev.id_a, mtpa_prev.iq_a, &id_f, &iq_f) &&
+        std::abs(std::hypot(id_f, iq_f) - lim.i_max_a * (1 + 1e-9)) > 1e-8) {
+      solved = true;
+      have_mtpa = std::hypot(id_f, iq_f) <= lim.i_max_a * (1 + 1e-9);
+      if (have_mtpa) mtpa = OperatingPoint{id_f, iq_f, TorqueNm(m, lim.pole_pairs, id_f, iq_f, lim.temperature_c)};
+    }
+    if (!solved) have_mtpa = TrySolve(m, lim, x, 0.0, &mtpa);
+    have_prev = have_mtpa;
+    mtpa_prev = mtpa;
     // The row's cells move little from one speed to the next: each
     // voltage-limited one starts the next speed's fast solve (RowLoci).
     RowLoci row;

@@ -52,6 +52,14 @@ struct LimitTorque {
 std::vector<LimitTorque> LimitTorques(const sim::MagneticModel& m, const MachineLimits& lim,
                                       const std::vector<double>& we, double sign, bool fast);
 
+// iq (sign s) on the constant-torque locus through id: T(id, iq) = t.
+// Newton with a bisection safeguard; dT/diq = 1.5 p (psi_d + Ldq iq - Lqq id).
+// `iq_guess_a` (> 0, magnitude): a start close to the root, e.g. the root at
+// a neighbouring id; otherwise the start scales linearly from the bracket
+// (the cold start). False if no bracket is found.
+bool SolveIqForTorque(const sim::MagneticModel& m, const MachineLimits& lim, double id, double t, double s,
+                      double* iq_out, double iq_guess_a = 0.0);
+
 // Least-current point for torque t under the limits; false if infeasible.
 // `mtpa_id` (optional): the least-current id of this torque without a
 // voltage limit, when already known (it does not depend on speed).
@@ -70,12 +78,18 @@ OperatingPoint SolveWithMax(const sim::MagneticModel& m, const MachineLimits& li
                             std::optional<OperatingPoint>* clamp = nullptr, RowLoci* row = nullptr,
                             const LimitTorque* limit = nullptr);
 
-// The fast field-weakening solve (solver.cc): the least-current point of
+// The fast field-weakening solve (fast_solve.cc): the least-current point of
 // torque t on the voltage limit by a 2-D Newton from (id0, iq0), accepted
 // only where its checks place it at the robust solve's root (id <= id_hi,
 // the MTPA point's id when known); false otherwise.
 bool FwNewton(const sim::MagneticModel& m, const MachineLimits& lim, double t, double we, double s, double id0,
               double iq0, double id_hi, double* id_out, double* iq_out);
+
+// The MTPA point of torque t by a 2-D Newton from (id0, iq0) (the
+// neighbouring torque row's), accepted only where its checks place it at the
+// robust solve's (fast_solve.cc); false otherwise.
+bool MtpaNewton(const sim::MagneticModel& m, const MachineLimits& lim, double t, double s, double id0, double iq0,
+                double* id_out, double* iq_out);
 
 }  // namespace fluxcal::tables::internal
 

@@ -14,6 +14,7 @@
 namespace fluxcal::tables {
 
 using internal::FwNewton;
+using internal::SolveIqForTorque;
 using internal::LimitTorque;
 using internal::MinimiseScalar;
 using internal::RowLoci;
@@ -36,14 +37,10 @@ double VoltageV(const sim::MagneticModel& m, const MachineLimits& lim, double id
   return std::hypot(rs * id - we * f.psi_q_wb, rs * iq + we * f.psi_d_wb);
 }
 
-namespace {
+namespace internal {
 
-// iq (sign s) on the constant-torque locus through id: T(id, iq) = t.
-// Newton with a bisection safeguard; dT/diq = 1.5 p (psi_d + Ldq iq - Lqq id).
-// `iq_guess_a` (> 0, magnitude): a start close to the root, e.g. the root at
-// a neighbouring id; otherwise the start scales linearly from the bracket.
 bool SolveIqForTorque(const sim::MagneticModel& m, const MachineLimits& lim, double id, double t,
-                      double s, double* iq_out, double iq_guess_a = 0.0) {
+                      double s, double* iq_out, double iq_guess_a) {
   const double target = std::abs(t);
   double lo = 0.0, hi = std::max(10.0, lim.i_max_a);
   auto torque = [&](double iq) { return s * TorqueNm(m, lim.pole_pairs, id, s * iq, lim.temperature_c); };
@@ -75,83 +72,8 @@ bool SolveIqForTorque(const sim::MagneticModel& m, const MachineLimits& lim, dou
   return true;
 }
 
-}  // namespace
-
-namespace internal {
-
-// The least-current point of torque t on the voltage limit |u| = u_max, by
-// a 2-D Newton on F = (T(id, iq) - t, |u(id, iq)|^2 - u_max^2) from a nearby
-// start (the row's cell at the previous speed, or its MTPA point). The
-// robust solve (TrySolve) reaches the same point as the root along the
-// constant-torque locus of g(id) = |u(id, iq(id))| - u_max by regula falsi,
-// each step a locus solve (~10-20 of them, and ~60 more for the locus' MTPV
-// point where its end at -i_max violates the voltage limit); here it is ~3-5
-// surface evaluations and one locus solve for the check.
-// The answer is accepted only where it is the point the robust solve finds:
-//  - converged: T = t as tightly as a locus solve, |u|^2 = u_max^2 to 1e-10;
-//  - on the branch of the locus that the robust solve follows: the locus
-//    solve from its cold start at id* gives the same iq (beyond the measured
-//    region the torque is not monotone in iq, and a start carried over from
-//    another point can settle on another root; this catches it);
-//  - inside the robust solve's bracket: -i_max <= id* <= `id_hi` (the MTPA
-//    point's id when known);
-//  - on the MTPA side of the locus' MTPV point: along the locus towards
-//    larger id the voltage rises (dg/did > 0) and the current falls
-//    (d|i|^2/did < 0). |u| and |i| each have one minimum along the locus
-//    (the robust solve's own premise), so g has one root between the MTPV
-//    and the MTPA point, and the voltage at the MTPA point exceeds u_max:
-//    this root is the robust solve's.
-// Otherwise false, and the caller solves robustly.
-bool FwNewton(const sim::MagneticModel& m, const MachineLimits& lim, double t, double we, double s, double id0,
-              double iq0, double id_hi, double* id_out, double* iq_out) {
-  const double u_max = lim.UMaxV(), u2 = u_max * u_max;
-  const double rs = *lim.rs_ohm;   // a voltage limit (we > 0 in field weakening) has Rs
-  const double k = 1.5 * lim.pole_pairs;
-  double id = id0, iq = iq0;
-  for (int it = 0; it < 16; ++it) {
-    sim::FluxLinkage F;
-    sim::DifferentialInductance L;
-    m.FluxAndInductance(id, iq, lim.temperature_c, &F, &L);
-    const double f1 = physics::ElectromagneticTorque(lim.pole_pairs, F.psi_d_wb, F.psi_q_wb, id, iq) - t;
-    const double ud = rs * id - we * F.psi_q_wb, uq = rs * iq + we * F.psi_d_wb;
-    const double f2 = ud * ud + uq * uq - u2;
-    // Jacobian, with d psi_d/d id = Ldd, d psi_d/d iq = d psi_q/d id = Ldq,
-    // d psi_q/d iq = Lqq: T = 1.5 p (psi_d iq - psi_q id) and
-    // u = (Rs id - we psi_q, Rs iq + we psi_d).
-    const double t_d = k * (L.ldd_h * iq - F.psi_q_wb - L.ldq_h * id);
-    const double t_q = physics::TorqueSlopeIq(lim.pole_pairs, F.psi_d_wb, L.ldq_h, L.lqq_h, id, iq);
-    const double g_d = 2 * (ud * (rs - we * L.ldq_h) + uq * we * L.ldd_h);
-    const double g_q = 2 * (-ud * we * L.lqq_h + uq * (rs + we * L.ldq_h));
-    if (std::abs(f1) < 1e-10 * (1.0 + std::abs(t)) && std::abs(f2) <= 1e-10 * u2) {
-      if (!(s * iq > -1e-9 && id >= -lim.i_max_a && id <= id_hi && t_q > 0)) return false;
-      // Along the locus diq/did = -T_d / T_q.
-      const double diq = -t_d / t_q;
-      if (!(g_d + g_q * diq > 0) || !(id + iq * diq < 0)) return false;
-      double iq_cold;
-      if (!SolveIqForTorque(m, lim, id, t, s, &iq_cold) ||
-          !(std::abs(iq_cold - iq) <= 1e-6 * (1.0 + std::abs(iq)))) {
-        return false;
-      }
-      // iq as the robust solve gives it: from the locus solve at id.
-      *id_out = id;
-      *iq_out = iq_cold;
-      return true;
-    }
-    const double det = t_d * g_q - t_q * g_d;
-    if (!(std::abs(det) > 0) || !std::isfinite(det)) return false;
-    // J (dd, dq) = -F by Cramer's rule; a step longer than a quarter of the
-    // current limit is shortened (a start far off, not a converging one).
-    double dd = (t_q * f2 - g_q * f1) / det, dq = (g_d * f1 - t_d * f2) / det;
-    const double len = std::hypot(dd, dq), cap = 0.25 * lim.i_max_a;
-    if (!std::isfinite(len)) return false;
-    if (len > cap) { dd *= cap / len; dq *= cap / len; }
-    id += dd;
-    iq += dq;
-  }
-  return false;
-}
-
 }  // namespace internal
+
 
 namespace {
 
