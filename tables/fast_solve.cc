@@ -155,6 +155,70 @@ bool MtpaNewton(const sim::MagneticModel& m, const MachineLimits& lim, double t,
   return false;
 }
 
+// The limit torque where it is the MTPV point of the voltage limit (above
+// the speed from which the current limit no longer binds at the maximum):
+// the point of |u| = u_max where the torque's gradient is parallel to the
+// voltage's, by a 2-D Newton on F = (|u|^2 - u_max^2, T_d G_q - T_q G_d)
+// (G = grad |u|^2) from the previous speed's, the second row of the
+// Jacobian by forward differences (the inductances' derivatives are not
+// given; they only set the steps). Accepted where it lies strictly inside
+// the current limit, on the motoring/generating side asked for, and the
+// torque grows outwards (s grad T = l grad |u|^2 with l > 0: a maximum, not
+// a minimum, of the torque over the inside of the voltage limit nearby).
+// Whether it is the largest, the caller's check decides (PassesLimitCheck:
+// its search above the limit covers the whole locus).
+bool MtpvLimit(const sim::MagneticModel& m, const MachineLimits& lim, double we, double s, double id0, double iq0,
+               LimitTorque* out) {
+  const double u_max = lim.UMaxV(), u2 = u_max * u_max;
+  const double rs = *lim.rs_ohm;
+  const double k = 1.5 * lim.pole_pairs;
+  struct Local { double torque, t_d, t_q, c, g_d, g_q; };
+  auto at = [&](double id, double iq) {
+    sim::FluxLinkage F;
+    sim::DifferentialInductance L;
+    m.FluxAndInductance(id, iq, lim.temperature_c, &F, &L);
+    const double ud = rs * id - we * F.psi_q_wb, uq = rs * iq + we * F.psi_d_wb;
+    Local r;
+    r.torque = physics::ElectromagneticTorque(lim.pole_pairs, F.psi_d_wb, F.psi_q_wb, id, iq);
+    r.t_d = k * (L.ldd_h * iq - F.psi_q_wb - L.ldq_h * id);
+    r.t_q = physics::TorqueSlopeIq(lim.pole_pairs, F.psi_d_wb, L.ldq_h, L.lqq_h, id, iq);
+    r.c = ud * ud + uq * uq - u2;
+    r.g_d = 2 * (ud * (rs - we * L.ldq_h) + uq * we * L.ldd_h);
+    r.g_q = 2 * (-ud * we * L.lqq_h + uq * (rs + we * L.ldq_h));
+    return r;
+  };
+  auto cross = [](const Local& a) { return a.t_d * a.g_q - a.t_q * a.g_d; };
+  const double h = 1e-6 * lim.i_max_a;
+  double id = id0, iq = iq0;
+  for (int it = 0; it < 20; ++it) {
+    const Local a = at(id, iq);
+    const double f1 = a.c, f2 = cross(a);
+    const double gn = std::hypot(a.g_d, a.g_q);
+    if (std::abs(f1) <= 1e-13 * u2 && std::abs(f2) <= 1e-10 * std::hypot(a.t_d, a.t_q) * gn) {
+      const double l = s * (a.t_d * a.g_d + a.t_q * a.g_q) / (gn * gn);
+      if (!(s * iq > 0 && id >= -lim.i_max_a && id <= 0 && std::hypot(id, iq) < lim.i_max_a * (1 - 1e-6) && l > 0)) {
+        return false;
+      }
+      out->t = s * a.torque;
+      out->direct = true;
+      out->id = id;
+      out->iq = iq;
+      return true;
+    }
+    const Local b = at(id + h, iq), c = at(id, iq + h);
+    const double f2_d = (cross(b) - f2) / h, f2_q = (cross(c) - f2) / h;
+    const double det = a.g_d * f2_q - a.g_q * f2_d;
+    if (!(std::abs(det) > 0) || !std::isfinite(det)) return false;
+    double dd = (a.g_q * f2 - f2_q * f1) / det, dq = (f2_d * f1 - a.g_d * f2) / det;
+    const double len = std::hypot(dd, dq), cap = 0.25 * lim.i_max_a;
+    if (!std::isfinite(len)) return false;
+    if (len > cap) { dd *= cap / len; dq *= cap / len; }
+    id += dd;
+    iq += dq;
+  }
+  return false;
+}
+
 }  // namespace internal
 
 }  // namespace fluxcal::tables

@@ -91,6 +91,13 @@ bool FwNewton(const sim::MagneticModel& m, const MachineLimits& lim, double t, d
 bool MtpaNewton(const sim::MagneticModel& m, const MachineLimits& lim, double t, double s, double id0, double iq0,
                 double* id_out, double* iq_out);
 
+// The limit torque at speed we where it is the MTPV point of the voltage
+// limit, by a 2-D Newton from (id0, iq0) (the previous speed's), with its
+// point; false where its checks fail (fast_solve.cc). Unchecked for being
+// the largest: the caller's check (solver.cc: PassesLimitCheck).
+bool MtpvLimit(const sim::MagneticModel& m, const MachineLimits& lim, double we, double s, double id0, double iq0,
+               LimitTorque* out);
+
 }  // namespace fluxcal::tables::internal
 
 #endif  // FLUXCAL_TABLES_INTERNAL_SOLVER_H_

@@ -17,6 +17,7 @@ using internal::FwNewton;
 using internal::SolveIqForTorque;
 using internal::LimitTorque;
 using internal::MinimiseScalar;
+using internal::MtpvLimit;
 using internal::RowLoci;
 using internal::SolveWithMax;
 using internal::TrySolve;
@@ -520,8 +521,10 @@ std::vector<LimitTorque> LimitTorques(const sim::MagneticModel& m, const Machine
   std::vector<LimitTorque> out;
   out.reserve(we.size());
   // Above base speed, a limit at a corner of the limits starts the next
-  // speed's CornerLimit (the corner moves little from speed to speed).
+  // speed's CornerLimit (the corner moves little from speed to speed), an
+  // MTPV-type one (inside the current limit) the next speed's MtpvLimit.
   const LimitTorque* corner = still.direct ? &still : nullptr;
+  const LimitTorque* mtpv = nullptr;
   for (double w : we) {
     if (w <= 0 || (still.direct && lim.HasVoltageLimit() && VoltageV(m, lim, still.id, still.iq, w) <= u_max)) {
       out.push_back(still);
@@ -531,11 +534,16 @@ std::vector<LimitTorque> LimitTorques(const sim::MagneticModel& m, const Machine
     if (fast && corner != nullptr && lim.HasVoltageLimit() && CornerLimit(m, lim, w, s, corner->id, corner->iq, &c) &&
         PassesLimitCheck(m, lim, w, s, &c, true)) {
       out.push_back(c);
+    } else if (fast && mtpv != nullptr && lim.HasVoltageLimit() && MtpvLimit(m, lim, w, s, mtpv->id, mtpv->iq, &c) &&
+               PassesLimitCheck(m, lim, w, s, &c, true)) {
+      out.push_back(c);
     } else {
       out.push_back(CheckedLimitTorque(m, lim, w, s));
     }
     const LimitTorque& l = out.back();
-    corner = l.direct && std::hypot(l.id, l.iq) >= lim.i_max_a * (1 - 1e-6) ? &l : nullptr;
+    const bool at_current_limit = std::hypot(l.id, l.iq) >= lim.i_max_a * (1 - 1e-6);
+    corner = l.direct && at_current_limit ? &l : nullptr;
+    mtpv = l.direct && !at_current_limit ? &l : nullptr;
   }
   return out;
 }
