@@ -1,9 +1,11 @@
-// The fast field-weakening solves (tables/solver.cc: FwNewton for cells and
-// clamped points, CornerLimit for limit torques, each warm-started and
-// checked) against the robust reference solve they replace: on the public
-// bench set's calibration, every cell of the fw table as exported equals
-// the robust solve's cell (the same flags, values within 1e-6), and a fast
-// solve started where it would settle on the wrong root is refused.
+// The fast solves of the field-weakening table (tables/fast_solve.cc and
+// solver.cc: FwNewton for cells and clamped points, MtpaNewton for a row's
+// MTPA point, CornerLimit and MtpvLimit for limit torques, each
+// warm-started and checked) against the robust reference solve they
+// replace: on the public bench set's calibration and on the twin's motor
+// past its MTPV onset, every cell of the fw table equals the robust solve's
+// (the same flags, values within 1e-6), and a fast solve started where it
+// would settle on the wrong root is refused.
 #include <cmath>
 #include <string>
 
@@ -33,44 +35,70 @@ fit::Calibration BenchCalibration() {
   return *cal;
 }
 
-// Each cell of the exported fw table (the fast path: BuildTable) against
-// the robust solve: SolveWithMax without a row (TrySolve's regula falsi over
-// locus solves, its clamped point from the MTPA point on) at the limit
-// torque MaxTorqueNm gives (the direct maximisation with its checks, no
-// corner Newton). The flags must be the same and the currents agree within
-// 1e-6 of their size (the solves' own tolerances are ~1e-9 A).
+// Each cell of a fw table (the fast paths: BuildTable) against the robust
+// solve: SolveWithMax without a row (TrySolve's regula falsi over locus
+// solves, its clamped point from the MTPA point on) at the limit torque
+// MaxTorqueNm gives (the direct maximisation with its checks, no Newton),
+// from the MTPA point TrySolve finds (scan and golden section). The flags
+// must be the same and the currents agree within 1e-6 of their size (the
+// golden section resolves a flat minimum to ~1e-7). Counts the cells on
+// the voltage limit and the clamped ones.
+void ExpectCellsAsTheRobustSolve(const sim::MagneticModel& m, const Table& t, int* voltage_limited, int* clamped) {
+  const MachineLimits& lim = t.limits;
+  const auto& tq = t.axes[0].values;
+  const auto& rpm = t.axes[1].values;
+  for (size_t i = 0; i < tq.size(); ++i) {
+    const double s = tq[i] < 0 ? -1.0 : 1.0;
+    OperatingPoint mtpa;
+    const bool have_mtpa = internal::TrySolve(m, lim, tq[i], 0.0, &mtpa);
+    for (size_t j = 0; j < rpm.size(); ++j) {
+      const double we = physics::RpmToElectricalRadS(rpm[j], lim.pole_pairs);
+      const double tlim = MaxTorqueNm(m, lim, we, s);
+      const OperatingPoint ref = internal::SolveWithMax(m, lim, tq[i], we, tlim, have_mtpa ? &mtpa.id_a : nullptr);
+      const size_t cell = i * rpm.size() + j;
+      const double id = t.outputs[0].values[cell], iq = t.outputs[1].values[cell];
+      ASSERT_EQ(static_cast<bool>(t.clamped[cell]), ref.clamped) << tq[i] << " N m at " << rpm[j] << " rpm";
+      EXPECT_NEAR(id, ref.id_a, 1e-6 * std::max(1.0, std::abs(ref.id_a))) << tq[i] << " N m at " << rpm[j] << " rpm";
+      EXPECT_NEAR(iq, ref.iq_a, 1e-6 * std::max(1.0, std::abs(ref.iq_a))) << tq[i] << " N m at " << rpm[j] << " rpm";
+      *clamped += ref.clamped;
+      *voltage_limited += !ref.clamped && VoltageV(m, lim, id, iq, we) > lim.UMaxV() * (1 - 1e-6);
+    }
+  }
+}
+
+// The bench calibration's table as `fluxcal export --table fw` builds it:
+// limit torques at corners of the limits, clamped points there.
 TEST(FastFieldWeakening, EveryCellOfTheBenchTableAsTheRobustSolve) {
   const fit::Calibration cal = BenchCalibration();
   TableSpec spec;
   spec.kind = "fw";
   auto built = BuildExportTable(cal, spec, {});
   ASSERT_TRUE(built.ok()) << built.status();
-  const Table& t = built->table;
-  const MachineLimits& lim = t.limits;
-  const auto& tq = t.axes[0].values;
-  const auto& rpm = t.axes[1].values;
   int voltage_limited = 0, clamped = 0;
-  for (size_t i = 0; i < tq.size(); ++i) {
-    const double s = tq[i] < 0 ? -1.0 : 1.0;
-    OperatingPoint mtpa;
-    const bool have_mtpa = internal::TrySolve(cal, lim, tq[i], 0.0, &mtpa);
-    for (size_t j = 0; j < rpm.size(); ++j) {
-      const double we = physics::RpmToElectricalRadS(rpm[j], lim.pole_pairs);
-      const double tlim = MaxTorqueNm(cal, lim, we, s);
-      const OperatingPoint ref = internal::SolveWithMax(cal, lim, tq[i], we, tlim, have_mtpa ? &mtpa.id_a : nullptr);
-      const size_t cell = i * rpm.size() + j;
-      const double id = t.outputs[0].values[cell], iq = t.outputs[1].values[cell];
-      ASSERT_EQ(static_cast<bool>(t.clamped[cell]), ref.clamped) << tq[i] << " N m at " << rpm[j] << " rpm";
-      EXPECT_NEAR(id, ref.id_a, 1e-6 * std::max(1.0, std::abs(ref.id_a))) << tq[i] << " N m at " << rpm[j] << " rpm";
-      EXPECT_NEAR(iq, ref.iq_a, 1e-6 * std::max(1.0, std::abs(ref.iq_a))) << tq[i] << " N m at " << rpm[j] << " rpm";
-      clamped += ref.clamped;
-      voltage_limited += !ref.clamped && VoltageV(cal, lim, id, iq, we) > lim.UMaxV() * (1 - 1e-6);
-    }
-  }
-  // Both kinds of fast solve were compared: cells on the voltage limit
-  // (FwNewton) and clamped points (at corners of the limits on this bench).
+  ExpectCellsAsTheRobustSolve(cal, built->table, &voltage_limited, &clamped);
+  // Both kinds of fast cell were compared: on the voltage limit (FwNewton)
+  // and clamped (at corners of the limits on this bench).
   EXPECT_GT(voltage_limited, 200);
   EXPECT_GT(clamped, 200);
+}
+
+// The twin's saturated motor well past its MTPV onset: limit torques at
+// the MTPV point (MtpvLimit), clamped points there (the robust solve).
+TEST(FastFieldWeakening, EveryCellPastTheMtpvOnsetAsTheRobustSolve) {
+  sim::MotorParams p;
+  p.sat.g_cross_h = 3e-5;
+  const sim::AnalyticMotor m(p);
+  TableSpec spec;
+  spec.kind = "fw";
+  spec.points = 41;
+  spec.speed_points = 37;
+  spec.speed_max_rpm = 9000;
+  auto t = BuildTable(m, TwinLimits(), spec);
+  ASSERT_TRUE(t.ok()) << t.status();
+  int voltage_limited = 0, clamped = 0;
+  ExpectCellsAsTheRobustSolve(m, *t, &voltage_limited, &clamped);
+  EXPECT_GT(voltage_limited, 100);
+  EXPECT_GT(clamped, 100);
 }
 
 // The guard: along a constant-torque locus whose end at -i_max violates the
