@@ -20,8 +20,11 @@
 namespace fluxcal::tables {
 namespace {
 
+using internal::LimitTorque;
+using internal::LimitTorques;
 using internal::Linspace;
 using internal::MinimiseScalar;
+using internal::MtpaNewton;
 using internal::RowLoci;
 using internal::SolveWithMax;
 using internal::TrySolve;
@@ -236,24 +239,51 @@ absl::Status FwRows(const sim::MagneticModel& m, const MachineLimits& lim, const
   Output id{"id_a", {}}, iq{"iq_a", {}};
   // Limit torque per speed, motoring and generating (they differ at speed:
   // the resistive drop subtracts from the voltage when generating).
-  std::vector<double> tlim_motor(n.size()), tlim_gen(n.size());
-  for (size_t j = 0; j < n.size(); ++j) {
-    const double we = physics::RpmToElectricalRadS(n[j], lim.pole_pairs);
-    tlim_motor[j] = MaxTorqueNm(m, lim, we, 1.0);
-    tlim_gen[j] = spec.include_generating ? MaxTorqueNm(m, lim, we, -1.0) : 0.0;
-  }
+  // The fast solves (RowLoci, LimitTorques) only within the measured current
+  // limit: beyond it (--i-max-a above it with --allow-extrapolation) the
+  // extrapolated surface breaks the premises their checks rest on (torque
+  // monotone in iq, one voltage minimum along a locus): a locus may cross
+  // the voltage limit several times, and the robust solve's choice among
+  // those crossings is kept there.
+  const double meas = spec.measured_current_limit_a;
+  const bool fast = !(meas > 0) || lim.i_max_a <= meas * (1 + 1e-9);
+  std::vector<double> we_axis(n.size());
+  for (size_t j = 0; j < n.size(); ++j) we_axis[j] = physics::RpmToElectricalRadS(n[j], lim.pole_pairs);
+  const std::vector<LimitTorque> tlim_motor = LimitTorques(m, lim, we_axis, 1.0, fast);
+  const std::vector<LimitTorque> tlim_gen =
+      spec.include_generating ? LimitTorques(m, lim, we_axis, -1.0, fast) : std::vector<LimitTorque>(n.size());
   // The clamped point per speed and torque sign (SolveWithMax).
   std::vector<std::optional<OperatingPoint>> clamp_motor(n.size()), clamp_gen(n.size());
+  // The previous row's MTPA point, the start of the next row's MtpaNewton.
+  OperatingPoint mtpa_prev;
+  bool have_prev = false;
   for (double x : tq) {
-    // The MTPA point of this torque row is the same at every speed.
+    // The MTPA point of this torque row is the same at every speed. Fast
+    // (MtpaNewton) from the previous row's of the same sign, checked;
+    // otherwise, near the current limit (TrySolve's test there, as for a
+    // cell: CurrentLimitSettled) and for the first row of each sign the
+    // robust solve.
     OperatingPoint mtpa;
-    const bool have_mtpa = TrySolve(m, lim, x, 0.0, &mtpa);
+    bool have_mtpa = false, solved = false;
+    double id_f, iq_f;
+    if (fast && x != 0.0 && have_prev && mtpa_prev.iq_a * x > 0 &&
+        MtpaNewton(m, lim, x, x < 0 ? -1.0 : 1.0, mtpa_prev.id_a, mtpa_prev.iq_a, &id_f, &iq_f) &&
+        std::abs(std::hypot(id_f, iq_f) - lim.i_max_a * (1 + 1e-9)) > 1e-8) {
+      solved = true;
+      have_mtpa = std::hypot(id_f, iq_f) <= lim.i_max_a * (1 + 1e-9);
+      if (have_mtpa) mtpa = OperatingPoint{id_f, iq_f, TorqueNm(m, lim.pole_pairs, id_f, iq_f, lim.temperature_c)};
+    }
+    if (!solved) have_mtpa = TrySolve(m, lim, x, 0.0, &mtpa);
+    have_prev = have_mtpa;
+    mtpa_prev = mtpa;
+    // The row's cells move little from one speed to the next: each
+    // voltage-limited one starts the next speed's fast solve (RowLoci).
     RowLoci row;
+    row.fast = fast;
     for (size_t j = 0; j < n.size(); ++j) {
-      const double we = physics::RpmToElectricalRadS(n[j], lim.pole_pairs);
-      const double tlim = x < 0 ? tlim_gen[j] : tlim_motor[j];
-      const auto op = SolveWithMax(m, lim, x, we, tlim, have_mtpa ? &mtpa.id_a : nullptr,
-                                   x < 0 ? &clamp_gen[j] : &clamp_motor[j], &row);
+      const LimitTorque& tlim = x < 0 ? tlim_gen[j] : tlim_motor[j];
+      const auto op = SolveWithMax(m, lim, x, we_axis[j], tlim.t, have_mtpa ? &mtpa.id_a : nullptr,
+                                   x < 0 ? &clamp_gen[j] : &clamp_motor[j], &row, &tlim);
       id.values.push_back(op.id_a);
       iq.values.push_back(op.iq_a);
       t.clamped.push_back(op.clamped);

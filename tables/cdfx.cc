@@ -25,7 +25,7 @@ std::string Cdfx(const Table& t) {
   std::string s =
       "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n"
       "<!DOCTYPE MSRSW PUBLIC \"-//ASAM//DTD CALIBRATION DATA FORMAT:V2.0.0:LAI:IAI:XML:CDF200.XSD//EN\" \"cdf_v2.0.0.sl.dtd\">\n";
-  s += absl::StrCat("<!-- fluxcal ", t.kind, " table; axis order: ", OneLine(AxisOrder(t)), ". payload_crc32 ", Crc(t),
+  absl::StrAppend(&s, "<!-- fluxcal ", t.kind, " table; axis order: ", OneLine(AxisOrder(t)), ". payload_crc32 ", Crc(t),
                     ", payload_sha256 ", t.sha256, ": over the values (fluxcal docs/tables.md), not over this file. -->\n");
   s += "<MSRSW>\n  <SHORT-NAME>fluxcal</SHORT-NAME>\n  <CATEGORY>CDF20</CATEGORY>\n  <SW-SYSTEMS>\n    <SW-SYSTEM>\n";
   s += absl::StrFormat("      <SHORT-NAME>%s</SHORT-NAME>\n", XmlEscape(t.serial.empty() ? "fluxcal" : t.serial));
@@ -33,19 +33,19 @@ std::string Cdfx(const Table& t) {
        "          <CATEGORY>NO_VCD</CATEGORY>\n";
   const std::string in = "          ";
   auto head = [&](const std::string& name, const std::string& long_name, const char* cat) {
-    s += absl::StrCat(in, "<SW-INSTANCE>\n", in, "  <SHORT-NAME>", Label(t, name), "</SHORT-NAME>\n", in,
+    absl::StrAppend(&s, in, "<SW-INSTANCE>\n", in, "  <SHORT-NAME>", Label(t, name), "</SHORT-NAME>\n", in,
                       "  <LONG-NAME>", XmlEscape(OneLine(long_name)), "</LONG-NAME>\n", in, "  <CATEGORY>", cat,
                       "</CATEGORY>\n");
   };
   for (const auto& sc : Scalars(t)) {
     head(sc.name, sc.description, "VALUE");
-    s += absl::StrCat(in, "  <SW-VALUE-CONT>\n", in, "    <UNIT-DISPLAY-NAME>", sc.unit, "</UNIT-DISPLAY-NAME>\n", in,
+    absl::StrAppend(&s, in, "  <SW-VALUE-CONT>\n", in, "    <UNIT-DISPLAY-NAME>", sc.unit, "</UNIT-DISPLAY-NAME>\n", in,
                       "    <SW-VALUES-PHYS><V>", Num(sc.value), "</V></SW-VALUES-PHYS>\n", in, "  </SW-VALUE-CONT>\n", in,
                       "</SW-INSTANCE>\n");
   }
   for (const auto& [k, v] : TextFields(t)) {
     head(k, k, "ASCII");
-    s += absl::StrCat(in, "  <SW-VALUE-CONT>\n", in, "    <SW-VALUES-PHYS><VT>", XmlEscape(OneLine(v)),
+    absl::StrAppend(&s, in, "  <SW-VALUE-CONT>\n", in, "    <SW-VALUES-PHYS><VT>", XmlEscape(OneLine(v)),
                       "</VT></SW-VALUES-PHYS>\n", in, "  </SW-VALUE-CONT>\n", in, "</SW-INSTANCE>\n");
   }
   const bool map = t.axes.size() > 1;
@@ -53,24 +53,26 @@ std::string Cdfx(const Table& t) {
   auto table = [&](const std::string& name, const std::string& unit, const std::vector<double>& vals,
                    const std::string& what) {
     head(name, what, map ? "MAP" : "CURVE");
-    s += absl::StrCat(in, "  <SW-VALUE-CONT>\n", in, "    <UNIT-DISPLAY-NAME>", unit, "</UNIT-DISPLAY-NAME>\n", in,
+    absl::StrAppend(&s, in, "  <SW-VALUE-CONT>\n", in, "    <UNIT-DISPLAY-NAME>", unit, "</UNIT-DISPLAY-NAME>\n", in,
                       "    <SW-VALUES-PHYS>\n");
     for (size_t i = 0; i < n0; ++i) {
-      if (map) s += absl::StrCat(in, "      <VG>\n");
+      if (map) absl::StrAppend(&s, in, "      <VG>\n");
       for (size_t j = 0; j < n1; ++j) {
-        s += absl::StrCat(in, map ? "        " : "      ", "<V>", Num(vals[i * n1 + j]), "</V>\n");
+        absl::StrAppend(&s, in, map ? "        " : "      ", "<V>");
+        AppendNum(&s, vals[i * n1 + j]);
+        s += "</V>\n";
       }
-      if (map) s += absl::StrCat(in, "      </VG>\n");
+      if (map) absl::StrAppend(&s, in, "      </VG>\n");
     }
-    s += absl::StrCat(in, "    </SW-VALUES-PHYS>\n", in, "  </SW-VALUE-CONT>\n", in, "  <SW-AXIS-CONTS>\n");
+    absl::StrAppend(&s, in, "    </SW-VALUES-PHYS>\n", in, "  </SW-VALUE-CONT>\n", in, "  <SW-AXIS-CONTS>\n");
     for (const auto& a : t.axes) {
-      s += absl::StrCat(in, "    <SW-AXIS-CONT>\n", in, "      <CATEGORY>STD_AXIS</CATEGORY>\n", in,
+      absl::StrAppend(&s, in, "    <SW-AXIS-CONT>\n", in, "      <CATEGORY>STD_AXIS</CATEGORY>\n", in,
                         "      <UNIT-DISPLAY-NAME>", UnitOf(a.name), "</UNIT-DISPLAY-NAME>\n", in,
                         "      <SW-VALUES-PHYS>\n");
-      for (double v : a.values) s += absl::StrCat(in, "        <V>", Num(v), "</V>\n");
-      s += absl::StrCat(in, "      </SW-VALUES-PHYS>\n", in, "    </SW-AXIS-CONT>\n");
+      for (double v : a.values) absl::StrAppend(&s, in, "        <V>", Num(v), "</V>\n");
+      absl::StrAppend(&s, in, "      </SW-VALUES-PHYS>\n", in, "    </SW-AXIS-CONT>\n");
     }
-    s += absl::StrCat(in, "  </SW-AXIS-CONTS>\n", in, "</SW-INSTANCE>\n");
+    absl::StrAppend(&s, in, "  </SW-AXIS-CONTS>\n", in, "</SW-INSTANCE>\n");
   };
   std::vector<std::string> axis_names;
   for (const auto& a : t.axes) axis_names.push_back(a.name);

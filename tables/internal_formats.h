@@ -15,6 +15,9 @@ namespace fluxcal::tables::internal {
 
 // A value as printf's "%.17g" writes it (export.cc).
 std::string Num(double v);
+// Num(v) appended to *out, without the temporary string (the writers'
+// per-value loops: a fw table's CDFX holds ~10^4 values).
+void AppendNum(std::string* out, double v);
 // The payload CRC-32 as 8 hex digits.
 std::string Crc(const Table& t);
 // The flag arrays as doubles, for the writers that treat them as tables.

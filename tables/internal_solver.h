@@ -17,11 +17,48 @@ namespace fluxcal::tables::internal {
 // field-weakening row asks for again: its MTPA point and its end at
 // -i_max. A locus point depends on the request and id only (the solve is
 // deterministic), so the row keeps them; TrySolve looks them up by exact id.
+//
+// A row also carries what the fast field-weakening solve (FwNewton in
+// solver.cc) needs: whether it may be tried (`fast`), the torque below
+// which it may (`fast_below`: SolveWithMax keeps it away from the limit
+// torque, where the robust solve decides feasibility at the edge), and the
+// last voltage-limited cell of the row (`warm`), the start for the next
+// speed's cell: the cells of a row move little from one speed to the next.
 struct RowLoci {
   double t = std::numeric_limits<double>::quiet_NaN();
   struct Point { double id; bool ok; double iq; };
   std::vector<Point> points;
+  bool fast = false;
+  double fast_below = 0.0;
+  bool warm = false;
+  double warm_id = 0.0, warm_iq = 0.0;
 };
+
+// The limit torque at one speed (MaxTorqueNm) and, when the direct
+// maximisation found it (`direct`), its point (id, iq): the largest torque
+// of the feasible set is reached there.
+struct LimitTorque {
+  double t = 0.0;
+  bool direct = false;
+  double id = 0.0, iq = 0.0;
+};
+
+// MaxTorqueNm at each of the electrical speeds `we` (rad/s, >= 0) for the
+// torque sign `sign`, with its point where the direct maximisation found it.
+// Where the speed's voltage limit admits the standstill limit torque's point,
+// the limit torque is the standstill one (see solver.cc). `fast`: a limit at
+// a corner of the limits starts the next speed's (CornerLimit), whose check
+// warm-starts its locus solves; only within the measured current limit.
+std::vector<LimitTorque> LimitTorques(const sim::MagneticModel& m, const MachineLimits& lim,
+                                      const std::vector<double>& we, double sign, bool fast);
+
+// iq (sign s) on the constant-torque locus through id: T(id, iq) = t.
+// Newton with a bisection safeguard; dT/diq = 1.5 p (psi_d + Ldq iq - Lqq id).
+// `iq_guess_a` (> 0, magnitude): a start close to the root, e.g. the root at
+// a neighbouring id; otherwise the start scales linearly from the bracket
+// (the cold start). False if no bracket is found.
+bool SolveIqForTorque(const sim::MagneticModel& m, const MachineLimits& lim, double id, double t, double s,
+                      double* iq_out, double iq_guess_a = 0.0);
 
 // Least-current point for torque t under the limits; false if infeasible.
 // `mtpa_id` (optional): the least-current id of this torque without a
@@ -34,9 +71,32 @@ bool TrySolve(const sim::MagneticModel& m, const MachineLimits& lim, double t, d
 // `clamp` (optional): the clamped point of this speed and torque sign, once
 // computed; it depends on nothing else, so a field-weakening column
 // computes it once for all the requests beyond its limit torque.
+// `limit` (optional): the limit torque's point at this speed (LimitTorques),
+// where a row solved fast (RowLoci::fast) starts the clamped point's solve.
 OperatingPoint SolveWithMax(const sim::MagneticModel& m, const MachineLimits& lim, double t,
                             double we, double tmax, const double* mtpa_id = nullptr,
-                            std::optional<OperatingPoint>* clamp = nullptr, RowLoci* row = nullptr);
+                            std::optional<OperatingPoint>* clamp = nullptr, RowLoci* row = nullptr,
+                            const LimitTorque* limit = nullptr);
+
+// The fast field-weakening solve (fast_solve.cc): the least-current point of
+// torque t on the voltage limit by a 2-D Newton from (id0, iq0), accepted
+// only where its checks place it at the robust solve's root (id <= id_hi,
+// the MTPA point's id when known); false otherwise.
+bool FwNewton(const sim::MagneticModel& m, const MachineLimits& lim, double t, double we, double s, double id0,
+              double iq0, double id_hi, double* id_out, double* iq_out);
+
+// The MTPA point of torque t by a 2-D Newton from (id0, iq0) (the
+// neighbouring torque row's), accepted only where its checks place it at the
+// robust solve's (fast_solve.cc); false otherwise.
+bool MtpaNewton(const sim::MagneticModel& m, const MachineLimits& lim, double t, double s, double id0, double iq0,
+                double* id_out, double* iq_out);
+
+// The limit torque at speed we where it is the MTPV point of the voltage
+// limit, by a 2-D Newton from (id0, iq0) (the previous speed's), with its
+// point; false where its checks fail (fast_solve.cc). Unchecked for being
+// the largest: the caller's check (solver.cc: PassesLimitCheck).
+bool MtpvLimit(const sim::MagneticModel& m, const MachineLimits& lim, double we, double s, double id0, double iq0,
+               LimitTorque* out);
 
 }  // namespace fluxcal::tables::internal
 

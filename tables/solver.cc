@@ -13,7 +13,11 @@
 
 namespace fluxcal::tables {
 
+using internal::FwNewton;
+using internal::SolveIqForTorque;
+using internal::LimitTorque;
 using internal::MinimiseScalar;
+using internal::MtpvLimit;
 using internal::RowLoci;
 using internal::SolveWithMax;
 using internal::TrySolve;
@@ -34,14 +38,10 @@ double VoltageV(const sim::MagneticModel& m, const MachineLimits& lim, double id
   return std::hypot(rs * id - we * f.psi_q_wb, rs * iq + we * f.psi_d_wb);
 }
 
-namespace {
+namespace internal {
 
-// iq (sign s) on the constant-torque locus through id: T(id, iq) = t.
-// Newton with a bisection safeguard; dT/diq = 1.5 p (psi_d + Ldq iq - Lqq id).
-// `iq_guess_a` (> 0, magnitude): a start close to the root, e.g. the root at
-// a neighbouring id; otherwise the start scales linearly from the bracket.
 bool SolveIqForTorque(const sim::MagneticModel& m, const MachineLimits& lim, double id, double t,
-                      double s, double* iq_out, double iq_guess_a = 0.0) {
+                      double s, double* iq_out, double iq_guess_a) {
   const double target = std::abs(t);
   double lo = 0.0, hi = std::max(10.0, lim.i_max_a);
   auto torque = [&](double iq) { return s * TorqueNm(m, lim.pole_pairs, id, s * iq, lim.temperature_c); };
@@ -73,6 +73,45 @@ bool SolveIqForTorque(const sim::MagneticModel& m, const MachineLimits& lim, dou
   return true;
 }
 
+}  // namespace internal
+
+
+namespace {
+
+// Whether TrySolve's current-limit test (|i| <= i_max (1 + 1e-9)) decides
+// the same at FwNewton's root as at the robust solve's, given `r`, the
+// root's |i| minus that threshold. The robust solve ends within its bracket
+// (2e-9 A in id) of the same root, which moves |i| by that times the slope
+// of |i| along the locus (of order one where a cell meets the current
+// limit); 1e-8 A from the threshold the answers agree. (A clamped point
+// at a corner of the limits, where the limit torque's point is on both the
+// current and the voltage limit, lies ~1e-9 of i_max inside: e.g. 2e-8 A at
+// 18 A.)
+bool CurrentLimitSettled(double r) { return std::abs(r) > 1e-8; }
+
+// TrySolve's field-weakening step by FwNewton, from the row's last
+// voltage-limited cell and, failing that, from the MTPA point (id_mtpa,
+// iq_mtpa). 1: solved, *op set; 0: the point lies beyond the current limit
+// (TrySolve's false); -1: not settled, solve robustly (also where
+// CurrentLimitSettled is not).
+int FastFieldWeakening(const sim::MagneticModel& m, const MachineLimits& lim, double t, double we, double s,
+                       double id_mtpa, double iq_mtpa, RowLoci* row, OperatingPoint* op) {
+  double id = 0.0, iq = 0.0;
+  const bool ok = (row->warm && FwNewton(m, lim, t, we, s, row->warm_id, row->warm_iq, id_mtpa, &id, &iq)) ||
+                  FwNewton(m, lim, t, we, s, id_mtpa, iq_mtpa, id_mtpa, &id, &iq);
+  if (!ok) return -1;
+  const double r = std::hypot(id, iq) - lim.i_max_a * (1 + 1e-9);
+  if (!CurrentLimitSettled(r)) return -1;
+  row->warm = true;
+  row->warm_id = id;
+  row->warm_iq = iq;
+  if (r > 0) return 0;
+  op->id_a = id;
+  op->iq_a = iq;
+  op->torque_nm = TorqueNm(m, lim.pole_pairs, id, iq, lim.temperature_c);
+  return 1;
+}
+
 }  // namespace
 
 namespace internal {
@@ -83,7 +122,11 @@ bool TrySolve(const sim::MagneticModel& m, const MachineLimits& lim, double t, d
   if (t == 0.0 && we <= 0) return true;
   const double s = t < 0 ? -1.0 : 1.0;
   const double id_min = -lim.i_max_a;
-  if (row != nullptr && row->t != t) *row = RowLoci{t, {}};
+  if (row != nullptr && row->t != t) {
+    row->t = t;
+    row->points.clear();
+    row->warm = false;
+  }
   // (Each locus point's Newton starts cold, from the bracket: where the
   // torque is not monotone in iq (far beyond the measured region) a start
   // carried over from a neighbouring point can settle on another root.)
@@ -113,6 +156,12 @@ bool TrySolve(const sim::MagneticModel& m, const MachineLimits& lim, double t, d
   auto volt = [&](double d, double q) { return we > 0 ? VoltageV(m, lim, d, q, we) : 0.0; };
   const double u_max = lim.UMaxV();
   if (we > 0 && volt(id, iq) > u_max) {
+    // The fast solve first (FwNewton), from the row's last voltage-limited
+    // cell, else from the MTPA point; away from the limit torque only.
+    if (row != nullptr && row->fast && std::abs(t) < row->fast_below) {
+      int verdict = FastFieldWeakening(m, lim, t, we, s, id, iq, row, op);
+      if (verdict >= 0) return verdict == 1;
+    }
     // Field weakening. Along the constant-torque locus the current grows
     // away from the MTPA point and the voltage has one minimum (the locus'
     // MTPV point) at a more negative id; the least-current feasible point is
@@ -154,6 +203,11 @@ bool TrySolve(const sim::MagneticModel& m, const MachineLimits& lim, double t, d
     }
     id = lo;
     iq = q_lo;
+    if (row != nullptr) {
+      row->warm = true;
+      row->warm_id = id;
+      row->warm_iq = iq;
+    }
   }
   if (std::hypot(id, iq) > lim.i_max_a * (1 + 1e-9)) return false;
   op->id_a = id;
@@ -164,13 +218,42 @@ bool TrySolve(const sim::MagneticModel& m, const MachineLimits& lim, double t, d
 
 OperatingPoint SolveWithMax(const sim::MagneticModel& m, const MachineLimits& lim, double t,
                             double we, double tmax, const double* mtpa_id,
-                            std::optional<OperatingPoint>* clamp, RowLoci* row) {
+                            std::optional<OperatingPoint>* clamp, RowLoci* row, const LimitTorque* limit) {
   OperatingPoint op;
+  // The fast field-weakening solve stays 1e-6 below the limit torque: there
+  // the feasible arc of the locus shrinks to a point and the robust solve
+  // decides feasibility.
+  if (row != nullptr) row->fast_below = tmax * (1 - 1e-6);
   if (std::abs(t) <= tmax && TrySolve(m, lim, t, we, &op, mtpa_id, row)) return op;
   if (clamp != nullptr && clamp->has_value()) return **clamp;
   // Infeasible: deliver the largest torque of the same sign within limits.
   const double s = t < 0 ? -1.0 : 1.0;
   double tt = s * tmax;
+  // The clamped point: the least-current point of the limit torque. Where
+  // the limit torque's point is a corner of the limits (on the current
+  // circle and the voltage limit), the voltage limit crosses the torque's
+  // locus there (well-conditioned) and FwNewton from the limit's point
+  // finds the clamped point next to it (checks as for a cell); the robust
+  // solve's first step, the MTPA point of this torque (~60 locus solves),
+  // is not needed: the checks place the root on its field-weakening side.
+  // Elsewhere the limit is the locus' MTPV point, where the voltage limit
+  // touches the locus: the root is ill-conditioned (1e-9 in torque moves it
+  // by ~1e-6), and the robust solve's answer is kept.
+  if (row != nullptr && row->fast && limit != nullptr && limit->direct && we > 0 &&
+      std::hypot(limit->id, limit->iq) >= lim.i_max_a * (1 - 1e-6)) {
+    double id, iq;
+    if (FwNewton(m, lim, tt, we, s, limit->id, limit->iq, 0.0, &id, &iq)) {
+      const double r = std::hypot(id, iq) - lim.i_max_a * (1 + 1e-9);
+      if (r < 0 && CurrentLimitSettled(r)) {
+        op.id_a = id;
+        op.iq_a = iq;
+        op.torque_nm = TorqueNm(m, lim.pole_pairs, id, iq, lim.temperature_c);
+        op.clamped = true;
+        if (clamp != nullptr) *clamp = op;
+        return op;
+      }
+    }
+  }
   for (int k = 0; k < 8 && !TrySolve(m, lim, tt, we, &op); ++k) tt *= 1 - 1e-6 * (1 << (2 * k));
   op.clamped = true;
   if (clamp != nullptr) *clamp = op;
@@ -188,6 +271,18 @@ OperatingPoint SolveLeastCurrent(const sim::MagneticModel& m, const MachineLimit
 
 namespace {
 
+// h at one locus point: the locus solve from its cold start at id, or from
+// `iq_guess` (> 0, magnitude) when given; *iq_found (optional): the root's
+// magnitude.
+double LocusPointH(const sim::MagneticModel& m, const MachineLimits& lim, double we, double s, double t, double id,
+                   double iq_guess = 0.0, double* iq_found = nullptr) {
+  double iq;
+  if (!SolveIqForTorque(m, lim, id, t, s, &iq, iq_guess)) return 1e30;
+  if (iq_found != nullptr) *iq_found = std::abs(iq);
+  const double c = std::hypot(id, iq) / lim.i_max_a;
+  return we > 0 ? std::max(c, VoltageV(m, lim, id, iq, we) / lim.UMaxV()) : c;
+}
+
 // Whether torque request s t (t > 0) can be met within both limits: some
 // point of its constant-torque locus lies inside them, i.e. the minimum
 // over the locus of h = max(|i| / i_max, |u| / u_max) is at most 1. |i|
@@ -197,14 +292,19 @@ namespace {
 // A locus point found inside both limits settles it: the search stops there
 // (a feasible request needs no more), so only an infeasible one costs the
 // whole search.
-bool LocusFeasible(const sim::MagneticModel& m, const MachineLimits& lim, double we, double s, double t) {
+// `warm`: each locus solve starts from the root at the last point searched
+// (the golden section's points lie close together) instead of cold. Only
+// where the torque is monotone in iq (within the measured region), so that
+// the root is the same: beyond it a carried-over start can settle on
+// another root. (Any root is a point of the locus, so a point it finds
+// inside both limits proves feasibility either way.)
+bool LocusFeasible(const sim::MagneticModel& m, const MachineLimits& lim, double we, double s, double t,
+                   bool warm = false) {
   bool found = false;
+  double q_last = 0.0;
   auto h = [&](double id) {
     if (found) return 0.0;
-    double iq;
-    if (!SolveIqForTorque(m, lim, id, t, s, &iq)) return 1e30;
-    const double c = std::hypot(id, iq) / lim.i_max_a;
-    const double v = we > 0 ? std::max(c, VoltageV(m, lim, id, iq, we) / lim.UMaxV()) : c;
+    const double v = LocusPointH(m, lim, we, s, t, id, warm ? q_last : 0.0, &q_last);
     found = v <= 1.0;
     return v;
   };
@@ -235,11 +335,12 @@ double MaxTorqueByBisection(const sim::MagneticModel& m, const MachineLimits& li
 // column's. A column with no feasible point scores minus its least
 // (|u|^2 - u_max^2) / u_max^2, so the scan climbs towards the feasible
 // columns even when they are a narrow band (high speed).
-double MaxTorqueDirect(const sim::MagneticModel& m, const MachineLimits& lim, double we, double s) {
+LimitTorque MaxTorqueDirect(const sim::MagneticModel& m, const MachineLimits& lim, double we, double s) {
   const double u_max = lim.UMaxV();
   const bool voltage = we > 0 && lim.rs_ohm.has_value() && std::isfinite(u_max);
   const double rs = voltage ? *lim.rs_ohm : 0.0;
   double q_warm = -1.0;
+  double q_last = 0.0;   // the last column's |iq| (its point, with the torque)
   // phi(q) = |u(id, s q)|^2 - u_max^2 and its slope in q.
   auto phi = [&](double id, double q, double* slope) {
     sim::FluxLinkage F;
@@ -265,7 +366,10 @@ double MaxTorqueDirect(const sim::MagneticModel& m, const MachineLimits& lim, do
           const double qm = MinimiseScalar([&](double x) { double d; return phi(id, x, &d); }, 0.0, qc, 4, 25);
           double dm;
           const double pm = phi(id, qm, &dm);
-          if (pm > 0) return -pm / (u_max * u_max);
+          if (pm > 0) {
+            q_last = qm;
+            return -pm / (u_max * u_max);
+          }
           lo = qm;
         }
         double x = q_warm > lo && q_warm < hi ? q_warm : hi, dx = dc;
@@ -284,17 +388,96 @@ double MaxTorqueDirect(const sim::MagneticModel& m, const MachineLimits& lim, do
         q_warm = q;
       }
     }
+    q_last = q;
     return s * TorqueNm(m, lim.pole_pairs, id, s * q, lim.temperature_c);
   };
   const double id = MinimiseScalar([&](double d) { return -column(d); }, -lim.i_max_a, 0.0, 24, 40);
-  return column(id);
+  LimitTorque r;
+  r.t = column(id);
+  r.direct = true;
+  r.id = id;
+  r.iq = s * q_last;
+  return r;
 }
 
 }  // namespace
 
-double MaxTorqueNm(const sim::MagneticModel& m, const MachineLimits& lim, double we,
-                   double sign) {
-  const double s = sign < 0 ? -1.0 : 1.0;
+namespace {
+
+// The check of a limit torque d->t found at d->id (MaxTorqueDirect or
+// CornerLimit): a request 1e-7 below is feasible and 1e-7 above is not
+// (LocusFeasible, the bisection's test). If it passes, d->t becomes the
+// limit just inside: 1e-9 below (below what the golden section resolves),
+// so that the least-current solver at this torque finds a feasible point;
+// the bisection ended ~1e-8 inside.
+// The request below is shown feasible by one locus point when it can be:
+// the point of its locus at the maximum's id is inside both limits there
+// (its |iq| is below the maximum's, where the column is feasible), and one
+// point inside both limits is what LocusFeasible's search looks for.
+bool PassesLimitCheck(const sim::MagneticModel& m, const MachineLimits& lim, double we, double s, LimitTorque* d,
+                      bool warm = false) {
+  constexpr double kCheck = 1e-7;
+  const double t = d->t;
+  if (t > 0 && std::isfinite(t) &&
+      (LocusPointH(m, lim, we, s, t * (1 - kCheck), d->id) <= 1.0 || LocusFeasible(m, lim, we, s, t * (1 - kCheck))) &&
+      !LocusFeasible(m, lim, we, s, t * (1 + kCheck), warm)) {
+    d->t = t * (1 - 1e-9);
+    return true;
+  }
+  return false;
+}
+
+// The limit torque where it lies at a corner of the limits: the point on
+// both the current circle and the voltage limit (between base speed and
+// the speed from which the locus' MTPV point limits instead), by a 2-D
+// Newton on (|i|^2 = i_max^2, |u|^2 = u_max^2) from the corner at the
+// previous speed (~4 surface evaluations, against MaxTorqueDirect's ~67
+// columns). It is a maximum of the torque over the feasible set where the
+// torque's gradient is a positive combination of the two limits' outward
+// gradients (KKT multipliers both > 0: with two independent active limits
+// in the plane no feasible direction is left, a strict local maximum).
+// Whether it is the largest, PassesLimitCheck decides (its search above
+// the limit covers the whole locus); otherwise false.
+bool CornerLimit(const sim::MagneticModel& m, const MachineLimits& lim, double we, double s, double id0,
+                 double iq0, LimitTorque* out) {
+  const double u_max = lim.UMaxV(), u2 = u_max * u_max, i2 = lim.i_max_a * lim.i_max_a;
+  const double rs = *lim.rs_ohm;
+  double id = id0, iq = iq0;
+  for (int it = 0; it < 16; ++it) {
+    sim::FluxLinkage F;
+    sim::DifferentialInductance L;
+    m.FluxAndInductance(id, iq, lim.temperature_c, &F, &L);
+    const double ud = rs * id - we * F.psi_q_wb, uq = rs * iq + we * F.psi_d_wb;
+    const double c1 = id * id + iq * iq - i2, c2 = ud * ud + uq * uq - u2;
+    // Gradients of |u|^2 (as in FwNewton) and of |i|^2 = (2 id, 2 iq).
+    const double g_d = 2 * (ud * (rs - we * L.ldq_h) + uq * we * L.ldd_h);
+    const double g_q = 2 * (-ud * we * L.lqq_h + uq * (rs + we * L.ldq_h));
+    const double det = 2 * id * g_q - 2 * iq * g_d;
+    if (!(std::abs(det) > 0) || !std::isfinite(det)) return false;
+    if (std::abs(c1) <= 1e-13 * i2 && std::abs(c2) <= 1e-13 * u2) {
+      const double t_d = 1.5 * lim.pole_pairs * (L.ldd_h * iq - F.psi_q_wb - L.ldq_h * id);
+      const double t_q = physics::TorqueSlopeIq(lim.pole_pairs, F.psi_d_wb, L.ldq_h, L.lqq_h, id, iq);
+      // s grad T = l1 grad|i|^2 + l2 grad|u|^2, by Cramer's rule.
+      const double l1 = s * (t_d * g_q - t_q * g_d) / det, l2 = s * (2 * id * t_q - 2 * iq * t_d) / det;
+      if (!(s * iq > 0 && id >= -lim.i_max_a && id <= 0 && l1 > 0 && l2 > 0)) return false;
+      out->t = s * physics::ElectromagneticTorque(lim.pole_pairs, F.psi_d_wb, F.psi_q_wb, id, iq);
+      out->direct = true;
+      out->id = id;
+      out->iq = iq;
+      return true;
+    }
+    double dd = (2 * iq * c2 - g_q * c1) / det, dq = (g_d * c1 - 2 * id * c2) / det;
+    const double len = std::hypot(dd, dq), cap = 0.25 * lim.i_max_a;
+    if (!std::isfinite(len)) return false;
+    if (len > cap) { dd *= cap / len; dq *= cap / len; }
+    id += dd;
+    iq += dq;
+  }
+  return false;
+}
+
+// MaxTorqueNm with its point: MaxTorqueDirect, checked.
+LimitTorque CheckedLimitTorque(const sim::MagneticModel& m, const MachineLimits& lim, double we, double s) {
   // The limit torque is the largest request some point of whose locus lies
   // inside both limits. It was found by bisection on the request
   // (MaxTorqueByBisection: ~30 x 67 locus points, each a Newton solve),
@@ -304,16 +487,67 @@ double MaxTorqueNm(const sim::MagneticModel& m, const MachineLimits& lim, double
   // 1e-7 below must be feasible and 1e-7 above must not. Where the check
   // fails (a feasible set the column search does not resolve), the
   // bisection decides, as before.
-  const double t = MaxTorqueDirect(m, lim, we, s);
-  constexpr double kCheck = 1e-7;
-  if (t > 0 && std::isfinite(t) && LocusFeasible(m, lim, we, s, t * (1 - kCheck)) &&
-      !LocusFeasible(m, lim, we, s, t * (1 + kCheck))) {
-    // Just inside the limit (1e-9 of it, below what the golden section
-    // resolves), so that the least-current solver at this torque finds a
-    // feasible point; the bisection ended ~1e-8 inside.
-    return t * (1 - 1e-9);
-  }
-  return MaxTorqueByBisection(m, lim, we, s);
+  // The request below is shown feasible by one locus point when it can be:
+  // the point of its locus at the maximum's id is inside both limits there
+  // (its |iq| is below the maximum's, where the column is feasible), and
+  // one point inside both limits is what LocusFeasible's search looks for.
+  LimitTorque d = MaxTorqueDirect(m, lim, we, s);
+  if (PassesLimitCheck(m, lim, we, s, &d)) return d;
+  LimitTorque b;
+  b.t = MaxTorqueByBisection(m, lim, we, s);
+  return b;
 }
+
+}  // namespace
+
+double MaxTorqueNm(const sim::MagneticModel& m, const MachineLimits& lim, double we,
+                   double sign) {
+  return CheckedLimitTorque(m, lim, we, sign < 0 ? -1.0 : 1.0).t;
+}
+
+namespace internal {
+
+std::vector<LimitTorque> LimitTorques(const sim::MagneticModel& m, const MachineLimits& lim,
+                                      const std::vector<double>& we, double sign, bool fast) {
+  const double s = sign < 0 ? -1.0 : 1.0;
+  // At standstill only the current limit binds. The feasible set at a speed
+  // (inside the current circle and the voltage limit) is part of the one at
+  // standstill, so its largest torque is at most the standstill one; where
+  // the standstill maximum's point also meets this speed's voltage limit,
+  // it is in the set and the limit torque is the standstill one (below base
+  // speed: one voltage evaluation instead of a maximisation and its checks).
+  const LimitTorque still = CheckedLimitTorque(m, lim, 0.0, s);
+  const double u_max = lim.UMaxV();
+  std::vector<LimitTorque> out;
+  out.reserve(we.size());
+  // Above base speed, a limit at a corner of the limits starts the next
+  // speed's CornerLimit (the corner moves little from speed to speed), an
+  // MTPV-type one (inside the current limit) the next speed's MtpvLimit.
+  const LimitTorque* corner = still.direct ? &still : nullptr;
+  const LimitTorque* mtpv = nullptr;
+  for (double w : we) {
+    if (w <= 0 || (still.direct && lim.HasVoltageLimit() && VoltageV(m, lim, still.id, still.iq, w) <= u_max)) {
+      out.push_back(still);
+      continue;
+    }
+    LimitTorque c;
+    if (fast && corner != nullptr && lim.HasVoltageLimit() && CornerLimit(m, lim, w, s, corner->id, corner->iq, &c) &&
+        PassesLimitCheck(m, lim, w, s, &c, true)) {
+      out.push_back(c);
+    } else if (fast && mtpv != nullptr && lim.HasVoltageLimit() && MtpvLimit(m, lim, w, s, mtpv->id, mtpv->iq, &c) &&
+               PassesLimitCheck(m, lim, w, s, &c, true)) {
+      out.push_back(c);
+    } else {
+      out.push_back(CheckedLimitTorque(m, lim, w, s));
+    }
+    const LimitTorque& l = out.back();
+    const bool at_current_limit = std::hypot(l.id, l.iq) >= lim.i_max_a * (1 - 1e-6);
+    corner = l.direct && at_current_limit ? &l : nullptr;
+    mtpv = l.direct && !at_current_limit ? &l : nullptr;
+  }
+  return out;
+}
+
+}  // namespace internal
 
 }  // namespace fluxcal::tables
