@@ -6,6 +6,7 @@
 #include "fitting/fit.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <tuple>
 #include <utility>
@@ -44,6 +45,59 @@ absl::StatusOr<ModelName> ParseModelName(const std::string& name) {
                                                  "spline, splineN (N 1..8), smooth or smooth-asym, got '", name, "'"));
 }
 
+namespace {
+
+// A machine without magnets (psi_pm stated 0) has no magnet axis to put d
+// on; fluxcal's d is then the low-permeance axis, where a PM-assisted
+// machine would carry its magnets, so that Lqq > Ldd as for every other
+// machine it fits (docs/recording-format.md, "Machines without magnets").
+// The reluctance-machine literature and SyR-e put d on the high-permeance
+// axis instead. Data in that frame fit as well as any, but every table
+// built on them searches the wrong quadrant (no torque where the MTPA
+// should be), so they are refused, saying how to rotate them. The axes are
+// judged on the HF points (Ldd against Lqq), else on the flux nodes and
+// steady-state rows (the apparent psi_d / id against psi_q / iq, taken
+// where both currents are at least a tenth of the data's largest).
+absl::Status CheckReluctanceAxes(const FitData& d) {
+  if (!d.psi_pm_prior_wb || *d.psi_pm_prior_wb != 0.0) return absl::OkStatus();
+  int high_d = 0, judged = 0;
+  for (const auto& o : d.inductances) {
+    if (!(o.ldd_h > 0) || !(o.lqq_h > 0)) continue;
+    ++judged;
+    high_d += o.ldd_h > o.lqq_h;
+  }
+  std::string what = "identified points";
+  if (judged == 0) {
+    what = "flux nodes and steady-state rows";
+    std::vector<std::array<double, 4>> nodes;   // id, iq, psi_d, psi_q
+    for (const auto& f : d.fluxes) nodes.push_back({f.id_a, f.iq_a, f.psi_d_wb, f.psi_q_wb});
+    for (const auto& s : d.steady_state) {
+      double pd, pq;
+      SteadyStateFlux(s, d.pole_pairs, d.rs_ohm, d.f_pwm_hz, &pd, &pq);
+      nodes.push_back({s.id_a, s.iq_a, pd, pq});
+    }
+    double scale = 0;
+    for (const auto& n : nodes) scale = std::max({scale, std::abs(n[0]), std::abs(n[1])});
+    for (const auto& n : nodes) {
+      if (std::abs(n[0]) < 0.1 * scale || std::abs(n[1]) < 0.1 * scale) continue;
+      const double ld = n[2] / n[0], lq = n[3] / n[1];
+      if (!(ld > 0) || !(lq > 0)) continue;
+      ++judged;
+      high_d += ld > lq;
+    }
+  }
+  if (judged < 3 || 2 * high_d <= judged) return absl::OkStatus();
+  return absl::InvalidArgumentError(absl::StrFormat(
+      "motor.psi_pm_wb: 0 (a machine without magnets), and d is the high-inductance axis at %d of %d %s: the data "
+      "are in the reluctance-machine frame (d on the high-permeance axis, as SyR-e's), fluxcal's d is the "
+      "low-permeance axis (docs/recording-format.md, \"Machines without magnets\"). Rotate them by -90 electrical "
+      "degrees: id = -iq', iq = id', psi_d = -psi_q', psi_q = psi_d' (theta_e = theta_e' - pi/2 for waveforms; "
+      "a flux map: --convention syre)",
+      high_d, judged, what));
+}
+
+}  // namespace
+
 // Screen, fit, and then the rows the torque screen could not judge. A row
 // without torque that averaged a limit cycle carries a flux that nothing
 // else in the data supports, and within the region it is taken as exact to
@@ -62,6 +116,7 @@ absl::StatusOr<Calibration> Fit(const FitData& input, const FitOptions& o) {
         "pole_pairs: ", input.pole_pairs == 0 ? std::string("unknown") : absl::StrCat(input.pole_pairs),
         " (1..100 required: the manifest's motor.pole_pairs or --pole-pairs; torque and speed depend on them)"));
   }
+  if (absl::Status axes = CheckReluctanceAxes(input); !axes.ok()) return axes;
   std::vector<std::string> excluded;
   std::vector<Calibration::Box> not_pd;
   std::vector<size_t> row_index;
@@ -99,7 +154,7 @@ absl::StatusOr<Calibration> Fit(const FitData& input, const FitOptions& o) {
       auto cal_large = FitScreened(large, excluded, not_pd, o, &dw, &cv_large);
       const bool take = cal_large.ok() && cv_large < (1.0 - internal::kLargeSignalScoreMargin) * cv_small;
       hf_model = absl::StrFormat(
-          "hf model: large-signal (describing function over %d of %zu points' orbits) cv=%.4g, small-signal cv=%.4g: "
+          "hf model: large-signal (describing function over the orbits of %d of %zu points) cv=%.4g, small-signal cv=%.4g: "
           "%s kept",
           orbits, d.inductances.size(), cal_large.ok() ? cv_large : std::nan(""), cv_small,
           take ? "large-signal" : "small-signal");

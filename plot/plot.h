@@ -78,6 +78,19 @@ enum class Marker {
   kTriangleDown,   // filled triangle pointing down
 };
 
+// Where a curve's values come from, and its dash: the one key of every
+// figure (the report page's and the exported tables' alike): solid
+// measured, dashed by symmetry, dotted extrapolated.
+enum class Provenance { kMeasured = 0, kBySymmetry = 1, kExtrapolated = 2 };
+inline const char* ProvenanceDash(Provenance p) {
+  switch (p) {
+    case Provenance::kMeasured: return "";
+    case Provenance::kBySymmetry: return "8 4";
+    case Provenance::kExtrapolated: return "2 3";
+  }
+  return "";
+}
+
 struct Style {
   std::string colour = "#1f77b4";
   double width_px = 1.8;

@@ -12,14 +12,8 @@
 
 namespace fluxcal::report::internal {
 
-const char* DashOf(Source s) {
-  switch (s) {
-    case Source::kMeasured: return "";
-    case Source::kMirror: return "8 4";
-    case Source::kExtrapolated: return "2 3";
-  }
-  return "";
-}
+// Source and plot::Provenance number the same three classes.
+const char* DashOf(Source s) { return plot::ProvenanceDash(static_cast<plot::Provenance>(s)); }
 
 Coverage MeasuredCoverage(const fit::Calibration& cal, const fit::FitData* data) {
   Coverage c;

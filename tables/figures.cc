@@ -398,9 +398,9 @@ int RegionClass(const Table& t, size_t k) {
   return 0;
 }
 
-// The report page's key (report/report.cc, DashOf): solid measured,
-// dashed by symmetry, dotted extrapolated; one key for every figure.
-const char* const kRegionDash[] = {"", "8 4", "2 3"};
+// The report page's key (plot::ProvenanceDash), indexed by region class
+// (0 measured, 1 by symmetry, 2 extrapolated).
+const char* RegionDash(int cls) { return plot::ProvenanceDash(static_cast<plot::Provenance>(cls)); }
 
 // One envelope output (torque or power) over speed as one curve per table:
 // each run of speeds of one region class drawn in its own dash, joined to
@@ -434,7 +434,7 @@ void EnvelopeCurves(plot::Figure* f, const std::vector<Table>& envs, const std::
       plot::Style st;
       st.colour = plot::Palette(static_cast<int>(i));
       st.width_px = 2.0;
-      st.dash = kRegionDash[cls];
+      st.dash = RegionDash(cls);
       // One legend entry per Udc, on its first solid stretch, or its first
       // stretch when none is solid.
       bool any_solid = false;
@@ -483,8 +483,8 @@ std::string PlotEnvelopeSvg(const std::vector<Table>& envs) {
   }
   plot::Style ex, sy;
   ex.colour = sy.colour = "#555555";
-  ex.dash = kRegionDash[2];
-  sy.dash = kRegionDash[1];
+  ex.dash = RegionDash(2);
+  sy.dash = RegionDash(1);
   for (plot::Figure* f : {&torque, &power}) {
     if (ext > 0) {
       f->Line({}, {}, ex, absl::StrFormat("dotted: extrapolated (%zu points), not measured", ext));

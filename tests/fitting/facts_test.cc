@@ -113,5 +113,70 @@ TEST(Facts, ManifestStatesThem) {
   EXPECT_FALSE(none.psi_pm_prior_wb || none.rs_ohm || none.udc_v);
 }
 
+// A machine without magnets (psi_pm stated 0): fluxcal's d is its
+// low-permeance axis (docs/recording-format.md, "Machines without
+// magnets"). The same saturating reluctance machine in that frame fits; in
+// the reluctance-machine frame (d on the high-permeance axis, id = iq',
+// iq = -id' ... rotated by 90 degrees) it is refused, whether the data are
+// identified inductances or flux nodes, naming the field and the rotation.
+TEST(Facts, MachineWithoutMagnetsTellsItsAxes) {
+  // psi_d = Ld id / (1 + |id| / 60), psi_q = Lq iq / (1 + |iq| / 40): a
+  // conservative map (diagonal Jacobian), Lq 5x Ld.
+  const double ld = 0.4e-3, lq = 2.0e-3;
+  auto flux = [&](double id, double iq, double* pd, double* pq) {
+    *pd = ld * id / (1 + std::abs(id) / 60);
+    *pq = lq * iq / (1 + std::abs(iq) / 40);
+  };
+  auto inductance = [&](double id, double iq, double* ldd, double* lqq) {
+    *ldd = ld / std::pow(1 + std::abs(id) / 60, 2);
+    *lqq = lq / std::pow(1 + std::abs(iq) / 40, 2);
+  };
+  for (bool rotated : {false, true}) {
+    FitData hf, map;
+    hf.pole_pairs = map.pole_pairs = 2;
+    hf.psi_pm_prior_wb = map.psi_pm_prior_wb = 0.0;
+    for (int a = 0; a <= 5; ++a) {
+      for (int b = 0; b <= 5; ++b) {
+        // fluxcal's frame: id in [-100, 0], iq in [0, 100]; rotated: the
+        // high-permeance axis called d (id' = iq, iq' = -id).
+        const double id = -100 + 20 * a, iq = 20 * b;
+        double pd, pq, ldd, lqq;
+        flux(id, iq, &pd, &pq);
+        inductance(id, iq, &ldd, &lqq);
+        InductanceObservation o;
+        o.id_a = rotated ? iq : id;
+        o.iq_a = rotated ? -id : iq;
+        o.ldd_h = rotated ? lqq : ldd;
+        o.lqq_h = rotated ? ldd : lqq;
+        o.ldq_h = 0.0;
+        o.ldd_h_std = 1e-3 * o.ldd_h;
+        o.lqq_h_std = 1e-3 * o.lqq_h;
+        o.ldq_h_std = 1e-3 * o.ldd_h;
+        hf.inductances.push_back(o);
+        FluxObservation f;
+        f.id_a = o.id_a;
+        f.iq_a = o.iq_a;
+        f.psi_d_wb = rotated ? pq : pd;
+        f.psi_q_wb = rotated ? -pd : pq;
+        f.psi_std_wb = 1e-5;
+        map.fluxes.push_back(f);
+      }
+    }
+    for (const FitData* d : {&hf, &map}) {
+      auto cal = Fit(*d, {});
+      if (!rotated) {
+        EXPECT_TRUE(cal.ok()) << cal.status();
+        continue;
+      }
+      ASSERT_FALSE(cal.ok());
+      EXPECT_EQ(cal.status().code(), absl::StatusCode::kInvalidArgument);
+      const std::string m(cal.status().message());
+      EXPECT_NE(m.find("motor.psi_pm_wb"), std::string::npos) << m;
+      EXPECT_NE(m.find(d == &hf ? "identified points" : "flux nodes"), std::string::npos) << m;
+      EXPECT_NE(m.find("id = -iq'"), std::string::npos) << m;
+    }
+  }
+}
+
 }  // namespace
 }  // namespace fluxcal::fit

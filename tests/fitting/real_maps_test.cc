@@ -526,6 +526,10 @@ TEST(RealMaps, LargeSignalHfIsWhatTheInjectionMeasures) {
     std::printf("%-10s chi2 per point: small-signal %.1f, describing %.2f; inductance RMS small-signal fit %.2f %%, "
                 "large-signal fit %.2f %%\n",
                 t.name.c_str(), chi2_small / n, chi2_large / n, 100 * e_small, 100 * e_large);
+    // The calibration says which HF model it kept (fit.cc, the score).
+    ASSERT_FALSE(cal_large->summary.candidates.empty());
+    EXPECT_NE(cal_large->summary.candidates.back().find("large-signal kept"), std::string::npos)
+        << cal_large->summary.candidates.back();
     EXPECT_GT(chi2_small / n, 50.0) << t.name;
     EXPECT_LT(chi2_large / n, 3.0) << t.name;
     EXPECT_LT(e_large, 0.7 * e_small) << t.name;
