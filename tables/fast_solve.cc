@@ -68,16 +68,8 @@ bool FwNewton(const sim::MagneticModel& m, const MachineLimits& lim, double t, d
       *iq_out = iq_cold;
       return true;
     }
-    const double det = t_d * g_q - t_q * g_d;
-    if (!(std::abs(det) > 0) || !std::isfinite(det)) return false;
-    // J (dd, dq) = -F by Cramer's rule; a step longer than a quarter of the
-    // current limit is shortened (a start far off, not a converging one).
-    double dd = (t_q * f2 - g_q * f1) / det, dq = (g_d * f1 - t_d * f2) / det;
-    const double len = std::hypot(dd, dq), cap = 0.25 * lim.i_max_a;
-    if (!std::isfinite(len)) return false;
-    if (len > cap) { dd *= cap / len; dq *= cap / len; }
-    id += dd;
-    iq += dq;
+    // A step longer than a quarter of the current limit is shortened.
+    if (!DampedNewtonStep(t_d, t_q, g_d, g_q, f1, f2, 0.25 * lim.i_max_a, &id, &iq)) return false;
   }
   return false;
 }
@@ -143,14 +135,7 @@ bool MtpaNewton(const sim::MagneticModel& m, const MachineLimits& lim, double t,
     grad(id, iq + h, &td_b, &tq_b);
     const double f2_d = t_q + id * (tq_a - t_q) / h - iq * (td_a - t_d) / h;
     const double f2_q = id * (tq_b - t_q) / h - t_d - iq * (td_b - t_d) / h;
-    const double det = t_d * f2_q - t_q * f2_d;
-    if (!(std::abs(det) > 0) || !std::isfinite(det)) return false;
-    double dd = (t_q * f2 - f2_q * f1) / det, dq = (f2_d * f1 - t_d * f2) / det;
-    const double len = std::hypot(dd, dq), cap = 0.25 * lim.i_max_a;
-    if (!std::isfinite(len)) return false;
-    if (len > cap) { dd *= cap / len; dq *= cap / len; }
-    id += dd;
-    iq += dq;
+    if (!DampedNewtonStep(t_d, t_q, f2_d, f2_q, f1, f2, 0.25 * lim.i_max_a, &id, &iq)) return false;
   }
   return false;
 }
@@ -207,14 +192,7 @@ bool MtpvLimit(const sim::MagneticModel& m, const MachineLimits& lim, double we,
     }
     const Local b = at(id + h, iq), c = at(id, iq + h);
     const double f2_d = (cross(b) - f2) / h, f2_q = (cross(c) - f2) / h;
-    const double det = a.g_d * f2_q - a.g_q * f2_d;
-    if (!(std::abs(det) > 0) || !std::isfinite(det)) return false;
-    double dd = (a.g_q * f2 - f2_q * f1) / det, dq = (f2_d * f1 - a.g_d * f2) / det;
-    const double len = std::hypot(dd, dq), cap = 0.25 * lim.i_max_a;
-    if (!std::isfinite(len)) return false;
-    if (len > cap) { dd *= cap / len; dq *= cap / len; }
-    id += dd;
-    iq += dq;
+    if (!DampedNewtonStep(a.g_d, a.g_q, f2_d, f2_q, f1, f2, 0.25 * lim.i_max_a, &id, &iq)) return false;
   }
   return false;
 }

@@ -4,6 +4,7 @@
 #ifndef FLUXCAL_TABLES_INTERNAL_SOLVER_H_
 #define FLUXCAL_TABLES_INTERNAL_SOLVER_H_
 
+#include <cmath>
 #include <limits>
 #include <optional>
 #include <vector>
@@ -97,6 +98,27 @@ bool MtpaNewton(const sim::MagneticModel& m, const MachineLimits& lim, double t,
 // the largest: the caller's check (solver.cc: PassesLimitCheck).
 bool MtpvLimit(const sim::MagneticModel& m, const MachineLimits& lim, double we, double s, double id0, double iq0,
                LimitTorque* out);
+
+// One damped step of the tables' 2-D Newton solves on F = (f1, f2) with
+// Jacobian [[a, b], [c, d]] (rows f1, f2; columns id, iq): the step
+// -J^-1 F by Cramer's rule, shortened to `cap_a` (a start far off, not a
+// converging one), added to (id, iq). False where J is singular or the step
+// is not finite.
+inline bool DampedNewtonStep(double a, double b, double c, double d, double f1, double f2, double cap_a, double* id,
+                             double* iq) {
+  const double det = a * d - b * c;
+  if (!(std::abs(det) > 0) || !std::isfinite(det)) return false;
+  double dd = (b * f2 - d * f1) / det, dq = (c * f1 - a * f2) / det;
+  const double len = std::hypot(dd, dq);
+  if (!std::isfinite(len)) return false;
+  if (len > cap_a) {
+    dd *= cap_a / len;
+    dq *= cap_a / len;
+  }
+  *id += dd;
+  *iq += dq;
+  return true;
+}
 
 }  // namespace fluxcal::tables::internal
 

@@ -466,12 +466,7 @@ bool CornerLimit(const sim::MagneticModel& m, const MachineLimits& lim, double w
       out->iq = iq;
       return true;
     }
-    double dd = (2 * iq * c2 - g_q * c1) / det, dq = (g_d * c1 - 2 * id * c2) / det;
-    const double len = std::hypot(dd, dq), cap = 0.25 * lim.i_max_a;
-    if (!std::isfinite(len)) return false;
-    if (len > cap) { dd *= cap / len; dq *= cap / len; }
-    id += dd;
-    iq += dq;
+    if (!internal::DampedNewtonStep(2 * id, 2 * iq, g_d, g_q, c1, c2, 0.25 * lim.i_max_a, &id, &iq)) return false;
   }
   return false;
 }
