@@ -5,155 +5,6 @@
 namespace fluxcal::storage {
 namespace {
 
-// Ordered migrations: index k brings the schema from version k to k + 1.
-const std::vector<std::string> kSqliteMigrations = {
-    // v1: motors, runs, points, recordings, calibrations.
-    R"sql(
-CREATE TABLE motors (
-  serial TEXT PRIMARY KEY,
-  pole_pairs INTEGER NOT NULL,
-  rs_ohm REAL NOT NULL,
-  psi_pm_wb REAL NOT NULL,
-  created_utc TEXT NOT NULL);
-CREATE TABLE recordings (
-  sha256 TEXT PRIMARY KEY,
-  size_bytes INTEGER NOT NULL,
-  zlib_data BLOB NOT NULL);
-CREATE TABLE runs (
-  run_id INTEGER PRIMARY KEY AUTOINCREMENT,
-  serial TEXT NOT NULL REFERENCES motors(serial),
-  station TEXT NOT NULL,
-  kind TEXT NOT NULL,
-  recording_sha256 TEXT REFERENCES recordings(sha256),
-  created_utc TEXT NOT NULL);
-CREATE TABLE hf_points (
-  run_id INTEGER NOT NULL REFERENCES runs(run_id),
-  idx INTEGER NOT NULL,
-  point_id TEXT NOT NULL,
-  id_a REAL NOT NULL, iq_a REAL NOT NULL, speed_rpm REAL NOT NULL,
-  ld_h REAL NOT NULL, lq_h REAL NOT NULL, ldq_h REAL,
-  ld_h_std REAL NOT NULL, lq_h_std REAL NOT NULL, ldq_h_std REAL NOT NULL,
-  temperature_c REAL NOT NULL, reliable INTEGER NOT NULL,
-  PRIMARY KEY (run_id, idx));
-CREATE TABLE calibrations (
-  serial TEXT NOT NULL REFERENCES motors(serial),
-  version INTEGER NOT NULL,
-  run_id INTEGER REFERENCES runs(run_id),
-  created_utc TEXT NOT NULL,
-  model TEXT NOT NULL,
-  psi_pm_wb REAL NOT NULL,
-  rms_relative REAL NOT NULL,
-  verdict TEXT NOT NULL,
-  calibration_json TEXT NOT NULL,
-  PRIMARY KEY (serial, version));
-CREATE INDEX runs_by_serial ON runs(serial, run_id);
-)sql",
-    // v2: calibration versions are immutable, enforced by the database.
-    R"sql(
-CREATE TRIGGER calibrations_no_update BEFORE UPDATE ON calibrations
-  BEGIN SELECT RAISE(ABORT, 'calibration versions are immutable'); END;
-CREATE TRIGGER calibrations_no_delete BEFORE DELETE ON calibrations
-  BEGIN SELECT RAISE(ABORT, 'calibration versions are immutable'); END;
-CREATE INDEX calibrations_by_verdict ON calibrations(verdict);
-)sql",
-    // v3: idempotency keys on runs: a retried ingest with the same key
-    // returns the first run instead of storing a second one.
-    R"sql(
-ALTER TABLE runs ADD COLUMN idempotency_key TEXT;
-CREATE UNIQUE INDEX runs_idempotency ON runs(serial, idempotency_key) WHERE idempotency_key IS NOT NULL;
-)sql",
-    // v4: releases. A calibration becomes flashable only by an explicit,
-    // recorded release; rows are insert-only like calibrations.
-    R"sql(
-CREATE TABLE releases (
-  serial TEXT NOT NULL,
-  version INTEGER NOT NULL,
-  released_by TEXT NOT NULL,
-  released_utc TEXT NOT NULL,
-  PRIMARY KEY (serial, version),
-  FOREIGN KEY (serial, version) REFERENCES calibrations(serial, version));
-CREATE TRIGGER releases_no_update BEFORE UPDATE ON releases
-  BEGIN SELECT RAISE(ABORT, 'releases are immutable'); END;
-CREATE TRIGGER releases_no_delete BEFORE DELETE ON releases
-  BEGIN SELECT RAISE(ABORT, 'releases are immutable'); END;
-)sql",
-    // v5: audit trail: who (authenticated identity and role), from where
-    // (peer), when, with which request id, did what to which serial.
-    R"sql(
-CREATE TABLE audit (
-  id INTEGER PRIMARY KEY AUTOINCREMENT,
-  utc TEXT NOT NULL,
-  identity TEXT NOT NULL,
-  role TEXT NOT NULL,
-  peer TEXT NOT NULL,
-  request_id TEXT NOT NULL,
-  rpc TEXT NOT NULL,
-  serial TEXT NOT NULL,
-  detail TEXT NOT NULL);
-CREATE INDEX audit_by_serial ON audit(serial, id);
-CREATE TRIGGER audit_no_update BEFORE UPDATE ON audit
-  BEGIN SELECT RAISE(ABORT, 'the audit trail is append-only'); END;
-CREATE TRIGGER audit_no_delete BEFORE DELETE ON audit
-  BEGIN SELECT RAISE(ABORT, 'the audit trail is append-only'); END;
-)sql",
-    // v6: a hash chain over calibration versions (storage/store.h,
-    // CalibrationRowSha256): editing a stored row, even with the triggers
-    // dropped, is detected by `fluxcal admin verify-db`.
-    R"sql(
-CREATE TABLE calibration_chain (
-  serial TEXT NOT NULL,
-  version INTEGER NOT NULL,
-  prev_sha256 TEXT NOT NULL,
-  row_sha256 TEXT NOT NULL,
-  PRIMARY KEY (serial, version));
-CREATE TRIGGER chain_no_update BEFORE UPDATE ON calibration_chain
-  BEGIN SELECT RAISE(ABORT, 'the calibration chain is append-only'); END;
-CREATE TRIGGER chain_no_delete BEFORE DELETE ON calibration_chain
-  BEGIN SELECT RAISE(ABORT, 'the calibration chain is append-only'); END;
-)sql",
-    // v7: a hash chain over releases, one for the whole store in release
-    // order (storage/store.h, ReleaseRowSha256): a release inserted, changed
-    // or removed behind the service is detected by `fluxcal admin
-    // verify-db` and by a flasher's export. Releases stored before v7 are
-    // linked by the migration itself (SqliteStore::Migrate), in time order.
-    R"sql(
-CREATE TABLE release_chain (
-  seq INTEGER PRIMARY KEY,
-  serial TEXT NOT NULL,
-  version INTEGER NOT NULL,
-  calibration_sha256 TEXT NOT NULL,
-  prev_sha256 TEXT NOT NULL,
-  row_sha256 TEXT NOT NULL,
-  UNIQUE (serial, version));
-CREATE TRIGGER release_chain_no_update BEFORE UPDATE ON release_chain
-  BEGIN SELECT RAISE(ABORT, 'the release chain is append-only'); END;
-CREATE TRIGGER release_chain_no_delete BEFORE DELETE ON release_chain
-  BEGIN SELECT RAISE(ABORT, 'the release chain is append-only'); END;
-)sql",
-    // v8: calibration versions stored as the binary fitted model
-    // (fluxcal.v1.CalibrationModel, ~45 kB for the largest family) instead
-    // of decimal JSON (0.3-0.5 MB); calibration_json stays for versions
-    // stored before and not converted ('' for the others). The migration
-    // converts the versions already stored (SqliteStore::Migrate,
-    // ConvertStoredJson) and records each conversion: the JSON its chain
-    // link hashed is gone, the record links the converted row to that link.
-    R"sql(
-ALTER TABLE calibrations ADD COLUMN model_pb BLOB;
-CREATE TABLE calibration_conversions (
-  serial TEXT NOT NULL,
-  version INTEGER NOT NULL,
-  json_sha256 TEXT NOT NULL,
-  row_sha256 TEXT NOT NULL,
-  converted_utc TEXT NOT NULL,
-  PRIMARY KEY (serial, version),
-  FOREIGN KEY (serial, version) REFERENCES calibrations(serial, version));
-CREATE TRIGGER conversions_no_update BEFORE UPDATE ON calibration_conversions
-  BEGIN SELECT RAISE(ABORT, 'the conversion records are append-only'); END;
-CREATE TRIGGER conversions_no_delete BEFORE DELETE ON calibration_conversions
-  BEGIN SELECT RAISE(ABORT, 'the conversion records are append-only'); END;
-)sql",
-};
-
 // The migration after which releases are chained.
 constexpr int kReleaseChainVersion = 7;
 // The migration that converts stored JSON to the binary model.
@@ -164,8 +15,6 @@ SqlValue BlobOrNull(const std::string& bytes) {
 }
 
 }  // namespace
-
-const std::vector<std::string>& SqliteMigrations() { return kSqliteMigrations; }
 
 absl::StatusOr<std::unique_ptr<SqliteStore>> SqliteStore::Open(const std::string& path, bool create,
                                                                JsonToModelFn json_to_model) {
@@ -195,7 +44,7 @@ absl::Status SqliteStore::Migrate(const JsonToModelFn& json_to_model) {
                                                         " is newer than this fluxcal (", kSchemaVersion, ")"));
     }
     for (; v < kSchemaVersion; ++v) {
-      if (auto st = writer_->Exec(kSqliteMigrations[v]); !st.ok()) return st;
+      if (auto st = writer_->Exec(SqliteMigrations()[v]); !st.ok()) return st;
       if (v + 1 == kReleaseChainVersion) {
         // Releases stored before the chain join it now, oldest first.
         auto rel = writer_->Prepare(

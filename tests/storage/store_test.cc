@@ -695,5 +695,18 @@ TEST(Transaction, RollsBackOnError) {
   EXPECT_EQ(q->Int(0), 0) << "the failed transaction left a row behind";
 }
 
+// A build without libpq refuses a PostgreSQL URL at open, saying why; a
+// build with it tries to connect (and fails: nothing listens there).
+TEST(StoreOpen, PostgresUrlSaysWhetherThisBuildHasPostgres) {
+  auto s = Store::Open("postgresql://fluxcal@127.0.0.1:1/none?connect_timeout=1");
+  ASSERT_FALSE(s.ok());
+#ifdef FLUXCAL_WITH_POSTGRESQL
+  EXPECT_EQ(s.status().code(), absl::StatusCode::kUnavailable) << s.status();
+#else
+  EXPECT_EQ(s.status().code(), absl::StatusCode::kUnimplemented) << s.status();
+  EXPECT_NE(s.status().message().find("built without PostgreSQL"), std::string::npos) << s.status();
+#endif
+}
+
 }  // namespace
 }  // namespace fluxcal::storage
