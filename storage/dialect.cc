@@ -1,8 +1,11 @@
-// The schema of each dialect as data: ordered migrations, index k bringing
-// the schema from version k to k + 1. Same tables, columns and order on
-// both (docs/service.md); only types, identity columns and triggers are
-// spelled each database's way. Compiled in every build (also without
-// libpq): tests and tools read the PostgreSQL text without a server.
+// Each dialect as data (storage/dialect.h): its ordered migrations, index
+// k bringing the schema from version k to k + 1, and the few clauses the
+// shared SQL of storage/sql_store*.cc takes from it. Same tables, columns
+// and order on both (docs/service.md); only types, identity columns and
+// triggers are spelled each database's way. Compiled in every build (also
+// without libpq): tests and tools read the PostgreSQL text without a server.
+#include "storage/dialect.h"
+
 #include "storage/store.h"
 
 namespace fluxcal::storage {
@@ -117,7 +120,7 @@ CREATE TRIGGER chain_no_delete BEFORE DELETE ON calibration_chain
     // order (storage/store.h, ReleaseRowSha256): a release inserted, changed
     // or removed behind the service is detected by `fluxcal admin
     // verify-db` and by a flasher's export. Releases stored before v7 are
-    // linked by the migration itself (SqliteStore::Migrate), in time order.
+    // linked by the migration itself (SqlStore::Migrate), in time order.
     R"sql(
 CREATE TABLE release_chain (
   seq INTEGER PRIMARY KEY,
@@ -136,7 +139,7 @@ CREATE TRIGGER release_chain_no_delete BEFORE DELETE ON release_chain
     // (fluxcal.v1.CalibrationModel, ~45 kB for the largest family) instead
     // of decimal JSON (0.3-0.5 MB); calibration_json stays for versions
     // stored before and not converted ('' for the others). The migration
-    // converts the versions already stored (SqliteStore::Migrate,
+    // converts the versions already stored (SqlStore::Migrate,
     // ConvertStoredJson) and records each conversion: the JSON its chain
     // link hashed is gone, the record links the converted row to that link.
     R"sql(
@@ -271,7 +274,7 @@ CREATE TRIGGER chain_no_update BEFORE UPDATE OR DELETE ON calibration_chain
     // order (storage/store.h, ReleaseRowSha256): a release inserted, changed
     // or removed behind the service is detected by `fluxcal admin
     // verify-db` and by a flasher's export. Releases stored before v7 are
-    // linked by the migration itself (PostgresStore::Migrate), in time
+    // linked by the migration itself (SqlStore::Migrate), in time
     // order. Both chains also refuse TRUNCATE.
     R"sql(
 CREATE TABLE release_chain (
@@ -294,7 +297,7 @@ CREATE TRIGGER chain_no_truncate BEFORE TRUNCATE ON calibration_chain
     // v8: calibration versions stored as the binary fitted model
     // (fluxcal.v1.CalibrationModel) instead of decimal JSON; the versions
     // already stored are converted by the migration itself
-    // (PostgresStore::Migrate, ConvertStoredJson), each with its record.
+    // (SqlStore::Migrate, ConvertStoredJson), each with its record.
     // model_pb is stored as is (STORAGE EXTERNAL: the binary does not
     // compress, so TOAST need not try).
     R"sql(
@@ -317,7 +320,47 @@ CREATE TRIGGER conversions_no_truncate BEFORE TRUNCATE ON calibration_conversion
 
 }  // namespace
 
-const std::vector<std::string>& SqliteMigrations() { return kSqliteMigrations; }
-const std::vector<std::string>& PostgresMigrations() { return kPostgresMigrations; }
+const Dialect& SqliteDialect() {
+  static const Dialect d{
+      .name = "sqlite",
+      .migrations = kSqliteMigrations,
+      .begin = "BEGIN IMMEDIATE",
+      .for_update = "",
+      .for_share = "",
+      .bytewise = "",
+      .advisory_lock = "",
+      .table_exists = "SELECT COUNT(*) FROM sqlite_master WHERE type = 'table' AND name = ?",
+      // SQLite cannot disable a trigger: it is dropped and created again,
+      // inside the migration's transaction.
+      .unlock_calibrations = "DROP TRIGGER calibrations_no_update",
+      .relock_calibrations = "CREATE TRIGGER calibrations_no_update BEFORE UPDATE ON calibrations "
+                             "BEGIN SELECT RAISE(ABORT, 'calibration versions are immutable'); END;",
+      // AUTOINCREMENT continues after the largest id inserted.
+      .after_import_runs = "",
+      .after_import_audit = "",
+  };
+  return d;
+}
+
+const Dialect& PostgresDialect() {
+  static const Dialect d{
+      .name = "postgresql",
+      .migrations = kPostgresMigrations,
+      .begin = "BEGIN",
+      .for_update = " FOR UPDATE",
+      .for_share = " FOR SHARE",
+      .bytewise = " COLLATE \"C\"",
+      .advisory_lock = "SELECT pg_advisory_xact_lock(?)",
+      .table_exists = "SELECT CASE WHEN to_regclass(?) IS NULL THEN 0 ELSE 1 END",
+      .unlock_calibrations = "ALTER TABLE calibrations DISABLE TRIGGER calibrations_no_update",
+      .relock_calibrations = "ALTER TABLE calibrations ENABLE TRIGGER calibrations_no_update",
+      .after_import_runs = "SELECT setval(pg_get_serial_sequence('runs', 'run_id'), (SELECT MAX(run_id) FROM runs))",
+      .after_import_audit = "SELECT setval(pg_get_serial_sequence('audit', 'id'), (SELECT MAX(id) FROM audit))",
+  };
+  return d;
+}
+
+const std::vector<std::string>& SqliteMigrations() { return SqliteDialect().migrations; }
+const std::vector<std::string>& PostgresMigrations() { return PostgresDialect().migrations; }
 
 }  // namespace fluxcal::storage
