@@ -1,7 +1,8 @@
 #include "pipeline/store.h"
 
 #include "pipeline/calibration_codec.h"
-#include "storage/sqlite_store.h"
+#include "storage/sql_store.h"
+#include "storage/sqlite_source.h"
 
 namespace fluxcal::pipeline {
 
@@ -14,7 +15,9 @@ absl::StatusOr<std::unique_ptr<storage::Store>> OpenStore(const std::string& url
 }
 
 absl::StatusOr<std::unique_ptr<storage::Store>> BackupSqliteStore(const std::string& path, const std::string& out) {
-  auto store = storage::SqliteStore::Open(path, /*create=*/false, CalibrationJsonToModel);
+  auto pool = storage::OpenSqlitePool(path, /*create=*/false);
+  if (!pool.ok()) return pool.status();
+  auto store = storage::SqlStore::Open(std::move(*pool), /*create=*/false, CalibrationJsonToModel);
   if (!store.ok()) return store.status();
   if (auto st = (*store)->Backup(out); !st.ok()) return st;
   return std::unique_ptr<storage::Store>(std::move(*store));

@@ -59,6 +59,16 @@ std::string Statement::Text(int c) const {
   const auto* p = sqlite3_column_text(s_, c);
   return p ? std::string(reinterpret_cast<const char*>(p), sqlite3_column_bytes(s_, c)) : std::string();
 }
+int Statement::Columns() const { return sqlite3_column_count(s_); }
+SqlValue Statement::Value(int c) const {
+  switch (sqlite3_column_type(s_, c)) {
+    case SQLITE_NULL: return nullptr;
+    case SQLITE_INTEGER: return Int(c);
+    case SQLITE_FLOAT: return Double(c);
+    case SQLITE_BLOB: return Blob(c);
+    default: return Text(c);
+  }
+}
 std::vector<uint8_t> Statement::Blob(int c) const {
   const auto* p = static_cast<const uint8_t*>(sqlite3_column_blob(s_, c));
   return p ? std::vector<uint8_t>(p, p + sqlite3_column_bytes(s_, c)) : std::vector<uint8_t>();

@@ -9,18 +9,16 @@
 #include <memory>
 #include <string>
 #include <string_view>
-#include <variant>
 #include <vector>
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "storage/sql_source.h"
 
 struct sqlite3;
 struct sqlite3_stmt;
 
 namespace fluxcal::storage {
-
-using SqlValue = std::variant<std::nullptr_t, int64_t, double, std::string, std::vector<uint8_t>>;
 
 class Statement {
  public:
@@ -40,6 +38,8 @@ class Statement {
   bool IsNull(int col) const;
   std::string Text(int col) const;
   std::vector<uint8_t> Blob(int col) const;
+  int Columns() const;
+  SqlValue Value(int col) const;   // the cell as its stored type
 
  private:
   sqlite3* db_;

@@ -10,8 +10,11 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "io/sha256.h"
-#include "storage/postgres_store.h"
-#include "storage/sqlite_store.h"
+#include "storage/sql_store.h"
+#include "storage/sqlite_source.h"
+#ifdef FLUXCAL_WITH_POSTGRESQL
+#include "storage/postgres_source.h"
+#endif
 
 namespace fluxcal::storage {
 
@@ -26,12 +29,22 @@ std::string NowUtc() {
 
 absl::StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& url, const OpenOptions& options) {
   if (absl::StartsWith(url, "postgresql://") || absl::StartsWith(url, "postgres://")) {
-    auto s = PostgresStore::Open(url, 16, options.create, options.json_to_model);
+#ifdef FLUXCAL_WITH_POSTGRESQL
+    auto pool = OpenPostgresPool(url, 16);
+    if (!pool.ok()) return pool.status();
+    auto s = SqlStore::Open(std::move(*pool), options.create, options.json_to_model);
     if (!s.ok()) return s.status();
     return std::unique_ptr<Store>(std::move(*s));
+#else
+    return absl::UnimplementedError(
+        "postgresql: this fluxcal was built without PostgreSQL support (libpq was not found at configure); "
+        "use a SQLite store, or rebuild with libpq-dev installed");
+#endif
   }
   const std::string path = absl::StartsWith(url, "sqlite:") ? url.substr(7) : url;
-  auto s = SqliteStore::Open(path, options.create, options.json_to_model);
+  auto pool = OpenSqlitePool(path, options.create);
+  if (!pool.ok()) return pool.status();
+  auto s = SqlStore::Open(std::move(*pool), options.create, options.json_to_model);
   if (!s.ok()) return s.status();
   return std::unique_ptr<Store>(std::move(*s));
 }

@@ -3,11 +3,15 @@
 // immutable calibration versions. Schema in docs/service.md.
 //
 // `Store` is the storage interface; it only stores (no fitting, no tables:
-// the use cases live in pipeline/). Two backends:
-//   - SQLite (storage/sqlite_store.h): the embedded default, one file;
-//   - PostgreSQL (storage/postgres_store.h, libpq): several stateless
-//     servers on one database.
-// Both apply the same ordered migrations (version table `schema_version`),
+// the use cases live in pipeline/). One implementation, SqlStore
+// (storage/sql_store.h), holds every use case once over a narrow seam
+// (storage/sql_source.h: connect, execute with bound parameters,
+// begin/commit/rollback) with two backends:
+//   - SQLite (storage/sqlite_source.h): the embedded default, one file;
+//   - PostgreSQL (storage/postgres_source.h, libpq; compiled only when
+//     configure finds libpq): several stateless servers on one database.
+// What differs between the two is data (storage/dialect.h): the ordered
+// migrations (version table `schema_version`) and a few clauses. Both
 // refuse UPDATE/DELETE of calibration versions with triggers, and make
 // every write one transaction that is durable when the call returns.
 // Calibration versions (per serial) and releases (one chain for the store)
@@ -164,7 +168,8 @@ class Store {
   };
   // Opens (creating, unless options.create is false) a store and applies
   // pending migrations in order:
-  //   "postgresql://..." or "postgres://..."  -> PostgreSQL (libpq URI);
+  //   "postgresql://..." or "postgres://..."  -> PostgreSQL (libpq URI;
+  //       Unimplemented, saying so, in a build without PostgreSQL);
   //   "sqlite:PATH", a file path or ":memory:" -> SQLite.
   static absl::StatusOr<std::unique_ptr<Store>> Open(const std::string& url, const OpenOptions& options);
   static absl::StatusOr<std::unique_ptr<Store>> Open(const std::string& url) { return Open(url, OpenOptions{}); }
@@ -361,7 +366,8 @@ absl::StatusOr<ChainReport> VerifyChains(Store& store, const ChainHead* anchor =
 // not: the store was changed behind the service).
 absl::Status VerifyReleasedVersion(Store& store, const std::string& serial, int version);
 
-// The migrations of each backend, in order (index k: version k -> k + 1).
+// The migrations of each backend, in order (index k: version k -> k + 1);
+// the dialects' data (storage/dialect.h), in every build.
 const std::vector<std::string>& SqliteMigrations();
 const std::vector<std::string>& PostgresMigrations();
 

@@ -24,7 +24,6 @@
 #include "pipeline/report.h"
 #include "simulation/twin.h"
 #include "storage/sqlite.h"
-#include "storage/sqlite_store.h"
 #include "tests/support/pg_cluster.h"
 
 namespace fluxcal::pipeline {
@@ -863,7 +862,7 @@ TEST(Admin, SqliteBackupAndTheCommand) {
   RemoveDb(src);
   RemoveDb(out);
   {
-    auto s = storage::SqliteStore::Open(src);
+    auto s = storage::Store::Open(src);
     ASSERT_TRUE(s.ok());
     Populate(**s);
   }

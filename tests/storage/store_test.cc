@@ -18,7 +18,13 @@
 #include <thread>
 
 #include "gtest/gtest.h"
+#include "storage/dialect.h"
+#include "storage/sql_source.h"
 #include "storage/sqlite.h"
+#include "storage/sqlite_source.h"
+#ifdef FLUXCAL_WITH_POSTGRESQL
+#include "storage/postgres_source.h"
+#endif
 #include "tests/support/pg_cluster.h"
 
 namespace fluxcal::storage {
@@ -693,6 +699,99 @@ TEST(Transaction, RollsBackOnError) {
   ASSERT_TRUE(q.ok());
   ASSERT_TRUE(*q->Step());
   EXPECT_EQ(q->Int(0), 0) << "the failed transaction left a row behind";
+}
+
+// The dialects are complete data: every schema version on both, and the
+// clauses the shared SQL takes from them where the database needs one.
+TEST(Dialects, EachHoldsEveryMigrationAndTheClausesItNeeds) {
+  for (const Dialect* d : {&SqliteDialect(), &PostgresDialect()}) {
+    SCOPED_TRACE(d->name);
+    EXPECT_EQ(d->migrations.size(), static_cast<size_t>(kSchemaVersion));
+    EXPECT_FALSE(d->begin.empty());
+    EXPECT_FALSE(d->table_exists.empty());
+    EXPECT_FALSE(d->unlock_calibrations.empty());
+    EXPECT_FALSE(d->relock_calibrations.empty());
+  }
+  // PostgreSQL has no file lock: row and advisory locks do its ordering.
+  EXPECT_FALSE(PostgresDialect().for_update.empty());
+  EXPECT_FALSE(PostgresDialect().advisory_lock.empty());
+  EXPECT_EQ(SqliteDialect().begin, "BEGIN IMMEDIATE");
+}
+
+// The seam on each backend: bound parameters in order (a `?` inside a
+// literal is no placeholder), rows back (RETURNING too), a rolled-back
+// transaction leaves nothing, cells read as stored.
+void CheckSeam(SqlPool& pool) {
+  auto st = pool.WithSource([](SqlSource& s) -> absl::Status {
+    if (auto e = s.ExecScript("CREATE TABLE seam_t (id INTEGER PRIMARY KEY, x DOUBLE PRECISION, name TEXT, b "
+                              + std::string(s.dialect().name == "sqlite" ? "BLOB" : "BYTEA") + ")");
+        !e.ok()) {
+      return e;
+    }
+    auto id = s.QueryOne("INSERT INTO seam_t (id, x, name, b) VALUES (?,?,?,?) RETURNING id",
+                         {int64_t{1}, 0.1, std::string("it's ?"), BytesOrNull("ab")}, "no id");
+    if (!id.ok()) return id.status();
+    EXPECT_EQ(id->Int(0), 1);
+    if (auto e = s.Begin(); !e.ok()) return e;
+    if (auto e = s.InsertRows("seam_t", {"id", "x", "name"}, {{int64_t{2}, 2.5, std::string("a\tb")},
+                                                              {int64_t{3}, nullptr, nullptr}});
+        !e.ok()) {
+      return e;
+    }
+    auto inside = s.Query("SELECT name FROM seam_t WHERE id = 2");
+    if (!inside.ok()) return inside.status();
+    EXPECT_EQ(inside->size(), 1u);
+    if (!inside->empty()) EXPECT_EQ(inside->front().Text(0), "a\tb");
+    if (auto e = s.Rollback(); !e.ok()) return e;
+    auto rows = s.Query("SELECT x, name, b, id, 'lit?' FROM seam_t WHERE name = ?", {std::string("it's ?")});
+    if (!rows.ok()) return rows.status();
+    EXPECT_EQ(rows->size(), 1u);
+    auto all = s.Query("SELECT COUNT(*) FROM seam_t");
+    if (!all.ok()) return all.status();
+    EXPECT_EQ(all->front().Int(0), 1) << "the rolled-back rows are gone";
+    if (rows->size() != 1) return absl::OkStatus();
+    const SqlRow& r = rows->front();
+    EXPECT_EQ(r.Double(0), 0.1);
+    EXPECT_EQ(r.Text(1), "it's ?");
+    EXPECT_EQ(r.Blob(2), (std::vector<uint8_t>{97, 98}));
+    EXPECT_EQ(r.Text(3), "1");
+    EXPECT_EQ(r.Text(4), "lit?");
+    return absl::OkStatus();
+  });
+  EXPECT_TRUE(st.ok()) << st;
+}
+
+TEST(SqlSeam, Sqlite) {
+  auto pool = OpenSqlitePool(":memory:", true);
+  ASSERT_TRUE(pool.ok()) << pool.status();
+  EXPECT_EQ((*pool)->dialect().name, "sqlite");
+  CheckSeam(**pool);
+}
+
+TEST(SqlSeam, PostgreSQL) {
+  std::string why;
+  auto* pg = fluxcal::testing::SharedPgCluster(&why);
+  FLUXCAL_PG_OR_SKIP(pg, why, "PostgreSQL seam run skipped");
+#ifdef FLUXCAL_WITH_POSTGRESQL
+  ASSERT_TRUE(pg->CreateDatabase("seam"));
+  auto pool = OpenPostgresPool(pg->Url("seam"), 2);
+  ASSERT_TRUE(pool.ok()) << pool.status();
+  EXPECT_EQ((*pool)->dialect().name, "postgresql");
+  CheckSeam(**pool);
+#endif
+}
+
+// A build without libpq refuses a PostgreSQL URL at open, saying why; a
+// build with it tries to connect (and fails: nothing listens there).
+TEST(StoreOpen, PostgresUrlSaysWhetherThisBuildHasPostgres) {
+  auto s = Store::Open("postgresql://fluxcal@127.0.0.1:1/none?connect_timeout=1");
+  ASSERT_FALSE(s.ok());
+#ifdef FLUXCAL_WITH_POSTGRESQL
+  EXPECT_EQ(s.status().code(), absl::StatusCode::kUnavailable) << s.status();
+#else
+  EXPECT_EQ(s.status().code(), absl::StatusCode::kUnimplemented) << s.status();
+  EXPECT_NE(s.status().message().find("built without PostgreSQL"), std::string::npos) << s.status();
+#endif
 }
 
 }  // namespace
