@@ -146,6 +146,10 @@ struct FitOptions {
 // them (without a manifest: all unknown).
 FitData FitDataFromRecording(const io::RecordingSet& set,
                              const std::vector<ident::HfPointResult>& identified);
+// The flux radius of an identified point (InductanceObservation::
+// hf_flux_radius_wb): |v_eff| / w_i of a rotating injection the manifest
+// states; unset for any other injection or none.
+std::optional<double> HfFluxRadiusOf(const io::Manifest& manifest, const ident::HfPointResult& identified);
 FitData FitDataFromHfRows(const io::Manifest* manifest, const std::vector<io::HfResultRow>& rows);
 // Observations from a flux map's nodes (io/flux_map.h): each node a
 // FluxObservation with standard deviation psi_std_wb per component (<= 0:

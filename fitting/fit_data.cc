@@ -29,15 +29,18 @@ void SteadyStateFlux(const SteadyStateObservation& s, int pole_pairs, std::optio
   *psi_q = -(u.real() - rs_ohm * s.id_a) / we;
 }
 
+std::optional<double> HfFluxRadiusOf(const io::Manifest& manifest, const ident::HfPointResult& identified) {
+  // physics/hf_orbit.h: a rotating injection's effective voltage |V| at w_i.
+  const auto& inj = manifest.injection;
+  if (!inj || inj->type != "rotating" || !(inj->frequency_hz > 0) || !(std::abs(identified.v_eff_v) > 0)) {
+    return std::nullopt;
+  }
+  return physics::HfFluxRadiusWb(std::abs(identified.v_eff_v), 2 * std::numbers::pi * inj->frequency_hz);
+}
+
 FitData FitDataFromRecording(const io::RecordingSet& set,
                              const std::vector<ident::HfPointResult>& identified) {
   FitData d = FitDataFromHfRows(&set.manifest, set.hf_results);
-  // The injection's flux radius per identified point (physics/hf_orbit.h):
-  // a rotating injection's effective voltage |V| at w_i. The bench's own
-  // hf_results rows say nothing of how they were measured: small-signal.
-  const bool rotating = set.manifest.injection && set.manifest.injection->type == "rotating" &&
-                        set.manifest.injection->frequency_hz > 0;
-  const double wi = rotating ? 2 * std::numbers::pi * set.manifest.injection->frequency_hz : 0.0;
   for (const auto& r : identified) {
     if (!r.reliable && r.flags.size() == 1 && r.flags[0] == "clipping") continue;
     if (!std::isfinite(r.ld_h) || !std::isfinite(r.lq_h) || !std::isfinite(r.id_a)) continue;
@@ -46,7 +49,9 @@ FitData FitDataFromRecording(const io::RecordingSet& set,
     o.ldd_h = r.ld_h; o.lqq_h = r.lq_h;
     o.ldd_h_std = r.ld_h_std; o.lqq_h_std = r.lq_h_std;
     if (r.has_ldq) { o.ldq_h = r.ldq_h; o.ldq_h_std = r.ldq_h_std; }
-    if (rotating && std::abs(r.v_eff_v) > 0) o.hf_flux_radius_wb = physics::HfFluxRadiusWb(std::abs(r.v_eff_v), wi);
+    // The bench's own hf_results rows say nothing of how they were
+    // measured: small-signal.
+    o.hf_flux_radius_wb = HfFluxRadiusOf(set.manifest, r);
     d.inductances.push_back(o);
   }
   for (const auto& s : set.steady_state) {

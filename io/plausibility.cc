@@ -38,6 +38,11 @@ absl::Status CheckInductanceH(std::string_view field, double v) {
   return absl::OkStatus();
 }
 
+absl::Status CheckHfFluxRadiusWb(std::string_view field, double v) {
+  if (!std::isfinite(v) || v <= 0 || v > kMaxFluxLinkageWb) return Bad(field, "must be in (0, 10] Wb", v);
+  return absl::OkStatus();
+}
+
 absl::Status CheckCrossInductanceH(std::string_view field, double v) {
   return Range(field, v, -kMaxAbsCrossInductanceH, kMaxAbsCrossInductanceH, "must be within +-1 H");
 }

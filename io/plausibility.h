@@ -41,6 +41,9 @@ absl::Status CheckSpeedRpm(std::string_view field, double v);
 absl::Status CheckPsiPmWb(std::string_view field, double v);
 // kMinInductanceH <= v < kMaxInductanceH: "must be in [1e-7, 1) H".
 absl::Status CheckInductanceH(std::string_view field, double v);
+// An HF injection's flux-circle radius: 0 < v <= kMaxFluxLinkageWb,
+// "must be in (0, 10] Wb".
+absl::Status CheckHfFluxRadiusWb(std::string_view field, double v);
 // |v| <= kMaxAbsCrossInductanceH: "must be within +-1 H".
 absl::Status CheckCrossInductanceH(std::string_view field, double v);
 // A standard deviation of an inductance, 0..kMaxInductanceH: "must be 0..1 H".

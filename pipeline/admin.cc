@@ -39,7 +39,14 @@ absl::StatusOr<std::string> ContentHash(storage::Store& store) {
       for (double v : {p.id_a, p.iq_a, p.speed_rpm, p.ld_h, p.lq_h}) d(v);
       if (p.ldq_h) d(*p.ldq_h); else dump += "null\t";
       for (double v : {p.ld_h_std, p.lq_h_std, p.ldq_h_std, p.temperature_c}) d(v);
-      absl::StrAppend(&dump, p.reliable ? 1 : 0, "\n");
+      absl::StrAppend(&dump, p.reliable ? 1 : 0);
+      // As the digest: only where stated (a dump of points without it is
+      // as before).
+      if (p.hf_flux_radius_wb) {
+        dump += "\t";
+        d(*p.hf_flux_radius_wb);
+      }
+      dump += "\n";
     }
   }
   auto cals = store.AllCalibrations();

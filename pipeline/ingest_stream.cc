@@ -39,6 +39,12 @@ std::string HfPointsSha256(const std::vector<IdentifiedPoint>& points) {
     if (p.ldq_h) PutF64(&buf, *p.ldq_h);
     for (double v : {p.ld_h_std, p.lq_h_std, p.ldq_h_std, p.temperature_c}) PutF64(&buf, v);
     buf.push_back(p.reliable ? 1 : 0);
+    // Appended only where stated, so that a point without it digests as
+    // before the field existed (an idempotency key keeps its meaning).
+    if (p.hf_flux_radius_wb) {
+      buf.push_back('r');
+      PutF64(&buf, *p.hf_flux_radius_wb);
+    }
   }
   return io::Sha256Hex(buf);
 }

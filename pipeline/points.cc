@@ -24,6 +24,7 @@ fit::InductanceObservation ToObservation(const IdentifiedPoint& p) {
   fit::InductanceObservation o;
   o.id_a = p.id_a; o.iq_a = p.iq_a; o.ldd_h = p.ld_h; o.lqq_h = p.lq_h; o.ldq_h = p.ldq_h;
   o.ldd_h_std = p.ld_h_std; o.lqq_h_std = p.lq_h_std; o.ldq_h_std = p.ldq_h_std;
+  o.hf_flux_radius_wb = p.hf_flux_radius_wb;
   return o;
 }
 
@@ -34,6 +35,7 @@ v1::HfPoint ToProto(const IdentifiedPoint& r) {
   if (r.ldq_h) p.set_ldq_h(*r.ldq_h);
   p.set_ld_h_std(r.ld_h_std); p.set_lq_h_std(r.lq_h_std); p.set_ldq_h_std(r.ldq_h_std);
   p.set_temperature_c(r.temperature_c); p.set_reliable(r.reliable);
+  if (r.hf_flux_radius_wb) p.set_hf_flux_radius_wb(*r.hf_flux_radius_wb);
   return p;
 }
 
@@ -46,6 +48,7 @@ IdentifiedPoint FromProto(const v1::HfPoint& p) {
   r.ld_h_std = p.ld_h_std(); r.lq_h_std = p.lq_h_std(); r.ldq_h_std = p.ldq_h_std();
   r.temperature_c = p.temperature_c();
   r.reliable = p.reliable();
+  if (p.has_hf_flux_radius_wb()) r.hf_flux_radius_wb = p.hf_flux_radius_wb();
   return r;
 }
 
@@ -57,6 +60,7 @@ absl::StatusOr<IdentifiedSet> IdentifySet(const io::RecordingSet& set, const ide
   for (const auto& r : out.results) {
     IdentifiedPoint p;
     if (FromIdentification(r, &p)) {
+      p.hf_flux_radius_wb = fit::HfFluxRadiusOf(set.manifest, r);
       out.points.push_back(std::move(p));
     } else {
       out.failures.push_back(absl::StrCat(r.point, ": ", r.failure));

@@ -82,6 +82,9 @@ absl::Status ValidatePoint(const fluxcal::v1::HfPoint& p, int i) {
   if (p.lq_h_std() >= p.lq_h()) {
     return absl::InvalidArgumentError(absl::StrFormat("%s.lq_h_std: must be below lq_h, got %.9g", f, p.lq_h_std()));
   }
+  if (p.has_hf_flux_radius_wb()) {
+    if (auto s = io::CheckHfFluxRadiusWb(f + ".hf_flux_radius_wb", p.hf_flux_radius_wb()); !s.ok()) return s;
+  }
   return io::CheckTemperatureC(f + ".temperature_c", p.temperature_c());
 }
 

@@ -157,6 +157,11 @@ CREATE TRIGGER conversions_no_update BEFORE UPDATE ON calibration_conversions
 CREATE TRIGGER conversions_no_delete BEFORE DELETE ON calibration_conversions
   BEGIN SELECT RAISE(ABORT, 'the conversion records are append-only'); END;
 )sql",
+    // v9: each HF point's injection flux radius (HfPointRow::
+    // hf_flux_radius_wb; NULL for points stored before or sent without).
+    R"sql(
+ALTER TABLE hf_points ADD COLUMN hf_flux_radius_wb REAL;
+)sql",
 };
 
 // Same tables, columns and order as the SQLite migrations (docs/service.md);
@@ -315,6 +320,10 @@ CREATE TRIGGER conversions_no_update BEFORE UPDATE OR DELETE ON calibration_conv
   FOR EACH ROW EXECUTE FUNCTION fluxcal_chain_append_only();
 CREATE TRIGGER conversions_no_truncate BEFORE TRUNCATE ON calibration_conversions
   FOR EACH STATEMENT EXECUTE FUNCTION fluxcal_chain_append_only();
+)sql",
+    // v9: each HF point's injection flux radius.
+    R"sql(
+ALTER TABLE hf_points ADD COLUMN hf_flux_radius_wb DOUBLE PRECISION;
 )sql",
 };
 

@@ -45,14 +45,15 @@ std::vector<SqlValue> CalibrationValues(const CalibrationRow& c) {
 absl::Status InsertPoints(SqlSource& s, int64_t run_id, const std::vector<HfPointRow>& points) {
   static const std::vector<std::string> kColumns = {"run_id", "idx", "point_id", "id_a", "iq_a", "speed_rpm",
                                                     "ld_h", "lq_h", "ldq_h", "ld_h_std", "lq_h_std", "ldq_h_std",
-                                                    "temperature_c", "reliable"};
+                                                    "temperature_c", "reliable", "hf_flux_radius_wb"};
   std::vector<std::vector<SqlValue>> rows;
   rows.reserve(points.size());
   for (size_t k = 0; k < points.size(); ++k) {
     const auto& p = points[k];
     rows.push_back({run_id, static_cast<int64_t>(k), p.point_id, p.id_a, p.iq_a, p.speed_rpm, p.ld_h, p.lq_h,
                     p.ldq_h ? SqlValue(*p.ldq_h) : SqlValue(nullptr), p.ld_h_std, p.lq_h_std, p.ldq_h_std,
-                    p.temperature_c, int64_t{p.reliable ? 1 : 0}});
+                    p.temperature_c, int64_t{p.reliable ? 1 : 0},
+                    p.hf_flux_radius_wb ? SqlValue(*p.hf_flux_radius_wb) : SqlValue(nullptr)});
   }
   return s.InsertRows("hf_points", kColumns, rows);
 }

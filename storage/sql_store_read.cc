@@ -16,7 +16,7 @@ constexpr char kConversionCols[] =
     "SELECT serial, version, json_sha256, row_sha256, converted_utc FROM calibration_conversions ";
 constexpr char kPointsOfRun[] =
     "SELECT point_id, id_a, iq_a, speed_rpm, ld_h, lq_h, ldq_h, ld_h_std, lq_h_std, ldq_h_std, temperature_c, "
-    "reliable FROM hf_points WHERE run_id = ? ORDER BY idx";
+    "reliable, hf_flux_radius_wb FROM hf_points WHERE run_id = ? ORDER BY idx";
 
 AuditRow ReadAudit(const SqlRow& r) {
   return {r.Int(0), r.Text(1), r.Text(2), r.Text(3), r.Text(4), r.Text(5), r.Text(6), r.Text(7), r.Text(8)};
@@ -34,6 +34,7 @@ HfPointRow ReadPoint(const SqlRow& r) {
   if (!r.IsNull(6)) h.ldq_h = r.Double(6);
   h.ld_h_std = r.Double(7); h.lq_h_std = r.Double(8); h.ldq_h_std = r.Double(9);
   h.temperature_c = r.Double(10); h.reliable = r.Int(11) != 0;
+  if (!r.IsNull(12)) h.hf_flux_radius_wb = r.Double(12);
   return h;
 }
 

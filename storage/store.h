@@ -36,7 +36,7 @@
 
 namespace fluxcal::storage {
 
-inline constexpr int kSchemaVersion = 8;
+inline constexpr int kSchemaVersion = 9;
 
 struct MotorRow {
   std::string serial;
@@ -54,6 +54,11 @@ struct HfPointRow {
   std::optional<double> ldq_h;
   double ld_h_std = 0, lq_h_std = 0, ldq_h_std = 0, temperature_c = 25;
   bool reliable = true;
+  // The radius of the flux circle the point's rotating injection drove,
+  // Wb (fit::InductanceObservation::hf_flux_radius_wb): what the fit needs
+  // to predict the point as the injection measured it. Unset where the
+  // station did not say (schema v9; points stored before have none).
+  std::optional<double> hf_flux_radius_wb;
 };
 
 struct RunRow {

@@ -55,8 +55,9 @@ def hf_points_sha256(points):
     b"fluxcal.hf-points.v1\n", then per point its point_id (4-byte
     big-endian length and UTF-8 bytes), id_a, iq_a, speed_rpm, ld_h, lq_h as
     big-endian binary64, a byte 1 and ldq_h when present (else a byte 0),
-    ld_h_std, lq_h_std, ldq_h_std, temperature_c, and a byte `reliable`. A
-    zero is hashed as +0.0 (x + 0.0 turns -0.0 into +0.0)."""
+    ld_h_std, lq_h_std, ldq_h_std, temperature_c, a byte `reliable`, and,
+    only when present, the byte b"r" and hf_flux_radius_wb. A zero is hashed
+    as +0.0 (x + 0.0 turns -0.0 into +0.0)."""
     h = hashlib.sha256(b"fluxcal.hf-points.v1\n")
 
     def f64(*values):
@@ -69,6 +70,8 @@ def hf_points_sha256(points):
         h.update(b"\x01" + f64(p.ldq_h) if p.HasField("ldq_h") else b"\x00")
         h.update(f64(p.ld_h_std, p.lq_h_std, p.ldq_h_std, p.temperature_c))
         h.update(b"\x01" if p.reliable else b"\x00")
+        if p.HasField("hf_flux_radius_wb"):
+            h.update(b"r" + f64(p.hf_flux_radius_wb))
     return h.hexdigest()
 
 

@@ -538,6 +538,12 @@ TEST(Pipeline, IdentifiedPointsFeedTheFitUnchanged) {
     const auto o = ToObservation(ids->points[k]);
     EXPECT_EQ(o.ldd_h, data->inductances[k].ldd_h);
     EXPECT_EQ(o.id_a, data->inductances[k].id_a);
+    // The injection's flux radius (5 V at 500 Hz: 1.59 mWb) travels with
+    // the point, so that a stored fit predicts it as the local one does.
+    ASSERT_TRUE(o.hf_flux_radius_wb.has_value());
+    EXPECT_EQ(o.hf_flux_radius_wb, data->inductances[k].hf_flux_radius_wb);
+    EXPECT_NEAR(*o.hf_flux_radius_wb, 5.0 / (2 * 3.14159265358979 * 500), 0.05e-3);
+    EXPECT_EQ(FromProto(ToProto(ids->points[k])).hf_flux_radius_wb, ids->points[k].hf_flux_radius_wb);
   }
 }
 
@@ -585,6 +591,12 @@ TEST(IngestStream, DigestsHaveTheDocumentedForm) {
   IdentifiedPoint e = b;
   e.id_a = -0.0;
   EXPECT_EQ(HfPointsSha256({a, e}), HfPointsSha256({a, b}));
+  // The injection's flux radius, where stated, is appended as the byte 'r'
+  // and its value (golden value: Python, b"r" + struct.pack(">d", 1.6e-3)
+  // after the reliable byte); absent, the digest is the one above.
+  IdentifiedPoint g = b;
+  g.hf_flux_radius_wb = 1.6e-3;
+  EXPECT_EQ(HfPointsSha256({a, g}), "2f7393121b26de7d2f55bd26262e6038ba2cb0a45d4ad3381cfa548a15a8aaf8");
   const io::RecordingFiles files = {
       {"manifest.json", "{}"}, {"points/p000.csv", "t_s,ia_a\n0,1\n"}, {"empty.csv", ""}};
   EXPECT_EQ(RecordingFilesSha256(files), "f11252fe1fd7038a64859e532eee696fde5c8288620077ea4fa227a6b75315b3");

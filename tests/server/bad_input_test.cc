@@ -197,7 +197,8 @@ std::vector<Case> Cases() {
       {"ld_h_std", [](v1::HfPoint* p, double v) { p->set_ld_h_std(v); }},
       {"lq_h_std", [](v1::HfPoint* p, double v) { p->set_lq_h_std(v); }},
       {"ldq_h_std", [](v1::HfPoint* p, double v) { p->set_ldq_h_std(v); }},
-      {"temperature_c", [](v1::HfPoint* p, double v) { p->set_temperature_c(v); }}};
+      {"temperature_c", [](v1::HfPoint* p, double v) { p->set_temperature_c(v); }},
+      {"hf_flux_radius_wb", [](v1::HfPoint* p, double v) { p->set_hf_flux_radius_wb(v); }}};
   for (const auto& [field, set] : fields) {
     for (double v : {kNaN, kInf, -kInf, 1e300, -1e300}) {
       add("IngestHfResults point " + field + " = " + std::to_string(v), [field = field, set = set, v](Stub* st) {
@@ -223,7 +224,10 @@ std::vector<Case> Cases() {
            {"point_id newline", [](v1::HfPoint* p) { p->set_point_id("p\n5"); }},
            {"point_id 1 MB", [](v1::HfPoint* p) { p->set_point_id(std::string(1 << 20, 'p')); }},
            {"temperature -300", [](v1::HfPoint* p) { p->set_temperature_c(-300); }},
-           {"id_a 20 kA", [](v1::HfPoint* p) { p->set_id_a(2e4); }}}) {
+           {"id_a 20 kA", [](v1::HfPoint* p) { p->set_id_a(2e4); }},
+           {"hf_flux_radius_wb 0", [](v1::HfPoint* p) { p->set_hf_flux_radius_wb(0); }},
+           {"hf_flux_radius_wb -1 mWb", [](v1::HfPoint* p) { p->set_hf_flux_radius_wb(-1e-3); }},
+           {"hf_flux_radius_wb 11 Wb", [](v1::HfPoint* p) { p->set_hf_flux_radius_wb(11); }}}) {
     add("IngestHfResults point " + name, [set](Stub* st) {
       auto pts = Grid();
       set(&pts[5]);

@@ -90,6 +90,7 @@ class StoreTest : public ::testing::TestWithParam<Backend> {
       p.id_a = -20.0 * k; p.iq_a = 40; p.ld_h = 1.8e-4 + k * 1e-19 + 1.0 / 3.0 * 1e-7; p.lq_h = 3.6e-4;
       p.ld_h_std = 1e-7; p.lq_h_std = 1e-7;
       if (k % 2) p.ldq_h = -1.234567890123456789e-6;
+      if (k % 3 == 1) p.hf_flux_radius_wb = 1.0 / 3.0 * 4.7e-3;
       p.reliable = k % 3 != 0;
       v.push_back(p);
     }
@@ -129,8 +130,11 @@ TEST_P(StoreTest, RunAndPointsRoundTripExactly) {
     EXPECT_EQ((*pts)[k].point_id, in[k].point_id);
     EXPECT_EQ((*pts)[k].ld_h, in[k].ld_h) << "doubles must round-trip bit-exactly";
     EXPECT_EQ((*pts)[k].ldq_h, in[k].ldq_h);
+    EXPECT_EQ((*pts)[k].hf_flux_radius_wb, in[k].hf_flux_radius_wb) << "absent stays absent, bit-exact otherwise";
     EXPECT_EQ((*pts)[k].reliable, in[k].reliable);
   }
+  EXPECT_TRUE((*pts)[4].hf_flux_radius_wb.has_value());
+  EXPECT_FALSE((*pts)[5].hf_flux_radius_wb.has_value());
   EXPECT_DOUBLE_EQ((*pts)[5].id_a, -100.0);
   EXPECT_FALSE((*pts)[4].ldq_h.has_value());
   auto m = store_->GetMotor("IPM-1");
