@@ -17,6 +17,7 @@
 #include "io/net.h"
 #include "nlohmann/json.hpp"
 #include "io/sha256.h"
+#include "pipeline/export.h"
 
 namespace fluxcal::cli {
 
@@ -296,6 +297,17 @@ int RunRemoteExport(const std::vector<std::string>& argv, const FlagSpecs& flags
   req.set_ctype(args->Get("ctype").value_or(""));
   req.set_allow_extrapolation(args->Has("allow-extrapolation"));
   req.set_allow_clamped(args->Has("allow-clamped"));
+  req.set_generating(args->Has("generating"));
+  {
+    // --generating only with --table envelope: a usage error before the call.
+    tables::TableSpec spec;
+    spec.kind = req.table();
+    spec.envelope_generating = req.generating();
+    if (auto st = pipeline::CheckExportSpec(spec, tables::ExportRequest{}); !st.ok()) {
+      std::fprintf(stderr, "fluxcal export: %s\n", std::string(st.message()).c_str());
+      return 2;
+    }
+  }
   int n = 0;
   if (auto v = args->Get("points")) { if (!absl::SimpleAtoi(*v, &n)) return 2; req.set_points(n); }
   if (auto v = args->Get("speed-points")) { if (!absl::SimpleAtoi(*v, &n)) return 2; req.set_speed_points(n); }
@@ -342,7 +354,8 @@ int RunRemoteExport(const std::vector<std::string>& argv, const FlagSpecs& flags
   }
   if (args->Has("json")) {
     std::cout << nlohmann::json{{"out", *args->Get("out")}, {"serial", resp.serial()}, {"version", resp.version()},
-                                {"table", req.table()}, {"format", req.format()}, {"sha256", file_sha256},
+                                {"table", req.table()}, {"generating", req.generating()},
+                                {"format", req.format()}, {"sha256", file_sha256},
                                 {"payload_crc32", resp.crc32()}, {"payload_sha256", resp.sha256()},
                                 {"cells", resp.cells()}, {"clamped_cells", resp.clamped_cells()},
                                 {"clamped_share", clamped_share}, {"verdict", resp.verdict()},
