@@ -49,8 +49,9 @@ const FlagSpecs kExportFlags = {
     {"speed-max-rpm", "RPM", "fw, envelope: speed axis range 0..RPM, mechanical rpm (default 6000)"},
     {"i-max-a", "A", "current limit, A peak (default the measured limit of the calibration)"},
     {"udc-v", "V", "DC-link voltage, V (default the calibration's; fw, mtpv and envelope refuse without one)"},
-    {"udc-axis-v", "LIST", "local only: a Udc axis, V1,V2,... or LO:HI:N volts: one table per Udc, written to "
-                           "OUT_udc<V>v.EXT with labels tagged _UDC<V>V (not with --udc-v)"},
+    {"udc-axis-v", "LIST", "a Udc axis, V1,V2,... or LO:HI:N volts (at most 32): one table per Udc, written to "
+                           "OUT_udc<V>v.EXT with labels tagged _UDC<V>V (not with --udc-v; with --server the "
+                           "service computes them, ExportTable udc_axis_v)"},
     {"magnet-temp-c", "C", "local only: tables at this magnet temperature, degC (needs the calibration's own "
                            "psi_pm temperature coefficient; refused without one)"},
     {"rs-ohm", "R", "stator resistance, ohm (default the calibration's; fw and envelope refuse without one)"},
@@ -167,7 +168,7 @@ int RunUdcAxisExport(const ParsedArgs& args, const fit::Calibration& cal, const 
 int RunExport(const std::vector<std::string>& argv) {
   for (const auto& a : argv) {
     if (a == "--server" || a.rfind("--server=", 0) == 0) {
-      return RunRemoteExport(argv, WithoutFlags(kExportFlags, {"svg", "sign-key", "udc-axis-v", "magnet-temp-c"}));
+      return RunRemoteExport(argv, WithoutFlags(kExportFlags, {"svg", "sign-key", "magnet-temp-c"}));
     }
   }
   auto args = ParseArgs(argv, WithoutFlags(kExportFlags, {"server", "version"}));

@@ -1462,5 +1462,71 @@ TEST(ReportCli, WritesThePageTheServiceBuilt) {
   fs::remove_all(dir);
 }
 
+// `fluxcal export SERIAL --server ADDR` with --udc-axis-v (ExportTable
+// udc_axis_v) and --generating: one file per Udc named as the local axis
+// names them, each the reply's bytes, the same payload as the single
+// remote export at that --udc-v; the refusals are usage errors (exit 2)
+// that write nothing.
+TEST(ExportCli, UdcAxisAndTheGeneratingEnvelopeOverTheService) {
+  const std::string dir = TempPath("exportcli");
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const ServeChild serve = StartServe(dir + "/store.db");
+  ASSERT_TRUE(serve.port > 0) << "no free loopback port";
+  const std::string& addr = serve.addr;
+  auto stub = v1::CalibrationService::NewStub(grpc::CreateChannel(addr, grpc::InsecureChannelCredentials()));
+  ASSERT_TRUE(WaitUntilUp(stub.get())) << "fluxcal serve did not come up on " << addr;
+  {
+    grpc::ClientContext c;
+    v1::IngestHfResultsResponse r;
+    auto w = stub->IngestHfResults(&c, &r);
+    v1::IngestHfResultsRequest m;
+    m.set_serial("IPM-CLI-AX");
+    m.mutable_motor()->set_pole_pairs(4);
+    m.mutable_motor()->set_rs_ohm(0.011);
+    m.mutable_motor()->set_psi_pm_wb(0.0114);
+    for (const auto& p : GridPoints()) *m.add_points() = p;
+    w->Write(m);
+    w->WritesDone();
+    ASSERT_TRUE(w->Finish().ok());
+    grpc::ClientContext fc;
+    v1::FitRequest f;
+    f.set_serial("IPM-CLI-AX");
+    v1::FitResponse fr;
+    ASSERT_TRUE(stub->Fit(&fc, f, &fr).ok());
+  }
+  const std::string common = "export IPM-CLI-AX --server " + addr + " --table envelope --generating --format dcm "
+                             "--speed-points 8 --rs-ohm 0.011 --allow-clamped";
+  auto j = JsonOf(Fluxcal(common + " --udc-axis-v 40,62.5 --out " + dir + "/env.dcm --json"));
+  ASSERT_EQ(j["files"].size(), 2u);
+  EXPECT_EQ(j["generating"], true);
+  const std::vector<std::string> names = {"env_udc40v.dcm", "env_udc62p5v.dcm"};
+  const std::vector<std::string> udcs = {"40", "62.5"};
+  for (size_t k = 0; k < 2; ++k) {
+    const std::string path = dir + "/" + names[k];
+    EXPECT_EQ(j["files"][k]["out"], path);
+    std::ifstream f(path, std::ios::binary);
+    const std::string written((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+    EXPECT_EQ(j["files"][k]["sha256"], io::Sha256Hex(written));
+    EXPECT_NE(written.find("KENNLINIE FLUXCAL_ENVELOPE_GENERATING_" + std::string(k ? "UDC62P5V" : "UDC40V") +
+                           "_TORQUE_NM "), std::string::npos);
+    auto one = JsonOf(Fluxcal(common + " --udc-v " + udcs[k] + " --out " + dir + "/one" + std::to_string(k) +
+                              ".dcm --json"));
+    EXPECT_EQ(j["files"][k]["payload_sha256"], one["payload_sha256"]) << udcs[k] << " V";
+  }
+  // The overwrite rule covers every file of the axis; the usage errors.
+  EXPECT_EQ(Fluxcal(common + " --udc-axis-v 40,62.5 --out " + dir + "/env.dcm").first, 1);
+  EXPECT_EQ(Fluxcal(common + " --udc-axis-v 40,62.5 --udc-v 50 --out " + dir + "/x.dcm").first, 2);
+  EXPECT_EQ(Fluxcal(common + " --udc-axis-v 40,nan --out " + dir + "/x.dcm").first, 2);
+  EXPECT_EQ(Fluxcal(common + " --udc-axis-v 40,62.5 --out -").first, 2);
+  EXPECT_EQ(Fluxcal("export IPM-CLI-AX --server " + addr + " --table fw --generating --out " + dir + "/x.dcm").first, 2);
+  EXPECT_FALSE(fs::exists(dir + "/x.dcm"));
+  EXPECT_FALSE(fs::exists(dir + "/x_udc40v.dcm"));
+
+  stub.reset();
+  StopServe(serve);
+  fs::remove_all(dir);
+}
+
 }  // namespace
 }  // namespace fluxcal::server
