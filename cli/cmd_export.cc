@@ -1,6 +1,6 @@
 // fluxcal export calibration.json --table mtpa|mtpv|fw|envelope --format csv|json|h|cdfx|dcm|a2l
 //                [--points N] [--speed-points M] [--speed-max-rpm R] [--i-max-a A]
-//                [--udc-v V | --udc-axis-v V1,V2,...|LO:HI:N] [--magnet-temp-c C] [--rs-ohm R] [--allow-clamped] [--ctype double|float|int16|int32] [--allow-extrapolation]
+//                [--generating] [--udc-v V | --udc-axis-v V1,V2,...|LO:HI:N] [--magnet-temp-c C] [--rs-ohm R] [--allow-clamped] [--ctype double|float|int16|int32] [--allow-extrapolation]
 //                [--svg FILE] [--sign-key ED25519.key] --out FILE [--json]
 // With --sign-key, FILE.sig holds a detached Ed25519 signature
 // (pipeline/signing.h; `fluxcal verify FILE --pubkey KEY.pub`).
@@ -43,12 +43,15 @@ const FlagSpecs kExportFlags = {
     {"table", "T", "mtpa|mtpv|fw|envelope (default mtpa; envelope: max torque and power over speed)"},
     {"format", "F", "csv|json|h|cdfx|dcm|a2l (default csv)"},
     {"points", "N", "at most N rows of a curve / torque axis of the fw map, round breakpoints (default 64)"},
+    {"generating", "", "with --table envelope: the generating limit (torque and power <= 0), labels "
+                       "FLUXCAL_ENVELOPE_GENERATING_* beside the motoring FLUXCAL_ENVELOPE_*"},
     {"speed-points", "N", "fw, envelope: at most N round speeds on the speed axis (default 32)"},
     {"speed-max-rpm", "RPM", "fw, envelope: speed axis range 0..RPM, mechanical rpm (default 6000)"},
     {"i-max-a", "A", "current limit, A peak (default the measured limit of the calibration)"},
     {"udc-v", "V", "DC-link voltage, V (default the calibration's; fw, mtpv and envelope refuse without one)"},
-    {"udc-axis-v", "LIST", "local only: a Udc axis, V1,V2,... or LO:HI:N volts: one table per Udc, written to "
-                           "OUT_udc<V>v.EXT with labels tagged _UDC<V>V (not with --udc-v)"},
+    {"udc-axis-v", "LIST", "a Udc axis, V1,V2,... or LO:HI:N volts (at most 32): one table per Udc, written to "
+                           "OUT_udc<V>v.EXT with labels tagged _UDC<V>V (not with --udc-v; with --server the "
+                           "service computes them, ExportTable udc_axis_v)"},
     {"magnet-temp-c", "C", "local only: tables at this magnet temperature, degC (needs the calibration's own "
                            "psi_pm temperature coefficient; refused without one)"},
     {"rs-ohm", "R", "stator resistance, ohm (default the calibration's; fw and envelope refuse without one)"},
@@ -62,6 +65,11 @@ const FlagSpecs kExportFlags = {
     {"json", "", "print a summary (checksums, limits, verdict) as one JSON document"},
     kForceFlag,
 };
+
+// "envelope (generating)" for the generating envelope, else the kind.
+std::string TableWhat(const tables::TableSpec& spec) {
+  return spec.kind == "envelope" && spec.envelope_generating ? "envelope (generating)" : spec.kind;
+}
 
 // --udc-axis-v: one export per Udc through the pipeline, each file named
 // and checked as a single export's (UdcAxisPath, the overwrite rule), the
@@ -79,7 +87,8 @@ int RunUdcAxisExport(const ParsedArgs& args, const fit::Calibration& cal, const 
   }
   if (!svg.empty() && spec.kind == "envelope") outputs.push_back({"svg", svg});
   if (auto e = CheckOverwrite(args, outputs); !e.empty()) return Fail(e);
-  std::fprintf(stderr, "export: building %s tables at %zu DC-link voltages for %s\n", spec.kind.c_str(), udcs.size(),
+  const std::string what = TableWhat(spec);
+  std::fprintf(stderr, "export: building %s tables at %zu DC-link voltages for %s\n", what.c_str(), udcs.size(),
                spec.serial.c_str());
   tables::ExportOptions options;
   options.ctype = ctype;
@@ -133,7 +142,7 @@ int RunUdcAxisExport(const ParsedArgs& args, const fit::Calibration& cal, const 
     if (!args.Has("json")) {
       std::printf("%s: %s table at Udc %g V (labels %s), %zu cells (%zu clamped at limits, %d extrapolated)\n"
                   "  sha256 %s (file)\n  payload_crc32 %s payload_sha256 %s (values, docs/tables.md)\n",
-                  path.c_str(), spec.kind.c_str(), b.udc_v, tables::Label(r.table, "*").c_str(), r.clamped.cells,
+                  path.c_str(), what.c_str(), b.udc_v, tables::Label(r.table, "*").c_str(), r.clamped.cells,
                   r.clamped.clamped, r.extrapolated_cells, file_sha256.c_str(), crc, r.exported.payload_sha256.c_str());
     }
   }
@@ -144,7 +153,8 @@ int RunUdcAxisExport(const ParsedArgs& args, const fit::Calibration& cal, const 
   }
   if (args.Has("json")) {
     const auto& lim = built->front().result.limits;
-    nlohmann::json j = {{"table", spec.kind}, {"format", format}, {"serial", spec.serial},
+    nlohmann::json j = {{"table", spec.kind}, {"generating", spec.envelope_generating}, {"format", format},
+                        {"serial", spec.serial},
                         {"calibration_version", spec.calibration_version}, {"udc_axis_v", udcs},
                         {"i_max_a", lim.limits.i_max_a},
                         {"rs_ohm", lim.limits.rs_ohm ? nlohmann::json(*lim.limits.rs_ohm) : nlohmann::json()},
@@ -158,7 +168,7 @@ int RunUdcAxisExport(const ParsedArgs& args, const fit::Calibration& cal, const 
 int RunExport(const std::vector<std::string>& argv) {
   for (const auto& a : argv) {
     if (a == "--server" || a.rfind("--server=", 0) == 0) {
-      return RunRemoteExport(argv, WithoutFlags(kExportFlags, {"svg", "sign-key", "udc-axis-v", "magnet-temp-c"}));
+      return RunRemoteExport(argv, WithoutFlags(kExportFlags, {"svg", "sign-key", "magnet-temp-c"}));
     }
   }
   auto args = ParseArgs(argv, WithoutFlags(kExportFlags, {"server", "version"}));
@@ -187,6 +197,7 @@ int RunExport(const std::vector<std::string>& argv) {
   spec.verdict = tables::kVerdictUnknown;
   spec.release_state = tables::kReleaseUnknown;
   spec.allow_extrapolation = args->Has("allow-extrapolation");
+  spec.envelope_generating = args->Has("generating");
   auto get_int = [&](const char* flag, int* v) {
     if (auto s = args->Get(flag)) return absl::SimpleAtoi(*s, v);
     return true;
@@ -214,6 +225,9 @@ int RunExport(const std::vector<std::string>& argv) {
   } else {
     request.magnet_temp_c = *v;
   }
+  // --generating with a table other than the envelope: a usage error
+  // before anything is read or written (the rule is the pipeline's).
+  if (auto s = pipeline::CheckExportSpec(spec, request); !s.ok()) return Fail(std::string(s.message()), 2);
   std::optional<std::vector<double>> udc_axis;
   if (auto a = args->Get("udc-axis-v")) {
     if (request.udc_v) return Fail("flags --udc-v and --udc-axis-v: give one Udc or a Udc axis, not both", 2);
@@ -231,8 +245,8 @@ int RunExport(const std::vector<std::string>& argv) {
   const OutputPath sig_path_out{"out", to_stdout ? "" : out_file + ".sig"};
   if (auto e = CheckOverwrite(*args, {out_path, sig_path_out, svg_path}); !e.empty()) return Fail(e);
   if (spec.kind == "envelope") {
-    std::fprintf(stderr, "export: building envelope table (at most %d speeds) for %s\n", spec.speed_points,
-                 spec.serial.c_str());
+    std::fprintf(stderr, "export: building %s table (at most %d speeds) for %s\n", TableWhat(spec).c_str(),
+                 spec.speed_points, spec.serial.c_str());
   } else {
     std::fprintf(stderr, "export: building %s table (at most %d points) for %s\n", spec.kind.c_str(), spec.points,
                  spec.serial.c_str());
@@ -289,7 +303,8 @@ int RunExport(const std::vector<std::string>& argv) {
   if (args->Has("json")) {
     // Unknown limits are null, with where each known one came from.
     auto opt = [](const std::optional<double>& v) { return v ? nlohmann::json(*v) : nlohmann::json(); };
-    nlohmann::json j = {{"out", *args->Get("out")}, {"table", spec.kind}, {"format", args->Get("format").value_or("csv")},
+    nlohmann::json j = {{"out", *args->Get("out")}, {"table", spec.kind}, {"generating", spec.envelope_generating},
+                        {"label_tag", table->label_tag}, {"format", args->Get("format").value_or("csv")},
                         {"serial", spec.serial}, {"calibration_version", spec.calibration_version},
                         {"rows", clamp.cells}, {"cells", clamp.cells}, {"clamped_rows", clamp.clamped},
                         {"clamped_cells", clamp.clamped}, {"clamped_share", clamp.share},
@@ -314,7 +329,7 @@ int RunExport(const std::vector<std::string>& argv) {
     const std::string u_max = lim.udc_v ? absl::StrFormat("u_max %.6g V", lim.UMaxV()) : "no voltage limit (Udc not known)";
     std::fprintf(to_stdout ? stderr : stdout, "%s: %s table, %zu cells (%zu clamped at limits, %zu extrapolated), i_max %.6g A, %s\n"
                 "  sha256 %s (file)\n  payload_crc32 %s payload_sha256 %s (values, docs/tables.md)\n",
-                args->Get("out")->c_str(), spec.kind.c_str(), clamp.cells, clamp.clamped, extrapolated,
+                args->Get("out")->c_str(), TableWhat(spec).c_str(), clamp.cells, clamp.clamped, extrapolated,
                 lim.i_max_a, u_max.c_str(), file_sha256.c_str(), crc, out->payload_sha256.c_str());
     for (const auto& q : out->fixed_point) {
       std::fprintf(to_stdout ? stderr : stdout, "  %s fixed point: %s LSB %.17g %s, offset %g (%s)\n",
@@ -328,7 +343,7 @@ int RunExport(const std::vector<std::string>& argv) {
 }  // namespace
 
 FLUXCAL_REGISTER_COMMAND("export", "export MTPA / MTPV / field-weakening / envelope tables for ECU flashing", RunExport,
-                         "fluxcal export calibration.json --out FILE [--force] [--table mtpa|mtpv|fw|envelope] [--format csv|json|h|cdfx|dcm|a2l] [flags]\n"
+                         "fluxcal export calibration.json --out FILE [--force] [--table mtpa|mtpv|fw|envelope [--generating]] [--format csv|json|h|cdfx|dcm|a2l] [flags]\n"
                          "fluxcal export SERIAL --server ADDR [--version N] --out FILE [--force] [--table T] [--format F] [flags]",
                          kExportFlags);
 

@@ -7,6 +7,8 @@
 #include <filesystem>
 #include <iostream>
 #include <map>
+#include <string>
+#include <vector>
 
 #include <grpcpp/grpcpp.h>
 #include <grpcpp/support/client_interceptor.h>
@@ -17,6 +19,7 @@
 #include "io/net.h"
 #include "nlohmann/json.hpp"
 #include "io/sha256.h"
+#include "pipeline/export.h"
 
 namespace fluxcal::cli {
 
@@ -268,6 +271,74 @@ int RunRemoteQuery(const std::vector<std::string>& argv, const FlagSpecs& flags)
   return 0;
 }
 
+namespace {
+
+// --udc-axis-v with --server: the reply's one table per Udc, each written
+// as the local axis writes it (pipeline::UdcAxisPath), its signature beside
+// it when the service signed (a stale one removed otherwise).
+int WriteRemoteUdcAxis(const ParsedArgs& args, const v1::ExportTableRequest& req, const v1::ExportTableResponse& resp,
+                       const std::vector<double>& udcs) {
+  const std::string out = *args.Get("out");
+  if (resp.udc_tables_size() != static_cast<int>(udcs.size())) {
+    std::fprintf(stderr, "fluxcal export: the service sent %d tables for %zu voltages; nothing written\n",
+                 resp.udc_tables_size(), udcs.size());
+    return 1;
+  }
+  for (size_t k = 0; k < udcs.size(); ++k) {
+    if (resp.udc_tables(static_cast<int>(k)).udc_v() != udcs[k]) {
+      std::fprintf(stderr, "fluxcal export: the service's table %zu is at %g V, not the %g V asked; nothing written\n",
+                   k + 1, resp.udc_tables(static_cast<int>(k)).udc_v(), udcs[k]);
+      return 1;
+    }
+  }
+  nlohmann::json files = nlohmann::json::array();
+  for (size_t k = 0; k < udcs.size(); ++k) {
+    const v1::ExportedUdcTable& t = resp.udc_tables(static_cast<int>(k));
+    const std::string path = pipeline::UdcAxisPath(out, udcs[k]);
+    if (auto st = WriteNewOutput(args, {"out", path}, t.data()); !st.ok()) {
+      std::fprintf(stderr, "fluxcal export: %s\n", std::string(st.message()).c_str());
+      return 1;
+    }
+    std::string sig_path;
+    if (t.signature().empty()) {
+      std::error_code ec;
+      std::filesystem::remove(path + ".sig", ec);
+    } else {
+      sig_path = path + ".sig";
+      if (auto st = WriteNewOutput(args, {"out", sig_path}, t.signature()); !st.ok()) {
+        std::fprintf(stderr, "fluxcal export: %s\n", std::string(st.message()).c_str());
+        return 1;
+      }
+    }
+    if (t.clamped_cells() > 0) {
+      std::fprintf(stderr, "fluxcal export: warning: Udc %g V: %d of %d cells clamped (requests beyond the limits)\n",
+                   t.udc_v(), t.clamped_cells(), t.cells());
+    }
+    const std::string file_sha256 = io::Sha256Hex(t.data());
+    files.push_back({{"out", path}, {"udc_v", t.udc_v()}, {"label_tag", t.label_tag()}, {"cells", t.cells()},
+                     {"clamped_cells", t.clamped_cells()}, {"sha256", file_sha256}, {"payload_crc32", t.crc32()},
+                     {"payload_sha256", t.sha256()}, {"bytes", t.data().size()}, {"signature", sig_path}});
+    if (!args.Has("json")) {
+      std::printf("%s: %s v%d %s table (%s) at Udc %g V (labels tagged %s), verdict %s, %s\n  sha256 %s (file)\n"
+                  "  payload_crc32 %s payload_sha256 %s (values)\n",
+                  path.c_str(), resp.serial().c_str(), resp.version(), req.table().c_str(), req.format().c_str(),
+                  t.udc_v(), t.label_tag().c_str(), resp.verdict().c_str(),
+                  resp.released() ? "released" : "not released", file_sha256.c_str(), t.crc32().c_str(),
+                  t.sha256().c_str());
+    }
+  }
+  if (args.Has("json")) {
+    std::cout << nlohmann::json{{"serial", resp.serial()}, {"version", resp.version()}, {"table", req.table()},
+                                {"generating", req.generating()}, {"format", req.format()}, {"udc_axis_v", udcs},
+                                {"verdict", resp.verdict()}, {"released", resp.released()}, {"files", files}}
+                     .dump(2, ' ', false, nlohmann::json::error_handler_t::replace)
+              << "\n";
+  }
+  return 0;
+}
+
+}  // namespace
+
 int RunRemoteExport(const std::vector<std::string>& argv, const FlagSpecs& flags) {
   auto args = ParseArgs(argv, flags);
   if (!args.ok()) std::fprintf(stderr, "fluxcal export: %s\n", std::string(args.status().message()).c_str());
@@ -282,10 +353,32 @@ int RunRemoteExport(const std::vector<std::string>& argv, const FlagSpecs& flags
     return 2;
   }
   const bool to_stdout = *args->Get("out") == "-";
+  // A Udc axis: one file per voltage, as the local export names them.
+  std::vector<double> udcs;
+  if (auto a = args->Get("udc-axis-v")) {
+    std::string e;
+    if (args->Get("udc-v")) e = "flags --udc-v and --udc-axis-v: give one Udc or a Udc axis, not both";
+    if (to_stdout) e = "--udc-axis-v writes one file per Udc: give --out FILE, not --out -";
+    auto axis = pipeline::ParseUdcAxis(*a);
+    if (e.empty() && !axis.ok()) e = std::string(axis.status().message());
+    if (!e.empty()) {
+      std::fprintf(stderr, "fluxcal export: %s\n", e.c_str());
+      return 2;
+    }
+    udcs = *axis;
+  }
   // The overwrite rule (cli/args.h) before the call; OUT.sig too, since the
   // service may sign (and a stale one must not sit beside a new table).
   const OutputPath out_path{"out", *args->Get("out")}, sig_path{"out", to_stdout ? "" : *args->Get("out") + ".sig"};
-  if (auto e = CheckOverwrite(*args, {out_path, sig_path}); !e.empty()) {
+  std::vector<OutputPath> outputs = {out_path, sig_path};
+  if (!udcs.empty()) {
+    outputs.clear();
+    for (double u : udcs) {
+      outputs.push_back({"out", pipeline::UdcAxisPath(out_path.path, u)});
+      outputs.push_back({"out", pipeline::UdcAxisPath(out_path.path, u) + ".sig"});
+    }
+  }
+  if (auto e = CheckOverwrite(*args, outputs); !e.empty()) {
     std::fprintf(stderr, "fluxcal export: %s\n", e.c_str());
     return 1;
   }
@@ -296,6 +389,17 @@ int RunRemoteExport(const std::vector<std::string>& argv, const FlagSpecs& flags
   req.set_ctype(args->Get("ctype").value_or(""));
   req.set_allow_extrapolation(args->Has("allow-extrapolation"));
   req.set_allow_clamped(args->Has("allow-clamped"));
+  req.set_generating(args->Has("generating"));
+  {
+    // --generating only with --table envelope: a usage error before the call.
+    tables::TableSpec spec;
+    spec.kind = req.table();
+    spec.envelope_generating = req.generating();
+    if (auto st = pipeline::CheckExportSpec(spec, tables::ExportRequest{}); !st.ok()) {
+      std::fprintf(stderr, "fluxcal export: %s\n", std::string(st.message()).c_str());
+      return 2;
+    }
+  }
   int n = 0;
   if (auto v = args->Get("points")) { if (!absl::SimpleAtoi(*v, &n)) return 2; req.set_points(n); }
   if (auto v = args->Get("speed-points")) { if (!absl::SimpleAtoi(*v, &n)) return 2; req.set_speed_points(n); }
@@ -309,6 +413,7 @@ int RunRemoteExport(const std::vector<std::string>& argv, const FlagSpecs& flags
     if (!d.ok()) { std::fprintf(stderr, "%s\n", std::string(d.status().message()).c_str()); return 2; }
     if (d->has_value()) (req.*setter)(**d);
   }
+  for (double u : udcs) req.add_udc_axis_v(u);
   auto stub = MakeStub(*args->Get("server"));
   if (!stub) return 1;
   v1::ExportTableResponse resp;
@@ -316,6 +421,7 @@ int RunRemoteExport(const std::vector<std::string>& argv, const FlagSpecs& flags
   Deadline(&ctx, 120);
   auto s = stub->ExportTable(&ctx, req, &resp);
   if (!s.ok()) return ReportRpcError("export", s);
+  if (!udcs.empty()) return WriteRemoteUdcAxis(*args, req, resp, udcs);
   if (auto st = WriteNewOutput(*args, out_path, resp.data()); !st.ok()) {
     std::fprintf(stderr, "fluxcal export: %s\n", std::string(st.message()).c_str());
     return 1;
@@ -342,7 +448,8 @@ int RunRemoteExport(const std::vector<std::string>& argv, const FlagSpecs& flags
   }
   if (args->Has("json")) {
     std::cout << nlohmann::json{{"out", *args->Get("out")}, {"serial", resp.serial()}, {"version", resp.version()},
-                                {"table", req.table()}, {"format", req.format()}, {"sha256", file_sha256},
+                                {"table", req.table()}, {"generating", req.generating()},
+                                {"format", req.format()}, {"sha256", file_sha256},
                                 {"payload_crc32", resp.crc32()}, {"payload_sha256", resp.sha256()},
                                 {"cells", resp.cells()}, {"clamped_cells", resp.clamped_cells()},
                                 {"clamped_share", clamped_share}, {"verdict", resp.verdict()},

@@ -2,6 +2,8 @@
 
 #include <utility>
 
+#include "absl/strings/str_cat.h"
+
 #include "pipeline/pipeline.h"
 
 namespace fluxcal::pipeline {
@@ -79,30 +81,88 @@ std::string EnvelopeFigureSvg(const std::vector<const ExportResult*>& envelopes)
   return tables::PlotEnvelopeSvg(t);
 }
 
-absl::StatusOr<ExportResult> ExportTable(storage::Store& store, const std::string& serial, int version,
-                                         const tables::TableSpec& spec_in, const tables::ExportRequest& request,
-                                         const std::string& format, const tables::ExportOptions& options) {
-  if (auto fmt = tables::ParseFormat(format); !fmt.ok()) return fmt.status();
+namespace {
+
+// A stored version with the spec its files are written under: serial,
+// version and model from the store, verdict and release state too, so
+// that a flashing tool that only sees the file sees them.
+struct StoredExport {
+  fit::Calibration cal;
+  tables::TableSpec spec;
+  std::string verdict;
+  bool released = false;
+};
+
+absl::StatusOr<StoredExport> LoadForExport(storage::Store& store, const std::string& serial, int version,
+                                           const tables::TableSpec& spec_in) {
   auto cal = LoadCalibration(store, serial, version);
   if (!cal.ok()) return cal.status();
-  // Verdict and release state travel inside the file, so that a flashing
-  // tool that only sees the file sees them too.
   auto row = store.GetCalibration(serial, cal->version);
   if (!row.ok()) return row.status();
   auto released = store.IsReleased(serial, cal->version);
   if (!released.ok()) return released.status();
-  tables::TableSpec spec = spec_in;
+  StoredExport out{*std::move(cal), spec_in, row->verdict, *released};
+  tables::TableSpec& spec = out.spec;
   spec.serial = serial;
-  spec.calibration_version = cal->version;
-  spec.model = cal->family().Name();
+  spec.calibration_version = out.cal.version;
+  spec.model = out.cal.family().Name();
   spec.verdict = row->verdict.empty() ? tables::kVerdictUnknown : row->verdict;
   spec.release_state = *released ? tables::kReleased : tables::kNotReleased;
-  auto r = ExportCalibration(*cal, spec, request, format, options);
+  return out;
+}
+
+}  // namespace
+
+absl::Status CheckExportSpec(const tables::TableSpec& spec, const tables::ExportRequest& request) {
+  return tables::CheckExportSpec(spec, request);
+}
+
+absl::StatusOr<ExportResult> ExportTable(storage::Store& store, const std::string& serial, int version,
+                                         const tables::TableSpec& spec_in, const tables::ExportRequest& request,
+                                         const std::string& format, const tables::ExportOptions& options) {
+  if (auto fmt = tables::ParseFormat(format); !fmt.ok()) return fmt.status();
+  if (auto s = tables::CheckExportSpec(spec_in, request); !s.ok()) return s;
+  auto stored = LoadForExport(store, serial, version, spec_in);
+  if (!stored.ok()) return stored.status();
+  auto r = ExportCalibration(stored->cal, stored->spec, request, format, options);
   if (!r.ok()) return r.status();
-  r->version = cal->version;
-  r->verdict = row->verdict;
-  r->released = *released;
+  r->version = stored->cal.version;
+  r->verdict = stored->verdict;
+  r->released = stored->released;
   return r;
+}
+
+absl::StatusOr<StoredUdcAxisExport> ExportTableOverUdc(storage::Store& store, const std::string& serial, int version,
+                                                       const tables::TableSpec& spec_in,
+                                                       const tables::ExportRequest& request,
+                                                       const std::vector<double>& udc_axis_v,
+                                                       const std::string& format,
+                                                       const tables::ExportOptions& options) {
+  if (auto fmt = tables::ParseFormat(format); !fmt.ok()) return fmt.status();
+  if (auto s = tables::CheckExportSpec(spec_in, request); !s.ok()) return s;
+  auto stored = LoadForExport(store, serial, version, spec_in);
+  if (!stored.ok()) return stored.status();
+  auto axis = ExportCalibrationOverUdc(stored->cal, stored->spec, request, udc_axis_v, format, options);
+  if (!axis.ok()) return axis.status();
+  StoredUdcAxisExport out;
+  out.version = stored->cal.version;
+  out.verdict = stored->verdict;
+  out.released = stored->released;
+  out.tables = *std::move(axis);
+  for (auto& t : out.tables) {
+    t.result.version = out.version;
+    t.result.verdict = out.verdict;
+    t.result.released = out.released;
+  }
+  return out;
+}
+
+std::string ExportFileName(const std::string& serial, const tables::TableSpec& spec, const std::string& format,
+                           double udc_v) {
+  const std::string base = absl::StrCat(serial, serial.empty() ? "" : "_", spec.kind,
+                                        spec.kind == "envelope" && spec.envelope_generating ? "_generating" : "", ".",
+                                        format);
+  return udc_v > 0 ? UdcAxisPath(base, udc_v) : base;
 }
 
 std::string ExportFigureSvg(const fit::Calibration& cal, const tables::TableSpec& spec, const ExportResult& exported) {

@@ -52,6 +52,11 @@ absl::StatusOr<ExportResult> ExportTable(storage::Store& store, const std::strin
                                          const tables::TableSpec& spec, const tables::ExportRequest& request,
                                          const std::string& format, const tables::ExportOptions& options = {});
 
+// What a table spec asks for, checked before anything is computed
+// (tables::CheckExportSpec: --generating / generating only with the
+// envelope); ExportCalibration and ExportTable check it too.
+absl::Status CheckExportSpec(const tables::TableSpec& spec, const tables::ExportRequest& request);
+
 // The names an export request takes, checked as ExportCalibration checks
 // them (tables/tables.h keeps the one list of each): InvalidArgument for a
 // name not listed, saying which are.
@@ -83,6 +88,31 @@ absl::StatusOr<std::vector<UdcAxisExport>> ExportCalibrationOverUdc(const fit::C
                                                                     const std::vector<double>& udc_axis_v,
                                                                     const std::string& format,
                                                                     const tables::ExportOptions& options = {});
+// ExportCalibrationOverUdc of the stored `version` of `serial` (0: the
+// latest), as ExportTable: the stored verdict and release state written
+// into every file and returned once (the service's ExportTable with
+// udc_axis_v). Nothing is written to disk.
+struct StoredUdcAxisExport {
+  int version = 0;
+  std::string verdict;
+  bool released = false;
+  std::vector<UdcAxisExport> tables;
+};
+absl::StatusOr<StoredUdcAxisExport> ExportTableOverUdc(storage::Store& store, const std::string& serial, int version,
+                                                       const tables::TableSpec& spec,
+                                                       const tables::ExportRequest& request,
+                                                       const std::vector<double>& udc_axis_v,
+                                                       const std::string& format,
+                                                       const tables::ExportOptions& options = {});
+// A file name for a table of `serial` (ExportedUdcTable.file_name):
+// SERIAL_KIND[_generating].FORMAT, and with a Udc (> 0) UdcAxisPath of it
+// ("IPM-1_fw_udc300v.h"), the names `fluxcal export --udc-axis-v` gives.
+std::string ExportFileName(const std::string& serial, const tables::TableSpec& spec, const std::string& format,
+                           double udc_v = 0);
+
+// The most voltages of a Udc axis (the CLI's and the service's bound).
+inline constexpr int kMaxUdcAxisPoints = tables::kMaxUdcAxisPoints;
+
 // The file of one Udc of an axis: `path` with `_<UdcTag>` before its
 // extension ("fw.h" -> "fw_udc300v.h", "out/fw" -> "out/fw_udc300v").
 std::string UdcAxisPath(const std::string& path, double udc_v);

@@ -8,9 +8,11 @@
 #include <grpcpp/grpcpp.h>
 
 #include <iterator>
+#include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "pipeline/export.h"
 #include "pipeline/pipeline.h"
 #include "pipeline/report.h"
 #include "pipeline/signing.h"
@@ -131,6 +133,18 @@ grpc::Status CalibrationServiceImpl::ExportTable(grpc::ServerContext* ctx, const
     return ToGrpcStatus(absl::ResourceExhaustedError(
         absl::StrCat("points x speed_points: a field-weakening map has at most ", kMaxTableCells, " cells")));
   }
+  // A Udc axis: bounded as the CLI's, the maps of all its voltages
+  // together no larger than one map may be.
+  if (auto s = ValidateUdcAxis(req->udc_axis_v(), req->udc_v(), pipeline::kMaxUdcAxisPoints); !s.ok()) {
+    return ToGrpcStatus(s);
+  }
+  const int axis_points = req->udc_axis_v_size();
+  if (spec.kind == "fw" && static_cast<long long>(spec.points) * spec.speed_points * axis_points > kMaxTableCells) {
+    return ToGrpcStatus(absl::ResourceExhaustedError(absl::StrCat(
+        "points x speed_points x udc_axis_v: the field-weakening maps of a Udc axis have at most ", kMaxTableCells,
+        " cells together")));
+  }
+  spec.envelope_generating = req->generating();
   if (!(spec.speed_max_rpm > 0 && spec.speed_max_rpm <= 1e5)) return ToGrpcStatus(absl::InvalidArgumentError("speed_max_rpm: must be in (0, 100000]"));
   // 0 in a limit field: the calibration's (tables/export_rule.h).
   tables::ExportRequest limits;
@@ -163,8 +177,41 @@ grpc::Status CalibrationServiceImpl::ExportTable(grpc::ServerContext* ctx, const
     if (!ct.ok()) return ToGrpcStatus(ct.status());
     options.ctype = *ct;
   }
-  auto r = pipeline::ExportTable(*store_, req->serial(), version, spec, limits,
-                                req->format().empty() ? "csv" : req->format(), options);
+  const std::string format = req->format().empty() ? "csv" : req->format();
+  if (axis_points > 0) {
+    // One table per Udc, each in the reply (nothing is written here).
+    const std::vector<double> udcs(req->udc_axis_v().begin(), req->udc_axis_v().end());
+    auto axis = pipeline::ExportTableOverUdc(*store_, req->serial(), version, spec, limits, udcs, format, options);
+    if (!axis.ok()) return ToGrpcStatus(axis.status());
+    resp->set_serial(req->serial());
+    resp->set_version(axis->version);
+    resp->set_verdict(axis->verdict);
+    resp->set_released(axis->released);
+    int cells = 0, clamped = 0;
+    for (const auto& t : axis->tables) {
+      const pipeline::ExportResult& r = t.result;
+      auto* u = resp->add_udc_tables();
+      u->set_udc_v(t.udc_v);
+      u->set_file_name(pipeline::ExportFileName(req->serial(), spec, format, t.udc_v));
+      u->set_label_tag(r.table.label_tag);
+      u->set_data(r.exported.bytes);
+      u->set_crc32(absl::StrFormat("%08x", r.exported.payload_crc32));
+      u->set_sha256(r.exported.payload_sha256);
+      u->set_cells(r.cells);
+      u->set_clamped_cells(r.clamped_cells);
+      cells += r.cells;
+      clamped += r.clamped_cells;
+      if (!signing_key_pem_.empty()) {
+        auto sig = pipeline::SignExport(r.exported.bytes, signing_key_pem_);
+        if (!sig.ok()) return ToGrpcStatus(sig.status());
+        u->set_signature(*sig);
+      }
+    }
+    resp->set_cells(cells);
+    resp->set_clamped_cells(clamped);
+    return grpc::Status::OK;
+  }
+  auto r = pipeline::ExportTable(*store_, req->serial(), version, spec, limits, format, options);
   if (!r.ok()) return ToGrpcStatus(r.status());
   resp->set_serial(req->serial());
   resp->set_version(r->version);

@@ -118,6 +118,25 @@ absl::Status ValidateDefaultable(const std::string& field, double value, double 
                absl::StrFormat("must be in (0, %g] %s (0: default)", max, unit));
 }
 
+absl::Status ValidateUdcAxis(const google::protobuf::RepeatedField<double>& axis, double udc_v, int max_points) {
+  if (axis.empty()) return absl::OkStatus();
+  if (axis.size() > max_points) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("udc_axis_v: at most %d voltages (one table each), got %d", max_points, axis.size()));
+  }
+  if (udc_v != 0) {
+    return absl::InvalidArgumentError("udc_v: give one Udc or a Udc axis (udc_axis_v), not both");
+  }
+  for (int k = 0; k < axis.size(); ++k) {
+    if (auto s = Range(absl::StrCat("udc_axis_v[", k, "]"), axis.Get(k), std::nextafter(0.0, 1.0), kMaxUdcV,
+                       absl::StrFormat("must be in (0, %g] V", kMaxUdcV));
+        !s.ok()) {
+      return s;
+    }
+  }
+  return absl::OkStatus();
+}
+
 absl::StatusOr<int> ParsePageToken(const std::string& token) {
   int offset = 0;
   if (token.empty()) return 0;

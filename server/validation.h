@@ -62,6 +62,10 @@ absl::Status ValidateVersion(int version);
 // An optional quantity where 0 means "the default": 0, or finite in
 // (0, max]; the message names field, range and unit.
 absl::Status ValidateDefaultable(const std::string& field, double value, double max, const std::string& unit);
+// ExportTable's udc_axis_v: at most `max_points` voltages (InvalidArgument
+// naming udc_axis_v and the count), each finite in (0, kMaxUdcV] V
+// (naming udc_axis_v[k]), not with a nonzero udc_v (naming both).
+absl::Status ValidateUdcAxis(const google::protobuf::RepeatedField<double>& axis, double udc_v, int max_points);
 // A page token this service issued: a non-negative decimal offset.
 absl::StatusOr<int> ParsePageToken(const std::string& token);
 

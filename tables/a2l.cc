@@ -10,6 +10,7 @@
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
 #include "absl/strings/str_replace.h"
+#include "tables/internal_formats.h"
 
 namespace fluxcal::tables {
 namespace {
@@ -319,14 +320,14 @@ std::string A2lWriter::Write() {
   s += " */\n";
   s += "ASAP2_VERSION 1 71\n";
   s += absl::StrFormat("/begin PROJECT FLUXCAL_%s %s\n", kind,
-                       Str(absl::StrFormat("fluxcal %s table of %s, calibration version %d", t_.kind, t_.serial,
+                       Str(absl::StrFormat("fluxcal %s table of %s, calibration version %d", internal::TableTitle(t_), t_.serial,
                                            t_.calibration_version)));
   s += absl::StrFormat("  /begin HEADER %s\n    VERSION %s\n  /end HEADER\n",
-                       Str(absl::StrFormat("fluxcal %s table", t_.kind)),
+                       Str(absl::StrFormat("fluxcal %s table", internal::TableTitle(t_))),
                        Str(absl::StrCat("calibration version ", t_.calibration_version)));
   s += absl::StrFormat("  /begin MODULE FLUXCAL_%s %s\n", kind,
-                       Str(absl::StrFormat("%s table, %s", t_.kind, AxisOrder(t_))));
-  s += absl::StrFormat("    /begin MOD_PAR %s\n", Str(absl::StrCat("fluxcal ", t_.kind, " table of ", t_.serial)));
+                       Str(absl::StrFormat("%s table, %s", internal::TableTitle(t_), AxisOrder(t_))));
+  s += absl::StrFormat("    /begin MOD_PAR %s\n", Str(absl::StrCat("fluxcal ", internal::TableTitle(t_), " table of ", t_.serial)));
   s += absl::StrFormat("      VERSION %s\n", Str(absl::StrCat("fluxcal ", t_.fluxcal_version)));
   for (const auto& [k, v] : TextFields(t_)) {
     s += absl::StrFormat("      SYSTEM_CONSTANT %s %s\n", Str(Label(t_, k)), Str(v));

@@ -83,7 +83,12 @@ Table NewTable(const sim::MagneticModel& m, const MachineLimits& lim, const Tabl
   const double meas = spec.measured_current_limit_a;
   Table t;
   t.kind = spec.kind;
-  t.label_tag = spec.label_tag;
+  t.envelope_generating = spec.kind == "envelope" && spec.envelope_generating;
+  // The generating envelope's labels differ from the motoring one's
+  // (FLUXCAL_ENVELOPE_GENERATING_...): both can be flashed side by side.
+  t.label_tag = t.envelope_generating
+                    ? absl::StrCat(kGeneratingTag, spec.label_tag.empty() ? "" : "_", spec.label_tag)
+                    : spec.label_tag;
   t.magnet_temperature = spec.magnet_temperature;
   t.serial = spec.serial;
   t.calibration_version = spec.calibration_version;
@@ -324,7 +329,8 @@ absl::Status EnvelopeRows(const sim::MagneticModel& m, const MachineLimits& lim,
     iq.values.push_back(op.iq_a);
     // The torque the point delivers (within 1e-9 of the limit torque).
     tq.values.push_back(op.torque_nm);
-    pw.values.push_back(op.torque_nm * rpm * 2 * kPi / 60.0);
+    // (+ 0.0: the generating power at standstill is 0, not -0.)
+    pw.values.push_back(op.torque_nm * rpm * 2 * kPi / 60.0 + 0.0);
     t.clamped.push_back(none);
   }
   t.axes = {{"speed_rpm", n}};

@@ -53,7 +53,7 @@ absl::StatusOr<std::string> CHeader(const Table& t, CType ct, const std::vector<
   const std::string g = Label(t, "TABLE_H_");
   const char* type = CElementType(ct);
   const int bits = FixedPointBits(ct);
-  std::string s = absl::StrFormat("/* fluxcal %s table. Units: SI (A, N m, rpm, Wb, V, Ohm, degC).\n", t.kind);
+  std::string s = absl::StrFormat("/* fluxcal %s table. Units: SI (A, N m, rpm, Wb, V, Ohm, degC).\n", TableTitle(t));
   for (const auto& [k, v] : TextFields(t)) s += absl::StrCat(" * ", k, ": ", OneLine(v), "\n");
   s += absl::StrCat(" * calibration_version: ", t.calibration_version, "\n");
   for (const auto& sc : Scalars(t)) {

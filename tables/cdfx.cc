@@ -25,7 +25,7 @@ std::string Cdfx(const Table& t) {
   std::string s =
       "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n"
       "<!DOCTYPE MSRSW PUBLIC \"-//ASAM//DTD CALIBRATION DATA FORMAT:V2.0.0:LAI:IAI:XML:CDF200.XSD//EN\" \"cdf_v2.0.0.sl.dtd\">\n";
-  absl::StrAppend(&s, "<!-- fluxcal ", t.kind, " table; axis order: ", OneLine(AxisOrder(t)), ". payload_crc32 ", Crc(t),
+  absl::StrAppend(&s, "<!-- fluxcal ", TableTitle(t), " table; axis order: ", OneLine(AxisOrder(t)), ". payload_crc32 ", Crc(t),
                     ", payload_sha256 ", t.sha256, ": over the values (fluxcal docs/tables.md), not over this file. -->\n");
   s += "<MSRSW>\n  <SHORT-NAME>fluxcal</SHORT-NAME>\n  <CATEGORY>CDF20</CATEGORY>\n  <SW-SYSTEMS>\n    <SW-SYSTEM>\n";
   s += absl::StrFormat("      <SHORT-NAME>%s</SHORT-NAME>\n", XmlEscape(t.serial.empty() ? "fluxcal" : t.serial));

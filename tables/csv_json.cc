@@ -10,7 +10,7 @@ namespace fluxcal::tables::internal {
 
 std::string Csv(const Table& t) {
   // Comment header: "# key: value" lines, then one row per cell (X slowest).
-  std::string s = absl::StrFormat("# fluxcal %s table\n", t.kind);
+  std::string s = absl::StrFormat("# fluxcal %s table\n", TableTitle(t));
   for (const auto& [k, v] : TextFields(t)) s += absl::StrCat("# ", k, ": ", OneLine(v), "\n");
   s += absl::StrCat("# calibration_version: ", t.calibration_version, "\n");
   for (const auto& sc : Scalars(t)) {
@@ -46,6 +46,7 @@ std::string Json(const Table& t) {
   // release state and flags travel in the file.
   j["format"] = "fluxcal.table.v2";
   j["kind"] = t.kind;
+  if (t.kind == "envelope") j["direction"] = t.envelope_generating ? "generating" : "motoring";
   for (const auto& [k, v] : TextFields(t)) j[k] = v;
   j["calibration_version"] = t.calibration_version;
   nlohmann::json sc = nlohmann::json::object();

@@ -13,7 +13,7 @@ std::string Dcm(const Table& t) {
   // DAMOS DCM 2.0 (KONSERVIERUNG_FORMAT 2.0): FESTWERT (scalar), KENNLINIE
   // (curve) and KENNFELD (map) blocks, 6 values a line; text metadata as
   // '*' comments (DCM has no text scalar every tool accepts).
-  std::string s = absl::StrFormat("* fluxcal %s table\n", t.kind);
+  std::string s = absl::StrFormat("* fluxcal %s table\n", TableTitle(t));
   for (const auto& [k, v] : TextFields(t)) s += absl::StrCat("* ", k, ": ", OneLine(v), "\n");
   s += absl::StrCat("* axis_order: ", AxisOrder(t), "\n");
   s += absl::StrCat("* payload_crc32: ", Crc(t), ", payload_sha256: ", t.sha256,

@@ -162,6 +162,10 @@ std::vector<Scalar> Scalars(const Table& t) {
   if (t.kind == "fw" || t.kind == "envelope") {
     s.push_back({"speed_max_rpm", t.speed_max_rpm, "rpm", "top of the speed axis (axis from 0 rpm)", false});
   }
+  if (t.kind == "envelope") {
+    s.push_back({"torque_sign", t.envelope_generating ? -1.0 : 1.0, "-",
+                 "+1: the motoring limit (torque, power >= 0); -1: the generating limit (torque, power <= 0)", true});
+  }
   s.push_back({"allow_extrapolation", t.allow_extrapolation ? 1.0 : 0.0, "-",
                "1: computed beyond the measured region on request (allow-extrapolation flag)", true});
   s.push_back({"calibration_version", static_cast<double>(t.calibration_version), "-",

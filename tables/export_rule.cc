@@ -94,8 +94,21 @@ absl::StatusOr<ExportLimits> ResolveExportLimits(const fit::Calibration& cal, co
   return out;
 }
 
+absl::Status CheckExportSpec(const TableSpec& spec, const ExportRequest& req) {
+  // An unknown kind is ResolveExportLimits' to name.
+  const bool known = spec.kind == "mtpa" || spec.kind == "mtpv" || spec.kind == "fw";
+  if (spec.envelope_generating && known) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        Label(req, "generating"), ": only with ", Name(req, "table"), " envelope (the generating torque-speed "
+        "limit), not with ", Name(req, "table"), " ", spec.kind, spec.kind == "mtpv" ? " (motoring rows)" :
+        spec.kind == "mtpa" || spec.kind == "fw" ? " (it holds the generating rows already)" : ""));
+  }
+  return absl::OkStatus();
+}
+
 absl::StatusOr<BuiltExport> BuildExportTable(const fit::Calibration& cal, TableSpec spec,
                                              const ExportRequest& req) {
+  if (auto s = CheckExportSpec(spec, req); !s.ok()) return s;
   auto limits = ResolveExportLimits(cal, spec.kind, req);
   if (!limits.ok()) return limits.status();
   if (spec.serial.empty()) spec.serial = cal.serial();

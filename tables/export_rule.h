@@ -62,6 +62,11 @@ struct ExportLimits {
 absl::StatusOr<ExportLimits> ResolveExportLimits(const fit::Calibration& cal, const std::string& kind,
                                                  const ExportRequest& request);
 
+// What a table spec asks for, checked before anything is computed (and
+// again by BuildExportTable): spec.envelope_generating only with kind
+// envelope (InvalidArgument naming --generating / generating otherwise).
+absl::Status CheckExportSpec(const TableSpec& spec, const ExportRequest& request);
+
 struct BuiltExport {
   Table table;
   ExportLimits limits;

@@ -459,10 +459,12 @@ std::string PlotEnvelopeSvg(const std::vector<Table>& envs) {
   if (envs.empty()) return "";
   const Table& t0 = envs.front();
   plot::Figure torque("envelope-torque", 620, 440), power("envelope-power", 620, 440);
-  torque.SetTitle("maximum torque over speed");
+  // The generating envelope: the largest braking torque (drawn negative).
+  const bool gen = t0.envelope_generating;
+  torque.SetTitle(gen ? "generating limit: torque over speed" : "maximum torque over speed");
   torque.SetXLabel("speed [rpm]");
   torque.SetYLabel("torque [N m]");
-  power.SetTitle("maximum power over speed");
+  power.SetTitle(gen ? "generating limit: power over speed" : "maximum power over speed");
   power.SetXLabel("speed [rpm]");
   power.SetYLabel("power [kW]");
   for (plot::Figure* f : {&torque, &power}) {
@@ -495,9 +497,9 @@ std::string PlotEnvelopeSvg(const std::vector<Table>& envs) {
   }
   const auto& l = t0.limits;
   const std::string title = absl::StrFormat(
-      "%s%storque-speed and power-speed envelope: current limit %.4g A, Rs %.4g ohm, u_max = %.3g x Udc / sqrt 3 "
+      "%s%s%storque-speed and power-speed envelope: current limit %.4g A, Rs %.4g ohm, u_max = %.3g x Udc / sqrt 3 "
       "(linear SVPWM)%s",
-      t0.serial, t0.serial.empty() ? "" : ": ", l.i_max_a, l.rs_ohm.value_or(0.0), l.modulation_limit,
+      t0.serial, t0.serial.empty() ? "" : ": ", gen ? "generating " : "", l.i_max_a, l.rs_ohm.value_or(0.0), l.modulation_limit,
       t0.magnet_temperature ? absl::StrFormat(", magnets at %.4g degC", t0.magnet_temperature->at_c) : "");
   return plot::PanelsSvg("envelope", title, {torque, power}, 2);
 }

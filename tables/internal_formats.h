@@ -23,6 +23,12 @@ std::string Crc(const Table& t);
 // The flag arrays as doubles, for the writers that treat them as tables.
 std::vector<double> AsDoubles(const std::vector<uint8_t>& v);
 
+// What the table is, for the first line of every file: the kind, "envelope
+// (generating)" for the generating envelope.
+inline std::string TableTitle(const Table& t) {
+  return t.kind == "envelope" && t.envelope_generating ? "envelope (generating)" : t.kind;
+}
+
 std::string Csv(const Table& t);    // csv_json.cc
 std::string Json(const Table& t);   // csv_json.cc
 // C header (c_header.cc); `fixed`: QuantityScales(t, ct). OutOfRange from

@@ -80,7 +80,13 @@ struct Table {
   // "" (the default) or a tag that joins the kind in every label
   // (FLUXCAL_FW_UDC300V_ID_A, the A2L project and the C include guard):
   // the tables of a Udc axis (UdcTag) live side by side in one ECU build.
+  // The generating envelope's tag starts with kGeneratingTag
+  // (FLUXCAL_ENVELOPE_GENERATING_TORQUE_NM, ..._GENERATING_UDC300V_...), so
+  // that it sits beside the motoring one too.
   std::string label_tag;
+  // envelope: the generating limit (torque and power <= 0), written as the
+  // scalar torque_sign = -1 (motoring: +1).
+  bool envelope_generating = false;
   // Provenance: written into every export format (docs/tables.md).
   std::string serial;
   int calibration_version = 0;
@@ -179,9 +185,15 @@ struct TableSpec {
   // "" or the tag joining the kind in every label (Table::label_tag).
   std::string label_tag;
   // envelope: the generating limit (negative torque and power) instead of
-  // the motoring one (the report page draws both).
+  // the motoring one (the report page draws both; `fluxcal export --table
+  // envelope --generating`, ExportTable `generating`). Its labels carry
+  // kGeneratingTag before label_tag. Only for kind envelope (the export
+  // rule refuses it with any other table).
   bool envelope_generating = false;
 };
+
+// The label tag part of the generating envelope (Table::label_tag).
+inline constexpr char kGeneratingTag[] = "generating";
 
 double TorqueNm(const sim::MagneticModel& m, int pole_pairs, double id_a, double iq_a,
                 double temperature_c = 25.0);

@@ -395,8 +395,11 @@ class Client:
         """ExportTableResponse: data (the file's bytes), crc32, sha256, version,
         verdict, cells, clamped_cells. `limits`: speed_points, speed_max_rpm,
         i_max_a, udc_v, rs_ohm (0 or absent: the calibration's; fw, mtpv and
-        envelope need a Udc from somewhere), allow_clamped. `table`: mtpa,
-        mtpv, fw or envelope."""
+        envelope need a Udc from somewhere), allow_clamped, generating (the
+        generating envelope, table="envelope" only), udc_axis_v (a list of
+        DC-link voltages: one table per voltage in the reply's udc_tables,
+        each with udc_v, file_name, data, crc32, sha256; not with udc_v).
+        `table`: mtpa, mtpv, fw or envelope."""
         req = self.pb.ExportTableRequest(serial=serial, version=version, table=table, format=fmt, points=points,
                                          **limits)
         return self._call("ExportTable", serial, self.stub.ExportTable, req)

@@ -125,5 +125,74 @@ TEST(EnvelopeCli, UdcAxisFilesEqualSingleExportsAndTheFigureHasACurvePerUdc) {
   fs::remove_all(dir);
 }
 
+// `fluxcal export --table envelope --generating` (docs/cli.md): the
+// generating limit on the Baldor set, torque and power <= 0 at every
+// speed, at standstill the motoring limit mirrored (the fitted model is
+// symmetric in iq), at speed at least the motoring one; the A2L and C
+// header under labels of their own (FLUXCAL_ENVELOPE_GENERATING_*), also
+// over a Udc axis; the flag with another table a usage error naming it,
+// nothing written.
+TEST(EnvelopeCli, GeneratingEnvelopeUnderLabelsOfItsOwn) {
+  const std::string set = std::string(FLUXCAL_SOURCE_DIR) + "/data/real/baldor_eol";
+  ASSERT_TRUE(fs::exists(set + "/manifest.json")) << "in-repo fixture missing: " << set;
+  const fs::path dir = fs::temp_directory_path() / ("fluxcal_generating_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  auto path = [&](const std::string& name) { return (dir / name).string(); };
+  const std::string cal = path("c.json");
+  ASSERT_EQ(RunFluxcal("fit " + set + " --out " + cal).code, 0);
+
+  const RunResult mot = RunFluxcal("export " + cal + " --table envelope --out " + path("m.csv") + " --json");
+  ASSERT_EQ(mot.code, 0) << mot.err;
+  const RunResult gen = RunFluxcal("export " + cal + " --table envelope --generating --out " + path("g.csv") +
+                                   " --svg " + path("g.svg") + " --json");
+  ASSERT_EQ(gen.code, 0) << gen.err;
+  const auto jm = nlohmann::json::parse(mot.out), jg = nlohmann::json::parse(gen.out);
+  EXPECT_EQ(jm["generating"], false);
+  EXPECT_EQ(jg["generating"], true);
+  EXPECT_EQ(jg["label_tag"], "generating");
+  EXPECT_EQ(jg["udc_v"], 540.0) << "the set's DC link";
+  EXPECT_NE(jg["payload_sha256"], jm["payload_sha256"]);
+  EXPECT_TRUE(Has(Read(path("g.csv")), "# fluxcal envelope (generating) table\n"));
+  const auto tm = Column(path("m.csv"), "torque_nm"), tg = Column(path("g.csv"), "torque_nm");
+  const auto pg = Column(path("g.csv"), "power_w");
+  ASSERT_EQ(tm.size(), tg.size());
+  ASSERT_GT(tg.size(), 10u);
+  for (size_t i = 0; i < tg.size(); ++i) {
+    EXPECT_LE(tg[i], 0.0) << "row " << i;
+    EXPECT_LE(pg[i], 0.0) << "row " << i;
+    EXPECT_GE(-tg[i], tm[i] * (1 - 1e-6)) << "row " << i << ": generating limit below the motoring one";
+  }
+  EXPECT_NEAR(-tg[0], tm[0], 1e-9 * tm[0]);
+  EXPECT_TRUE(Has(Read(path("g.svg")), "<svg"));
+
+  // A2L and C header: labels of their own, so that both directions flash side by side.
+  ASSERT_EQ(RunFluxcal("export " + cal + " --table envelope --generating --format a2l --out " + path("g.a2l")).code, 0);
+  ASSERT_EQ(RunFluxcal("export " + cal + " --table envelope --generating --format h --out " + path("g.h")).code, 0);
+  const std::string a2l = Read(path("g.a2l")), h = Read(path("g.h"));
+  EXPECT_TRUE(Has(a2l, "/begin CHARACTERISTIC FLUXCAL_ENVELOPE_GENERATING_TORQUE_NM")) << a2l.substr(0, 2000);
+  EXPECT_FALSE(Has(a2l, "FLUXCAL_ENVELOPE_TORQUE_NM"));
+  EXPECT_TRUE(Has(h, "#define FLUXCAL_ENVELOPE_GENERATING_TORQUE_SIGN -1\n"));
+  EXPECT_TRUE(Has(h, "fluxcal_envelope_generating_torque_nm["));
+
+  // Over a Udc axis: both tags in every label.
+  const RunResult axis = RunFluxcal("export " + cal + " --table envelope --generating --format dcm --udc-axis-v 400,540 "
+                                    "--out " + path("g.dcm") + " --json");
+  ASSERT_EQ(axis.code, 0) << axis.err;
+  EXPECT_EQ(nlohmann::json::parse(axis.out)["files"][1]["label_tag"], "generating_udc540v");
+  EXPECT_TRUE(Has(Read(path("g_udc540v.dcm")), "KENNLINIE FLUXCAL_ENVELOPE_GENERATING_UDC540V_TORQUE_NM "));
+
+  // Only with the envelope: a usage error naming the flag, nothing written.
+  for (const char* table : {"mtpa", "mtpv", "fw"}) {
+    const RunResult bad = RunFluxcal("export " + cal + " --table " + table + " --generating --out " + path("bad.csv"));
+    EXPECT_EQ(bad.code, 2) << table << ": " << bad.err;
+    EXPECT_TRUE(Has(bad.err, "flag --generating: only with --table envelope")) << bad.err;
+    EXPECT_FALSE(fs::exists(path("bad.csv")));
+  }
+  const RunResult no_table = RunFluxcal("export " + cal + " --generating --out " + path("bad.csv"));
+  EXPECT_EQ(no_table.code, 2) << "the default table is mtpa: " << no_table.err;
+  fs::remove_all(dir);
+}
+
 }  // namespace
 }  // namespace fluxcal::e2e

@@ -13,6 +13,7 @@
 #include <fstream>
 
 #include "absl/strings/ascii.h"
+#include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "fitting/fit.h"
 #include "gtest/gtest.h"
@@ -269,6 +270,106 @@ TEST(Pipeline, UdcAxisExportsAreTheSingleExportsPerUdc) {
   EXPECT_EQ(UdcAxisPath("out/fw.h", 300), "out/fw_udc300v.h");
   EXPECT_EQ(UdcAxisPath("out.d/fw", 312.5), "out.d/fw_udc312p5v");
   EXPECT_EQ(UdcAxisPath(".fw", 48), ".fw_udc48v");
+}
+
+// A file's bytes without the lines that name the moment it was written.
+std::string WithoutCreatedUtc(const std::string& bytes) {
+  std::string out;
+  size_t at = 0;
+  while (at < bytes.size()) {
+    size_t end = bytes.find('\n', at);
+    end = end == std::string::npos ? bytes.size() : end + 1;
+    const std::string line = bytes.substr(at, end - at);
+    if (line.find("created_utc") == std::string::npos) out += line;
+    at = end;
+  }
+  return out;
+}
+
+// The service's Udc axis (ExportTable udc_axis_v): the stored version's
+// tables, one per voltage, each the single stored export at that voltage
+// (the same file but for its tagged labels and the time it was written),
+// with the stored verdict and release state, and file names as the CLI
+// gives them; the generating envelope through the same path.
+TEST(Pipeline, StoredUdcAxisIsTheStoredSingleExportPerUdc) {
+  auto store = storage::Store::Open(":memory:");
+  ASSERT_TRUE(store.ok());
+  ASSERT_TRUE(IngestHfRun(**store, "IPM-V", "st", kMotor, Grid(1.0)).ok());
+  ASSERT_TRUE(FitSerial(**store, "IPM-V", "analytic", {}).ok());
+  tables::TableSpec spec;
+  spec.points = 12;
+  spec.speed_points = 8;
+  tables::ExportRequest rpc;
+  rpc.names_flags = false;
+  rpc.rs_ohm = 0.011;
+  rpc.allow_clamped = true;
+  for (const char* kind : {"fw", "envelope", "mtpa"}) {
+    for (const bool generating : {false, true}) {
+      if (generating && std::string(kind) != "envelope") continue;
+      SCOPED_TRACE(std::string(kind) + (generating ? " generating" : ""));
+      spec.kind = kind;
+      spec.envelope_generating = generating;
+      auto axis = ExportTableOverUdc(**store, "IPM-V", 0, spec, rpc, {40, 60, 80}, "csv");
+      ASSERT_TRUE(axis.ok()) << axis.status();
+      EXPECT_EQ(axis->version, 1);
+      EXPECT_FALSE(axis->verdict.empty());
+      EXPECT_FALSE(axis->released);
+      ASSERT_EQ(axis->tables.size(), 3u);
+      for (const auto& a : axis->tables) {
+        tables::ExportRequest one = rpc;
+        one.udc_v = a.udc_v;
+        auto single = ExportTable(**store, "IPM-V", 0, spec, one, "csv");
+        ASSERT_TRUE(single.ok()) << single.status();
+        EXPECT_EQ(a.result.exported.payload_sha256, single->exported.payload_sha256) << a.udc_v;
+        // CSV names no labels: the same bytes.
+        EXPECT_EQ(WithoutCreatedUtc(a.result.exported.bytes), WithoutCreatedUtc(single->exported.bytes)) << a.udc_v;
+        EXPECT_EQ(a.result.verdict, axis->verdict);
+        EXPECT_NE(a.result.exported.bytes.find("# verdict: " + axis->verdict + "\n"), std::string::npos);
+      }
+      EXPECT_EQ(ExportFileName("IPM-V", spec, "csv", 60),
+                absl::StrCat("IPM-V_", kind, generating ? "_generating" : "", "_udc60v.csv"));
+    }
+  }
+  // The generating envelope is the table the report page draws
+  // (tables::BuildTable with envelope_generating under the export rule's
+  // limits), bit for bit, torque <= 0, at standstill the motoring limit's
+  // magnitude (the fitted model is symmetric in iq).
+  spec.kind = "envelope";
+  spec.speed_points = 16;
+  spec.speed_max_rpm = 4000;
+  tables::ExportRequest at60 = rpc;
+  at60.udc_v = 60;
+  spec.envelope_generating = false;
+  auto mot = ExportTable(**store, "IPM-V", 0, spec, at60, "dcm");
+  spec.envelope_generating = true;
+  auto gen = ExportTable(**store, "IPM-V", 0, spec, at60, "dcm");
+  ASSERT_TRUE(mot.ok() && gen.ok()) << mot.status() << gen.status();
+  auto cal = LoadCalibration(**store, "IPM-V", 1);
+  ASSERT_TRUE(cal.ok());
+  tables::TableSpec page = spec;
+  page.measured_current_limit_a = cal->MeasuredCurrentLimitA();
+  auto drawn = tables::BuildTable(*cal, gen->limits.limits, page);
+  ASSERT_TRUE(drawn.ok()) << drawn.status();
+  ASSERT_EQ(drawn->outputs[2].name, "torque_nm");
+  EXPECT_EQ(gen->table.outputs[2].values, drawn->outputs[2].values);
+  const auto& tg = gen->table.outputs[2].values;
+  const auto& tm = mot->table.outputs[2].values;
+  for (double t : tg) EXPECT_LE(t, 0.0);
+  EXPECT_NEAR(-tg[0], tm[0], 1e-9 * tm[0]);
+  EXPECT_NE(gen->exported.bytes.find("KENNLINIE FLUXCAL_ENVELOPE_GENERATING_TORQUE_NM "), std::string::npos);
+  EXPECT_NE(mot->exported.bytes.find("KENNLINIE FLUXCAL_ENVELOPE_TORQUE_NM "), std::string::npos);
+  // Refused before the store is read: with another table, and an axis
+  // with a Udc.
+  spec.kind = "fw";
+  auto bad = ExportTable(**store, "IPM-NONE", 0, spec, rpc, "csv");
+  ASSERT_FALSE(bad.ok());
+  EXPECT_EQ(bad.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(bad.status().message().rfind("generating: ", 0), 0u) << bad.status();
+  spec.kind = "envelope";
+  auto both = ExportTableOverUdc(**store, "IPM-V", 0, spec, at60, {40, 60}, "csv");
+  ASSERT_FALSE(both.ok());
+  EXPECT_EQ(both.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(both.status().message().find("udc_axis_v"), std::string::npos) << both.status();
 }
 
 TEST(Pipeline, LocalAndStoredExportsAreOnePath) {

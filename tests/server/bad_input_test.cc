@@ -382,6 +382,25 @@ std::vector<Case> Cases() {
     add("ExportTable udc_v " + std::to_string(v), exp([v](auto* q) { q->set_udc_v(v); }));
   }
   add("ExportTable table xyz", exp([](auto* q) { q->set_table("xyz"); }));
+  add("ExportTable generating fw", exp([](auto* q) { q->set_table("fw"); q->set_generating(true); }));
+  add("ExportTable generating mtpa", exp([](auto* q) { q->set_generating(true); }));
+  for (double v : {-1.0, 0.0, kNaN, kInf, -kInf, 1e9, -1e-300}) {
+    add("ExportTable udc_axis_v " + std::to_string(v),
+        exp([v](auto* q) { q->set_table("envelope"); q->add_udc_axis_v(40); q->add_udc_axis_v(v); }));
+  }
+  add("ExportTable udc_axis_v 33 voltages", exp([](auto* q) {
+        q->set_table("envelope");
+        for (int k = 0; k < 33; ++k) q->add_udc_axis_v(40 + k);
+      }));
+  add("ExportTable udc_axis_v 100000 voltages", exp([](auto* q) {
+        for (int k = 0; k < 100000; ++k) q->add_udc_axis_v(40 + k);
+      }));
+  add("ExportTable udc_axis_v decreasing", exp([](auto* q) { q->set_table("envelope"); q->add_udc_axis_v(60); q->add_udc_axis_v(40); }));
+  add("ExportTable udc_axis_v same label", exp([](auto* q) { q->set_table("envelope"); q->add_udc_axis_v(40); q->add_udc_axis_v(40.0000001); }));
+  add("ExportTable udc_axis_v with udc_v", exp([](auto* q) { q->set_table("envelope"); q->add_udc_axis_v(40); q->set_udc_v(50); }));
+  add("ExportTable udc_axis_v fw too many cells", exp([](auto* q) {
+        q->set_table("fw"); q->set_points(1024); q->set_speed_points(64); q->add_udc_axis_v(40); q->add_udc_axis_v(50);
+      }));
   add("ExportTable format exe", exp([](auto* q) { q->set_format("exe"); }));
   add("ExportTable version -1", exp([](auto* q) { q->set_version(-1); }));
   add("ExportTable version 999", exp([](auto* q) { q->set_version(999); }));

@@ -56,6 +56,19 @@ def main():
         e = stub.ExportTable(pb.ExportTableRequest(serial="IPM-PY-1", table="mtpa", format="json", points=8),
                              timeout=60)
         assert len(e.sha256) == 64 and b'"kind": "mtpa"' in e.data, e.crc32
+        # A Udc axis: one table per voltage in udc_tables, named as the CLI names its files.
+        ax = stub.ExportTable(pb.ExportTableRequest(serial="IPM-PY-1", table="mtpa", format="json", points=8,
+                                                    udc_axis_v=[40.0, 62.5]), timeout=60)
+        assert [t.udc_v for t in ax.udc_tables] == [40.0, 62.5] and not ax.data, ax
+        assert ax.udc_tables[1].file_name == "IPM-PY-1_mtpa_udc62p5v.json", ax.udc_tables[1].file_name
+        assert all(len(t.sha256) == 64 and b'"kind": "mtpa"' in t.data for t in ax.udc_tables)
+        for bad, field in ((dict(table="mtpa", generating=True), "generating"),
+                           (dict(table="mtpa", udc_axis_v=[40.0, float("nan")]), "udc_axis_v[1]")):
+            try:
+                stub.ExportTable(pb.ExportTableRequest(serial="IPM-PY-1", **bad), timeout=30)
+                raise AssertionError("expected INVALID_ARGUMENT for %s" % field)
+            except grpc.RpcError as err:
+                assert err.code() == grpc.StatusCode.INVALID_ARGUMENT and field in err.details(), err
         try:
             stub.Fit(pb.FitRequest(serial="IPM-PY-NONE"), timeout=30)
             raise AssertionError("expected NOT_FOUND")

@@ -16,11 +16,15 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <functional>
+#include <limits>
+#include <sstream>
 #include <thread>
 
 #include <grpcpp/grpcpp.h>
 
 #include "gtest/gtest.h"
+#include "absl/strings/ascii.h"
 #include "absl/strings/str_cat.h"
 #include "io/csv.h"
 #include "nlohmann/json.hpp"
@@ -524,6 +528,160 @@ TEST_P(ServiceTest, EightConcurrentStationsThenFitExportQuery) {
   v1::ExportTableResponse sr;
   ASSERT_TRUE(stub_->ExportTable(&sc, e, &sr).ok());
   EXPECT_TRUE(tables::VerifyDetached(sr.data(), sr.signature(), kp->public_pem).ok()) << sr.signature();
+}
+
+// A file's bytes without the lines that name the moment it was written.
+std::string WithoutCreatedUtc(const std::string& bytes) {
+  std::string out;
+  for (size_t at = 0; at < bytes.size();) {
+    size_t end = bytes.find('\n', at);
+    end = end == std::string::npos ? bytes.size() : end + 1;
+    if (bytes.substr(at, end - at).find("created_utc") == std::string::npos) out += bytes.substr(at, end - at);
+    at = end;
+  }
+  return out;
+}
+
+// ExportTable over a Udc axis (udc_axis_v): one table per voltage in the
+// reply, each the single export at that udc_v (the same CSV bytes but for
+// the time written, the same payload checksums), labels tagged, file names
+// suggested, signed each, nothing written on the server; the generating
+// envelope (generating) with labels of its own; bad axes and the flag
+// with another table refused with INVALID_ARGUMENT naming the field.
+TEST_P(ServiceTest, ExportTableOverAUdcAxisAndTheGeneratingEnvelope) {
+  v1::IngestHfResultsResponse ir;
+  ASSERT_TRUE(Ingest("IPM-AX", GridPoints(), &ir).ok());
+  {
+    grpc::ClientContext fc;
+    v1::FitRequest f;
+    f.set_serial("IPM-AX");
+    v1::FitResponse fr;
+    ASSERT_TRUE(stub_->Fit(&fc, f, &fr).ok());
+  }
+  auto kp = tables::GenerateEd25519();
+  ASSERT_TRUE(kp.ok());
+  service_->set_signing_key(kp->private_pem);
+  v1::ExportTableRequest e;
+  e.set_serial("IPM-AX");
+  e.set_table("envelope");
+  e.set_format("csv");
+  e.set_speed_points(8);
+  e.set_allow_clamped(true);
+  const std::vector<double> udcs = {40, 50, 62.5};
+  for (const bool generating : {false, true}) {
+    SCOPED_TRACE(generating ? "generating" : "motoring");
+    for (const char* format : {"csv", "dcm"}) {
+      v1::ExportTableRequest q = e;
+      q.set_generating(generating);
+      q.set_format(format);
+      for (double u : udcs) q.add_udc_axis_v(u);
+      grpc::ClientContext c;
+      v1::ExportTableResponse r;
+      const grpc::Status st = stub_->ExportTable(&c, q, &r);
+      ASSERT_TRUE(st.ok()) << st.error_message();
+      ASSERT_EQ(r.udc_tables_size(), 3);
+      EXPECT_TRUE(r.data().empty());
+      EXPECT_EQ(r.version(), 1);
+      EXPECT_FALSE(r.verdict().empty());
+      int cells = 0;
+      for (int k = 0; k < 3; ++k) {
+        const v1::ExportedUdcTable& t = r.udc_tables(k);
+        EXPECT_EQ(t.udc_v(), udcs[k]);
+        cells += t.cells();
+        const std::string gen = generating ? "_generating" : "";
+        const std::string tag = k == 2 ? "udc62p5v" : absl::StrCat("udc", static_cast<int>(udcs[k]), "v");
+        EXPECT_EQ(t.file_name(), absl::StrCat("IPM-AX_envelope", gen, "_", tag, ".", format));
+        EXPECT_EQ(t.label_tag(), (generating ? "generating_" : "") + tag);
+        EXPECT_FALSE(fs::exists(t.file_name())) << "the service wrote " << t.file_name();
+        EXPECT_FALSE(fs::exists(fs::temp_directory_path() / t.file_name()));
+        EXPECT_TRUE(tables::VerifyDetached(t.data(), t.signature(), kp->public_pem).ok());
+        v1::ExportTableRequest one = e;
+        one.set_generating(generating);
+        one.set_format(format);
+        one.set_udc_v(udcs[k]);
+        grpc::ClientContext c1;
+        v1::ExportTableResponse r1;
+        ASSERT_TRUE(stub_->ExportTable(&c1, one, &r1).ok());
+        EXPECT_EQ(t.crc32(), r1.crc32());
+        EXPECT_EQ(t.sha256(), r1.sha256());
+        EXPECT_EQ(t.cells(), r1.cells());
+        EXPECT_EQ(t.clamped_cells(), r1.clamped_cells());
+        if (std::string(format) == "csv") {
+          EXPECT_EQ(WithoutCreatedUtc(t.data()), WithoutCreatedUtc(r1.data())) << udcs[k] << " V";
+        } else {
+          const std::string label = absl::StrCat("KENNLINIE FLUXCAL_ENVELOPE_", generating ? "GENERATING_" : "",
+                                                 absl::AsciiStrToUpper(tag), "_TORQUE_NM ");
+          EXPECT_NE(t.data().find(label), std::string::npos) << label;
+          const std::string single = absl::StrCat("KENNLINIE FLUXCAL_ENVELOPE_", generating ? "GENERATING_" : "",
+                                                  "TORQUE_NM ");
+          EXPECT_NE(r1.data().find(single), std::string::npos) << single;
+        }
+        if (generating && std::string(format) == "csv") {
+          // Torque <= 0 in every row; at standstill the motoring limit
+          // mirrored (the fitted model is symmetric in iq).
+          v1::ExportTableRequest m = one;
+          m.set_generating(false);
+          grpc::ClientContext c2;
+          v1::ExportTableResponse rm;
+          ASSERT_TRUE(stub_->ExportTable(&c2, m, &rm).ok());
+          auto rows = [](const std::string& csv) {
+            std::vector<std::vector<double>> v;
+            std::istringstream in(csv);
+            std::string line;
+            bool header = true;
+            while (std::getline(in, line)) {
+              if (line.empty() || line[0] == '#') continue;
+              if (header) { header = false; continue; }
+              std::vector<double> row;
+              std::istringstream cells(line);
+              for (std::string cell; std::getline(cells, cell, ',');) row.push_back(std::stod(cell));
+              v.push_back(row);
+            }
+            return v;
+          };
+          const auto g = rows(t.data()), mo = rows(rm.data());
+          ASSERT_EQ(g.size(), mo.size());
+          ASSERT_FALSE(g.empty());
+          for (const auto& row : g) EXPECT_LE(row[3], 0.0) << "torque_nm at " << row[0] << " rpm";
+          EXPECT_NEAR(-g[0][3], mo[0][3], 1e-9 * mo[0][3]);
+        }
+      }
+      EXPECT_EQ(r.cells(), cells);
+    }
+  }
+  service_->set_signing_key("");
+  // Refused, naming the field, before any table is computed.
+  auto refused = [&](std::function<void(v1::ExportTableRequest*)> set, const std::string& field) {
+    v1::ExportTableRequest q = e;
+    set(&q);
+    grpc::ClientContext c;
+    v1::ExportTableResponse r;
+    const grpc::Status st = stub_->ExportTable(&c, q, &r);
+    EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << field << ": " << st.error_message();
+    EXPECT_NE(st.error_message().find(field), std::string::npos) << st.error_message();
+    EXPECT_EQ(r.udc_tables_size(), 0);
+  };
+  refused([](auto* q) { for (int k = 0; k < 33; ++k) q->add_udc_axis_v(100 + 10 * k); }, "udc_axis_v");
+  refused([](auto* q) { q->add_udc_axis_v(40); q->add_udc_axis_v(std::nan("")); }, "udc_axis_v[1]");
+  refused([](auto* q) { q->add_udc_axis_v(std::numeric_limits<double>::infinity()); }, "udc_axis_v[0]");
+  refused([](auto* q) { q->add_udc_axis_v(-40); }, "udc_axis_v[0]");
+  refused([](auto* q) { q->add_udc_axis_v(0); }, "udc_axis_v[0]");
+  refused([](auto* q) { q->add_udc_axis_v(6000); }, "udc_axis_v[0]");
+  refused([](auto* q) { q->add_udc_axis_v(60); q->add_udc_axis_v(40); }, "udc_axis_v");
+  refused([](auto* q) { q->add_udc_axis_v(40); q->set_udc_v(50); }, "udc_axis_v");
+  refused([](auto* q) { q->set_table("fw"); q->set_generating(true); }, "generating");
+  refused([](auto* q) { q->set_table("mtpa"); q->set_generating(true); }, "generating");
+  {
+    // The maps of an axis together no larger than one map may be.
+    v1::ExportTableRequest q = e;
+    q.set_table("fw");
+    q.set_points(1024);
+    q.set_speed_points(64);
+    for (double u : udcs) q.add_udc_axis_v(u);
+    grpc::ClientContext c;
+    v1::ExportTableResponse r;
+    ExpectStatus(stub_->ExportTable(&c, q, &r), grpc::StatusCode::RESOURCE_EXHAUSTED, "udc_axis_v");
+  }
 }
 
 // A raw recording streamed in chunks is validated, identified, stored by
@@ -1298,6 +1456,72 @@ TEST(ReportCli, WritesThePageTheServiceBuilt) {
   // An unknown serial fails and writes nothing.
   EXPECT_EQ(Fluxcal("report IPM-NOPE --server " + addr + " --out " + dir + "/nope.html").first, 1);
   EXPECT_FALSE(fs::exists(dir + "/nope.html"));
+
+  stub.reset();
+  StopServe(serve);
+  fs::remove_all(dir);
+}
+
+// `fluxcal export SERIAL --server ADDR` with --udc-axis-v (ExportTable
+// udc_axis_v) and --generating: one file per Udc named as the local axis
+// names them, each the reply's bytes, the same payload as the single
+// remote export at that --udc-v; the refusals are usage errors (exit 2)
+// that write nothing.
+TEST(ExportCli, UdcAxisAndTheGeneratingEnvelopeOverTheService) {
+  const std::string dir = TempPath("exportcli");
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const ServeChild serve = StartServe(dir + "/store.db");
+  ASSERT_TRUE(serve.port > 0) << "no free loopback port";
+  const std::string& addr = serve.addr;
+  auto stub = v1::CalibrationService::NewStub(grpc::CreateChannel(addr, grpc::InsecureChannelCredentials()));
+  ASSERT_TRUE(WaitUntilUp(stub.get())) << "fluxcal serve did not come up on " << addr;
+  {
+    grpc::ClientContext c;
+    v1::IngestHfResultsResponse r;
+    auto w = stub->IngestHfResults(&c, &r);
+    v1::IngestHfResultsRequest m;
+    m.set_serial("IPM-CLI-AX");
+    m.mutable_motor()->set_pole_pairs(4);
+    m.mutable_motor()->set_rs_ohm(0.011);
+    m.mutable_motor()->set_psi_pm_wb(0.0114);
+    for (const auto& p : GridPoints()) *m.add_points() = p;
+    w->Write(m);
+    w->WritesDone();
+    ASSERT_TRUE(w->Finish().ok());
+    grpc::ClientContext fc;
+    v1::FitRequest f;
+    f.set_serial("IPM-CLI-AX");
+    v1::FitResponse fr;
+    ASSERT_TRUE(stub->Fit(&fc, f, &fr).ok());
+  }
+  const std::string common = "export IPM-CLI-AX --server " + addr + " --table envelope --generating --format dcm "
+                             "--speed-points 8 --rs-ohm 0.011 --allow-clamped";
+  auto j = JsonOf(Fluxcal(common + " --udc-axis-v 40,62.5 --out " + dir + "/env.dcm --json"));
+  ASSERT_EQ(j["files"].size(), 2u);
+  EXPECT_EQ(j["generating"], true);
+  const std::vector<std::string> names = {"env_udc40v.dcm", "env_udc62p5v.dcm"};
+  const std::vector<std::string> udcs = {"40", "62.5"};
+  for (size_t k = 0; k < 2; ++k) {
+    const std::string path = dir + "/" + names[k];
+    EXPECT_EQ(j["files"][k]["out"], path);
+    std::ifstream f(path, std::ios::binary);
+    const std::string written((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+    EXPECT_EQ(j["files"][k]["sha256"], io::Sha256Hex(written));
+    EXPECT_NE(written.find("KENNLINIE FLUXCAL_ENVELOPE_GENERATING_" + std::string(k ? "UDC62P5V" : "UDC40V") +
+                           "_TORQUE_NM "), std::string::npos);
+    auto one = JsonOf(Fluxcal(common + " --udc-v " + udcs[k] + " --out " + dir + "/one" + std::to_string(k) +
+                              ".dcm --json"));
+    EXPECT_EQ(j["files"][k]["payload_sha256"], one["payload_sha256"]) << udcs[k] << " V";
+  }
+  // The overwrite rule covers every file of the axis; the usage errors.
+  EXPECT_EQ(Fluxcal(common + " --udc-axis-v 40,62.5 --out " + dir + "/env.dcm").first, 1);
+  EXPECT_EQ(Fluxcal(common + " --udc-axis-v 40,62.5 --udc-v 50 --out " + dir + "/x.dcm").first, 2);
+  EXPECT_EQ(Fluxcal(common + " --udc-axis-v 40,nan --out " + dir + "/x.dcm").first, 2);
+  EXPECT_EQ(Fluxcal(common + " --udc-axis-v 40,62.5 --out -").first, 2);
+  EXPECT_EQ(Fluxcal("export IPM-CLI-AX --server " + addr + " --table fw --generating --out " + dir + "/x.dcm").first, 2);
+  EXPECT_FALSE(fs::exists(dir + "/x.dcm"));
+  EXPECT_FALSE(fs::exists(dir + "/x_udc40v.dcm"));
 
   stub.reset();
   StopServe(serve);

@@ -284,6 +284,26 @@ TEST(A2lExport, UdcAxisTablesCrossCheckUnderTheirTaggedLabels) {
   }
 }
 
+// The generating envelope (--generating): the strict reader takes its A2L,
+// which matches its C header, CDFX and DCM under labels of its own
+// (FLUXCAL_ENVELOPE_GENERATING_*), none of them a motoring label.
+TEST(A2lExport, GeneratingEnvelopeCrossChecksUnderItsOwnLabels) {
+  TableSpec spec;
+  spec.kind = "envelope";
+  spec.speed_points = 7;
+  spec.envelope_generating = true;
+  auto b = BuildExportTable(Twin(), spec, {});
+  ASSERT_TRUE(b.ok()) << b.status();
+  for (CType ct : {CType::kDouble, CType::kInt16, CType::kInt32, CType::kFloat}) CrossCheck(b->table, ct);
+  auto e = Export(b->table, Format::kA2l);
+  ASSERT_TRUE(e.ok());
+  auto file = ar::ReadA2l(e->bytes);
+  ASSERT_TRUE(file.ok()) << file.status();
+  const auto& mod = file->modules[0];
+  EXPECT_NE(mod.FindCharacteristic("FLUXCAL_ENVELOPE_GENERATING_TORQUE_NM"), nullptr);
+  EXPECT_EQ(mod.FindCharacteristic("FLUXCAL_ENVELOPE_TORQUE_NM"), nullptr);
+}
+
 // Fixed point: the COMPU_METHODs are RAT_FUNC with the LSB the header
 // states; floating: IDENTICAL.
 TEST(A2lExport, ConversionsFollowTheRepresentation) {

@@ -329,6 +329,105 @@ TEST(UdcAxis, HeadersOfEveryUdcCompileIntoOneUnit) {
   EXPECT_NE((*axis)[0].table.outputs[0].values, (*axis)[1].table.outputs[0].values);
 }
 
+// The generating envelope (TableSpec::envelope_generating, `fluxcal export
+// --table envelope --generating`): the limit with torque and power <= 0, at
+// standstill the motoring limit's magnitude on a model symmetric in iq
+// (there is no voltage drop to tell the directions apart), at speed at least
+// the motoring one (the resistive drop helps when generating), its operating
+// points the motoring ones mirrored in iq at standstill; labels of its own,
+// so that both headers compile into one unit; any other table refuses the
+// flag, naming it.
+TEST(Envelope, GeneratingIsTheNegativeLimitUnderLabelsOfItsOwn) {
+  const fit::Calibration cal = TwinCalibration(50.0, sim::MotorParams().rs_ohm);
+  TableSpec spec = EnvelopeSpec(8000, 17);
+  ExportRequest req;
+  req.allow_clamped = true;
+  auto mot = BuildExportTable(cal, spec, req);
+  spec.envelope_generating = true;
+  auto gen = BuildExportTable(cal, spec, req);
+  ASSERT_TRUE(mot.ok() && gen.ok()) << mot.status() << gen.status();
+  const Table &m = mot->table, &g = gen->table;
+  EXPECT_FALSE(m.envelope_generating);
+  EXPECT_TRUE(g.envelope_generating);
+  ASSERT_EQ(m.axes[0].values, g.axes[0].values);
+  const auto &tm = Out(m, "torque_nm"), &tg = Out(g, "torque_nm"), &pg = Out(g, "power_w");
+  const auto &iqm = Out(m, "iq_a"), &iqg = Out(g, "iq_a"), &idm = Out(m, "id_a"), &idg = Out(g, "id_a");
+  size_t torque = 0;
+  for (size_t k = 0; k < tg.size(); ++k) {
+    EXPECT_LE(tg[k], 0.0) << k;
+    EXPECT_LE(pg[k], 0.0) << k;
+    EXPECT_FALSE(std::signbit(pg[k]) && pg[k] == 0) << "power -0 at " << g.axes[0].values[k] << " rpm";
+    if (!g.clamped[k]) {
+      ++torque;
+      EXPECT_LT(iqg[k], 0.0) << k;
+      // 1e-6 relative: each limit is solved to 1e-9 of its value.
+      EXPECT_GE(-tg[k], tm[k] * (1 - 1e-6)) << g.axes[0].values[k] << " rpm: generating below motoring";
+    }
+  }
+  EXPECT_GT(torque, tg.size() / 2);
+  // Standstill: the mirror image of the motoring limit.
+  EXPECT_NEAR(-tg[0], tm[0], 1e-9 * tm[0]);
+  EXPECT_NEAR(idg[0], idm[0], 1e-6);
+  EXPECT_NEAR(iqg[0], -iqm[0], 1e-6);
+  // A motoring-only bench: the generating points rest on the mirror image.
+  EXPECT_TRUE(std::any_of(g.by_symmetry.begin(), g.by_symmetry.end(), [](uint8_t b) { return b; }));
+  EXPECT_EQ(Label(m, "torque_nm"), "FLUXCAL_ENVELOPE_TORQUE_NM");
+  EXPECT_EQ(Label(g, "torque_nm"), "FLUXCAL_ENVELOPE_GENERATING_TORQUE_NM");
+  for (Format f : {Format::kCsv, Format::kJson, Format::kCHeader, Format::kCdfx, Format::kDcm, Format::kA2l}) {
+    auto e = Export(g, f);
+    ASSERT_TRUE(e.ok()) << e.status();
+    EXPECT_NE(e->bytes.find(f == Format::kJson ? "\"generating\"" : "envelope (generating)"), std::string::npos)
+        << "format " << static_cast<int>(f);
+  }
+  // The sign is stated in the file: torque_sign -1 (motoring +1).
+  auto dm = Export(m, Format::kDcm), dg = Export(g, Format::kDcm);
+  ASSERT_TRUE(dm.ok() && dg.ok());
+  EXPECT_NE(dm->bytes.find("FESTWERT FLUXCAL_ENVELOPE_TORQUE_SIGN\n"), std::string::npos);
+  EXPECT_NE(dg->bytes.find("FESTWERT FLUXCAL_ENVELOPE_GENERATING_TORQUE_SIGN\n"), std::string::npos);
+  EXPECT_EQ(dg->bytes.find("FLUXCAL_ENVELOPE_TORQUE"), std::string::npos) << "a motoring label in the generating file";
+  // Over a Udc axis: both tags.
+  spec.speed_max_rpm = 6000;
+  auto axis = BuildExportTablesOverUdc(cal, spec, req, {40, 62.5});
+  ASSERT_TRUE(axis.ok()) << axis.status();
+  EXPECT_EQ(Label((*axis)[1].table, "torque_nm"), "FLUXCAL_ENVELOPE_GENERATING_UDC62P5V_TORQUE_NM");
+  ExportRequest one = req;
+  one.udc_v = 62.5;
+  auto single = BuildExportTable(cal, spec, one);
+  ASSERT_TRUE(single.ok()) << single.status();
+  EXPECT_EQ(Out((*axis)[1].table, "torque_nm"), Out(single->table, "torque_nm"));
+  // Only the envelope takes the flag.
+  for (const char* kind : {"mtpa", "mtpv", "fw"}) {
+    TableSpec bad = spec;
+    bad.kind = kind;
+    auto r = BuildExportTable(cal, bad, req);
+    ASSERT_FALSE(r.ok()) << kind;
+    EXPECT_EQ(r.status().code(), absl::StatusCode::kInvalidArgument);
+    EXPECT_EQ(r.status().message().rfind("flag --generating: only with --table envelope", 0), 0u) << r.status();
+    ExportRequest rpc = req;
+    rpc.names_flags = false;
+    EXPECT_EQ(CheckExportSpec(bad, rpc).message().rfind("generating: only with table envelope", 0), 0u);
+  }
+  // Side by side in one ECU build: both headers in one C unit.
+  if (std::system("cc --version > /dev/null 2>&1") != 0) GTEST_SKIP() << "no C compiler (cc)";
+  const std::string dir = ::testing::TempDir() + "/fluxcal_generating_h";
+  ASSERT_EQ(std::system(("mkdir -p " + dir).c_str()), 0);
+  std::string prog = "#include <stdio.h>\n#include \"m.h\"\n#include \"g.h\"\nint main(void) {\n";
+  for (const auto& [t, name] : {std::pair<const Table*, const char*>{&m, "m"}, {&g, "g"}}) {
+    auto h = Export(*t, Format::kCHeader, ExportOptions{});
+    ASSERT_TRUE(h.ok()) << h.status();
+    std::ofstream(dir + "/" + name + ".h") << h->bytes;
+    prog += "  printf(\"%.17g\\n\", " + CSymbol(*t, "torque_nm") + "[0]);\n";
+  }
+  prog += "  return 0;\n}\n";
+  std::ofstream(dir + "/main.c") << prog;
+  const std::string cmd = "cd " + dir + " && cc -std=c99 -pedantic -Wall -Wextra -Werror main.c -o main && ./main > out.txt";
+  ASSERT_EQ(std::system(cmd.c_str()), 0) << "the motoring and generating headers do not compile together; see " << dir;
+  std::ifstream out(dir + "/out.txt");
+  std::vector<double> got;
+  for (double x; out >> x;) got.push_back(x);
+  EXPECT_EQ(got, (std::vector<double>{tm[0], tg[0]}));
+}
+
 TEST(MagnetTemperature, RefusedWithoutTheCalibrationsCoefficient) {
   const fit::Calibration cal = TwinCalibration(50.0, sim::MotorParams().rs_ohm);
   TableSpec spec;
