@@ -23,6 +23,7 @@
 #include "pipeline/facts.h"
 #include "pipeline/ingest_stream.h"
 #include "pipeline/report.h"
+#include "simulation/trait_motor.h"
 #include "simulation/twin.h"
 #include "storage/sqlite.h"
 #include "tests/support/pg_cluster.h"
@@ -645,6 +646,62 @@ TEST(Pipeline, IdentifiedPointsFeedTheFitUnchanged) {
     EXPECT_EQ(o.hf_flux_radius_wb, data->inductances[k].hf_flux_radius_wb);
     EXPECT_NEAR(*o.hf_flux_radius_wb, 5.0 / (2 * 3.14159265358979 * 500), 0.05e-3);
     EXPECT_EQ(FromProto(ToProto(ids->points[k])).hf_flux_radius_wb, ids->points[k].hf_flux_radius_wb);
+  }
+}
+
+// The stored path fits as the local one does: a machine whose injection
+// sweeps a knee (the bridge-knee trait motor), its identified points sent
+// with their flux radius, stored and fitted, gives the calibration the
+// same points give locally, and both kept the large-signal HF model
+// (docs/fitting.md, "Large-signal HF").
+TEST(Pipeline, StoredFitPredictsTheInjectionAsTheLocalFit) {
+  sim::MotorTraits bridge;
+  for (const auto& t : sim::RealLikeMotors(100.0, 0.15)) {
+    if (t.name == "ipm-bridge") bridge = t;
+  }
+  ASSERT_EQ(bridge.name, "ipm-bridge");
+  sim::TwinConfig cfg;
+  cfg.seed = 31;
+  cfg.serial = "IPM-KNEE";
+  cfg.motor.sat.psi_pm_wb = bridge.psi_pm_wb;
+  cfg.magnetics = std::make_shared<sim::TraitMotor>(bridge);
+  cfg.control.gain_scheduled = true;
+  auto r = sim::Simulate(cfg, sim::DefaultPlan());
+  ASSERT_TRUE(r.ok()) << r.status();
+  auto ids = IdentifySet(r->set);
+  ASSERT_TRUE(ids.ok());
+  const MotorNominal motor{r->set.manifest.motor.pole_pairs, *r->set.manifest.motor.rs_ohm,
+                           *r->set.manifest.motor.psi_pm_wb};
+  // Over the wire and into the store.
+  std::vector<IdentifiedPoint> sent;
+  for (const auto& p : ids->points) sent.push_back(FromProto(ToProto(p)));
+  auto store = storage::Store::Open(":memory:");
+  ASSERT_TRUE(store.ok());
+  ASSERT_TRUE(IngestHfRun(**store, "IPM-KNEE", "st", motor, sent).ok());
+  auto row = FitSerial(**store, "IPM-KNEE", "auto", {});
+  ASSERT_TRUE(row.ok()) << row.status();
+  auto stored = ParseStoredCalibration(*row);
+  ASSERT_TRUE(stored.ok()) << stored.status();
+  // Locally: the same points, the manifest's facts.
+  fit::FitData local_data;
+  local_data.serial = "IPM-KNEE";
+  local_data.pole_pairs = motor.pole_pairs;
+  local_data.rs_ohm = motor.rs_ohm;
+  local_data.psi_pm_prior_wb = motor.psi_pm_wb;
+  for (const auto& p : ids->points) local_data.inductances.push_back(ToObservation(p));
+  auto local = fit::Fit(local_data, {});
+  ASSERT_TRUE(local.ok()) << local.status();
+  for (const fit::Calibration* c : {&*stored, &*local}) {
+    ASSERT_FALSE(c->summary.candidates.empty());
+    EXPECT_NE(c->summary.candidates.back().find("large-signal kept"), std::string::npos)
+        << c->summary.candidates.back();
+  }
+  for (double id : {-80.0, -40.0, 0.0}) {
+    for (double iq : {10.0, 40.0, 90.0}) {
+      const auto a = stored->Flux(id, iq), b = local->Flux(id, iq);
+      EXPECT_NEAR(a.psi_d_wb, b.psi_d_wb, 1e-9) << id << ", " << iq;
+      EXPECT_NEAR(a.psi_q_wb, b.psi_q_wb, 1e-9) << id << ", " << iq;
+    }
   }
 }
 
