@@ -19,6 +19,9 @@ constexpr double kTwoPi = 2.0 * std::numbers::pi;
 // The relative standard error of Ldd or Lqq beyond which a point is
 // flagged low_snr (its 2-sigma band wider than 1 %).
 constexpr double kLowPrecisionRelStd = 0.005;
+// The share of the smaller inductance beyond which the paper method's
+// neglect of Ldq is flagged (ldq_neglected).
+constexpr double kLdqNeglectedShare = 0.01;
 
 // Residual power at other harmonics of the injection (-w_i, +-3 w_i, +-5 w_i)
 // relative to |I0|^2: distortion such as dead time or sensor gain errors.
@@ -102,6 +105,7 @@ absl::StatusOr<HfPointResult> IdentifyPoint(const io::RecordingSet& set, size_t 
   r.residual_rms_a = lsq->residual_rms_a;
 
   PhasorEstimate est = *lsq;
+  bool ldq_neglected = false;   // paper method only (below)
   if (options.method == Method::kPaper) {
     auto paper = PaperDemodulate(s, options.compensate_delay_filters);
     if (!paper.ok()) return prefix(paper.status());
@@ -113,6 +117,22 @@ absl::StatusOr<HfPointResult> IdentifyPoint(const io::RecordingSet& set, size_t 
     r.ld_h = L->ldd_h; r.lq_h = L->lqq_h;
     r.ld_h_std = L->ldd_h_std; r.lq_h_std = L->lqq_h_std;
     r.has_ldq = false;
+    // The paper's eq. (8) takes |I1| for (Ldd - Lqq)/2, i.e. it assumes
+    // Ldq = 0: with D = (Ldd - Lqq)/2 + j Ldq its values are S +- |D|, each
+    // off by |D| - |Re D|. The LSQ solve of the same point measures Ldq;
+    // where that bias exceeds kLdqNeglectedShare of the smaller inductance
+    // the point says so (machines with cross saturation: 15-43 % on the
+    // measured-magnetics benches of issue 27, a property of the method).
+    auto full = InductanceFromPhasors(lsq->i0_a, lsq->i1_a, v_eff, wi, lsq->w_e_rad_s,
+                                      {lsq->var_i0_a2, lsq->var_i1_a2, lsq->cov_i0_i1_a2});
+    if (full.ok()) {
+      const double half_diff = 0.5 * (full->ldd_h - full->lqq_h);
+      const double bias = std::hypot(half_diff, full->ldq_h) - std::abs(half_diff);
+      const double smaller = std::min(std::abs(full->ldd_h), std::abs(full->lqq_h));
+      if (smaller > 0 && bias > kLdqNeglectedShare * smaller && std::abs(full->ldq_h) > 3 * full->ldq_h_std) {
+        ldq_neglected = true;
+      }
+    }
   } else {
     auto L = InductanceFromPhasors(est.i0_a, est.i1_a, v_eff, wi, lsq->w_e_rad_s,
                                    {est.var_i0_a2, est.var_i1_a2, est.cov_i0_i1_a2});
@@ -179,6 +199,7 @@ absl::StatusOr<HfPointResult> IdentifyPoint(const io::RecordingSet& set, size_t 
   const double rel_std = std::max(r.ld_h_std / std::abs(r.ld_h), r.lq_h_std / std::abs(r.lq_h));
   if (!(rel_std <= kLowPrecisionRelStd)) r.flags.push_back("low_snr");
   if (r.harmonic_ratio > 1e-3) r.flags.push_back("harmonic_distortion");
+  if (ldq_neglected) r.flags.push_back("ldq_neglected");
   r.reliable = r.flags.empty();
   return r;
 }
