@@ -65,6 +65,12 @@ int RunIdentify(const std::vector<std::string>& argv) {
                           {"snr_db", r.snr_db}, {"harmonic_ratio", r.harmonic_ratio},
                           {"near_zero_fraction", r.near_zero_fraction},
                           {"reliable", r.reliable}, {"flags", r.flags}};
+      // The injection's flux radius, Wb (docs/fitting.md, "Large-signal
+      // HF"): what a station sends with the point so that a stored fit
+      // predicts it as the injection measured it; null without a rotating
+      // injection in the manifest.
+      const auto radius = pipeline::InjectionFluxRadiusWb(set->manifest, r);
+      p["hf_flux_radius_wb"] = radius ? nlohmann::json(*radius) : nlohmann::json(nullptr);
       if (r.has_ldq) {
         p["ldq_h"] = r.ldq_h; p["ldq_h_std"] = r.ldq_h_std;
         p["r_hf_ohm"] = r.r_hf_ohm; p["r_hf_ohm_std"] = r.r_hf_ohm_std;

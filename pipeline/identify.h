@@ -7,6 +7,7 @@
 #ifndef FLUXCAL_PIPELINE_IDENTIFY_H_
 #define FLUXCAL_PIPELINE_IDENTIFY_H_
 
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -19,6 +20,12 @@ namespace fluxcal::pipeline {
 // "paper" or "lsq"; InvalidArgument naming the ones there are.
 absl::StatusOr<ident::Method> ParseIdentifyMethod(const std::string& name);
 const char* IdentifyMethodName(ident::Method method);
+
+// The flux radius of a point's rotating injection, Wb (docs/fitting.md,
+// "Large-signal HF"; unset without a rotating injection in the manifest):
+// what IdentifySet (points.h) puts on each point, `fluxcal identify --json`
+// reports and the EOL client sends.
+std::optional<double> InjectionFluxRadiusWb(const io::Manifest& manifest, const ident::HfPointResult& result);
 
 // Every point of `set`, identified (failed points included, flagged).
 absl::StatusOr<std::vector<ident::HfPointResult>> IdentifyEveryPoint(const io::RecordingSet& set,

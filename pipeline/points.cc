@@ -6,6 +6,7 @@
 #include <cmath>
 
 #include "absl/strings/str_cat.h"
+#include "pipeline/identify.h"
 
 namespace fluxcal::pipeline {
 
@@ -60,7 +61,7 @@ absl::StatusOr<IdentifiedSet> IdentifySet(const io::RecordingSet& set, const ide
   for (const auto& r : out.results) {
     IdentifiedPoint p;
     if (FromIdentification(r, &p)) {
-      p.hf_flux_radius_wb = fit::HfFluxRadiusOf(set.manifest, r);
+      p.hf_flux_radius_wb = InjectionFluxRadiusWb(set.manifest, r);
       out.points.push_back(std::move(p));
     } else {
       out.failures.push_back(absl::StrCat(r.point, ": ", r.failure));
