@@ -45,9 +45,9 @@ struct MotorRow {
   std::string created_utc;   // set by the store
 };
 
-// One identified HF point as stored (the project's identified-point type;
-// converters from/to identification, fitting and protobuf live in
-// pipeline/points.h and server/service.cc).
+// One identified HF point as stored (the project's identified-point type,
+// pipeline::IdentifiedPoint; its converters from/to identification, fitting
+// and protobuf live in pipeline/points.h, nowhere else).
 struct HfPointRow {
   std::string point_id;
   double id_a = 0, iq_a = 0, speed_rpm = 0, ld_h = 0, lq_h = 0;
