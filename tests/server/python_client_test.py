@@ -146,6 +146,12 @@ def check_digest_form():
     got = fluxcal_client.hf_points_sha256([a, b])
     want = "22e7c253c7ba13bdab6539be3f8fba08288e5e31a45100ad0037a57d316856df"
     check(got == want, f"hf_points_sha256: {got}, the C++ form gives {want}")
+    # A point with the injection's flux radius (schema v9): the golden value
+    # of the same C++ test, point b with hf_flux_radius_wb = 1.6e-3.
+    b.hf_flux_radius_wb = 1.6e-3
+    got = fluxcal_client.hf_points_sha256([a, b])
+    want = "2f7393121b26de7d2f55bd26262e6038ba2cb0a45d4ad3381cfa548a15a8aaf8"
+    check(got == want, f"hf_points_sha256 with hf_flux_radius_wb: {got}, the C++ form gives {want}")
 
 
 @contextlib.contextmanager
