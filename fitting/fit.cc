@@ -184,8 +184,7 @@ absl::StatusOr<Calibration> Fit(const FitData& input, const FitOptions& o) {
     // The leave-one-out fits keep the full fit's smoothing anisotropy (the
     // machine's axes do not change with one row less; lambda is still
     // chosen anew): one penalty per fit instead of the grid's seven, up to
-    // 12 fits a round (a bench set with a concealed dead time spent 1.3 s
-    // of its 8.7 s diagnosis here).
+    // 12 fits a round.
     FitOptions loo_options = o;
     if (!loo_options.smoothing_anisotropy_q && cal->summary.smoothing_lambda > 0) {
       loo_options.smoothing_anisotropy_q = cal->summary.smoothing_anisotropy_q;

@@ -6,6 +6,7 @@
 #include <memory>
 
 #include "fitting/inductance_residual.h"
+#include "fitting/problem.h"
 #include "physics/hf_orbit.h"
 
 namespace fluxcal::fit::internal {
@@ -45,10 +46,23 @@ sim::DifferentialInductance PredictedInductance(const Calibration& cal, const In
 
 int AttachHfOrbits(const Calibration& first, double sigma_floor, FitData* d) {
   auto map = [&](double id, double iq, double* psi, double* l) { MapAt(first, id, iq, psi, l); };
+  // An orbit wider than the whole region the points span is no
+  // small excursion about its point (a radius a station sent wrong, or an
+  // injection far too strong for the machine): its describing function
+  // would be the surface's extrapolation, and its Newton solves the most
+  // expensive. Such a point keeps the small-signal model; the first-order
+  // excursion rho / lambda_min(L) is judged before any orbit is solved.
+  const double current_scale = std::max(DataCurrentScaleA(*d), 1.0);
   int attached = 0;
   for (auto& obs : d->inductances) {
     if (!obs.hf_flux_radius_wb || !(*obs.hf_flux_radius_wb > 0)) continue;
     obs.hf_orbit.reset();
+    {
+      const auto L = first.Inductance(obs.id_a, obs.iq_a);
+      const double mean = 0.5 * (L.ldd_h + L.lqq_h), half = std::hypot(0.5 * (L.ldd_h - L.lqq_h), L.ldq_h);
+      const double lambda_min = mean - half;
+      if (!(lambda_min > 0) || *obs.hf_flux_radius_wb / lambda_min > current_scale) continue;
+    }
     auto w = std::make_shared<HfOrbitWeights>();
     if (!physics::HfOrbit(map, obs.id_a, obs.iq_a, *obs.hf_flux_radius_wb, &w->currents_a) ||
         !physics::DescribingWeights(w->currents_a, &w->weights)) {

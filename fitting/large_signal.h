@@ -20,8 +20,10 @@ inline constexpr double kLargeSignalMaterialSigma = 0.1;
 inline constexpr double kLargeSignalScoreMargin = 0.05;
 
 // Sets hf_orbit on every inductance observation of `d` with a flux radius
-// whose orbit on `first` exists (the surfaces invertible along it) and
-// matters (kLargeSignalMaterialSigma); returns how many. `sigma_floor`: the
+// whose orbit on `first` exists (the surfaces invertible along it), stays
+// within the size of the data's region (first order: rho over the smaller
+// eigenvalue of L, at most the largest |i| of the points) and matters
+// (kLargeSignalMaterialSigma); returns how many. `sigma_floor`: the
 // fit's relative floor on inductance sigmas (FitOptions).
 int AttachHfOrbits(const Calibration& first, double sigma_floor, FitData* d);
 

@@ -134,6 +134,27 @@ TEST(Fit, ReciprocalAndPositiveDefinite) {
   }
 }
 
+// A flux radius no injection on this machine could drive (5 Wb: an orbit
+// of ~10^4 A about each point, far beyond the region measured), as a
+// station could send it: no orbit is solved, the fit is the small-signal
+// one and says nothing of a large-signal model.
+TEST(Fit, ImplausibleInjectionRadiusKeepsTheSmallSignalFit) {
+  FitData d = TwinCase().data;
+  FitOptions small;
+  small.large_signal_hf = false;
+  auto base = Fit(d, small);
+  for (auto& o : d.inductances) o.hf_flux_radius_wb = 5.0;
+  auto wild = Fit(d, {});
+  ASSERT_TRUE(base.ok() && wild.ok());
+  for (const auto& line : wild->summary.candidates) EXPECT_EQ(line.rfind("hf model:", 0), std::string::npos) << line;
+  for (double id : {-80.0, -20.0}) {
+    for (double iq : {20.0, 80.0}) {
+      EXPECT_EQ(wild->Flux(id, iq).psi_d_wb, base->Flux(id, iq).psi_d_wb);
+      EXPECT_EQ(wild->Flux(id, iq).psi_q_wb, base->Flux(id, iq).psi_q_wb);
+    }
+  }
+}
+
 TEST(Fit, GrossOutlierMovesNothing) {
   const Case& c = TwinCase();
   auto base = Fit(c.data, {});
