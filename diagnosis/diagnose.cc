@@ -172,20 +172,37 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
     // The current model's residuals, once per round (candidates compare to them).
     const auto z_current = Residuals(m, current.p);
     std::vector<RejectedCandidate> round_rejected;
+    // Each candidate's joint refit from the current model, independent of
+    // the others: solved in parallel, then judged in catalogue order.
+    std::vector<size_t> open;
     for (size_t c = 0; c < cands.size(); ++c) {
-      if (opt.cancelled && opt.cancelled()) {
-        return absl::CancelledError("diagnosis: stopped between candidate refits (cancelled by the caller)");
-      }
       if (used[c]) continue;
       if (std::find(free.begin(), free.end(), cands[c].block) != free.end()) continue;
-      if (cands[c].block == kHarm) m.harm_order = cands[c].order;
+      open.push_back(c);
+    }
+    auto trial_of = [&](size_t c) {
       std::vector<Block> trial = free;
       for (Block b : blocks_of(cands[c])) {
         if (std::find(trial.begin(), trial.end(), b) == trial.end()) trial.push_back(b);
       }
+      return trial;
+    };
+    std::vector<FitOut> trial_fit(cands.size());
+    ParallelForModels(open.size(), m, [&](size_t k, Model& mw) {
+      const size_t c = open[k];
+      if (opt.cancelled && opt.cancelled()) return;
+      if (cands[c].block == kHarm) mw.harm_order = cands[c].order;
       Params st = current.p;
       if (cands[c].block == kHarm) st.b[kHarm][0] = 0.0;
-      FitOut f = Solve(m, st, trial);
+      trial_fit[c] = Solve(mw, st, trial_of(c));
+    });
+    if (opt.cancelled && opt.cancelled()) {
+      return absl::CancelledError("diagnosis: stopped between candidate refits (cancelled by the caller)");
+    }
+    for (size_t c : open) {
+      if (cands[c].block == kHarm) m.harm_order = cands[c].order;
+      const std::vector<Block> trial = trial_of(c);
+      FitOut f = std::move(trial_fit[c]);
       std::optional<Model> cand_model;
       if (!f.ok) continue;
       const double dbic = f.bic - current.bic;
@@ -306,23 +323,32 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
     double best_ith = m.ith_a;
     // -2 ln(likelihood) up to a constant, the noise variance profiled out
     // (the BIC's first term): n ln chi2 of the final model at i_th = e^x.
-    auto profile = [&](double x) {
-      Model mi = m;
-      SetSoftSignCurrent(set, std::exp(x), &mi);
-      const FitOut f = Solve(mi, current.p, free);
+    auto solve_at = [&](double x, Model* mi) {
+      SetSoftSignCurrent(set, std::exp(x), mi);
+      return Solve(*mi, current.p, free);
+    };
+    auto take = [&](double x, const FitOut& f) {
       if (!f.ok) return std::numeric_limits<double>::infinity();
       if (f.bic < best.bic) { best = f; best_ith = std::exp(x); }
       return f.bic;
     };
+    auto profile = [&](double x) {
+      Model mi = m;
+      return take(x, solve_at(x, &mi));
+    };
     const double step = std::log(2.0);
     std::vector<double> xs, ls;
-    for (int j = 0; j <= 6; ++j) {
-      if (opt.cancelled && opt.cancelled()) {
-        return absl::CancelledError("diagnosis: stopped while profiling the soft-sign current (cancelled by the caller)");
-      }
-      xs.push_back(std::log(0.0625) + j * step);
-      ls.push_back(profile(xs.back()));
+    for (int j = 0; j <= 6; ++j) xs.push_back(std::log(0.0625) + j * step);
+    // The grid's refits are independent: in parallel, then taken in order.
+    std::vector<FitOut> grid(xs.size());
+    ParallelForModels(xs.size(), m, [&](size_t j, Model& mw) {
+      if (opt.cancelled && opt.cancelled()) return;
+      grid[j] = solve_at(xs[j], &mw);
+    });
+    if (opt.cancelled && opt.cancelled()) {
+      return absl::CancelledError("diagnosis: stopped while profiling the soft-sign current (cancelled by the caller)");
     }
+    for (size_t j = 0; j < xs.size(); ++j) ls.push_back(take(xs[j], grid[j]));
     const size_t i = static_cast<size_t>(std::min_element(ls.begin(), ls.end()) - ls.begin());
     double a = xs[i > 0 ? i - 1 : i], b = xs[i + 1 < xs.size() ? i + 1 : i];
     constexpr double kGolden = 0.6180339887498949;
@@ -439,12 +465,19 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
       }
       return k ? (chi2 - k) / std::sqrt(2.0 * k) : 0.0;
     };
-    for (int kind : kinds) {
-      const bool has = kind == kHfKind ? !m.hf.empty()
-                       : kind == kDcKind || kind == kDcSecondUdcKind ? !m.dc.empty()
-                       : kind == kSsKind ? !m.ss.empty()
-                                         : std::any_of(m.ss.begin(), m.ss.end(), [](const SsObs& o) { return o.has_torque; });
-      if (!has) continue;
+    kinds.erase(std::remove_if(kinds.begin(), kinds.end(),
+                               [&](int kind) {
+                                 return kind == kHfKind ? m.hf.empty()
+                                        : kind == kDcKind || kind == kDcSecondUdcKind ? m.dc.empty()
+                                        : kind == kSsKind ? m.ss.empty()
+                                                          : std::none_of(m.ss.begin(), m.ss.end(),
+                                                                         [](const SsObs& o) { return o.has_torque; });
+                               }),
+                kinds.end());
+    // Each class's held-out refit, independent of the others: in parallel.
+    std::vector<FitOut> held(kinds.size());
+    ParallelForModels(kinds.size(), m, [&](size_t k, Model& mw) {
+      const int kind = kinds[k];
       // Held-out HF: the surfaces are what the HF phasors measure, so they
       // stay as fitted; the question is whether the effects, refitted from
       // the other classes, predict the phasors (an effect seen in the HF
@@ -460,13 +493,19 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
       // that choice, not the effects) and the one the remaining classes
       // choose; the prediction is judged with the better of the two, as
       // the check is of the effects.
-      Model m_held = m;
-      if (current.lambda > 0) m_held.surf_lambda = current.lambda;
-      FitOut f = Solve(m_held, current.p, refit, kind, /*choose_lambda=*/false);
-      if (kind != kHfKind && m.surf_lambda > 0) {
-        const FitOut g = Solve(m, current.p, refit, kind);
-        if (g.ok && (!f.ok || RelativeRmsOf(m, g.p, kind) < RelativeRmsOf(m, f.p, kind))) f = g;
+      const double own_lambda = mw.surf_lambda;
+      if (current.lambda > 0) mw.surf_lambda = current.lambda;
+      FitOut f = Solve(mw, current.p, refit, kind, /*choose_lambda=*/false);
+      mw.surf_lambda = own_lambda;
+      if (kind != kHfKind && mw.surf_lambda > 0) {
+        const FitOut g = Solve(mw, current.p, refit, kind);
+        if (g.ok && (!f.ok || RelativeRmsOf(mw, g.p, kind) < RelativeRmsOf(mw, f.p, kind))) f = g;
       }
+      held[k] = std::move(f);
+    });
+    for (size_t k = 0; k < kinds.size(); ++k) {
+      const int kind = kinds[k];
+      const FitOut& f = held[k];
       if (!f.ok) continue;
       HeldOutCheck h;
       h.signal = KindSignal(kind);
@@ -482,8 +521,8 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
         // (the full fit being the efficient one). An effect that stands in
         // for physics the other classes contradict moves by many of those.
         double worst = 0;
-        for (Block b : refit) {
-          if (!f.stdev.count(b) || !current.stdev.count(b)) continue;
+        for (Block b : free) {
+          if (b == kBase || !f.stdev.count(b) || !current.stdev.count(b)) continue;
           for (int i = 0; i < kBlockSize[b]; ++i) {
             const double d = f.p.b[b][i] - current.p.b[b][i];
             if (d == 0.0) continue;

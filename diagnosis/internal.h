@@ -11,6 +11,7 @@
 #include <cmath>
 #include <complex>
 #include <map>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -424,6 +425,16 @@ double RelativeRmsOf(const Model& m, const Params& p, int kind);
 // solution (refit.cc); false keeps m.surf_lambda.
 FitOut Solve(const Model& m, const Params& start, const std::vector<Block>& free_blocks, int held_out = -1,
              bool choose_lambda = true);
+
+// ---- parallel.cc ------------------------------------------------------------
+// Independent refits (the candidates of one selection round, the soft-sign
+// profile's grid, the held-out classes) run on up to WorkerCount() threads.
+// Each worker has its own copy of the model: a Model carries per-evaluation
+// state (the surface probe of ObservationCost, the harmonic order a
+// candidate sets). task(k, model) writes only its own output k, so results
+// do not depend on the schedule.
+int WorkerCount();
+void ParallelForModels(size_t n, const Model& m, const std::function<void(size_t, Model&)>& task);
 
 // ---- locate.cc --------------------------------------------------------------
 struct Z {
