@@ -53,7 +53,8 @@ const FlagSpecs kExportFlags = {
                            "OUT_udc<V>v.EXT with labels tagged _UDC<V>V (not with --udc-v; with --server the "
                            "service computes them, ExportTable udc_axis_v)"},
     {"magnet-temp-c", "C", "local only: tables at this magnet temperature, degC (needs the calibration's own "
-                           "psi_pm temperature coefficient; refused without one)"},
+                           "psi_pm temperature coefficient and the magnet temperature of its flux map; refused "
+                           "without them)"},
     {"rs-ohm", "R", "stator resistance, ohm (default the calibration's; fw and envelope refuse without one)"},
     {"allow-clamped", "", "export a table with more than half of its cells clamped (refused otherwise)"},
     {"ctype", "T", "element type of --format h and a2l: double|float|int16|int32 (fixed point, LSB per quantity; default double)"},
@@ -94,6 +95,10 @@ int RunUdcAxisExport(const ParsedArgs& args, const fit::Calibration& cal, const 
   options.ctype = ctype;
   auto built = pipeline::ExportCalibrationOverUdc(cal, spec, request, udcs, format, options);
   if (!built.ok()) return Fail(std::string(built.status().message()), ExitCodeFor(built.status()));
+  if (!built->empty() && built->front().result.table.magnet_temperature) {
+    std::fprintf(stderr, "export: note: %s\n",
+                 tables::MagnetTemperatureNote(*built->front().result.table.magnet_temperature).c_str());
+  }
   std::optional<std::string> key;
   if (auto key_path = args.Get("sign-key")) {
     auto k = io::ReadFileToString(*key_path);
@@ -264,6 +269,9 @@ int RunExport(const std::vector<std::string>& argv) {
   const tables::MachineLimits& lim = built->limits.limits;
   if (!built->limits.overridden.empty()) {
     std::fprintf(stderr, "export: note: %s\n", built->limits.overridden.c_str());
+  }
+  if (table->magnet_temperature) {
+    std::fprintf(stderr, "export: note: %s\n", tables::MagnetTemperatureNote(*table->magnet_temperature).c_str());
   }
   const tables::ClampSummary& clamp = built->clamped;
   if (clamp.clamped > 0) {
