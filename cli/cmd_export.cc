@@ -325,6 +325,13 @@ int RunExport(const std::vector<std::string>& argv) {
     auto src = [](const std::string& v) { return v.empty() ? nlohmann::json() : nlohmann::json(v); };
     j["sources"] = {{"i_max_a", src(built->limits.i_max_source)}, {"udc_v", src(built->limits.udc_source)},
                     {"rs_ohm", src(built->limits.rs_source)}};
+    // The magnet temperature the table was computed at (null: the flux map's own).
+    j["magnet_temperature"] = nullptr;
+    if (const auto& mt = table->magnet_temperature) {
+      j["magnet_temperature"] = {{"at_c", mt->at_c}, {"reference_c", mt->reference_c},
+                                 {"reference_spread_k", opt(mt->reference_spread_k)},
+                                 {"alpha_per_k", mt->alpha_per_k}, {"psi_pm_scale", mt->Scale()}};
+    }
     // h and a2l in fixed point: the scale of each quantity as the file states it.
     j["ctype"] = pipeline::ExportCTypeName(*ctype);
     j["fixed_point"] = nlohmann::json::array();

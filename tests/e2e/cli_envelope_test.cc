@@ -239,8 +239,13 @@ TEST(EnvelopeCli, MagnetTemperatureFromTheSetOrTheFlags) {
   const std::string fit_map = "fit --map " + map + " --pole-pairs 2 --serial BALDOR-MAGNET-1 --magnet-temp-coeff-per-k -0.0011 ";
   ASSERT_EQ(RunFluxcal(fit_map + "--magnet-reference-c 60 --out " + path("map60.json")).code, 0);
   const RunResult at = RunFluxcal("export " + path("map60.json") + " --table mtpa --magnet-temp-c 120 --format h --out " +
-                                  path("map120.h"));
+                                  path("map120.h") + " --json");
   ASSERT_EQ(at.code, 0) << at.err;
+  const nlohmann::json aj = nlohmann::json::parse(at.out);
+  EXPECT_EQ(aj["magnet_temperature"]["at_c"], 120.0) << at.out;
+  EXPECT_EQ(aj["magnet_temperature"]["reference_c"], 60.0) << at.out;
+  EXPECT_EQ(aj["magnet_temperature"]["reference_spread_k"], 0.0) << at.out;
+  EXPECT_NEAR(aj["magnet_temperature"]["psi_pm_scale"].get<double>(), 1 - 0.0011 * 60, 1e-12) << at.out;
   EXPECT_TRUE(Has(Read(path("map120.h")), "MAGNET_REFERENCE_C")) << Read(path("map120.h")).substr(0, 3000);
   const RunResult no_ref_fit = RunFluxcal(fit_map + "--out " + path("map.json"));
   ASSERT_EQ(no_ref_fit.code, 0) << no_ref_fit.err;
