@@ -52,7 +52,7 @@ const FlagSpecs kExportFlags = {
     {"udc-axis-v", "LIST", "a Udc axis, V1,V2,... or LO:HI:N volts (at most 32): one table per Udc, written to "
                            "OUT_udc<V>v.EXT with labels tagged _UDC<V>V (not with --udc-v; with --server the "
                            "service computes them, ExportTable udc_axis_v)"},
-    {"magnet-temp-c", "C", "local only: tables at this magnet temperature, degC (needs the calibration's own "
+    {"magnet-temp-c", "C", "tables at this magnet temperature, degC (needs the calibration's own "
                            "psi_pm temperature coefficient and the magnet temperature of its flux map; refused "
                            "without them)"},
     {"rs-ohm", "R", "stator resistance, ohm (default the calibration's; fw and envelope refuse without one)"},
@@ -173,7 +173,7 @@ int RunUdcAxisExport(const ParsedArgs& args, const fit::Calibration& cal, const 
 int RunExport(const std::vector<std::string>& argv) {
   for (const auto& a : argv) {
     if (a == "--server" || a.rfind("--server=", 0) == 0) {
-      return RunRemoteExport(argv, WithoutFlags(kExportFlags, {"svg", "sign-key", "magnet-temp-c"}));
+      return RunRemoteExport(argv, WithoutFlags(kExportFlags, {"svg", "sign-key"}));
     }
   }
   auto args = ParseArgs(argv, WithoutFlags(kExportFlags, {"server", "version"}));

@@ -5,13 +5,19 @@
 // the manifest states the coefficient, and the MTPA table of the set
 // recorded at 25 degC, exported at 100 degC, is that of the same machine
 // recorded at 100 degC.
+#include <unistd.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <optional>
 #include <string>
 
 #include "fitting/fit.h"
+#include "io/csv.h"
+#include "pipeline/pipeline.h"
+#include "storage/store.h"
 #include "gtest/gtest.h"
 #include "pipeline/export.h"
 #include "pipeline/facts.h"
@@ -21,6 +27,8 @@
 
 namespace fluxcal::pipeline {
 namespace {
+
+namespace fs = std::filesystem;
 
 // The twin's default plan with every point and row recorded at `temp_c`
 // (plus `step_k` per row, for a warming machine), simulated and fitted.
@@ -188,6 +196,63 @@ TEST(MagnetTemperature, StatedFactsForDataThatRecordNone) {
   st = ApplyStatedFacts(stated, FactSource::kRecordingSet, &d);
   ASSERT_FALSE(st.ok());
   EXPECT_NE(st.message().find("psi_pm_temp_coeff_per_k -0.0012"), std::string::npos) << st;
+}
+
+// The stored path: the set ingested (IngestRecording), fitted by the store
+// (FitSerial) and exported at 100 degC as the ExportTable RPC asks
+// (magnet_temp_c) gives the values of the local export of the local fit,
+// bit for bit: the coefficient and the reference travel through the
+// stored binary model.
+TEST(MagnetTemperature, StoredSetExportsAtTAsTheLocalFile) {
+  const Fitted local = FitTwinAt(25, -0.0012);
+  ASSERT_TRUE(local.cal.ok());
+  const fs::path dir = fs::temp_directory_path() / ("fluxcal_magnet_store_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  ASSERT_TRUE(io::WriteRecordingSet(dir.string(), local.set).ok());
+  io::RecordingFiles files;
+  for (const auto& e : fs::recursive_directory_iterator(dir)) {
+    if (!e.is_regular_file()) continue;
+    auto text = io::ReadFileToString(e.path().string());
+    ASSERT_TRUE(text.ok()) << text.status();
+    files[fs::relative(e.path(), dir).string()] = *text;
+  }
+  // Locally: the set as written (its numbers round-trip the physics, not
+  // every bit), fitted as `fluxcal fit SET` does.
+  auto written = io::ReadRecordingSet(dir.string());
+  ASSERT_TRUE(written.ok()) << written.status();
+  fs::remove_all(dir);
+  auto data = FitDataFromSet(*written);
+  ASSERT_TRUE(data.ok()) << data.status();
+  auto local_cal = fit::Fit(*data, {});
+  ASSERT_TRUE(local_cal.ok()) << local_cal.status();
+  auto store = storage::Store::Open(":memory:");
+  ASSERT_TRUE(store.ok()) << store.status();
+  const std::string serial = local.set.manifest.serial;
+  ASSERT_TRUE(IngestRecording(**store, serial, "st", files).ok());
+  ASSERT_TRUE(FitSerial(**store, serial, "auto", {}).ok());
+  auto stored = LoadCalibration(**store, serial, 1);
+  ASSERT_TRUE(stored.ok()) << stored.status();
+  EXPECT_EQ(stored->psi_pm_temp_coeff_per_k(), -0.0012);
+  EXPECT_EQ(stored->magnet_reference_c(), 25.0);
+  tables::TableSpec spec;
+  spec.kind = "mtpa";
+  tables::ExportRequest flags;
+  flags.i_max_a = 90;
+  flags.magnet_temp_c = 100;
+  tables::ExportRequest rpc = flags;
+  rpc.names_flags = false;
+  auto a = ExportCalibration(*local_cal, spec, flags, "csv");
+  auto b = ExportTable(**store, serial, 1, spec, rpc, "csv");
+  ASSERT_TRUE(a.ok()) << a.status();
+  ASSERT_TRUE(b.ok()) << b.status();
+  ASSERT_TRUE(b->table.magnet_temperature.has_value());
+  EXPECT_EQ(b->table.magnet_temperature->at_c, 100.0);
+  EXPECT_EQ(a->exported.payload_sha256, b->exported.payload_sha256);
+  // The RPC's refusal names its field.
+  rpc.magnet_temp_c = 300;
+  auto hot = ExportTable(**store, serial, 1, spec, rpc, "csv");
+  ASSERT_FALSE(hot.ok());
+  EXPECT_EQ(hot.status().message().rfind("magnet_temp_c: ", 0), 0u) << hot.status();
 }
 
 }  // namespace
