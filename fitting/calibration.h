@@ -128,7 +128,7 @@ class Calibration : public sim::MagneticModel {
   // --udc-v): the voltage limit of field-weakening and MTPV exports.
   const std::optional<double>& udc_v() const { return udc_v_; }
   void set_udc_v(std::optional<double> v) { udc_v_ = v; }
-  // Magnet temperature (docs/fitting.md, "Magnet temperature"): the
+  // Magnet temperature (docs/recording-format.md, "Magnet temperature"): the
   // relative change of psi_pm per kelvin as stated (manifest
   // motor.psi_pm_temp_coeff_per_k, --magnet-temp-coeff-per-k), and the
   // magnet temperature of the flux map, degC: the mean of the recorded

@@ -172,8 +172,8 @@ FitData FitDataFromHfRows(const io::Manifest* manifest, const std::vector<io::Hf
 // of them (nor pole pairs, which the caller gives).
 FitData FitDataFromFluxMap(const io::FluxMap& map, int pole_pairs, double psi_std_wb = 0.0);
 
-// The magnet temperature of the observations a fit used (docs/fitting.md,
-// "Magnet temperature"): the mean and the spread (max - min) of their
+// The magnet temperature of the observations a fit used
+// (docs/recording-format.md, "Magnet temperature"): the mean and the spread (max - min) of their
 // recorded temperature_c when every one of them records one; nullopt when
 // any does not (or there are none). Fit stores it in the calibration.
 struct MagnetReference {

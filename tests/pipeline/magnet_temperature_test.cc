@@ -1,5 +1,5 @@
 // A calibration's magnet temperature from a recording set, end to end over
-// the twin's bench (docs/fitting.md, "Magnet temperature"): the magnets of
+// the twin's bench (docs/recording-format.md, "Magnet temperature"): the magnets of
 // the simulated machine are at the temperature each point and row records
 // (simulation/bench.cc, MakePlant: psi_pm(25 degC) (1 + alpha (T - 25))),
 // the manifest states the coefficient, and the MTPA table of the set
