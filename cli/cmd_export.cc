@@ -52,8 +52,9 @@ const FlagSpecs kExportFlags = {
     {"udc-axis-v", "LIST", "a Udc axis, V1,V2,... or LO:HI:N volts (at most 32): one table per Udc, written to "
                            "OUT_udc<V>v.EXT with labels tagged _UDC<V>V (not with --udc-v; with --server the "
                            "service computes them, ExportTable udc_axis_v)"},
-    {"magnet-temp-c", "C", "local only: tables at this magnet temperature, degC (needs the calibration's own "
-                           "psi_pm temperature coefficient; refused without one)"},
+    {"magnet-temp-c", "C", "tables at this magnet temperature, degC (needs the calibration's own "
+                           "psi_pm temperature coefficient and the magnet temperature of its flux map; refused "
+                           "without them)"},
     {"rs-ohm", "R", "stator resistance, ohm (default the calibration's; fw and envelope refuse without one)"},
     {"allow-clamped", "", "export a table with more than half of its cells clamped (refused otherwise)"},
     {"ctype", "T", "element type of --format h and a2l: double|float|int16|int32 (fixed point, LSB per quantity; default double)"},
@@ -94,6 +95,10 @@ int RunUdcAxisExport(const ParsedArgs& args, const fit::Calibration& cal, const 
   options.ctype = ctype;
   auto built = pipeline::ExportCalibrationOverUdc(cal, spec, request, udcs, format, options);
   if (!built.ok()) return Fail(std::string(built.status().message()), ExitCodeFor(built.status()));
+  if (!built->empty() && built->front().result.table.magnet_temperature) {
+    std::fprintf(stderr, "export: note: %s\n",
+                 tables::MagnetTemperatureNote(*built->front().result.table.magnet_temperature).c_str());
+  }
   std::optional<std::string> key;
   if (auto key_path = args.Get("sign-key")) {
     auto k = io::ReadFileToString(*key_path);
@@ -168,7 +173,7 @@ int RunUdcAxisExport(const ParsedArgs& args, const fit::Calibration& cal, const 
 int RunExport(const std::vector<std::string>& argv) {
   for (const auto& a : argv) {
     if (a == "--server" || a.rfind("--server=", 0) == 0) {
-      return RunRemoteExport(argv, WithoutFlags(kExportFlags, {"svg", "sign-key", "magnet-temp-c"}));
+      return RunRemoteExport(argv, WithoutFlags(kExportFlags, {"svg", "sign-key"}));
     }
   }
   auto args = ParseArgs(argv, WithoutFlags(kExportFlags, {"server", "version"}));
@@ -265,6 +270,9 @@ int RunExport(const std::vector<std::string>& argv) {
   if (!built->limits.overridden.empty()) {
     std::fprintf(stderr, "export: note: %s\n", built->limits.overridden.c_str());
   }
+  if (table->magnet_temperature) {
+    std::fprintf(stderr, "export: note: %s\n", tables::MagnetTemperatureNote(*table->magnet_temperature).c_str());
+  }
   const tables::ClampSummary& clamp = built->clamped;
   if (clamp.clamped > 0) {
     std::fprintf(stderr, "export: warning: %zu of %zu cells (%.1f %%) clamped: %s%s\n", clamp.clamped, clamp.cells,
@@ -317,6 +325,13 @@ int RunExport(const std::vector<std::string>& argv) {
     auto src = [](const std::string& v) { return v.empty() ? nlohmann::json() : nlohmann::json(v); };
     j["sources"] = {{"i_max_a", src(built->limits.i_max_source)}, {"udc_v", src(built->limits.udc_source)},
                     {"rs_ohm", src(built->limits.rs_source)}};
+    // The magnet temperature the table was computed at (null: the flux map's own).
+    j["magnet_temperature"] = nullptr;
+    if (const auto& mt = table->magnet_temperature) {
+      j["magnet_temperature"] = {{"at_c", mt->at_c}, {"reference_c", mt->reference_c},
+                                 {"reference_spread_k", opt(mt->reference_spread_k)},
+                                 {"alpha_per_k", mt->alpha_per_k}, {"psi_pm_scale", mt->Scale()}};
+    }
     // h and a2l in fixed point: the scale of each quantity as the file states it.
     j["ctype"] = pipeline::ExportCTypeName(*ctype);
     j["fixed_point"] = nlohmann::json::array();

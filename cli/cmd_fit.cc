@@ -2,8 +2,9 @@
 //             --out calibration.json [--svg PLOT.svg] [--json] [machine-fact flags]
 // fluxcal fit hf_results.csv --serial S --pole-pairs P --psi-pm-wb WB [--rs-ohm R] [--udc-v V] ...
 // fluxcal fit --map map.csv --pole-pairs P [--psi-std-wb S] [--rs-ohm R] [--udc-v V] [--serial S]
-//             [--convention C] [--current S] [--flux-amplitude S] [--units U] --out calibration.json
-// Machine facts (serial, pole pairs, psi_pm, Rs, Udc) come from the set's
+//             [--magnet-temp-coeff-per-k A] [--magnet-reference-c C] [--convention C] [--current S] [--flux-amplitude S] [--units U] --out calibration.json
+// Machine facts (serial, pole pairs, psi_pm, Rs, Udc, the magnet
+// temperature coefficient and reference) come from the set's
 // manifest or these flags, never from a default (pipeline/facts.h).
 // Identifies every waveform point (least squares), then fits the
 // flux-linkage surfaces jointly with hf_results and steady-state rows; or
@@ -50,6 +51,10 @@ const FlagSpecs kFitFlags = [] {
     {"psi-pm-wb", "WB", "nominal magnet flux, Wb (required for hf_results.csv: not observable from inductances)"},
     {"rs-ohm", "R", "nominal stator resistance, ohm (optional; unknown if no one states it)"},
     {"udc-v", "V", "DC-link voltage of the drive, V (optional; fw/mtpv exports need it)"},
+    {"magnet-temp-coeff-per-k", "A", "relative change of psi_pm per kelvin of magnet temperature, 1/K (NdFeB about "
+                                     "-0.0011; optional: tables at another magnet temperature need it)"},
+    {"magnet-reference-c", "C", "magnet temperature the data were taken at, degC, for data that record none "
+                                "(a flux map; refused when they record temperature_c)"},
     {"psi-std-wb", "S", "with --map: flux standard deviation per component, Wb (default 0.2 % of the largest |psi|)"},
     {"json", "", "print the calibration and fit summary as one JSON document"},
     kForceFlag,
@@ -91,7 +96,9 @@ int RunFit(const std::vector<std::string>& argv) {
     stated.pole_pairs = pp;
   }
   for (auto [flag, dst] : {std::pair<const char*, std::optional<double>*>{"psi-pm-wb", &stated.psi_pm_wb},
-                           {"rs-ohm", &stated.rs_ohm}, {"udc-v", &stated.udc_v}}) {
+                           {"rs-ohm", &stated.rs_ohm}, {"udc-v", &stated.udc_v},
+                           {"magnet-temp-coeff-per-k", &stated.psi_pm_temp_coeff_per_k},
+                           {"magnet-reference-c", &stated.magnet_reference_c}}) {
     auto v = args->GetDouble(flag);
     if (!v.ok()) return Fail(std::string(v.status().message()), 2);
     *dst = *v;
@@ -178,6 +185,7 @@ int RunFit(const std::vector<std::string>& argv) {
   }
   for (const auto& c : cal->summary.candidates) std::fprintf(stderr, "fit:   %s\n", c.c_str());
   for (const auto& e : cal->summary.excluded) std::fprintf(stderr, "fit: %s\n", e.c_str());
+  std::fprintf(stderr, "fit: magnet temperature: %s\n", cal->MagnetTemperatureText().c_str());
   if (auto svg = args->Get("svg")) {
     if (auto st = WriteNewOutput(*args, svg_path, pipeline::FitPlotSvg(*cal, data)); !st.ok()) {
       return Fail(std::string(st.message()));

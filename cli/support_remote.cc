@@ -408,7 +408,8 @@ int RunRemoteExport(const std::vector<std::string>& argv, const FlagSpecs& flags
                                   "speed-max-rpm", &v1::ExportTableRequest::set_speed_max_rpm},
                               {"i-max-a", &v1::ExportTableRequest::set_i_max_a},
                               {"udc-v", &v1::ExportTableRequest::set_udc_v},
-                              {"rs-ohm", &v1::ExportTableRequest::set_rs_ohm}}) {
+                              {"rs-ohm", &v1::ExportTableRequest::set_rs_ohm},
+                              {"magnet-temp-c", &v1::ExportTableRequest::set_magnet_temp_c}}) {
     auto d = args->GetDouble(flag);
     if (!d.ok()) { std::fprintf(stderr, "%s\n", std::string(d.status().message()).c_str()); return 2; }
     if (d->has_value()) (req.*setter)(**d);

@@ -11,6 +11,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "io/csv.h"
+#include "io/recording_set.h"
 #include "nlohmann/json.hpp"
 #include "physics/torque.h"
 
@@ -141,6 +142,28 @@ Region Calibration::RegionOf(double id, double iq) const {
   return Region::kExtrapolated;
 }
 
+std::string Calibration::MagnetTemperatureText() const {
+  std::string s;
+  if (psi_pm_temp_coeff_per_k_) {
+    s = absl::StrFormat("psi_pm changes by %.4g %%/K of magnet temperature (stated)", 100 * *psi_pm_temp_coeff_per_k_);
+  } else {
+    s = "no psi_pm temperature coefficient stated";
+  }
+  if (magnet_reference_c_) {
+    absl::StrAppendFormat(&s, "; flux map at %.4g degC", *magnet_reference_c_);
+    if (magnet_reference_spread_k_ && *magnet_reference_spread_k_ > 0) {
+      absl::StrAppendFormat(&s, " (mean of the recorded temperatures, spread %.3g K%s)", *magnet_reference_spread_k_,
+                            *magnet_reference_spread_k_ > kMagnetReferenceSpreadWarnK
+                                ? absl::StrFormat(", more than %.3g K: a machine warming during the test, its psi_pm "
+                                                  "is that of a mean temperature", kMagnetReferenceSpreadWarnK)
+                                : "");
+    }
+  } else {
+    s += "; no magnet temperature recorded for its flux map";
+  }
+  return s;
+}
+
 std::string Calibration::IqRegionText() const {
   if (iq_halves_ == IqHalves::kUnknown) {
     return absl::StrFormat("|iq| %.4g .. %.4g A, both halves counted as measured (the calibration does not record "
@@ -257,6 +280,11 @@ nlohmann::json Calibration::ToJson() const {
   j["psi_pm_wb"] = psi_pm_wb();
   if (psi_pm_nominal_wb_) j["psi_pm_nominal_wb"] = *psi_pm_nominal_wb_;
   if (udc_v_) j["udc_v"] = *udc_v_;
+  // Magnet temperature: a compatible extension of v1 (docs/fitting.md),
+  // absent when not stated.
+  if (psi_pm_temp_coeff_per_k_) j["psi_pm_temp_coeff_per_k"] = *psi_pm_temp_coeff_per_k_;
+  if (magnet_reference_c_) j["magnet_reference_c"] = *magnet_reference_c_;
+  if (magnet_reference_spread_k_) j["magnet_reference_spread_k"] = *magnet_reference_spread_k_;
   j["params"] = params_;
   j["covariance"] = covariance_;
   j["region"] = {{"id_min_a", id_min_a_}, {"id_max_a", id_max_a_},
@@ -288,6 +316,48 @@ nlohmann::json Calibration::ToJson() const {
   }
   return j;
 }
+
+absl::Status CheckMagnetTemperatureFacts(const std::optional<double>& coeff, const std::optional<double>& ref,
+                                         const std::optional<double>& spread) {
+  if (coeff && !(std::isfinite(*coeff) && *coeff >= io::kMinPsiPmTempCoeffPerK &&
+                 *coeff <= io::kMaxPsiPmTempCoeffPerK)) {
+    return absl::InvalidArgumentError(absl::StrFormat("field 'psi_pm_temp_coeff_per_k': expected %g .. %g per "
+                                                      "kelvin, got %g", io::kMinPsiPmTempCoeffPerK,
+                                                      io::kMaxPsiPmTempCoeffPerK, *coeff));
+  }
+  if (ref && !(std::isfinite(*ref) && *ref >= -60 && *ref <= 250)) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("field 'magnet_reference_c': expected -60 .. 250 degC, got %g", *ref));
+  }
+  if (spread && (!ref || !(std::isfinite(*spread) && *spread >= 0))) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "field 'magnet_reference_spread_k': %s", ref ? absl::StrFormat("expected a finite number >= 0, got %g", *spread)
+                                                     : std::string("given without magnet_reference_c")));
+  }
+  return absl::OkStatus();
+}
+
+namespace {
+
+struct MagnetFacts {
+  std::optional<double> coeff_per_k, reference_c, spread_k;
+};
+
+// The optional magnet temperature members of a calibration's JSON.
+absl::StatusOr<MagnetFacts> MagnetFactsFromJson(const nlohmann::json& j) {
+  MagnetFacts f;
+  for (auto [key, dst] : {std::pair<const char*, std::optional<double>*>{"psi_pm_temp_coeff_per_k", &f.coeff_per_k},
+                          {"magnet_reference_c", &f.reference_c},
+                          {"magnet_reference_spread_k", &f.spread_k}}) {
+    if (!j.contains(key) || j[key].is_null()) continue;
+    if (!j[key].is_number()) return absl::InvalidArgumentError(absl::StrCat("field '", key, "': expected a number"));
+    *dst = j[key].get<double>();
+  }
+  if (auto s = CheckMagnetTemperatureFacts(f.coeff_per_k, f.reference_c, f.spread_k); !s.ok()) return s;
+  return f;
+}
+
+}  // namespace
 
 absl::StatusOr<Calibration> Calibration::FromJson(const nlohmann::json& j) {
   try {
@@ -381,6 +451,10 @@ absl::StatusOr<Calibration> Calibration::FromJson(const nlohmann::json& j) {
                   r.at("iq_max_a").get<double>());
     c.psi_pm_nominal_wb_ = *psi_nom;
     c.udc_v_ = *udc;
+    auto magnet = MagnetFactsFromJson(j);
+    if (!magnet.ok()) return magnet.status();
+    c.psi_pm_temp_coeff_per_k_ = magnet->coeff_per_k;
+    c.set_magnet_reference(magnet->reference_c, magnet->spread_k);
     if (r.contains("iq_halves")) {
       const std::string h = r.at("iq_halves").get<std::string>();
       IqHalves halves = IqHalves::kUnknown;

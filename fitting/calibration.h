@@ -128,6 +128,23 @@ class Calibration : public sim::MagneticModel {
   // --udc-v): the voltage limit of field-weakening and MTPV exports.
   const std::optional<double>& udc_v() const { return udc_v_; }
   void set_udc_v(std::optional<double> v) { udc_v_ = v; }
+  // Magnet temperature (docs/recording-format.md, "Magnet temperature"): the
+  // relative change of psi_pm per kelvin as stated (manifest
+  // motor.psi_pm_temp_coeff_per_k, --magnet-temp-coeff-per-k), and the
+  // magnet temperature of the flux map, degC: the mean of the recorded
+  // temperature_c of the observations the fit used (or
+  // --magnet-reference-c), with their spread max - min, K (0 for a stated
+  // one). Unset: not stated / not recorded. Together they give psi_pm(T) =
+  // psi_pm(T_ref) (1 + alpha (T - T_ref)) (tables::MagnetTemperatureOf).
+  const std::optional<double>& psi_pm_temp_coeff_per_k() const { return psi_pm_temp_coeff_per_k_; }
+  void set_psi_pm_temp_coeff_per_k(std::optional<double> v) { psi_pm_temp_coeff_per_k_ = v; }
+  const std::optional<double>& magnet_reference_c() const { return magnet_reference_c_; }
+  const std::optional<double>& magnet_reference_spread_k() const { return magnet_reference_spread_k_; }
+  // A spread without a reference is dropped (it says nothing alone).
+  void set_magnet_reference(std::optional<double> reference_c, std::optional<double> spread_k) {
+    magnet_reference_c_ = reference_c;
+    magnet_reference_spread_k_ = reference_c ? spread_k : std::nullopt;
+  }
   // Measured, by symmetry or extrapolated (Region above).
   Region RegionOf(double id_a, double iq_a) const;
   // RegionOf(...) != kExtrapolated: measured, or the mirror image of a
@@ -149,6 +166,9 @@ class Calibration : public sim::MagneticModel {
   // the other half ("iq 0 .. 24 A measured; iq -24 .. 0 A by symmetry
   // (...)"), for pages and summaries.
   std::string IqRegionText() const;
+  // One sentence on the magnet temperature dependence the calibration
+  // states (coefficient, reference, spread) or what it lacks for one.
+  std::string MagnetTemperatureText() const;
   double iq_signed_min_a() const { return iq_signed_min_a_; }
   double iq_signed_max_a() const { return iq_signed_max_a_; }
   // Inductance positive definite (Ldd > 0, Lqq > 0, det > 0) on a grid over
@@ -185,10 +205,26 @@ class Calibration : public sim::MagneticModel {
   SplineSurface spline_;
   int pole_pairs_ = 0;   // 0: unknown (only a default-constructed calibration)
   std::optional<double> rs_ohm_, psi_pm_nominal_wb_, udc_v_;
+  std::optional<double> psi_pm_temp_coeff_per_k_, magnet_reference_c_, magnet_reference_spread_k_;
   double id_min_a_ = 0, id_max_a_ = 0, iq_min_a_ = 0, iq_max_a_ = 0;
   IqHalves iq_halves_ = IqHalves::kUnknown;
   double iq_signed_min_a_ = 0, iq_signed_max_a_ = 0;
 };
+
+// A spread of the flux map's recorded temperatures beyond which the
+// calibration's magnet reference is a mean over a warming machine rather
+// than one temperature: said wherever the reference is used (report,
+// exports at another magnet temperature), K.
+inline constexpr double kMagnetReferenceSpreadWarnK = 10.0;
+
+// The magnet temperature facts of a calibration as read (FromJson, the
+// binary codec): the coefficient finite and within the manifest's range
+// (io::kMinPsiPmTempCoeffPerK .. kMaxPsiPmTempCoeffPerK), the reference
+// finite in -60 .. 250 degC, the spread finite, >= 0 and only with a
+// reference. InvalidArgument naming the JSON field otherwise.
+absl::Status CheckMagnetTemperatureFacts(const std::optional<double>& psi_pm_temp_coeff_per_k,
+                                         const std::optional<double>& magnet_reference_c,
+                                         const std::optional<double>& magnet_reference_spread_k);
 
 absl::StatusOr<Calibration> LoadCalibrationFile(const std::string& path);
 absl::Status SaveCalibrationFile(const std::string& path, const Calibration& cal);

@@ -233,6 +233,10 @@ absl::StatusOr<Calibration> Fit(const FitData& input, const FitOptions& o) {
     if (!hf_model.empty()) cal->summary.candidates.push_back(hf_model);
     cal->set_udc_v(input.udc_v);
     cal->set_psi_pm_nominal_wb(input.psi_pm_prior_wb);
+    cal->set_psi_pm_temp_coeff_per_k(input.psi_pm_temp_coeff_per_k);
+    // The magnet temperature of the flux map: that of the observations
+    // the kept fit used (d, after the screens and the rows left out).
+    if (const auto ref = MagnetReferenceOf(d)) cal->set_magnet_reference(ref->mean_c, ref->spread_k);
   }
   return cal;
 }

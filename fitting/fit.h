@@ -47,6 +47,10 @@ struct InductanceObservation {
   // That orbit, computed by Fit from its first pass where the radius is
   // set; given without a radius, it is used as it is.
   std::shared_ptr<const HfOrbitWeights> hf_orbit;
+  // The temperature the bench recorded for the point, degC (the manifest's
+  // points[].temperature_c, hf_results.csv's temperature_c); unset: none
+  // recorded. Read as the magnet temperature (Fit, magnet reference).
+  std::optional<double> temperature_c{};
 };
 
 struct SteadyStateObservation {
@@ -62,12 +66,17 @@ struct SteadyStateObservation {
   std::optional<double> current_ripple_a{};
   std::optional<double> voltage_limited_share{};
   std::optional<double> controller_saturated_share{};
+  // The row's recorded temperature_c, degC; unset: empty cell.
+  std::optional<double> temperature_c{};
 };
 
 // A flux linkage known directly: a measured or FEA flux map's node
 // (io/flux_map.h), sigma its standard deviation per component.
 struct FluxObservation {
   double id_a = 0, iq_a = 0, psi_d_wb = 0, psi_q_wb = 0, psi_std_wb = 0;
+  // The magnet temperature of the node, degC; unset: not stated (a map
+  // file carries none; `fluxcal fit --magnet-reference-c` states it).
+  std::optional<double> temperature_c{};
 };
 
 // What the data say about the machine and drive comes from the set's
@@ -88,6 +97,10 @@ struct FitData {
   // DC-link voltage of the drive (manifest drive.udc_v, or a flag); carried
   // into the calibration for the voltage limit of its tables.
   std::optional<double> udc_v;
+  // Relative change of psi_pm per kelvin of magnet temperature (manifest
+  // motor.psi_pm_temp_coeff_per_k, or --magnet-temp-coeff-per-k); carried
+  // into the calibration for tables at another magnet temperature.
+  std::optional<double> psi_pm_temp_coeff_per_k;
   std::vector<InductanceObservation> inductances;
   std::vector<SteadyStateObservation> steady_state;
   std::vector<FluxObservation> fluxes;
@@ -158,6 +171,15 @@ FitData FitDataFromHfRows(const io::Manifest* manifest, const std::vector<io::Hf
 // one with psi_d > 0. Serial, Rs and Udc stay unknown: a map carries none
 // of them (nor pole pairs, which the caller gives).
 FitData FitDataFromFluxMap(const io::FluxMap& map, int pole_pairs, double psi_std_wb = 0.0);
+
+// The magnet temperature of the observations a fit used
+// (docs/recording-format.md, "Magnet temperature"): the mean and the spread (max - min) of their
+// recorded temperature_c when every one of them records one; nullopt when
+// any does not (or there are none). Fit stores it in the calibration.
+struct MagnetReference {
+  double mean_c = 0, spread_k = 0;
+};
+std::optional<MagnetReference> MagnetReferenceOf(const FitData& used);
 
 // The calibration of `data` (InvalidArgument naming 'pole_pairs' when they
 // are unknown: torque and speed need them): observations that are not data screened out

@@ -41,6 +41,14 @@ std::optional<double> HfFluxRadiusOf(const io::Manifest& manifest, const ident::
 FitData FitDataFromRecording(const io::RecordingSet& set,
                              const std::vector<ident::HfPointResult>& identified) {
   FitData d = FitDataFromHfRows(&set.manifest, set.hf_results);
+  // The point's recorded temperature from the manifest (identification
+  // reports 25 degC for a point that recorded none).
+  auto point_temperature = [&](const std::string& id) -> std::optional<double> {
+    for (const auto& p : set.manifest.points) {
+      if (p.id == id) return p.temperature_c;
+    }
+    return std::nullopt;
+  };
   for (const auto& r : identified) {
     if (!r.reliable && r.flags.size() == 1 && r.flags[0] == "clipping") continue;
     if (!std::isfinite(r.ld_h) || !std::isfinite(r.lq_h) || !std::isfinite(r.id_a)) continue;
@@ -52,6 +60,7 @@ FitData FitDataFromRecording(const io::RecordingSet& set,
     // The bench's own hf_results rows say nothing of how they were
     // measured: small-signal.
     o.hf_flux_radius_wb = HfFluxRadiusOf(set.manifest, r);
+    o.temperature_c = point_temperature(r.point);
     d.inductances.push_back(o);
   }
   for (const auto& s : set.steady_state) {
@@ -59,6 +68,7 @@ FitData FitDataFromRecording(const io::RecordingSet& set,
     o.current_ripple_a = s.current_ripple_a;
     o.voltage_limited_share = s.voltage_limited_share;
     o.controller_saturated_share = s.controller_saturated_share;
+    o.temperature_c = s.temperature_c;
     d.steady_state.push_back(o);
   }
   return d;
@@ -73,10 +83,12 @@ FitData FitDataFromHfRows(const io::Manifest* m, const std::vector<io::HfResultR
     d.f_pwm_hz = m->drive.f_pwm_hz.value_or(m->drive.f_sample_hz);
     d.psi_pm_prior_wb = m->motor.psi_pm_wb;
     d.udc_v = m->drive.udc_v;
+    d.psi_pm_temp_coeff_per_k = m->motor.psi_pm_temp_coeff_per_k;
   }
   for (const auto& r : rows) {
     InductanceObservation o;
     o.id_a = r.id_a; o.iq_a = r.iq_a; o.ldd_h = r.ld_h; o.lqq_h = r.lq_h; o.ldq_h = r.ldq_h;
+    o.temperature_c = r.temperature_c;
     d.inductances.push_back(o);
   }
   return d;
@@ -98,6 +110,30 @@ FitData FitDataFromFluxMap(const io::FluxMap& map, int pole_pairs, double psi_st
     if (p.id_a == 0 && p.iq_a == 0 && p.psi_d_wb > 0) d.psi_pm_prior_wb = p.psi_d_wb;
   }
   return d;
+}
+
+std::optional<MagnetReference> MagnetReferenceOf(const FitData& used) {
+  double lo = 0, hi = 0, sum = 0;
+  size_t n = 0;
+  auto add = [&](const std::optional<double>& t) {
+    if (!t || !std::isfinite(*t)) return false;
+    lo = n == 0 ? *t : std::min(lo, *t);
+    hi = n == 0 ? *t : std::max(hi, *t);
+    sum += *t;
+    ++n;
+    return true;
+  };
+  for (const auto& o : used.inductances) {
+    if (!add(o.temperature_c)) return std::nullopt;
+  }
+  for (const auto& o : used.steady_state) {
+    if (!add(o.temperature_c)) return std::nullopt;
+  }
+  for (const auto& o : used.fluxes) {
+    if (!add(o.temperature_c)) return std::nullopt;
+  }
+  if (n == 0) return std::nullopt;
+  return MagnetReference{sum / static_cast<double>(n), hi - lo};
 }
 
 }  // namespace fluxcal::fit

@@ -129,6 +129,17 @@ absl::Status ParseMotor(const ManifestCtx& ctx, const json& j, Manifest* m) {
       if (*pm < 0) return ctx.Error("motor.psi_pm_wb", "must not be negative");
       m->motor.psi_pm_wb = *pm;
     }
+    auto tc = GetNumber(ctx, mo, "psi_pm_temp_coeff_per_k", "motor.psi_pm_temp_coeff_per_k", false, 0, &present);
+    if (!tc.ok()) return tc.status();
+    if (present) {
+      if (*tc < kMinPsiPmTempCoeffPerK || *tc > kMaxPsiPmTempCoeffPerK) {
+        return ctx.Error("motor.psi_pm_temp_coeff_per_k",
+                         absl::StrCat("must be in [", kMinPsiPmTempCoeffPerK, ", ", kMaxPsiPmTempCoeffPerK,
+                                      "] per kelvin (a relative change, not %/K: NdFeB is about -0.0011), got ",
+                                      *tc));
+      }
+      m->motor.psi_pm_temp_coeff_per_k = *tc;
+    }
   }
   return absl::OkStatus();
 }
@@ -347,6 +358,7 @@ nlohmann::json ManifestToJson(const Manifest& m) {
   motor["pole_pairs"] = m.motor.pole_pairs;
   if (m.motor.rs_ohm) motor["rs_ohm"] = *m.motor.rs_ohm;
   if (m.motor.psi_pm_wb) motor["psi_pm_wb"] = *m.motor.psi_pm_wb;
+  if (m.motor.psi_pm_temp_coeff_per_k) motor["psi_pm_temp_coeff_per_k"] = *m.motor.psi_pm_temp_coeff_per_k;
   j["motor"] = motor;
   nlohmann::json drive;
   if (m.drive.udc_v) drive["udc_v"] = *m.drive.udc_v;

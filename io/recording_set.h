@@ -30,7 +30,19 @@ struct MotorNominal {
   int pole_pairs = 0;                  // required
   std::optional<double> rs_ohm;        // nominal (datasheet) value
   std::optional<double> psi_pm_wb;     // nominal (datasheet) value
+  // fluxcal's compatible extension (docs/recording-format.md, "Magnet
+  // temperature coefficient"): the relative change of psi_pm per kelvin of
+  // magnet temperature (NdFeB about -0.0011 /K), within
+  // [kMinPsiPmTempCoeffPerK, kMaxPsiPmTempCoeffPerK].
+  std::optional<double> psi_pm_temp_coeff_per_k;
 };
+
+// The range a stated psi_pm temperature coefficient must lie in, 1/K:
+// ferrite about -0.002, NdFeB -0.0009 .. -0.0012, SmCo -0.0003 .. -0.0004
+// (remanence coefficients of magnet datasheets); wider than any magnet
+// material, narrow enough to catch a value in %/K (-0.11) or a sign slip.
+inline constexpr double kMinPsiPmTempCoeffPerK = -0.005;
+inline constexpr double kMaxPsiPmTempCoeffPerK = 0.002;
 
 struct DriveInfo {
   std::optional<double> udc_v;

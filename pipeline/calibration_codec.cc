@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <cstdlib>
 #include <cstring>
+#include <optional>
 #include <utility>
 #include <vector>
 
@@ -198,6 +199,9 @@ std::string EncodeCalibration(const fit::Calibration& cal, const nlohmann::json&
   if (cal.rs_ohm()) m.set_rs_ohm(*cal.rs_ohm());
   if (cal.psi_pm_nominal_wb()) m.set_psi_pm_nominal_wb(*cal.psi_pm_nominal_wb());
   if (cal.udc_v()) m.set_udc_v(*cal.udc_v());
+  if (cal.psi_pm_temp_coeff_per_k()) m.set_psi_pm_temp_coeff_per_k(*cal.psi_pm_temp_coeff_per_k());
+  if (cal.magnet_reference_c()) m.set_magnet_reference_c(*cal.magnet_reference_c());
+  if (cal.magnet_reference_spread_k()) m.set_magnet_reference_spread_k(*cal.magnet_reference_spread_k());
   m.mutable_params()->Add(cal.params().begin(), cal.params().end());
   const size_t n = cal.params().size();
   const auto& cov = cal.covariance();
@@ -243,6 +247,17 @@ absl::StatusOr<fit::Calibration> DecodeCalibration(std::string_view bytes, nlohm
                        region.id_max_a(), region.iq_min_a(), region.iq_max_a());
   if (m.has_psi_pm_nominal_wb()) cal.set_psi_pm_nominal_wb(m.psi_pm_nominal_wb());
   if (m.has_udc_v()) cal.set_udc_v(m.udc_v());
+  {
+    auto opt = [](bool has, double v) { return has ? std::optional<double>(v) : std::nullopt; };
+    const auto coeff = opt(m.has_psi_pm_temp_coeff_per_k(), m.psi_pm_temp_coeff_per_k());
+    const auto ref = opt(m.has_magnet_reference_c(), m.magnet_reference_c());
+    const auto spread = opt(m.has_magnet_reference_spread_k(), m.magnet_reference_spread_k());
+    if (auto s = fit::CheckMagnetTemperatureFacts(coeff, ref, spread); !s.ok()) {
+      return absl::InvalidArgumentError(absl::StrCat("calibration model: ", s.message()));
+    }
+    cal.set_psi_pm_temp_coeff_per_k(coeff);
+    cal.set_magnet_reference(ref, spread);
+  }
   const fit::IqHalves halves = FromProto(region.iq_halves());
   if (halves != fit::IqHalves::kUnknown) cal.SetMeasuredIq(halves, region.iq_signed_min_a(), region.iq_signed_max_a());
   cal.summary = FromProto(m.fit());

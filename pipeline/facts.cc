@@ -47,6 +47,16 @@ absl::Status ApplyStatedFacts(const StatedFacts& stated, FactSource source, fit:
                                                         f.zero_ok ? "non-negative" : "positive", *f.value));
     }
   }
+  if (const auto& a = stated.psi_pm_temp_coeff_per_k;
+      a && !(std::isfinite(*a) && *a >= io::kMinPsiPmTempCoeffPerK && *a <= io::kMaxPsiPmTempCoeffPerK)) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "flag --magnet-temp-coeff-per-k: must be in [%g, %g] per kelvin (a relative change, not %%/K: NdFeB is "
+        "about -0.0011), got %g", io::kMinPsiPmTempCoeffPerK, io::kMaxPsiPmTempCoeffPerK, *a));
+  }
+  if (const auto& t = stated.magnet_reference_c; t && !(std::isfinite(*t) && *t >= -60 && *t <= 250)) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("flag --magnet-reference-c: must be a magnet temperature in -60 .. 250 degC, got %g", *t));
+  }
   const std::string from = SourceName(source);
   auto note = [&](const std::string& what) {
     if (notes != nullptr) notes->push_back(what);
@@ -81,13 +91,32 @@ absl::Status ApplyStatedFacts(const StatedFacts& stated, FactSource source, fit:
   };
   for (const Quantity& q : {Quantity{"--psi-pm-wb", "psi_pm_wb", stated.psi_pm_wb, &d->psi_pm_prior_wb},
                             Quantity{"--rs-ohm", "rs_ohm", stated.rs_ohm, &d->rs_ohm},
-                            Quantity{"--udc-v", "udc_v", stated.udc_v, &d->udc_v}}) {
+                            Quantity{"--udc-v", "udc_v", stated.udc_v, &d->udc_v},
+                            Quantity{"--magnet-temp-coeff-per-k", "psi_pm_temp_coeff_per_k",
+                                     stated.psi_pm_temp_coeff_per_k, &d->psi_pm_temp_coeff_per_k}}) {
     if (!q.stated) continue;
     if (*q.have && !Same(**q.have, *q.stated)) {
       return conflict(q.flag, absl::StrFormat("%g", *q.stated), q.field, absl::StrFormat("%g", **q.have));
     }
     if (!*q.have) note(absl::StrFormat("%s %g from %s", q.field, *q.stated, q.flag));
     *q.have = *q.stated;
+  }
+  // The magnet temperature of data that record none.
+  if (stated.magnet_reference_c) {
+    size_t recorded = 0;
+    for (const auto& o : d->inductances) recorded += o.temperature_c.has_value();
+    for (const auto& o : d->steady_state) recorded += o.temperature_c.has_value();
+    for (const auto& o : d->fluxes) recorded += o.temperature_c.has_value();
+    if (recorded > 0) {
+      return absl::InvalidArgumentError(absl::StrFormat(
+          "flag --magnet-reference-c: %g degC, but %zu observations of %s record their own temperature_c (the "
+          "calibration's magnet reference is their mean); a flag may only state what %s does not (leave the "
+          "flag out)", *stated.magnet_reference_c, recorded, from, from));
+    }
+    for (auto& o : d->inductances) o.temperature_c = stated.magnet_reference_c;
+    for (auto& o : d->steady_state) o.temperature_c = stated.magnet_reference_c;
+    for (auto& o : d->fluxes) o.temperature_c = stated.magnet_reference_c;
+    note(absl::StrFormat("magnet reference temperature %g degC from --magnet-reference-c", *stated.magnet_reference_c));
   }
   // What a calibration cannot do without.
   std::vector<std::string> missing;

@@ -23,6 +23,11 @@ struct StatedFacts {
   std::optional<std::string> serial;
   std::optional<int> pole_pairs;
   std::optional<double> psi_pm_wb, rs_ohm, udc_v;
+  // Magnet temperature (--magnet-temp-coeff-per-k, --magnet-reference-c):
+  // the relative change of psi_pm per kelvin, and the magnet temperature
+  // the data were taken at, degC (for data that record none, e.g. a flux
+  // map: every observation is taken as at that temperature).
+  std::optional<double> psi_pm_temp_coeff_per_k, magnet_reference_c;
 };
 
 // Where the fit data came from, i.e. what it states by itself.
@@ -42,8 +47,12 @@ enum class FactSource {
 //     inductances alone do not (d psi / d i says nothing of psi at zero
 //     current); steady-state rows at speed or flux-map nodes do.
 // Rs and Udc stay unknown when nobody states them (the calibration records
-// them absent; exports that need them ask). Values are range-checked
-// (pole pairs 1..100, psi_pm >= 0, Rs >= 0, Udc > 0, serial as the set
+// them absent; exports that need them ask); so do the magnet temperature
+// coefficient and reference. --magnet-reference-c is refused when the data
+// record a temperature_c of their own (the reference is then their mean,
+// docs/fitting.md). Values are range-checked (pole pairs 1..100, psi_pm >=
+// 0, Rs >= 0, Udc > 0, the coefficient in io::kMinPsiPmTempCoeffPerK ..
+// kMaxPsiPmTempCoeffPerK, the reference -60 .. 250 degC, serial as the set
 // format's rule). `notes` (optional) receives one line per fact a flag
 // supplied.
 absl::Status ApplyStatedFacts(const StatedFacts& stated, FactSource source, fit::FitData* data,

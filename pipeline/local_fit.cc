@@ -9,6 +9,15 @@ absl::Status CheckModelName(const std::string& name) { return fit::ParseModelNam
 
 absl::Status CheckSetFacts(const io::RecordingSet& set, const StatedFacts& stated) {
   fit::FitData probe = fit::FitDataFromRecording(set, {});
+  // The points' recorded temperatures, which identification would carry
+  // into the data (--magnet-reference-c is refused for data that record
+  // one): stand-ins holding nothing else, checked and dropped.
+  for (const auto& p : set.manifest.points) {
+    if (!p.temperature_c) continue;
+    fit::InductanceObservation o;
+    o.temperature_c = p.temperature_c;
+    probe.inductances.push_back(o);
+  }
   return ApplyStatedFacts(stated, FactSource::kRecordingSet, &probe);
 }
 

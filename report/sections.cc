@@ -134,6 +134,9 @@ void FitSection(const PageContext& ctx, Page* page) {
   b += Row("Rs (nominal) / pole pairs",
            absl::StrFormat("%s / %d", cal.rs_ohm() ? Num(*cal.rs_ohm(), kResistanceOhm, "ohm") : "not known",
                            cal.pole_pairs()));
+  // The magnet temperature dependence it states (fit::Calibration), or
+  // what it lacks for tables at another magnet temperature.
+  b += Row("magnet temperature", H(cal.MagnetTemperatureText()));
   b += Row("DC link Udc (of its data)",
            cal.udc_v() ? Num(*cal.udc_v(), kVoltageV, "V") : std::string("not known (the data stated none)"));
   b += Row("measured region", absl::StrFormat("id %s, iq %s <small>(from %s)</small>",

@@ -161,6 +161,9 @@ grpc::Status CalibrationServiceImpl::ExportTable(grpc::ServerContext* ctx, const
   if (req->i_max_a() != 0) limits.i_max_a = req->i_max_a();
   if (req->udc_v() != 0) limits.udc_v = req->udc_v();
   if (req->rs_ohm() != 0) limits.rs_ohm = req->rs_ohm();
+  // Checked (range, the calibration's coefficient and reference) by the
+  // export rule, tables::MagnetTemperatureOf, naming magnet_temp_c.
+  if (req->has_magnet_temp_c()) limits.magnet_temp_c = req->magnet_temp_c();
   limits.allow_clamped = req->allow_clamped();
   // Flashers get released calibrations only (version 0: the newest
   // released one), re-checked now against verdict and hash chains.

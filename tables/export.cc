@@ -154,6 +154,10 @@ std::vector<Scalar> Scalars(const Table& t) {
     s.push_back({"magnet_temperature_c", mt.at_c, "degC", "magnet temperature the table was computed for", false});
     s.push_back({"magnet_reference_c", mt.reference_c, "degC",
                  "magnet temperature of the calibration's flux map", false});
+    if (mt.reference_spread_k) {
+      s.push_back({"magnet_reference_spread_k", *mt.reference_spread_k, "K",
+                   "spread (max - min) of the temperatures the flux map was recorded at", false});
+    }
     s.push_back({"magnet_alpha_per_k", mt.alpha_per_k, "1/K",
                  "the calibration's relative change of psi_pm per kelvin", false});
     s.push_back({"psi_pm_scale", mt.Scale(), "-",

@@ -5,6 +5,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_format.h"
+#include "absl/strings/str_join.h"
 #include "absl/strings/str_split.h"
 #include "absl/strings/ascii.h"
 
@@ -150,14 +151,48 @@ absl::StatusOr<MagnetTemperature> MagnetTemperatureOf(const fit::Calibration& ca
     return absl::InvalidArgumentError(
         absl::StrFormat("%s: %g degC is no magnet temperature (-60 .. 250 degC)", Label(req, "magnet_temp_c"), at_c));
   }
-  // fit::Calibration states no magnet temperature coefficient and no
-  // temperature of its flux map: refused rather than assumed.
+  // The calibration's own coefficient and the magnet temperature of its
+  // flux map (fit::Calibration, docs/fitting.md); neither is assumed.
+  const std::optional<double>& alpha = cal.psi_pm_temp_coeff_per_k();
+  const std::optional<double>& ref = cal.magnet_reference_c();
+  if (alpha && ref) {
+    MagnetTemperature mt;
+    mt.alpha_per_k = *alpha;
+    mt.reference_c = *ref;
+    mt.at_c = at_c;
+    mt.reference_spread_k = cal.magnet_reference_spread_k();
+    return mt;
+  }
+  std::vector<std::string> missing;
+  if (!alpha) {
+    missing.push_back("no magnet temperature coefficient (its data stated no motor.psi_pm_temp_coeff_per_k; "
+                      "`fluxcal fit --magnet-temp-coeff-per-k` states it)");
+  }
+  if (!ref) {
+    missing.push_back("no magnet temperature of its flux map (not every observation its fit used recorded a "
+                      "temperature_c; `fluxcal fit --magnet-reference-c` states it for data that record none)");
+  }
   return absl::InvalidArgumentError(absl::StrFormat(
-      "%s: the calibration of %s states no magnet temperature coefficient and no magnet temperature of its flux "
-      "map, so a table at %g degC would rest on an assumed one (NdFeB is about -0.1 %%/K, but the magnet's own "
-      "grade decides); export at the calibration's temperature (without %s), or fit the motor at the magnet "
-      "temperature the table is for",
-      Label(req, "magnet_temp_c"), cal.serial(), at_c, Name(req, "magnet_temp_c")));
+      "%s: the calibration of %s states %s, so a table at %g degC would rest on an assumed one (NdFeB is about "
+      "-0.1 %%/K, but the magnet's own grade decides); export at the calibration's temperature (without %s), or "
+      "fit the motor again with what is missing stated",
+      Label(req, "magnet_temp_c"), cal.serial(), absl::StrJoin(missing, " and "), at_c, Name(req, "magnet_temp_c")));
+}
+
+std::string MagnetTemperatureNote(const MagnetTemperature& mt) {
+  std::string s = absl::StrFormat(
+      "magnets at %.4g degC: psi_pm x %.6g = 1 + alpha (T - T_ref) with the calibration's alpha %.4g /K and "
+      "T_ref %.4g degC",
+      mt.at_c, mt.Scale(), mt.alpha_per_k, mt.reference_c);
+  if (mt.reference_spread_k && *mt.reference_spread_k > fit::kMagnetReferenceSpreadWarnK) {
+    absl::StrAppendFormat(&s,
+                          "; warning: the flux map was recorded over a %.3g K spread of temperatures (more than "
+                          "%.3g K: a machine warming during the test), so T_ref is their mean and psi_pm(T) is "
+                          "uncertain by about %.2g %%",
+                          *mt.reference_spread_k, fit::kMagnetReferenceSpreadWarnK,
+                          100 * std::abs(mt.alpha_per_k) * *mt.reference_spread_k / 2);
+  }
+  return s;
 }
 
 absl::StatusOr<std::vector<double>> ParseUdcAxis(const std::string& text, const std::string& flag) {

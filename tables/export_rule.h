@@ -81,14 +81,19 @@ absl::StatusOr<BuiltExport> BuildExportTable(const fit::Calibration& cal, TableS
 
 // The magnet temperature `at_c` under the calibration's own coefficient
 // of psi_pm and the temperature its flux map holds (tables.h,
-// MagnetTemperature). A calibration carries neither today (fit::Calibration
-// states pole pairs, Rs, Udc and the nominal psi_pm, no magnet
-// temperature or coefficient), so this refuses, InvalidArgument naming
-// --magnet-temp-c / magnet_temp_c, what is missing and why no textbook
-// coefficient is put in its place. The one place to read them once a
-// calibration states them.
+// MagnetTemperature; fit::Calibration::psi_pm_temp_coeff_per_k and
+// magnet_reference_c, with the reference's spread). Either unknown:
+// InvalidArgument naming --magnet-temp-c / magnet_temp_c and exactly what
+// is missing (no textbook coefficient or temperature is put in its place);
+// also for `at_c` outside -60 .. 250 degC.
 absl::StatusOr<MagnetTemperature> MagnetTemperatureOf(const fit::Calibration& cal, double at_c,
                                                       const ExportRequest& request);
+
+// One line on a table at a magnet temperature (what `fluxcal export`
+// prints): the scale and where alpha and T_ref come from, and a warning
+// when the flux map's temperatures spread more than
+// fit::kMagnetReferenceSpreadWarnK.
+std::string MagnetTemperatureNote(const MagnetTemperature& mt);
 
 // A Udc axis (docs/tables.md, "Tables over Udc"): the DC-link voltages
 // of `--udc-axis-v`, written as a list "250,300,350,400" or a range

@@ -50,11 +50,16 @@ struct MachineLimits {
 // i.e. psi_d shifted by (scale - 1) psi_d(0, 0) at every current, the
 // inductances unchanged (the iron's saturation by the magnet is not
 // modelled). alpha and T_ref must be the calibration's own (a measured
-// or datasheet coefficient it states); none is invented.
+// or datasheet coefficient it states); none is invented. The linear
+// reversible temperature coefficient of remanence is how magnet datasheets
+// and IEC 60404-8-1 state it; psi_pm is proportional to the remanence.
 struct MagnetTemperature {
   double alpha_per_k = 0;       // relative change of psi_pm per kelvin (e.g. -0.001)
   double reference_c = 25;      // temperature the calibration's flux map holds
   double at_c = 25;             // the table's magnet temperature
+  // The spread (max - min) of the temperatures the flux map was recorded
+  // at, K, where the calibration states it (written as a scalar).
+  std::optional<double> reference_spread_k{};
   double Scale() const { return 1.0 + alpha_per_k * (at_c - reference_c); }
 };
 struct Axis {

@@ -7,7 +7,10 @@
 //  - each file's values are the single export's at that Udc, bit for bit
 //    (the payload SHA-256 the files carry);
 //  - torque never rises with speed and never falls with Udc;
-//  - --magnet-temp-c is refused: the calibration states no coefficient.
+//  - --magnet-temp-c is refused: the calibration states no coefficient;
+//    with the coefficient and the flux map's temperature stated (a
+//    simulated set's manifest, `fit --map` flags), the tables at the magnet
+//    temperature state it, and what is missing is named.
 #include <unistd.h>
 
 #include <filesystem>
@@ -191,6 +194,70 @@ TEST(EnvelopeCli, GeneratingEnvelopeUnderLabelsOfItsOwn) {
   }
   const RunResult no_table = RunFluxcal("export " + cal + " --generating --out " + path("bad.csv"));
   EXPECT_EQ(no_table.code, 2) << "the default table is mtpa: " << no_table.err;
+  fs::remove_all(dir);
+}
+
+// The coefficient from the manifest (motor.psi_pm_temp_coeff_per_k), the
+// reference from the temperatures the twin's set records (25 degC): the
+// MTPA table at 100 degC states both and psi_pm x (1 - 0.0012 x 75). A bad
+// coefficient is refused naming the manifest's line and field.
+TEST(EnvelopeCli, MagnetTemperatureFromTheSetOrTheFlags) {
+  const fs::path dir = fs::temp_directory_path() / ("fluxcal_magnet_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  auto path = [&](const std::string& name) { return (dir / name).string(); };
+  ASSERT_EQ(RunFluxcal("simulate --serial IPM-MAGNET-E2E --out " + path("set")).code, 0);
+  const std::string manifest = path("set/manifest.json");
+  nlohmann::json m = nlohmann::json::parse(Read(manifest));
+  m["motor"]["psi_pm_temp_coeff_per_k"] = -0.0012;
+  std::ofstream(manifest) << m.dump(2);
+  const RunResult fit = RunFluxcal("fit " + path("set") + " --out " + path("c.json"));
+  ASSERT_EQ(fit.code, 0) << fit.err;
+  EXPECT_TRUE(Has(fit.err, "fit: magnet temperature: psi_pm changes by -0.12 %/K of magnet temperature (stated); "
+                           "flux map at 25 degC")) << fit.err;
+  const RunResult hot = RunFluxcal("export " + path("c.json") + " --table mtpa --magnet-temp-c 100 --out " +
+                                   path("hot.csv"));
+  ASSERT_EQ(hot.code, 0) << hot.err;
+  EXPECT_TRUE(Has(hot.err, "export: note: magnets at 100 degC: psi_pm x 0.91 ")) << hot.err;
+  const std::string csv = Read(path("hot.csv"));
+  for (const char* line : {"# magnet_temperature_c: 100 degC", "# magnet_reference_c: 25 degC",
+                           "# magnet_reference_spread_k: 0 K", "# magnet_alpha_per_k: -0.00119999999",
+                           "# psi_pm_scale: 0.9100000000"}) {
+    EXPECT_TRUE(Has(csv, line)) << line << " not in\n" << csv.substr(0, 2000);
+  }
+  // A coefficient in %/K.
+  m["motor"]["psi_pm_temp_coeff_per_k"] = -0.12;
+  std::ofstream(manifest) << m.dump(2);
+  const RunResult bad = RunFluxcal("fit " + path("set") + " --out " + path("bad.json"));
+  EXPECT_NE(bad.code, 0);
+  EXPECT_TRUE(Has(bad.err, manifest + ":") && Has(bad.err, "field 'motor.psi_pm_temp_coeff_per_k': must be in")) << bad.err;
+  EXPECT_FALSE(fs::exists(path("bad.json")));
+
+  // A flux map records no temperature: --magnet-reference-c states it,
+  // else the export at another temperature names what is missing.
+  const std::string map = std::string(FLUXCAL_SOURCE_DIR) + "/data/real/baldor_fluxmap_measured.csv";
+  const std::string fit_map = "fit --map " + map + " --pole-pairs 2 --serial BALDOR-MAGNET-1 --magnet-temp-coeff-per-k -0.0011 ";
+  ASSERT_EQ(RunFluxcal(fit_map + "--magnet-reference-c 60 --out " + path("map60.json")).code, 0);
+  const RunResult at = RunFluxcal("export " + path("map60.json") + " --table mtpa --magnet-temp-c 120 --format h --out " +
+                                  path("map120.h") + " --json");
+  ASSERT_EQ(at.code, 0) << at.err;
+  const nlohmann::json aj = nlohmann::json::parse(at.out);
+  EXPECT_EQ(aj["magnet_temperature"]["at_c"], 120.0) << at.out;
+  EXPECT_EQ(aj["magnet_temperature"]["reference_c"], 60.0) << at.out;
+  EXPECT_EQ(aj["magnet_temperature"]["reference_spread_k"], 0.0) << at.out;
+  EXPECT_NEAR(aj["magnet_temperature"]["psi_pm_scale"].get<double>(), 1 - 0.0011 * 60, 1e-12) << at.out;
+  EXPECT_TRUE(Has(Read(path("map120.h")), "MAGNET_REFERENCE_C")) << Read(path("map120.h")).substr(0, 3000);
+  const RunResult no_ref_fit = RunFluxcal(fit_map + "--out " + path("map.json"));
+  ASSERT_EQ(no_ref_fit.code, 0) << no_ref_fit.err;
+  const RunResult no_ref = RunFluxcal("export " + path("map.json") + " --table mtpa --magnet-temp-c 120 --out " +
+                                      path("x.csv"));
+  EXPECT_EQ(no_ref.code, 2);
+  EXPECT_TRUE(Has(no_ref.err, "flag --magnet-temp-c: the calibration of BALDOR-MAGNET-1 states no magnet temperature "
+                              "of its flux map")) << no_ref.err;
+  EXPECT_FALSE(Has(no_ref.err, "no magnet temperature coefficient")) << no_ref.err;
+  const RunResult bad_flag = RunFluxcal(fit_map + "--magnet-reference-c 400 --out " + path("y.json"));
+  EXPECT_EQ(bad_flag.code, 2);
+  EXPECT_TRUE(Has(bad_flag.err, "flag --magnet-reference-c: must be")) << bad_flag.err;
   fs::remove_all(dir);
 }
 

@@ -245,6 +245,34 @@ TEST_F(RecordingSetTest, MissingRequiredPolePairs) {
   ExpectError(absl::StatusCode::kInvalidArgument, {"manifest.json", "field 'motor.pole_pairs'"});
 }
 
+// The compatible extension "Magnet temperature coefficient"
+// (docs/recording-format.md): motor.psi_pm_temp_coeff_per_k, optional,
+// read back as written; a set without it reads as before.
+TEST_F(RecordingSetTest, MagnetTempCoeffRoundTrips) {
+  auto before = ReadRecordingSet(dir_.string());
+  ASSERT_TRUE(before.ok()) << before.status();
+  EXPECT_FALSE(before->manifest.motor.psi_pm_temp_coeff_per_k.has_value());
+  EXPECT_EQ(Read("manifest.json").find("psi_pm_temp_coeff_per_k"), std::string::npos);
+  RecordingSet set = MakeSet();
+  set.manifest.motor.psi_pm_temp_coeff_per_k = -0.0011;
+  ASSERT_TRUE(WriteRecordingSet(dir_.string(), set).ok());
+  auto r = ReadRecordingSet(dir_.string());
+  ASSERT_TRUE(r.ok()) << r.status();
+  EXPECT_EQ(r->manifest.motor.psi_pm_temp_coeff_per_k, -0.0011);
+}
+
+// A coefficient in %/K (-0.11), beyond any magnet (+0.01), or not a number:
+// refused, naming the file, the line and the field.
+TEST_F(RecordingSetTest, BadMagnetTempCoeffNamesFileAndField) {
+  for (const std::string bad : {"-0.11", "0.01", "\"-0.1 %/K\""}) {
+    SetUp();
+    Replace("manifest.json", "\"pole_pairs\": 4", "\"pole_pairs\": 4,\n    \"psi_pm_temp_coeff_per_k\": " + bad);
+    ExpectError(absl::StatusCode::kInvalidArgument,
+                {LineOf("manifest.json", "psi_pm_temp_coeff_per_k"), "field 'motor.psi_pm_temp_coeff_per_k'",
+                 bad[0] == '"' ? "expected a number" : "must be in [-0.005, 0.002]"});
+  }
+}
+
 TEST_F(RecordingSetTest, WrongJsonType) {
   Replace("manifest.json", "\"amplitude_v\": 5.0", "\"amplitude_v\": \"five\"");
   ExpectError(absl::StatusCode::kInvalidArgument, {"manifest.json", "field 'injection.amplitude_v'"});

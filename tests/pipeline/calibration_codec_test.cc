@@ -16,6 +16,7 @@
 #include <map>
 
 #include "fitting/fit.h"
+#include "fluxcal/v1/calibration_model.pb.h"
 #include "gtest/gtest.h"
 #include "identification/identify.h"
 #include "io/sha256.h"
@@ -138,6 +139,65 @@ TEST(CalibrationCodec, DoubleCovarianceIsReadAtFloatPrecision) {
   EXPECT_EQ(read->covariance(), cal.covariance());
   const auto a = cal.Predict(-10, 5), b = read->Predict(-10, 5);
   EXPECT_NEAR(b.torque_nm_std, a.torque_nm_std, 1e-6 * a.torque_nm_std);
+}
+
+// The magnet temperature facts (fit::Calibration::psi_pm_temp_coeff_per_k,
+// magnet_reference_c and its spread) through every serialisation: binary
+// and JSON, bit for bit; a calibration without them (every file and row
+// written before they existed) reads back without them; out-of-range
+// values are refused naming the field.
+TEST(CalibrationCodec, MagnetTemperatureRoundTripsBitExact) {
+  ASSERT_TRUE(Fits().count("poly4"));
+  // The simulated set records 25 degC at every point and row.
+  ASSERT_TRUE(Fits().at("poly4").magnet_reference_c().has_value());
+  EXPECT_EQ(*Fits().at("poly4").magnet_reference_c(), 25.0);
+  fit::Calibration cal = Fits().at("poly4");
+  cal.set_psi_pm_temp_coeff_per_k(-0.0011);
+  cal.set_magnet_reference(37.123456789012345, 12.5 + 1e-13);
+  const std::string bytes = EncodeCalibration(cal);
+  auto back = DecodeCalibration(bytes);
+  ASSERT_TRUE(back.ok()) << back.status();
+  EXPECT_TRUE(EncodeCalibration(*back) == bytes);
+  ASSERT_TRUE(back->psi_pm_temp_coeff_per_k() && back->magnet_reference_c() && back->magnet_reference_spread_k());
+  EXPECT_TRUE(SameBits(*back->psi_pm_temp_coeff_per_k(), -0.0011));
+  EXPECT_TRUE(SameBits(*back->magnet_reference_c(), 37.123456789012345));
+  EXPECT_TRUE(SameBits(*back->magnet_reference_spread_k(), 12.5 + 1e-13));
+  const std::string json = cal.ToJson().dump();
+  auto from_json = fit::Calibration::FromJson(nlohmann::json::parse(json));
+  ASSERT_TRUE(from_json.ok()) << from_json.status();
+  EXPECT_TRUE(EncodeCalibration(*from_json) == bytes) << "JSON -> Calibration -> binary differs";
+  auto model_pb = CalibrationJsonToModel(json);
+  ASSERT_TRUE(model_pb.ok()) << model_pb.status();
+  EXPECT_TRUE(*model_pb == bytes);
+  auto view = CalibrationModelToJson(*model_pb);
+  ASSERT_TRUE(view.ok()) << view.status();
+  EXPECT_EQ(view->dump(), json);
+  // Without them: absent from both forms, and absent when read back.
+  fit::Calibration none = cal;
+  none.set_psi_pm_temp_coeff_per_k(std::nullopt);
+  none.set_magnet_reference(std::nullopt, 3.0);   // a spread alone is dropped
+  const nlohmann::json nj = none.ToJson();
+  for (const char* key : {"psi_pm_temp_coeff_per_k", "magnet_reference_c", "magnet_reference_spread_k"}) {
+    EXPECT_FALSE(nj.contains(key)) << key;
+  }
+  v1::CalibrationModel m;
+  ASSERT_TRUE(m.ParseFromString(EncodeCalibration(none)));
+  EXPECT_FALSE(m.has_psi_pm_temp_coeff_per_k() || m.has_magnet_reference_c() || m.has_magnet_reference_spread_k());
+  auto none_back = DecodeCalibration(m.SerializeAsString());
+  ASSERT_TRUE(none_back.ok()) << none_back.status();
+  EXPECT_FALSE(none_back->psi_pm_temp_coeff_per_k() || none_back->magnet_reference_c() ||
+               none_back->magnet_reference_spread_k());
+  // Refused, naming the field.
+  nlohmann::json bad = cal.ToJson();
+  bad["psi_pm_temp_coeff_per_k"] = -0.11;   // %/K, not a relative change per kelvin
+  auto refused = fit::Calibration::FromJson(bad);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.status().message().find("field 'psi_pm_temp_coeff_per_k'"), std::string::npos)
+      << refused.status();
+  m.set_magnet_reference_spread_k(4.0);   // without a reference
+  auto refused_pb = DecodeCalibration(m.SerializeAsString());
+  ASSERT_FALSE(refused_pb.ok());
+  EXPECT_NE(refused_pb.status().message().find("magnet_reference_spread_k"), std::string::npos) << refused_pb.status();
 }
 
 TEST(CalibrationCodec, RefusesWhatIsNotAModel) {

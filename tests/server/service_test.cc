@@ -519,6 +519,21 @@ TEST_P(ServiceTest, EightConcurrentStationsThenFitExportQuery) {
     EXPECT_LE(2 * fr.clamped_cells(), fr.cells());
     EXPECT_NE(fr.data().find("FESTWERT FLUXCAL_FW_UDC_V\n"), std::string::npos);
   }
+  {
+    // magnet_temp_c: an HF run states no psi_pm temperature coefficient and
+    // the store no temperature of its points: INVALID_ARGUMENT naming the
+    // field and both.
+    v1::ExportTableRequest hot = e;
+    hot.set_magnet_temp_c(120);
+    v1::ExportTableResponse hr;
+    grpc::ClientContext c1;
+    const grpc::Status refused = stub_->ExportTable(&c1, hot, &hr);
+    EXPECT_EQ(refused.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+    EXPECT_EQ(refused.error_message().rfind("magnet_temp_c: the calibration of IPM-C-3 states no magnet temperature "
+                                            "coefficient", 0), 0u) << refused.error_message();
+    EXPECT_NE(refused.error_message().find("and no magnet temperature of its flux map"), std::string::npos)
+        << refused.error_message();
+  }
   EXPECT_TRUE(er.signature().empty());
   // With a signing key every reply carries a detached signature of its data.
   auto kp = tables::GenerateEd25519();
