@@ -8,6 +8,7 @@
 // catalogue models it and what it would show elsewhere: the test that tells
 // the hypotheses apart. The ranking is by how specific the signature is
 // (an effect whose signature is exactly this pattern first).
+#include <algorithm>
 #include <cmath>
 
 #include "absl/strings/str_format.h"
@@ -67,14 +68,21 @@ std::vector<H> ForLine(const Mismatch& m, int pole_pairs) {
     return h;
   }
   if (m.kind == "mechanical_order") {
-    h.push_back({absl::StrFormat("rotor eccentricity: the air gap varies %d time(s) per mechanical revolution", std::abs(k)),
+    // A stator-frame line at k f_mech is most likely the fundamental's
+    // sideband (rotor-frame order k - p) or the mechanical order itself:
+    // the rotor-frame order the physics has is the smallest of |k - p|,
+    // |k|, |k + p|.
+    const int r = std::min({std::abs(k - pole_pairs), std::abs(k), std::abs(k + pole_pairs)});
+    h.push_back({absl::StrFormat("rotor eccentricity: the air gap varies %d time(s) per mechanical revolution", r),
                  "", "make locked points at one electrical angle in different pole-pair sectors differ, and put "
                  "sidebands at +-f_mech beside the HF response at speed"});
     h.push_back({"the angle sensor's eccentricity (an off-axis encoder)", "",
                  "show as the same order in the recorded angle beyond constant speed"});
     h.push_back({"a load torque pulsing with the shaft (coupling misalignment)", "",
                  "show in the torque transducer at the mechanical frequency"});
-    (void)pole_pairs;
+    h.push_back({"partial demagnetisation: one magnet weaker than the others (overheating, overcurrent, a chipped "
+                 "or missing magnet)",
+                 "", "grow with speed as a back-EMF would (sidebands f_e (1 +- k / p)), be absent at standstill"});
     return h;
   }
   if (m.kind == "injection_sideband") {
@@ -179,7 +187,8 @@ std::vector<H> ForSummarised(const Mismatch& m) {
 void AttachHypotheses(std::vector<Mismatch>* mismatches, int pole_pairs) {
   for (auto& m : *mismatches) {
     if (!m.hypotheses.empty()) continue;
-    const bool waveform = m.signal == "phase_current" || m.signal == "zero_sequence_current" || m.signal == "rotor_angle";
+    const bool waveform = m.signal == "phase_current" || m.signal == "zero_sequence_current" ||
+                          m.signal == "rotor_angle" || m.signal == "phase_voltage";
     m.hypotheses = waveform ? ForLine(m, pole_pairs) : ForSummarised(m);
   }
 }

@@ -543,6 +543,13 @@ struct WaveformPoint {
 // spectra, noise and lines (waveform.cc's comment).
 std::vector<WaveformPoint> AnalyseWaveforms(const io::RecordingSet& set, const std::vector<sim::ReplayPoint>& replay,
                                             int pole_pairs);
+// ---- mechanical_orders.cc -----------------------------------------------------
+// Mechanical-order lines at a rotating point, f_e (1 + o / p), o = +-1,
+// in the recorded voltage command (file comment): each at z^2 >= line_z2
+// on channel "phase_voltage", its size in V (WaveformLine::amp_a).
+std::vector<WaveformLine> MechanicalOrderVoltageLines(const io::Waveform& w, double f_sample_hz, double f_i_hz,
+                                                      int pole_pairs, double f_e_hz, double line_z2);
+
 // ---- hypotheses.cc ------------------------------------------------------------
 // Fills each mismatch's ranked hypotheses (catalogue effects and physics
 // outside it) from its kind, signal and order.

@@ -325,6 +325,9 @@ std::vector<WaveformPoint> AnalyseWaveforms(const io::RecordingSet& set, const s
     };
     detect(xout, wp.sigma2_bin, "phase_current");
     detect(zout, wp.sigma2_bin_zero, "zero_sequence_current");
+    for (auto& l : MechanicalOrderVoltageLines(w, fs, f_i, pole_pairs, wp.f_e_hz, kLineZ2)) {
+      wp.lines.push_back(std::move(l));
+    }
     if (std::abs(wp.f_e_hz) > 0.0) {
       // The recorded angle at speed: the rotor turns at constant speed, so
       // what the reading does beyond its least-squares line is the sensor's
@@ -515,6 +518,19 @@ std::vector<Mismatch> WaveformMismatches(const std::vector<WaveformPoint>& pts, 
     // them, and its size for the dependence on order, current and speed.
     std::vector<double> z2s, amps, order_idx, current, speed;
     for (const auto& wp : pts) {
+      if (g.channel == "phase_voltage") {
+        // Tested by regression where the record allows it
+        // (mechanical_orders.cc): the lines' own z^2, no spectrum.
+        for (const auto& l : wp.lines) {
+          if (l.channel != g.channel || l.kind != g.kind || l.order != g.order) continue;
+          z2s.push_back(l.z2);
+          amps.push_back(l.amp_a);
+          order_idx.push_back(static_cast<double>(wp.index));
+          current.push_back(std::hypot(wp.id_a, wp.iq_a));
+          speed.push_back(std::abs(wp.speed_rpm));
+        }
+        continue;
+      }
       const bool turning = std::abs(wp.f_e_hz) >= 3 * wp.df_hz;
       double f = g.freq_hz;
       if (g.kind == "electrical_harmonic") {
@@ -620,7 +636,10 @@ std::vector<Mismatch> WaveformMismatches(const std::vector<WaveformPoint>& pts, 
     mm.where = KindText(mm.kind, top.order, top.m, top.freq_hz) +
                (mm.signal == "zero_sequence_current" ? ", in the zero sequence (ia + ib + ic)"
                 : mm.signal == "rotor_angle"         ? ", in the recorded rotor angle beyond its constant speed (rad)"
-                                                     : ", in the phase currents");
+                : mm.signal == "phase_voltage"
+                    ? ", in the voltage the bench's current controller commanded (rotor frame, V): the controller "
+                      "held the current against it"
+                    : ", in the phase currents");
     if (!others.empty()) {
       mm.where += absl::StrFormat("; %zu more of its kind%s (%s%s)", members.size() - 1,
                                   members.size() - 1 > others.size() ? ", strongest" : "", absl::StrJoin(others, ", "),

@@ -12,6 +12,7 @@ std::unique_ptr<BenchEffect> MakeEncoderEccentricity();
 std::unique_ptr<BenchEffect> MakeCurrentPickup();
 std::unique_ptr<BenchEffect> MakeCurrentCrosstalk();
 std::unique_ptr<BenchEffect> MakeDcLinkRipple();
+std::unique_ptr<BenchEffect> MakePartialDemagnetisation();
 
 std::vector<std::unique_ptr<BenchEffect>> AllBenchEffects() {
   std::vector<std::unique_ptr<BenchEffect>> all;
@@ -21,6 +22,7 @@ std::vector<std::unique_ptr<BenchEffect>> AllBenchEffects() {
   all.push_back(MakeCurrentPickup());
   all.push_back(MakeCurrentCrosstalk());
   all.push_back(MakeDcLinkRipple());
+  all.push_back(MakePartialDemagnetisation());
   return all;
 }
 

@@ -210,3 +210,66 @@ TEST(Verdict, PhaseGainsAndOffsets) {
 
 }  // namespace
 }  // namespace fluxcal::diag::detail
+
+namespace fluxcal::diag::detail {
+namespace {
+
+// A rotating point's voltage command, built in the rotor frame: the held
+// voltage with a drift, the injection, white noise, and a line at
+// mechanical order o (rotor frame e^{j o theta / p}) of `line_v`.
+io::Waveform RotatingCommand(double f_e_hz, double seconds, double line_v, int o, unsigned seed) {
+  constexpr double kFs = 10000.0, kFi = 500.0;
+  const int p = 4;
+  io::Waveform w;
+  uint64_t state = seed * 2654435761ull + 1;
+  auto gauss = [&] {   // Box-Muller on a 64-bit LCG: reproducible across libraries
+    auto u = [&] {
+      state = state * 6364136223846793005ull + 1442695040888963407ull;
+      return (static_cast<double>(state >> 11) + 0.5) / 9007199254740992.0;
+    };
+    return std::sqrt(-2 * std::log(u())) * std::cos(2 * kPi * u());
+  };
+  const size_t n = static_cast<size_t>(seconds * kFs);
+  for (size_t k = 0; k < n; ++k) {
+    const double t = static_cast<double>(k) / kFs, th = 2 * kPi * f_e_hz * t + 0.3;
+    const double tau = 2 * t / seconds - 1;
+    Complex u_dq(-1.2 + 0.05 * tau, 4.6 - 0.02 * tau * tau);
+    u_dq += 5.0 * std::polar(1.0, 2 * kPi * kFi * t - th);
+    u_dq += line_v * std::polar(1.0, o * th / p + 0.7);
+    u_dq += Complex(0.002 * gauss(), 0.002 * gauss());
+    const Complex u_ab = u_dq * std::polar(1.0, th);
+    w.t_s.push_back(t);
+    w.ia_a.push_back(0); w.ib_a.push_back(0); w.ic_a.push_back(0);
+    w.theta_e_rad.push_back(std::remainder(th, 2 * kPi));
+    w.ualpha_ref_v.push_back(u_ab.real());
+    w.ubeta_ref_v.push_back(u_ab.imag());
+    w.udc_v.push_back(50.0);
+  }
+  return w;
+}
+
+// A mechanical order in the voltage command (o = +-1: once per
+// revolution) is found with its size and order (p + o in the stator frame) where the record spans 1.5 revolutions
+// or more; without one nothing is claimed, and over half a revolution
+// nothing is claimed even with one (the drift and the order are alike).
+TEST(MechanicalOrders, LineInTheVoltageCommand) {
+  const double z2 = 14.4;
+  for (unsigned seed : {1u, 2u, 3u}) {
+    const auto found = MechanicalOrderVoltageLines(RotatingCommand(66.7, 0.1, 0.02, 1, seed), 10000, 500, 4, 66.7, z2);
+    ASSERT_EQ(found.size(), 1u) << "seed " << seed;
+    EXPECT_EQ(found[0].order, 5);
+    EXPECT_EQ(found[0].channel, "phase_voltage");
+    EXPECT_NEAR(found[0].amp_a, 0.02, 0.002);
+    EXPECT_NEAR(found[0].freq_hz, 66.7 * 1.25, 1e-9);
+    const auto minus = MechanicalOrderVoltageLines(RotatingCommand(66.7, 0.1, 0.02, -1, seed), 10000, 500, 4, 66.7, z2);
+    ASSERT_EQ(minus.size(), 1u) << "seed " << seed;
+    EXPECT_EQ(minus[0].order, 3);
+    EXPECT_TRUE(MechanicalOrderVoltageLines(RotatingCommand(66.7, 0.1, 0.0, 1, seed), 10000, 500, 4, 66.7, z2).empty())
+        << "seed " << seed;
+    EXPECT_TRUE(MechanicalOrderVoltageLines(RotatingCommand(13.3, 0.1, 0.02, 1, seed), 10000, 500, 4, 13.3, z2).empty())
+        << "seed " << seed;
+  }
+}
+
+}  // namespace
+}  // namespace fluxcal::diag::detail
