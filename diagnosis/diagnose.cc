@@ -588,8 +588,14 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
   if (opt.waveform_replay) {
     for (int f = -50; f <= 50; ++f) rep.spectrum_hz.push_back(50.0 * f);
     const double f_inj = set.manifest.injection ? set.manifest.injection->frequency_hz : 0.0;
-    auto before = ReplayModel(set, m_base, base.p, m_base.harm_order);
-    auto after = ReplayModel(set, m, current.p, m.harm_order);
+    // The two replays are independent (each builds its own surface model).
+    std::vector<absl::StatusOr<std::vector<sim::ReplayPoint>>> replays(2);
+    ParallelFor(2, [&](size_t k) {
+      replays[k] = k == 0 ? ReplayModel(set, m_base, base.p, m_base.harm_order)
+                          : ReplayModel(set, m, current.p, m.harm_order);
+    });
+    auto before = std::move(replays[0]);
+    auto after = std::move(replays[1]);
     if (before.ok()) LeaveOutUnheldPoints(ids, &*before);
     if (after.ok()) LeaveOutUnheldPoints(ids, &*after);
     if (before.ok()) {

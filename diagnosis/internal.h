@@ -434,6 +434,9 @@ FitOut Solve(const Model& m, const Params& start, const std::vector<Block>& free
 // candidate sets). task(k, model) writes only its own output k, so results
 // do not depend on the schedule.
 int WorkerCount();
+// task(k) for k = 0..n-1 on up to WorkerCount() threads (tasks that share
+// no mutable state: the two open-loop replays, each with its own model).
+void ParallelFor(size_t n, const std::function<void(size_t)>& task);
 void ParallelForModels(size_t n, const Model& m, const std::function<void(size_t, Model&)>& task);
 
 // ---- locate.cc --------------------------------------------------------------
