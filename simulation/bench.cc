@@ -408,6 +408,9 @@ absl::StatusOr<SimulationResult> Simulate(const TwinConfig& cfg, const Plan& pla
   mf.motor.pole_pairs = cfg.motor.pole_pairs;
   mf.motor.rs_ohm = cfg.motor.rs_ohm;               // nominal: what the bench believes
   mf.motor.psi_pm_wb = cfg.motor.sat.psi_pm_wb;
+  // The magnet grade's coefficient, as a bench knows it from the datasheet
+  // (docs/recording-format.md, "Magnet temperature").
+  mf.motor.psi_pm_temp_coeff_per_k = cfg.motor.psi_pm_temp_coeff_per_k;
   mf.drive.udc_v = cfg.drive.udc_v;
   mf.drive.f_pwm_hz = cfg.drive.f_pwm_hz;
   mf.drive.f_sample_hz = cfg.drive.f_pwm_hz;
