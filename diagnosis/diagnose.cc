@@ -135,6 +135,7 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
     // do not change with a finding, and it is one penalty instead of seven.
     fit::FitOptions fo;
     fo.smoothing_anisotropy_q = mm.surf_anisotropy_q;
+    fo.smoothing_curvature_weight = mm.surf_curvature_weight;   // the baseline's penalty (observations.cc)
     fo.large_signal_hf = false;   // the joint model's HF prediction is small-signal (InitSurfaces)
     auto cal = fit::Fit(CorrectedFitData(set, mm, ff.p, ids), fo);
     if (!cal.ok()) return std::nullopt;

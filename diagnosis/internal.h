@@ -160,6 +160,7 @@ struct Model {
   Eigen::MatrixXd surf_R;
   double surf_lambda = 0;
   double surf_anisotropy_q = 1;   // the calibration's SmoothingPenalty kappa
+  double surf_curvature_weight = 0;   // and its curvature weight mu
   double surf_k_eff = 0;                // effective parameters of the surfaces (BIC)
   int BlockSize(int b) const { return b == kBase ? surf.NumParams() : kBlockSize[b]; }
   // psi_pm at the kPsi block (magnet_temperature), relative to nominal;

@@ -305,6 +305,11 @@ nlohmann::json Calibration::ToJson() const {
   // Written only when not isotropic: files of older versions (no field)
   // read back as 1, the penalty they were fitted with.
   if (summary.smoothing_anisotropy_q != 1.0) j["fit"]["smoothing_anisotropy_q"] = summary.smoothing_anisotropy_q;
+  // Likewise only when not 0: older files read back as 0, the penalty
+  // without the curvature term they were fitted with.
+  if (summary.smoothing_curvature_weight != 0.0) {
+    j["fit"]["smoothing_curvature_weight"] = summary.smoothing_curvature_weight;
+  }
   if (summary.flux_nodes > 0) {
     auto& f = j["fit"];
     f["flux_nodes"] = summary.flux_nodes;
@@ -488,6 +493,12 @@ absl::StatusOr<Calibration> Calibration::FromJson(const nlohmann::json& j) {
       if (!(std::isfinite(c.summary.smoothing_anisotropy_q) && c.summary.smoothing_anisotropy_q > 0)) {
         return absl::InvalidArgumentError(absl::StrFormat(
             "field 'fit.smoothing_anisotropy_q': %g is not a positive finite number", c.summary.smoothing_anisotropy_q));
+      }
+      c.summary.smoothing_curvature_weight = f.value("smoothing_curvature_weight", 0.0);
+      if (!(std::isfinite(c.summary.smoothing_curvature_weight) && c.summary.smoothing_curvature_weight >= 0)) {
+        return absl::InvalidArgumentError(
+            absl::StrFormat("field 'fit.smoothing_curvature_weight': %g is not a non-negative finite number",
+                            c.summary.smoothing_curvature_weight));
       }
       // Absent before map fits reported them (and for fits without flux nodes).
       c.summary.flux_nodes = f.value("flux_nodes", 0);

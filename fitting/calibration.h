@@ -81,6 +81,9 @@ struct FitSummary {
   // unknowns beside them (diagnosis) keeps them as smooth with.
   double effective_parameters = 0, smoothing_lambda = 0;
   double smoothing_anisotropy_q = 1;   // SmoothingPenalty's kappa with smoothing_lambda (surface.h)
+  // SmoothingPenalty's curvature weight mu: 0 in calibrations written before
+  // it existed (third derivatives only), kSmoothingCurvatureWeight since.
+  double smoothing_curvature_weight = 0;
   std::vector<std::string> candidates;   // model-selection table "name cv bic ..."
   // Observations the fit left out or the robust loss down-weighted, each
   // with its point and reason ("hf point 31 (id 0 A, iq 0 A): ldd_h ...").

@@ -143,6 +143,11 @@ struct FitOptions {
   // refitting the same machine's data, e.g. the diagnosis after each
   // finding, keeps the one its baseline chose: one penalty, not seven).
   std::optional<double> smoothing_anisotropy_q;
+  // The smoothing splines' curvature weight mu (surface.h,
+  // SmoothingPenalty): unset, kSmoothingCurvatureWeight; 0, the penalty on
+  // the inductance's slopes alone (the diagnosis' baseline, diagnosis/
+  // observations.cc says why).
+  std::optional<double> smoothing_curvature_weight;
   // Predict HF points whose injection's flux radius is known as the
   // describing function over their orbit (InductanceObservation::
   // hf_flux_radius_wb): a second pass on the first pass's orbits. False: the

@@ -200,6 +200,12 @@ Family SmoothFamily(const DataRegion& r, bool symmetric) {
   return f;
 }
 
+// The smoothing splines' curvature weight (FitOptions).
+double CurvatureWeightOf(const FitOptions& o) {
+  const auto& mu = o.smoothing_curvature_weight;
+  return mu && std::isfinite(*mu) && *mu >= 0 ? *mu : kSmoothingCurvatureWeight;
+}
+
 // The candidate families for `model_name` (ParseModelName's errors).
 absl::StatusOr<std::vector<Family>> CandidateFamilies(const FitData& d, const DataRegion& r,
                                                       const std::string& model_name) {
@@ -274,7 +280,7 @@ absl::StatusOr<std::vector<Solved>> SolveCandidates(const std::vector<Family>& c
       }
       std::optional<Solved> chosen;
       for (const double kappa : kappas) {
-        const Eigen::MatrixXd P = SmoothingPenalty(f, kappa);
+        const Eigen::MatrixXd P = SmoothingPenalty(f, kappa, CurvatureWeightOf(o));
         Solved s = Solve(f, d, o, &P, &pd);
         s.anisotropy_q = kappa;
         if (!chosen || (s.usable && s.reml < chosen->reml) || !chosen->usable) chosen = std::move(s);
@@ -303,6 +309,7 @@ void Report(const FitData& d, const FitOptions& o, const std::vector<Solved>& so
   cal.summary.usable = best->usable;
   cal.summary.smoothing_lambda = best->lambda;
   cal.summary.smoothing_anisotropy_q = best->lambda > 0 ? best->anisotropy_q : 1.0;
+  cal.summary.smoothing_curvature_weight = best->lambda > 0 ? CurvatureWeightOf(o) : 0.0;
   cal.summary.effective_parameters = best->k_eff;
   double rel = 0;
   int nrel = 0;

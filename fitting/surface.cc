@@ -166,6 +166,30 @@ SurfacePoint SurfaceAt(const Family& f, const double* params, double id_a, doubl
 // its square by kappa^((b-a)/6); the null space (a constant inductance) is
 // the same for every kappa. The fit chooses kappa with lambda
 // (solve_linear.cc, select.cc).
+// The inductance's curvature (`curvature_weight` mu): W's third derivatives
+// are the inductance's slopes, and a penalty on slopes alone prices a
+// wiggle of the inductance between the measured points (wavelength l,
+// amplitude A: ~A^2 (2 pi / l)^2 per unit length) like a knee of the same
+// height. Fourth derivatives, the inductance's curvature, price the wiggle
+// (2 pi u / l)^2 times more than its slope term does, u the knot spacing
+// (the rows' common current unit):
+//   R = int |nabla^3 W|^2 + mu u^2 (W_dddd^2 + 4 W_dddq^2 + 6 W_ddqq^2 + 4 W_dqqq^2)
+// (binomial weights as above). mu = 1 weighs the inductance's slope and
+// its change over one knot spacing alike: wiggles shorter than ~2 pi knot
+// spacings (the measured points lie 1-2 spacings apart) cost mostly
+// curvature, a knee mostly slope. W_qqqq, Lqq's own curvature along iq, is
+// left out: that is where a machine's sharpest knee lies (bridges and ribs
+// saturating within a few amperes, Lqq falling up to 10x), and pricing its
+// curvature spread the knee: the bridge-knee twin end to end went from
+// 0.52-0.57 % to 0.52-0.67 % with it, 0.40-0.44 % without
+// (docs/fitting.md, "The inductance's curvature"). On uniform knots the
+// fourth difference of a quartic spline's coefficients over h^4 is its
+// fourth derivative on a span (de Boor, as above). Each added term's null
+// space contains the third-order one's, so the sum's null space is still a
+// constant inductance (extrapolation unchanged) and the likelihoods stay
+// comparable across kappa. The anisotropy scales both orders alike
+// (kappa^-1/12 per id derivative, kappa^1/12 per iq derivative: a change
+// of the axes' metric).
 SurfaceEvaluator::SurfaceEvaluator(const Family& f, std::vector<double> params) : f_(f), p_(std::move(params)) {
   if (f_.kind == Family::kSpline && static_cast<int>(p_.size()) == f_.NumParams()) {
     spline_ = SplineSurface(f_.spline, p_.data());
@@ -182,7 +206,7 @@ void SurfaceEvaluator::Eval(double id, double iq, double* psi_d, double* psi_q, 
   if (ldd != nullptr) FamilyInductance(f_, id, iq, p_.data(), ldd, lqq, ldq);
 }
 
-Eigen::MatrixXd SmoothingPenalty(const Family& fam, double anisotropy_q) {
+Eigen::MatrixXd SmoothingPenalty(const Family& fam, double anisotropy_q, double curvature_weight) {
   if (fam.kind != Family::kSpline || !fam.spline.smoothing) return Eigen::MatrixXd(0, fam.NumParams());
   const SplineDomain& dom = fam.spline;
   const int nd = dom.NumD(), nq = dom.NumQ(), ne = dom.NumEven(), k = fam.NumParams();
@@ -190,32 +214,41 @@ Eigen::MatrixXd SmoothingPenalty(const Family& fam, double anisotropy_q) {
   // the differences are of the full coefficients, expressed in the free ones.
   const MirrorConstraint mirror(dom);
   const double hd = (dom.id_hi_a - dom.id_lo_a) / dom.spans, hq = (dom.iq_hi_a - dom.IqLo()) / dom.SpansQ();
-  // Binomial difference stencils of order 0..3.
-  const std::vector<std::vector<double>> stencil = {{1}, {-1, 1}, {1, -2, 1}, {-1, 3, -3, 1}};
-  const double weight[4] = {1, 3, 3, 1};   // (a, b) = (3,0), (2,1), (1,2), (0,3)
+  // Binomial difference stencils of order 0..4.
+  const std::vector<std::vector<double>> stencil = {{1}, {-1, 1}, {1, -2, 1}, {-1, 3, -3, 1}, {1, -4, 6, -4, 1}};
   // A common current unit keeps the rows of order one.
   const double unit = std::max(hd, hq);
   std::vector<Eigen::VectorXd> rows;
-  for (int a = 3; a >= 0; --a) {
-    const int bq = 3 - a;
-    const double scale = std::sqrt(weight[3 - a]) * std::pow(unit / hd, a) * std::pow(unit / hq, bq) *
-                         std::pow(anisotropy_q, (bq - a) / 12.0);
-    for (int i = 0; i + a < nd; ++i) {
-      for (int j = 0; j + bq < nq; ++j) {
-        Eigen::VectorXd row = Eigen::VectorXd::Zero(k);
-        for (int u = 0; u <= a; ++u)
-          for (int v = 0; v <= bq; ++v)
-            if (dom.mirrored) {
-              mirror.Terms(j + v, [&](int e, double w) {
-                row(1 + (i + u) * ne + e) += w * scale * stencil[a][u] * stencil[bq][v];
-              });
-            } else {
-              row(1 + (i + u) * ne + dom.QIndex(j + v)) += scale * stencil[a][u] * stencil[bq][v];
-            }
-        rows.push_back(row);
+  // Rows of one order: sqrt(w_order C(order, a)) Delta_d^a Delta_q^b c
+  // (unit/h_d)^a (unit/h_q)^b kappa^((b-a)/12), a + b = order.
+  auto add_order = [&](int order, double w_order) {
+    for (int a = order; a >= 0; --a) {
+      const int bq = order - a;
+      // Not W_qqqq, Lqq's own curvature along iq: the q knee (below).
+      if (order == 4 && a == 0) continue;
+      double binom = 1;
+      for (int t = 0; t < a; ++t) binom = binom * (order - t) / (t + 1);
+      const double scale = std::sqrt(w_order * binom) * std::pow(unit / hd, a) * std::pow(unit / hq, bq) *
+                           std::pow(anisotropy_q, (bq - a) / 12.0);
+      for (int i = 0; i + a < nd; ++i) {
+        for (int j = 0; j + bq < nq; ++j) {
+          Eigen::VectorXd row = Eigen::VectorXd::Zero(k);
+          for (int u = 0; u <= a; ++u)
+            for (int v = 0; v <= bq; ++v)
+              if (dom.mirrored) {
+                mirror.Terms(j + v, [&](int e, double w) {
+                  row(1 + (i + u) * ne + e) += w * scale * stencil[a][u] * stencil[bq][v];
+                });
+              } else {
+                row(1 + (i + u) * ne + dom.QIndex(j + v)) += scale * stencil[a][u] * stencil[bq][v];
+              }
+          rows.push_back(row);
+        }
       }
     }
-  }
+  };
+  add_order(3, 1.0);
+  if (curvature_weight > 0) add_order(4, curvature_weight);
   Eigen::MatrixXd P(rows.size(), k);
   for (size_t r = 0; r < rows.size(); ++r) P.row(r) = rows[r].transpose();
   return P;

@@ -46,12 +46,21 @@ class SurfaceEvaluator {
 };
 
 // Roughness of a smoothing-spline co-energy (surface.cc, where it is derived):
-// rows of third differences of the coefficients, one column per parameter
-// (column 0, psi_pm, is zero). Empty (0 x NumParams) for other families.
+// rows of third differences of the coefficients (the inductance's slopes)
+// and, weighted by `curvature_weight`, of fourth differences (the
+// inductance's curvature, all but Lqq's along iq), one column per
+// parameter (column 0, psi_pm, is zero). Empty (0 x NumParams) for other
+// families.
 // `anisotropy_q` (kappa > 0) weighs bending along iq against bending along
 // id: the squared term of W_{d^a q^b} carries kappa^((b - a)/6), so W_qqq^2
-// counts kappa times, W_ddd^2 1/kappa times (1: isotropic in amperes).
-Eigen::MatrixXd SmoothingPenalty(const Family& f, double anisotropy_q = 1.0);
+// counts kappa times as much as W_ddd^2 (1: isotropic in amperes).
+// `curvature_weight`: 0 is the penalty of calibrations written before
+// fit.smoothing_curvature_weight existed (third derivatives only); new fits
+// use kSmoothingCurvatureWeight.
+Eigen::MatrixXd SmoothingPenalty(const Family& f, double anisotropy_q = 1.0, double curvature_weight = 0.0);
+
+// The curvature term's weight of new fits (surface.cc says why 1).
+inline constexpr double kSmoothingCurvatureWeight = 1.0;
 
 }  // namespace fluxcal::fit
 

@@ -101,6 +101,7 @@ void ToProto(const fit::FitSummary& s, v1::FitSummary* p) {
   p->set_effective_parameters(s.effective_parameters);
   p->set_smoothing_lambda(s.smoothing_lambda);
   p->set_smoothing_anisotropy_q(s.smoothing_anisotropy_q);
+  p->set_smoothing_curvature_weight(s.smoothing_curvature_weight);
   for (const auto& c : s.candidates) p->add_candidates(c);
   for (const auto& e : s.excluded) p->add_excluded(e);
   p->set_flux_nodes(s.flux_nodes);
@@ -122,6 +123,7 @@ fit::FitSummary FromProto(const v1::FitSummary& p) {
   s.effective_parameters = p.effective_parameters();
   s.smoothing_lambda = p.smoothing_lambda();
   s.smoothing_anisotropy_q = p.smoothing_anisotropy_q();
+  s.smoothing_curvature_weight = p.smoothing_curvature_weight();
   s.candidates.assign(p.candidates().begin(), p.candidates().end());
   s.excluded.assign(p.excluded().begin(), p.excluded().end());
   s.flux_nodes = p.flux_nodes();

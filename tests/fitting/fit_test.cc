@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "fitting/fit.h"
+#include "fitting/surface.h"
 #include "gtest/gtest.h"
 #include "identification/identify.h"
 #include "io/csv.h"
@@ -514,6 +515,15 @@ TEST(Fit, SmoothingAnisotropyChosenOrAsGiven) {
   auto back = Calibration::FromJson(fixed->ToJson());
   ASSERT_TRUE(back.ok()) << back.status();
   EXPECT_EQ(back->summary.smoothing_anisotropy_q, *o.smoothing_anisotropy_q);
+  // The penalty's curvature term: carried, and absent (0, the older
+  // penalty) where a file has no field.
+  EXPECT_EQ(fixed->summary.smoothing_curvature_weight, kSmoothingCurvatureWeight);
+  EXPECT_EQ(back->summary.smoothing_curvature_weight, kSmoothingCurvatureWeight);
+  auto j = fixed->ToJson();
+  j["fit"].erase("smoothing_curvature_weight");
+  auto old = Calibration::FromJson(j);
+  ASSERT_TRUE(old.ok()) << old.status();
+  EXPECT_EQ(old->summary.smoothing_curvature_weight, 0.0);
 }
 }  // namespace
 }  // namespace fluxcal::fit

@@ -753,9 +753,9 @@ TEST(RealMaps, WhatTheBenchLeavesOut) {
 // A controller tuned from these inductances (current-loop gains,
 // observers) inherits every wiggle. With lambda from GCV's basins and one
 // isotropic weight the measured map's fit had 112 sign changes per draw
-// (the map 35) and Ldd 2.1 % RMS; asserted: each component within 2 % RMS
-// of the map's on every map, and on the measured map at most 60 (measured
-// 50). Figures in docs/fitting.md, "Smoothness chosen by the likelihood".
+// (the map 35) and Ldd 2.1 % RMS. Asserted: each component within 2 % RMS
+// of the map's on every map, and at most `most` sign changes per draw (a few
+// above docs/fitting.md's, "The inductance's curvature in the penalty").
 int SlopeSignChanges(const std::vector<double>& v) {
   int c = 0;
   for (size_t i = 2; i < v.size(); ++i) c += (v[i] - v[i - 1]) * (v[i - 1] - v[i - 2]) < 0;
@@ -818,9 +818,9 @@ TEST(RealMaps, InductancesAsSmoothAsTheMachine) {
                 "fit %.1f per draw\n",
                 m.name.c_str(), 100 * worst_rms[0], 100 * worst_rms[1], 100 * worst_rms[2], map_changes, mean_changes);
     for (int k = 0; k < 3; ++k) EXPECT_LT(worst_rms[k], 0.02) << m.name << " component " << k;
-    if (m.name == "baldor") {
-      EXPECT_LE(mean_changes, 60) << "the measured map's inductances wiggle again";
-    }
+    const std::map<std::string, double> most = {
+        {"baldor", 47}, {"pm-syrm", 43}, {"ipm-bridge", 75}, {"psi-q-offset", 44}, {"negative-slope", 60}};
+    EXPECT_LE(mean_changes, most.at(m.name)) << m.name << ": the fitted inductances wiggle again";
   }
 }
 
