@@ -19,6 +19,7 @@
 #include "identification/demod.h"
 #include "identification/identify.h"
 #include "fitting/fit.h"
+#include "fitting/parallel.h"
 #include "identification/inductance.h"
 #include "simulation/effects.h"
 #include "simulation/frames.h"
@@ -591,7 +592,7 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
     const double f_inj = set.manifest.injection ? set.manifest.injection->frequency_hz : 0.0;
     // The two replays are independent (each builds its own surface model).
     std::vector<absl::StatusOr<std::vector<sim::ReplayPoint>>> replays(2);
-    ParallelFor(2, [&](size_t k) {
+    fit::ParallelFor(2, [&](size_t k, int) {
       replays[k] = k == 0 ? ReplayModel(set, m_base, base.p, m_base.harm_order)
                           : ReplayModel(set, m, current.p, m.harm_order);
     });

@@ -429,15 +429,11 @@ FitOut Solve(const Model& m, const Params& start, const std::vector<Block>& free
 
 // ---- parallel.cc ------------------------------------------------------------
 // Independent refits (the candidates of one selection round, the soft-sign
-// profile's grid, the held-out classes) run on up to WorkerCount() threads.
+// profile's grid, the held-out classes) run on fit::ParallelFor's threads.
 // Each worker has its own copy of the model: a Model carries per-evaluation
 // state (the surface probe of ObservationCost, the harmonic order a
 // candidate sets). task(k, model) writes only its own output k, so results
 // do not depend on the schedule.
-int WorkerCount();
-// task(k) for k = 0..n-1 on up to WorkerCount() threads (tasks that share
-// no mutable state: the two open-loop replays, each with its own model).
-void ParallelFor(size_t n, const std::function<void(size_t)>& task);
 void ParallelForModels(size_t n, const Model& m, const std::function<void(size_t, Model&)>& task);
 
 // ---- locate.cc --------------------------------------------------------------

@@ -13,6 +13,7 @@
 #include "absl/strings/str_format.h"
 #include "fitting/flux_error.h"
 #include "fitting/large_signal.h"
+#include "fitting/parallel.h"
 #include "fitting/solve.h"
 #include "fitting/surface.h"
 #include "io/flux_map.h"
@@ -252,12 +253,18 @@ absl::StatusOr<std::vector<Solved>> SolveCandidates(const std::vector<Family>& c
                                                     const DataRegion& r,
                                                     const std::vector<Calibration::Box>& not_pd,
                                                     const FitOptions& o) {
-  std::vector<Solved> solved;
   const int n_data = static_cast<int>(3 * d.inductances.size() + 3 * d.steady_state.size() + 2 * d.fluxes.size());
-  for (const auto& f : candidates) {
-    if (o.cancelled && o.cancelled()) {
-      return absl::CancelledError("fit: stopped between candidate models (cancelled by the caller)");
-    }
+  // Every fit to make: a family, with a penalty's anisotropy kappa for the
+  // smoothing splines. Each is independent of the others: solved in
+  // parallel (fitting/parallel.h), then taken in candidate and grid order,
+  // so the choice does not depend on the schedule.
+  struct Task {
+    size_t family;
+    std::optional<double> kappa;
+  };
+  std::vector<Task> tasks;
+  for (size_t c = 0; c < candidates.size(); ++c) {
+    const Family& f = candidates[c];
     if (f.kind == Family::kSpline && f.spline.smoothing) {
       // May have more coefficients than observations: the penalty decides,
       // its weight lambda and its anisotropy kappa (SmoothingPenalty) both
@@ -269,28 +276,48 @@ absl::StatusOr<std::vector<Solved>> SolveCandidates(const std::vector<Family>& c
       // likelihood wins. The likelihoods are comparable across kappa: the
       // penalties share their null space, so the marginal likelihood's
       // unpenalised part is common to all of them.
-      const Acceptable pd = [&](const std::vector<double>& params) {
-        return CalibrationOf(d, r, f, params, {}).PhysicalOver(1.0, not_pd);
-      };
-      std::vector<double> kappas;
       if (o.smoothing_anisotropy_q && std::isfinite(*o.smoothing_anisotropy_q) && *o.smoothing_anisotropy_q > 0) {
-        kappas.push_back(*o.smoothing_anisotropy_q);
+        tasks.push_back({c, *o.smoothing_anisotropy_q});
       } else {
-        for (int e = -3; e <= 3; ++e) kappas.push_back(std::pow(9.0, e));
+        for (int e = -3; e <= 3; ++e) tasks.push_back({c, std::pow(9.0, e)});
       }
-      std::optional<Solved> chosen;
-      for (const double kappa : kappas) {
-        const Eigen::MatrixXd P = SmoothingPenalty(f, kappa, CurvatureWeightOf(o));
-        Solved s = Solve(f, d, o, &P, &pd);
-        s.anisotropy_q = kappa;
-        if (!chosen || (s.usable && s.reml < chosen->reml) || !chosen->usable) chosen = std::move(s);
-      }
-      solved.push_back(std::move(*chosen));
       continue;
     }
     // A flexible family needs more observations than parameters.
     if (f.NumParams() + 2 > n_data) continue;
-    solved.push_back(Solve(f, d, o));
+    tasks.push_back({c, std::nullopt});
+  }
+  std::vector<std::optional<Solved>> done(tasks.size());
+  ParallelFor(tasks.size(), [&](size_t t, int) {
+    if (o.cancelled && o.cancelled()) return;
+    const Family& f = candidates[tasks[t].family];
+    if (!tasks[t].kappa) {
+      done[t] = Solve(f, d, o);
+      return;
+    }
+    const Acceptable pd = [&](const std::vector<double>& params) {
+      return CalibrationOf(d, r, f, params, {}).PhysicalOver(1.0, not_pd);
+    };
+    const Eigen::MatrixXd P = SmoothingPenalty(f, *tasks[t].kappa, CurvatureWeightOf(o));
+    Solved s = Solve(f, d, o, &P, &pd);
+    s.anisotropy_q = *tasks[t].kappa;
+    done[t] = std::move(s);
+  });
+  if (o.cancelled && o.cancelled()) {
+    return absl::CancelledError("fit: stopped between candidate models (cancelled by the caller)");
+  }
+  std::vector<Solved> solved;
+  for (size_t t = 0; t < tasks.size();) {
+    // The smoothing spline's penalties: the kappa whose fit has the best
+    // likelihood (grid order breaks ties).
+    std::optional<Solved> chosen = std::move(done[t]);
+    size_t u = t + 1;
+    for (; u < tasks.size() && tasks[u].family == tasks[t].family; ++u) {
+      auto& s = done[u];
+      if ((s->usable && s->reml < chosen->reml) || !chosen->usable) chosen = std::move(s);
+    }
+    solved.push_back(std::move(*chosen));
+    t = u;
   }
   return solved;
 }
