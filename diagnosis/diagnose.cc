@@ -190,15 +190,17 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
       return trial;
     };
     std::vector<FitOut> trial_fit(cands.size());
-    ParallelForModels(open.size(), m, [&](size_t k, Model& mw) {
-      const size_t c = open[k];
-      if (opt.cancelled && opt.cancelled()) return;
-      if (cands[c].block == kHarm) mw.harm_order = cands[c].order;
-      Params st = current.p;
-      if (cands[c].block == kHarm) st.b[kHarm][0] = 0.0;
-      trial_fit[c] = Solve(mw, st, trial_of(c));
-    });
-    if (opt.cancelled && opt.cancelled()) {
+    const bool stopped = ParallelForModels(
+        open.size(), m,
+        [&](size_t k, Model& mw) {
+          const size_t c = open[k];
+          if (cands[c].block == kHarm) mw.harm_order = cands[c].order;
+          Params st = current.p;
+          if (cands[c].block == kHarm) st.b[kHarm][0] = 0.0;
+          trial_fit[c] = Solve(mw, st, trial_of(c));
+        },
+        opt.cancelled);
+    if (stopped) {
       return absl::CancelledError("diagnosis: stopped between candidate refits (cancelled by the caller)");
     }
     for (size_t c : open) {
@@ -343,11 +345,9 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
     for (int j = 0; j <= 6; ++j) xs.push_back(std::log(0.0625) + j * step);
     // The grid's refits are independent: in parallel, then taken in order.
     std::vector<FitOut> grid(xs.size());
-    ParallelForModels(xs.size(), m, [&](size_t j, Model& mw) {
-      if (opt.cancelled && opt.cancelled()) return;
-      grid[j] = solve_at(xs[j], &mw);
-    });
-    if (opt.cancelled && opt.cancelled()) {
+    const bool stopped = ParallelForModels(
+        xs.size(), m, [&](size_t j, Model& mw) { grid[j] = solve_at(xs[j], &mw); }, opt.cancelled);
+    if (stopped) {
       return absl::CancelledError("diagnosis: stopped while profiling the soft-sign current (cancelled by the caller)");
     }
     for (size_t j = 0; j < xs.size(); ++j) ls.push_back(take(xs[j], grid[j]));

@@ -434,7 +434,10 @@ FitOut Solve(const Model& m, const Params& start, const std::vector<Block>& free
 // state (the surface probe of ObservationCost, the harmonic order a
 // candidate sets). task(k, model) writes only its own output k, so results
 // do not depend on the schedule.
-void ParallelForModels(size_t n, const Model& m, const std::function<void(size_t, Model&)>& task);
+// `cancelled` (may be empty) is polled on the calling thread before each
+// task it takes; true when it stopped them (some outputs then unset).
+bool ParallelForModels(size_t n, const Model& m, const std::function<void(size_t, Model&)>& task,
+                       const std::function<bool()>& cancelled = {});
 
 // ---- locate.cc --------------------------------------------------------------
 struct Z {

@@ -287,9 +287,10 @@ absl::StatusOr<std::vector<Solved>> SolveCandidates(const std::vector<Family>& c
     if (f.NumParams() + 2 > n_data) continue;
     tasks.push_back({c, std::nullopt});
   }
+  // In rounds of one task per worker, the caller's cancellation polled on
+  // this thread between rounds (the callback need not be thread-safe).
   std::vector<std::optional<Solved>> done(tasks.size());
-  ParallelFor(tasks.size(), [&](size_t t, int) {
-    if (o.cancelled && o.cancelled()) return;
+  auto solve = [&](size_t t) {
     const Family& f = candidates[tasks[t].family];
     if (!tasks[t].kappa) {
       done[t] = Solve(f, d, o);
@@ -302,9 +303,13 @@ absl::StatusOr<std::vector<Solved>> SolveCandidates(const std::vector<Family>& c
     Solved s = Solve(f, d, o, &P, &pd);
     s.anisotropy_q = *tasks[t].kappa;
     done[t] = std::move(s);
-  });
-  if (o.cancelled && o.cancelled()) {
-    return absl::CancelledError("fit: stopped between candidate models (cancelled by the caller)");
+  };
+  const size_t round = static_cast<size_t>(std::max(1, WorkersFor(tasks.size())));
+  for (size_t t0 = 0; t0 < tasks.size(); t0 += round) {
+    if (o.cancelled && o.cancelled()) {
+      return absl::CancelledError("fit: stopped between candidate models (cancelled by the caller)");
+    }
+    ParallelFor(std::min(round, tasks.size() - t0), [&](size_t k, int) { solve(t0 + k); });
   }
   std::vector<Solved> solved;
   for (size_t t = 0; t < tasks.size();) {

@@ -3,20 +3,17 @@
 // located -- the verdict is never `no_mismatch` -- and never `explained` by
 // catalogue effects that are not there (docs/diagnosis.md, "Honesty").
 // Seven kinds, three seeds each, on the twin's motor with production spread,
-// each effect 10-100 sigma in the waveforms. A weak magnet (partial
-// demagnetisation) shows only at speed, in the voltage the bench's current
-// controller commands against it (diagnosis/mechanical_orders.cc): before
-// that test it read `explained` by magnet_temperature or `no_mismatch`.
-// Except one, which the default plan cannot resolve, asserted as such:
-// rotor eccentricity (the inductance once per mechanical revolution).
-// Every (id, iq) is measured once at standstill, so the flexible surface
-// takes each point's few percent as the map's own, and at speed its
-// sidebands at +-f_mech (3-17 Hz at 200-1000 rpm) lie within 2 of the 10 Hz
-// bins of a 0.1 s record beside the HF response's lines, which the locator
-// leaves to the machine's own nonlinearity. It once read "located" only
-// through replay artefacts (a replay that ran away, lines at -10 x f_i and
-// 4164 Hz); with the replay fixed (docs/diagnosis.md, "Open") it reads
-// `no_mismatch`: what the plan cannot see, never `explained`.
+// each effect 10-100 sigma in the waveforms: every one located.
+// Two follow the mechanical angle and show only at speed, in the voltage
+// the bench's current controller commands against them
+// (diagnosis/mechanical_orders.cc): a weak magnet (partial
+// demagnetisation) and rotor eccentricity (the inductance once per
+// mechanical revolution). Before that test a weak magnet read `explained`
+// by magnet_temperature or `no_mismatch`, and rotor eccentricity
+// `no_mismatch`: every (id, iq) is measured once at standstill, so the
+// flexible surface takes each point's few percent as the map's own, and at
+// speed its sidebands at +-f_mech lie within the bins of a 0.1 s record
+// that the current spectrum leaves to the fundamental.
 #include <string>
 #include <vector>
 
@@ -33,7 +30,6 @@ struct Outside {
   std::string key;   // the bench effect's amplitude parameter
   double value;
   std::string meaning;
-  bool resolvable = true;   // on the default plan (file comment)
 };
 
 TEST(Honesty, PhysicsOutsideTheCatalogueIsLocatedNeverExplained) {
@@ -44,7 +40,7 @@ TEST(Honesty, PhysicsOutsideTheCatalogueIsLocatedNeverExplained) {
       {"psi_harmonic_wb", 2e-4, "a spatial harmonic of the magnet flux (back-EMF harmonics)"},
       {"encoder_eccentricity_rad", 0.02, "an angle sensor error once per mechanical revolution"},
       {"demagnetised_share", 0.03, "a weak magnet: the magnet flux 3 % lower and higher once per revolution"},
-      {"eccentricity", 0.03, "rotor eccentricity (inductance once per mechanical revolution)", false},
+      {"eccentricity", 0.03, "rotor eccentricity (inductance once per mechanical revolution)"},
   };
   for (const auto& kind : kinds) {
     for (uint64_t seed : {31u, 32u, 33u}) {
@@ -59,10 +55,8 @@ TEST(Honesty, PhysicsOutsideTheCatalogueIsLocatedNeverExplained) {
       const std::string label = absl::StrCat(kind.meaning, ", seed ", seed);
       EXPECT_NE(r->verdict, "explained") << label << ": explained by effects that are not there";
       EXPECT_TRUE(r->findings.empty() || r->verdict != "no_mismatch") << label;
-      if (kind.resolvable) {
-        EXPECT_NE(r->verdict, "no_mismatch") << label << ": not located";
-        EXPECT_FALSE(r->mismatches.empty() && r->remaining.empty()) << label;
-      }
+      EXPECT_NE(r->verdict, "no_mismatch") << label << ": not located";
+      EXPECT_FALSE(r->mismatches.empty() && r->remaining.empty()) << label;
       // Whatever is still significant after the refit carries hypotheses.
       for (const auto& m : r->remaining) EXPECT_FALSE(m.hypotheses.empty()) << label << ": " << m.where;
     }

@@ -92,15 +92,6 @@ TableSpec EnvelopeSpec(double speed_max_rpm, int points = 41) {
   return s;
 }
 
-const std::vector<double>& Out(const Table& t, const std::string& name) {
-  for (const auto& o : t.outputs) {
-    if (o.name == name) return o.values;
-  }
-  ADD_FAILURE() << "no output " << name;
-  static const std::vector<double> none;
-  return none;
-}
-
 TEST(Envelope, LinearMachineMatchesTheClosedForm) {
   // psi_pm 0.05 Wb; L 0.2 mH (i_ch 250 A > I: a top speed) and 0.5 mH
   // (i_ch 100 A < I: MTPV and constant power to any speed); 48 V.

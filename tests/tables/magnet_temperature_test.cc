@@ -17,6 +17,7 @@
 #include "simulation/twin.h"
 #include "tables/export_rule.h"
 #include "tables/tables.h"
+#include "tests/tables/twin_limits.h"
 
 namespace fluxcal::tables {
 namespace {
@@ -47,15 +48,6 @@ fit::Calibration TwinAt(double temperature_c, std::optional<double> alpha, bool 
   auto cal = fit::Fit(d, o);
   EXPECT_TRUE(cal.ok()) << cal.status();
   return *cal;
-}
-
-const std::vector<double>& Out(const Table& t, const std::string& name) {
-  for (const auto& o : t.outputs) {
-    if (o.name == name) return o.values;
-  }
-  ADD_FAILURE() << "no output " << name;
-  static const std::vector<double> none;
-  return none;
 }
 
 Table Mtpa(const fit::Calibration& cal, std::optional<double> magnet_temp_c) {

@@ -7,6 +7,8 @@
 #define FLUXCAL_TESTS_TABLES_TWIN_LIMITS_H_
 
 #include <optional>
+#include <string>
+#include <vector>
 
 #include "fitting/fit.h"
 #include "gtest/gtest.h"
@@ -46,6 +48,16 @@ inline fit::Calibration TwinCalibration(std::optional<double> udc_v, std::option
   auto cal = fit::Fit(d, o);
   EXPECT_TRUE(cal.ok()) << cal.status();
   return *cal;
+}
+
+// The values of a table's output `name` (a test failure when it has none).
+inline const std::vector<double>& Out(const Table& t, const std::string& name) {
+  for (const auto& o : t.outputs) {
+    if (o.name == name) return o.values;
+  }
+  ADD_FAILURE() << "no output " << name;
+  static const std::vector<double> none;
+  return none;
 }
 
 }  // namespace fluxcal::tables
