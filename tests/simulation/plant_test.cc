@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "gtest/gtest.h"
+#include "simulation/bench_effect.h"
 #include "simulation/effects.h"
 #include "simulation/frames.h"
 #include "simulation/plant.h"
@@ -198,6 +199,34 @@ TEST(Catalogue, RowsAreUniqueAndDocumented) {
   }
   EXPECT_EQ(&EffectParam("dead_time", "dead_time_s"), &FindEffect("dead_time")->parameters[0]);
   EXPECT_EQ(FindEffect("no_such_effect"), nullptr);
+}
+
+// The twin-only effects (simulation/bench_effect.h): each named with its
+// parameters in docs/simulation.md's table, parameter names unique across
+// them and the catalogue (one --effects key, one owner), off by default.
+TEST(BenchEffects, RegistryIsDocumented) {
+  std::ifstream f(std::string(FLUXCAL_SOURCE_DIR) + "/docs/simulation.md");
+  std::stringstream ss;
+  ss << f.rdbuf();
+  const std::string doc = ss.str();
+  std::set<std::string> names, params;
+  for (const auto& row : EffectCatalogue()) {
+    for (const auto& p : row.parameters) params.insert(std::string(p.name));
+  }
+  const auto all = AllBenchEffects();
+  EXPECT_GE(all.size(), 7u);
+  for (const auto& e : all) {
+    const std::string name(e->Name());
+    EXPECT_TRUE(names.insert(name).second) << name;
+    EXPECT_NE(doc.find("`" + name + "`"), std::string::npos) << name << " not in docs/simulation.md";
+    EXPECT_FALSE(e->Meaning().empty()) << name;
+    EXPECT_FALSE(e->Active()) << name << " on by default";
+    for (const auto& p : e->Parameters()) {
+      const std::string key(p.name);
+      EXPECT_TRUE(params.insert(key).second) << key << " used twice";
+      EXPECT_NE(doc.find("`" + key + "`"), std::string::npos) << key << " not in docs/simulation.md";
+    }
+  }
 }
 
 TEST(Catalogue, ParseEffectsAndActiveNames) {
