@@ -50,8 +50,12 @@ nlohmann::json MismatchJson(const Mismatch& m) {
 }
 
 std::string MismatchText(const Mismatch& m) {
-  std::string s = absl::StrFormat("%s at %s: %.1f sigma", m.signal, m.where, m.significance_sigma);
-  if (m.size_a > 0) s += absl::StrFormat(", up to %.3g A", m.size_a);
+  // A waveform line's place already reads "at speed, ...".
+  const bool says_at = m.where.rfind("at ", 0) == 0;
+  std::string s = absl::StrFormat("%s %s%s: %.1f sigma", m.signal, says_at ? "" : "at ", m.where, m.significance_sigma);
+  // size_a is in the signal's unit (docs/diagnosis-report.md).
+  const char* unit = m.signal == "rotor_angle" ? "rad" : m.signal == "phase_voltage" ? "V" : "A";
+  if (m.size_a > 0) s += absl::StrFormat(", up to %.3g %s", m.size_a, unit);
   if (!m.points.empty()) s += absl::StrCat(", worst points ", absl::StrJoin(m.points, ", "));
   if (!m.dependence.empty()) s += absl::StrCat("; ", m.dependence);
   return s;

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <complex>
 
+#include "diagnosis/diagnose.h"
 #include "diagnosis/internal.h"
 #include "gtest/gtest.h"
 #include "identification/inductance.h"
@@ -273,3 +274,37 @@ TEST(MechanicalOrders, LineInTheVoltageCommand) {
 
 }  // namespace
 }  // namespace fluxcal::diag::detail
+
+namespace fluxcal::diag {
+namespace {
+
+// The sentence form states a waveform mismatch's size in its signal's unit
+// (V for the voltage command, rad for the angle, A for currents) and reads
+// "at speed", not "at at speed".
+TEST(ReportText, SizeInTheSignalsUnit) {
+  DiagnosisReport r;
+  r.verdict = "unexplained";
+  Mismatch v;
+  v.signal = "phase_voltage";
+  v.kind = "mechanical_order";
+  v.where = "at speed, mechanical order 5";
+  v.significance_sigma = 66.9;
+  v.size_a = 0.156;
+  Mismatch c = v;
+  c.signal = "phase_current";
+  c.size_a = 0.02;
+  Mismatch h;
+  h.signal = "hf_current";
+  h.where = "rotating points";
+  h.significance_sigma = 45.5;
+  r.mismatches = {v, c, h};
+  const std::string text = ToText(r);
+  EXPECT_NE(text.find("phase_voltage at speed, mechanical order 5: 66.9 sigma, up to 0.156 V"), std::string::npos)
+      << text;
+  EXPECT_NE(text.find("up to 0.02 A"), std::string::npos) << text;
+  EXPECT_NE(text.find("hf_current at rotating points"), std::string::npos) << text;
+  EXPECT_EQ(text.find("at at "), std::string::npos) << text;
+}
+
+}  // namespace
+}  // namespace fluxcal::diag
