@@ -28,6 +28,7 @@
 // claimed. No catalogue effect and no magnetics of the machine's own
 // (functions of the electrical angle and the currents) put anything at a
 // mechanical order.
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 
@@ -37,14 +38,18 @@ namespace fluxcal::diag::detail {
 namespace {
 constexpr double kMinRevolutions = 1.5;
 constexpr double kMaxInflation = 10.0;
+// The regression holds ~50 complex columns of the record: at most this many
+// samples of it (2 s at 10 kHz, tens of revolutions at any speed the test
+// applies to), so a long record costs bounded memory and time.
+constexpr size_t kMaxSamples = 20000;
 }  // namespace
 
 std::vector<WaveformLine> MechanicalOrderVoltageLines(const io::Waveform& w, double f_sample_hz, double f_i_hz,
                                                       int pole_pairs, double f_e_hz, double line_z2) {
   std::vector<WaveformLine> out;
-  const size_t n = w.size();
-  if (pole_pairs < 2 || f_e_hz == 0.0 || n < 256 || w.ualpha_ref_v.size() != n || w.ubeta_ref_v.size() != n ||
-      w.theta_e_rad.size() != n) {
+  const size_t n = std::min(w.size(), kMaxSamples);
+  if (pole_pairs < 2 || !std::isfinite(f_e_hz) || f_e_hz == 0.0 || !(f_sample_hz > 0) || n < 256 ||
+      w.ualpha_ref_v.size() != w.size() || w.ubeta_ref_v.size() != w.size() || w.theta_e_rad.size() != w.size()) {
     return out;
   }
   const double p = pole_pairs, w_i = 2 * kPi * f_i_hz;
@@ -157,7 +162,8 @@ std::vector<WaveformLine> MechanicalOrderVoltageLines(const io::Waveform& w, dou
     const double var = colour * s2 * cov(col, col).real();
     if (!(var > 0)) continue;
     const double z2 = std::norm(c(col)) / var;
-    if (z2 < line_z2) continue;
+    if (!(z2 >= line_z2)) continue;   // NaN too: a line is only what the numbers show
+
     WaveformLine l;
     l.channel = "phase_voltage";
     l.freq_hz = f_e_hz * (1.0 + orders[j] / p);

@@ -270,6 +270,14 @@ TEST(MechanicalOrders, LineInTheVoltageCommand) {
     EXPECT_TRUE(MechanicalOrderVoltageLines(RotatingCommand(13.3, 0.1, 0.02, 1, seed), 10000, 500, 4, 13.3, z2).empty())
         << "seed " << seed;
   }
+  // A long record (6 s) is read up to its first 2 s: the line is found, the
+  // memory bounded. A command with a non-number in it claims nothing.
+  const auto long_record = MechanicalOrderVoltageLines(RotatingCommand(66.7, 6.0, 0.02, 1, 4), 10000, 500, 4, 66.7, z2);
+  ASSERT_EQ(long_record.size(), 1u);
+  EXPECT_NEAR(long_record[0].amp_a, 0.02, 0.001);
+  io::Waveform bad = RotatingCommand(66.7, 0.1, 0.02, 1, 5);
+  bad.ualpha_ref_v[100] = std::nan("");
+  EXPECT_TRUE(MechanicalOrderVoltageLines(bad, 10000, 500, 4, 66.7, z2).empty());
 }
 
 }  // namespace
