@@ -252,61 +252,51 @@ void SplineFluxAndInductance(const SplineDomain& dom, double id, double iq, cons
     }
     return;
   }
-  if (dom.mirrored && dom.smoothing && dom.symmetric) {
-    const double s = iq < 0 ? -1.0 : 1.0, q = std::abs(iq);
-    const MirrorConstraint mc(dom);
-    auto sum = [&](const Basis1d& bd, const Basis1d& bq, auto f) {
+  // The two layouts differ only in how a coefficient c_ij is read from p
+  // (the mirrored one's pivot is a weighted sum, MirrorConstraint; the
+  // folded one's an index fold) and in the iq argument (|iq| and its sign
+  // for the mirrored one); the sums below are the same for both.
+  const bool mirrored = dom.mirrored && dom.smoothing && dom.symmetric;
+  const double s = mirrored && iq < 0 ? -1.0 : 1.0, q = mirrored ? std::abs(iq) : iq;
+  const Basis1d bd = EvalBasis(id, dom.id_lo_a, dom.id_hi_a, dom.spans);
+  const Basis1d bq = EvalBasis(q, dom.IqLo(), dom.iq_hi_a, dom.SpansQ());
+  // Coefficients scaled like the polynomial family's: W' in L0 I0^2 units.
+  const double kW = kPolyL0H * kPolyI0A * kPolyI0A;
+  // b0q_of(): the iq basis at 0 (only flux needs it).
+  auto evaluate = [&](auto coefficient, auto b0q_of) {
+    // sum over the nonzero basis products of coefficient * f(a, c).
+    auto sum = [&](const Basis1d& bdd, const Basis1d& bqq, auto f) {
       T r(0.0);
       for (int a = 0; a <= kSplineDegree; ++a)
-        for (int c = 0; c <= kSplineDegree; ++c) r += mc.Coefficient<T>(p, bd.first + a, bq.first + c) * f(a, c);
+        for (int c = 0; c <= kSplineDegree; ++c) r += coefficient(bdd.first + a, bqq.first + c) * f(a, c);
       return r;
     };
-    const Basis1d bd = EvalBasis(id, dom.id_lo_a, dom.id_hi_a, dom.spans);
-    const Basis1d bq = EvalBasis(q, dom.IqLo(), dom.iq_hi_a, dom.SpansQ());
-    const double kW = kPolyL0H * kPolyI0A * kPolyI0A;
     if (psi_d != nullptr) {
       const Basis1d b0d = EvalBasis(0.0, dom.id_lo_a, dom.id_hi_a, dom.spans);
-      const T slope0 = sum(b0d, mc.b0, [&](int a, int c) { return b0d.d1[a] * mc.b0.v[c]; });
+      const Basis1d b0q = b0q_of();
+      const T slope0 = sum(b0d, b0q, [&](int a, int c) { return b0d.d1[a] * b0q.v[c]; });
       *psi_d = p[0] + kW * (sum(bd, bq, [&](int a, int c) { return bd.d1[a] * bq.v[c]; }) - slope0);
       *psi_q = s * kW * sum(bd, bq, [&](int a, int c) { return bd.v[a] * bq.d1[c]; });
+      if (!mirrored && !dom.Folded()) {
+        // psi_q(0, 0) = 0 also without the fold: d is the magnet axis
+        // (recording-format.md), so zero current links no q flux; psi_q(id, 0)
+        // away from id = 0 stays free.
+        *psi_q = *psi_q - kW * sum(b0d, b0q, [&](int a, int c) { return b0d.v[a] * b0q.d1[c]; });
+      }
     }
     if (ldd != nullptr) {
       *ldd = kW * sum(bd, bq, [&](int a, int c) { return bd.d2[a] * bq.v[c]; });
       *lqq = kW * sum(bd, bq, [&](int a, int c) { return bd.v[a] * bq.d2[c]; });
       *ldq = s * kW * sum(bd, bq, [&](int a, int c) { return bd.d1[a] * bq.d1[c]; });
     }
-    return;
-  }
-  const int ne = dom.NumEven();
-  auto even = [&](int j) { return dom.QIndex(j); };
-  // sum over the nonzero basis products of coefficient * f(bd, bq, a, c).
-  auto sum = [&](const Basis1d& bd, const Basis1d& bq, auto f) {
-    T s(0.0);
-    for (int a = 0; a <= kSplineDegree; ++a)
-      for (int c = 0; c <= kSplineDegree; ++c) s += p[1 + (bd.first + a) * ne + even(bq.first + c)] * f(a, c);
-    return s;
   };
-  const Basis1d bd = EvalBasis(id, dom.id_lo_a, dom.id_hi_a, dom.spans);
-  const Basis1d bq = EvalBasis(iq, dom.IqLo(), dom.iq_hi_a, dom.SpansQ());
-  // Coefficients scaled like the polynomial family's: W' in L0 I0^2 units.
-  const double kW = kPolyL0H * kPolyI0A * kPolyI0A;
-  if (psi_d != nullptr) {
-    const Basis1d b0d = EvalBasis(0.0, dom.id_lo_a, dom.id_hi_a, dom.spans);
-    const Basis1d b0q = EvalBasis(0.0, dom.IqLo(), dom.iq_hi_a, dom.SpansQ());
-    const T slope0 = sum(b0d, b0q, [&](int a, int c) { return b0d.d1[a] * b0q.v[c]; });
-    *psi_d = p[0] + kW * (sum(bd, bq, [&](int a, int c) { return bd.d1[a] * bq.v[c]; }) - slope0);
-    *psi_q = kW * sum(bd, bq, [&](int a, int c) { return bd.v[a] * bq.d1[c]; });
-    if (!dom.Folded()) {
-      // psi_q(0, 0) = 0 also without the fold: d is the magnet axis
-      // (recording-format.md), so zero current links no q flux; psi_q(id, 0)
-      // away from id = 0 stays free.
-      *psi_q = *psi_q - kW * sum(b0d, b0q, [&](int a, int c) { return b0d.v[a] * b0q.d1[c]; });
-    }
-  }
-  if (ldd != nullptr) {
-    *ldd = kW * sum(bd, bq, [&](int a, int c) { return bd.d2[a] * bq.v[c]; });
-    *lqq = kW * sum(bd, bq, [&](int a, int c) { return bd.v[a] * bq.d2[c]; });
-    *ldq = kW * sum(bd, bq, [&](int a, int c) { return bd.d1[a] * bq.d1[c]; });
+  if (mirrored) {
+    const MirrorConstraint mc(dom);
+    evaluate([&](int i, int j) { return mc.Coefficient<T>(p, i, j); }, [&] { return mc.b0; });
+  } else {
+    const int ne = dom.NumEven();
+    evaluate([&](int i, int j) { return p[1 + i * ne + dom.QIndex(j)]; },
+             [&] { return EvalBasis(0.0, dom.IqLo(), dom.iq_hi_a, dom.SpansQ()); });
   }
 }
 
