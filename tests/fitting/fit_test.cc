@@ -16,6 +16,7 @@
 #include "nlohmann/json.hpp"
 #include "simulation/flux_map.h"
 #include "simulation/twin.h"
+#include "tests/fitting/truth_error.h"
 
 namespace fluxcal::fit {
 namespace {
@@ -135,6 +136,19 @@ TEST(Fit, ReciprocalAndPositiveDefinite) {
   }
 }
 
+// Ldd and Lqq of `moved` within tol (relative) of `base` at every truth
+// point but the one at index `skip` (the point a test spoiled).
+void ExpectOtherPointsUnmoved(const Calibration& base, const Calibration& moved,
+                              const std::vector<sim::TruthPoint>& truth, size_t skip, double tol) {
+  for (size_t k = 0; k < truth.size(); ++k) {
+    if (k == skip) continue;
+    const auto& t = truth[k];
+    const auto a = base.Predict(t.id_true_a, t.iq_true_a), b = moved.Predict(t.id_true_a, t.iq_true_a);
+    EXPECT_NEAR(b.ldd_h / a.ldd_h, 1.0, tol) << t.id;
+    EXPECT_NEAR(b.lqq_h / a.lqq_h, 1.0, tol) << t.id;
+  }
+}
+
 // A flux radius no injection on this machine could drive (5 Wb: an orbit
 // of ~10^4 A about each point, far beyond the region measured), as a
 // station could send it: no orbit is solved, the fit is the small-signal
@@ -164,13 +178,7 @@ TEST(Fit, GrossOutlierMovesNothing) {
   d.inductances[10].lqq_h *= 1.3;
   auto bad = Fit(d, {});
   ASSERT_TRUE(base.ok() && bad.ok());
-  for (size_t k = 0; k < c.sim.truth_points.size(); ++k) {
-    if (k == 10) continue;
-    const auto& t = c.sim.truth_points[k];
-    const auto a = base->Predict(t.id_true_a, t.iq_true_a), b = bad->Predict(t.id_true_a, t.iq_true_a);
-    EXPECT_NEAR(b.ldd_h / a.ldd_h, 1.0, 0.002) << t.id;
-    EXPECT_NEAR(b.lqq_h / a.lqq_h, 1.0, 0.002) << t.id;
-  }
+  ExpectOtherPointsUnmoved(*base, *bad, c.sim.truth_points, 10, 0.002);
 }
 
 // A point read non-positive in a map that is positive definite everywhere
@@ -189,13 +197,7 @@ TEST(Fit, NonPositiveGlitchMovesNothing) {
   for (const auto& e : bad->summary.excluded) listed |= e.find("not required positive definite over id") != std::string::npos;
   EXPECT_TRUE(listed) << "the glitch and its cells are not listed";
   EXPECT_TRUE(bad->PhysicalOver(1.0)) << "the cells around a glitch went non-positive-definite";
-  for (size_t j = 0; j < c.sim.truth_points.size(); ++j) {
-    if (j == k) continue;
-    const auto& t = c.sim.truth_points[j];
-    const auto a = base->Predict(t.id_true_a, t.iq_true_a), b = bad->Predict(t.id_true_a, t.iq_true_a);
-    EXPECT_NEAR(b.ldd_h / a.ldd_h, 1.0, 0.003) << t.id;
-    EXPECT_NEAR(b.lqq_h / a.lqq_h, 1.0, 0.003) << t.id;
-  }
+  ExpectOtherPointsUnmoved(*base, *bad, c.sim.truth_points, k, 0.003);
 }
 
 // A steady-state row that averaged a limit cycle instead of a steady state:
@@ -435,16 +437,9 @@ TEST(Fit, GriddedMapMotorWithinHalfPercent) {
   ASSERT_TRUE(ids.ok());
   auto cal = Fit(FitDataFromRecording(r->set, *ids), {});
   ASSERT_TRUE(cal.ok()) << cal.status();
-  double e = 0, e_psi = 0;
-  for (const auto& t : r->truth_points) {
-    const auto p = cal->Predict(t.id_true_a, t.iq_true_a);
-    e += std::pow(p.ldd_h / t.ldd_h - 1, 2) + std::pow(p.lqq_h / t.lqq_h - 1, 2);
-    e_psi = std::max(e_psi, std::hypot(p.psi_d_wb - t.psi_d_wb, p.psi_q_wb - t.psi_q_wb) /
-                                std::max(std::hypot(t.psi_d_wb, t.psi_q_wb), t.psi_pm_wb));
-  }
-  const double rms = std::sqrt(e / (2 * r->truth_points.size()));
-  EXPECT_LT(rms, 0.005) << cal->family().Name();
-  EXPECT_LT(e_psi, 0.005) << cal->family().Name();
+  const TruthError e = AgainstTruth(*cal, r->truth_points);
+  EXPECT_LT(e.inductance_rms, 0.005) << cal->family().Name();
+  EXPECT_LT(e.flux_max, 0.005) << cal->family().Name();
 }
 
 // HF results alone without Ldq (no steady-state rows, no flux nodes): only

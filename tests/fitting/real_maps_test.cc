@@ -444,6 +444,22 @@ TEST(RealMaps, SelfConsistentBadRowsOnAMistunedBench) {
   }
 }
 
+// The fitted self inductances against the machine's over the default
+// plan's box (id -100..0 A, iq 0..100 A, 10 A steps): RMS relative error of
+// Ldd and Lqq together.
+double InductanceRmsOverPlan(const Calibration& cal, const sim::TraitMotor& machine) {
+  double e = 0;
+  int m = 0;
+  for (double id = -100; id <= 0; id += 10) {
+    for (double iq = 0; iq <= 100; iq += 10) {
+      const auto a = cal.Inductance(id, iq), b = machine.Inductance(id, iq);
+      e += std::pow(a.ldd_h / b.ldd_h - 1, 2) + std::pow(a.lqq_h / b.lqq_h - 1, 2);
+      m += 2;
+    }
+  }
+  return std::sqrt(e / m);
+}
+
 // Large-signal HF (physics/hf_orbit.h, docs/fitting.md): the default
 // injection (5 V at 500 Hz, a flux circle of 1.6 mWb) drives the current of
 // these machines over 10-50 A about each point, across the saturation
@@ -508,24 +524,12 @@ TEST(RealMaps, LargeSignalHfIsWhatTheInjectionMeasures) {
     }
     ASSERT_GE(n, 30) << t.name;
     // The fitted inductances against the machine's over the plan's box.
-    auto inductance_rms = [&](const Calibration& cal) {
-      double e = 0;
-      int m = 0;
-      for (double id = -100; id <= 0; id += 10) {
-        for (double iq = 0; iq <= 100; iq += 10) {
-          const auto a = cal.Inductance(id, iq), b = machine->Inductance(id, iq);
-          e += std::pow(a.ldd_h / b.ldd_h - 1, 2) + std::pow(a.lqq_h / b.lqq_h - 1, 2);
-          m += 2;
-        }
-      }
-      return std::sqrt(e / m);
-    };
     FitOptions small_signal;
     small_signal.large_signal_hf = false;
     auto cal_small = Fit(data, small_signal);
     auto cal_large = Fit(data, {});
     ASSERT_TRUE(cal_small.ok() && cal_large.ok()) << t.name;
-    const double e_small = inductance_rms(*cal_small), e_large = inductance_rms(*cal_large);
+    const double e_small = InductanceRmsOverPlan(*cal_small, *machine), e_large = InductanceRmsOverPlan(*cal_large, *machine);
     std::printf("%-10s chi2 per point: small-signal %.1f, describing %.2f; inductance RMS small-signal fit %.2f %%, "
                 "large-signal fit %.2f %%\n",
                 t.name.c_str(), chi2_small / n, chi2_large / n, 100 * e_small, 100 * e_large);
@@ -589,23 +593,12 @@ TEST(RealMaps, LargeSignalTable) {
     auto cs = Fit(data, small);
     auto cl = Fit(data, {});
     ASSERT_TRUE(cs.ok() && cl.ok()) << t.name;
-    auto lrms = [&](const Calibration& c) {
-      double e = 0;
-      int m = 0;
-      for (double id = -100; id <= 0; id += 10) {
-        for (double iq = 0; iq <= 100; iq += 10) {
-          const auto a = c.Inductance(id, iq), b = machine->Inductance(id, iq);
-          e += std::pow(a.ldd_h / b.ldd_h - 1, 2) + std::pow(a.lqq_h / b.lqq_h - 1, 2);
-          m += 2;
-        }
-      }
-      return std::sqrt(e / m);
-    };
     const GateRow g = GateOf(*cl);
     const MachineMap mm = TraitMachine(t, 100.0);
     std::printf("twin %-14s seed %d | cv small %.4g large %.4g | %s kept | flux %.3f / %.3f %% | L %.2f / %.2f %%\n",
                 t.name.c_str(), cfg.seed, g.cv_small, g.cv_large, g.large_kept ? "large" : "small",
-                100 * FluxRms(*cs, mm), 100 * FluxRms(*cl, mm), 100 * lrms(*cs), 100 * lrms(*cl));
+                100 * FluxRms(*cs, mm), 100 * FluxRms(*cl, mm), 100 * InductanceRmsOverPlan(*cs, *machine),
+                100 * InductanceRmsOverPlan(*cl, *machine));
     EXPECT_TRUE(g.large_kept) << t.name;
   }
   {

@@ -17,6 +17,7 @@
 #include "nlohmann/json.hpp"
 #include "simulation/flux_map.h"
 #include "simulation/twin.h"
+#include "tests/fitting/truth_error.h"
 
 namespace fluxcal::fit {
 namespace {
@@ -75,6 +76,30 @@ TEST(SplineBasis, ContinuesSmoothlyBeyondTheKnots) {
   }
 }
 
+// At (id, iq): psi_d even and psi_q odd in iq, and L the Jacobian of psi
+// by central differences of step h (reciprocal: d psi_d / d iq = d psi_q /
+// d id = Ldq), each within tol.
+void ExpectEvenOddAndJacobian(const Family& f, const std::vector<double>& p, double id, double iq, double h,
+                              double tol) {
+  auto psi = [&](double i_d, double i_q, double* d, double* q) { FamilyFlux(f, i_d, i_q, p.data(), d, q); };
+  double d1, q1, dm, qm;
+  psi(id, iq, &d1, &q1);
+  psi(id, -iq, &dm, &qm);
+  EXPECT_NEAR(dm, d1, 1e-14);
+  EXPECT_NEAR(qm, -q1, 1e-14);
+  double ldd, lqq, ldq;
+  FamilyInductance(f, id, iq, p.data(), &ldd, &lqq, &ldq);
+  double a, b, c, e;
+  psi(id + h, iq, &a, &b);
+  psi(id - h, iq, &c, &e);
+  EXPECT_NEAR(ldd, (a - c) / (2 * h), tol) << id << ", " << iq;
+  EXPECT_NEAR(ldq, (b - e) / (2 * h), tol) << id << ", " << iq;
+  psi(id, iq + h, &a, &b);
+  psi(id, iq - h, &c, &e);
+  EXPECT_NEAR(ldq, (a - c) / (2 * h), tol) << "reciprocity at " << id << ", " << iq;
+  EXPECT_NEAR(lqq, (b - e) / (2 * h), tol) << id << ", " << iq;
+}
+
 // Random coefficients: whatever the fit finds, the surfaces are physical
 // where the family guarantees it.
 TEST(SplineFamily, ConservativeAndSymmetricByConstruction) {
@@ -94,27 +119,8 @@ TEST(SplineFamily, ConservativeAndSymmetricByConstruction) {
     double d, q;
     psi(id, 0, &d, &q);
     EXPECT_NEAR(q, 0.0, 1e-15) << "psi_q(id, 0) = 0 at id " << id;
-    for (double iq : {-140.0, -60.0, 13.0, 55.0, 109.0, 130.0}) {
-      double d1, q1;
-      psi(id, iq, &d1, &q1);
-      double dm, qm;
-      psi(id, -iq, &dm, &qm);
-      EXPECT_NEAR(dm, d1, 1e-14);
-      EXPECT_NEAR(qm, -q1, 1e-14);
-      // L = d psi / d i (central differences), inside and beyond the knots.
-      double ldd, lqq, ldq;
-      FamilyInductance(f, id, iq, p.data(), &ldd, &lqq, &ldq);
-      const double h = 1e-3;
-      double a, b, c, e;
-      psi(id + h, iq, &a, &b);
-      psi(id - h, iq, &c, &e);
-      EXPECT_NEAR(ldd, (a - c) / (2 * h), 1e-8) << id << ", " << iq;
-      EXPECT_NEAR(ldq, (b - e) / (2 * h), 1e-8) << id << ", " << iq;
-      psi(id, iq + h, &a, &b);
-      psi(id, iq - h, &c, &e);
-      EXPECT_NEAR(ldq, (a - c) / (2 * h), 1e-8) << "reciprocity at " << id << ", " << iq;
-      EXPECT_NEAR(lqq, (b - e) / (2 * h), 1e-8) << id << ", " << iq;
-    }
+    // L = d psi / d i (central differences), inside and beyond the knots.
+    for (double iq : {-140.0, -60.0, 13.0, 55.0, 109.0, 130.0}) ExpectEvenOddAndJacobian(f, p, id, iq, 1e-3, 1e-8);
   }
 }
 
@@ -162,24 +168,7 @@ TEST(SplineFamily, MirroredLayoutIsConservativeEvenAndContinuous) {
     ind(id, -1e-7, &lm[0], &lm[1], &lm[2]);
     for (int c = 0; c < 3; ++c) EXPECT_NEAR(lp[c], lm[c], 1e-9) << "inductance " << c << " at id " << id;
     for (double iq : {-140.0, -60.0, -0.5, 0.7, 13.0, 55.0, 109.0, 130.0}) {
-      double d1, q1;
-      psi(id, iq, &d1, &q1);
-      double dn, qn;
-      psi(id, -iq, &dn, &qn);
-      EXPECT_NEAR(dn, d1, 1e-14);
-      EXPECT_NEAR(qn, -q1, 1e-14);
-      double ldd, lqq, ldq;
-      ind(id, iq, &ldd, &lqq, &ldq);
-      const double h = 1e-4;
-      double a, b, c, e;
-      psi(id + h, iq, &a, &b);
-      psi(id - h, iq, &c, &e);
-      EXPECT_NEAR(ldd, (a - c) / (2 * h), 1e-7) << id << ", " << iq;
-      EXPECT_NEAR(ldq, (b - e) / (2 * h), 1e-7) << id << ", " << iq;
-      psi(id, iq + h, &a, &b);
-      psi(id, iq - h, &c, &e);
-      EXPECT_NEAR(ldq, (a - c) / (2 * h), 1e-7) << "reciprocity at " << id << ", " << iq;
-      EXPECT_NEAR(lqq, (b - e) / (2 * h), 1e-7) << id << ", " << iq;
+      ExpectEvenOddAndJacobian(f, p, id, iq, 1e-4, 1e-7);
     }
   }
 }
@@ -253,17 +242,11 @@ TEST(SplineFit, RecoversTruthOnBothMagneticsFamilies) {
     auto cal = Fit(FitDataFromRecording(r->set, *ids), o);
     ASSERT_TRUE(cal.ok()) << cal.status();
     EXPECT_EQ(cal->family().kind, Family::kSpline);
-    double e = 0, e_psi = 0;
-    for (const auto& t : r->truth_points) {
-      const auto p = cal->Predict(t.id_true_a, t.iq_true_a);
-      e += std::pow(p.ldd_h / t.ldd_h - 1, 2) + std::pow(p.lqq_h / t.lqq_h - 1, 2);
-      e_psi = std::max(e_psi, std::hypot(p.psi_d_wb - t.psi_d_wb, p.psi_q_wb - t.psi_q_wb) /
-                                  std::max(std::hypot(t.psi_d_wb, t.psi_q_wb), t.psi_pm_wb));
-      EXPECT_GT(p.ldd_h_std, 0.0);
-    }
-    const double rms = std::sqrt(e / (2 * r->truth_points.size()));
-    EXPECT_LT(rms, 0.005) << cal->family().Name() << (gridded ? " on the gridded map" : " on the analytic motor");
-    EXPECT_LT(e_psi, 0.005) << cal->family().Name();
+    for (const auto& t : r->truth_points) EXPECT_GT(cal->Predict(t.id_true_a, t.iq_true_a).ldd_h_std, 0.0);
+    const TruthError e = AgainstTruth(*cal, r->truth_points);
+    EXPECT_LT(e.inductance_rms, 0.005) << cal->family().Name()
+                                       << (gridded ? " on the gridded map" : " on the analytic motor");
+    EXPECT_LT(e.flux_max, 0.005) << cal->family().Name();
     // Exact JSON round trip, knots included.
     auto back = Calibration::FromJson(nlohmann::json::parse(cal->ToJson().dump()));
     ASSERT_TRUE(back.ok()) << back.status();
@@ -307,7 +290,7 @@ TEST(SplineFit, RecoversTruthOnBothMagneticsFamilies) {
       EXPECT_EQ(named, levels->size()) << id;
     }
     std::printf("spline fit (%s): %s, L RMS %.3f %%, worst psi %.3f %%\n", gridded ? "gridded map" : "analytic",
-                cal->family().Name().c_str(), 100 * rms, 100 * e_psi);
+                cal->family().Name().c_str(), 100 * e.inductance_rms, 100 * e.flux_max);
   }
 }
 
