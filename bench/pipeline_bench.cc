@@ -4,11 +4,13 @@
 // measurement of docs/performance.md ("Compact calibrations"), which is not
 // a Google Benchmark loop:
 //
-//   pipeline_bench --fleet-ingest URL VERSIONS SECONDS
+//   pipeline_bench --fleet-ingest URL VERSIONS SECONDS [FIRST]
 //       appends synthetic versions (smooth-asym, the largest family, of a simulated
 //       bench run, its parameters varied per version; 2 versions per motor,
 //       one AddCalibration transaction each, with its audit row, as
 //       FitSerial stores) until VERSIONS or SECONDS, and prints the ingest rate;
+//       FIRST (even, default 0) is the index of the first version, so that
+//       several processes can fill one store with disjoint motors;
 //   pipeline_bench --fleet-query URL VERSIONS QUERIES
 //       QueryFlux (the store's read of one version + decode + Predict at one
 //       point) of QUERIES versions picked at random among the first VERSIONS
@@ -111,21 +113,26 @@ std::string Serial(int64_t k) {
   return buf;
 }
 
-int FleetIngest(const std::string& url, int64_t versions, double seconds) {
+int FleetIngest(const std::string& url, int64_t versions, double seconds, int64_t first) {
+  if (first < 0 || first % 2 != 0) {
+    std::fprintf(stderr, "FIRST must be even and >= 0 (two versions per motor), got %lld\n",
+                 static_cast<long long>(first));
+    return 1;
+  }
   const Calibration& base = Fits().at("smooth-asym");   // the largest family
   auto store = fluxcal::pipeline::OpenStore(url);
   if (!store.ok()) {
     std::fprintf(stderr, "%s\n", std::string(store.status().message()).c_str());
     return 1;
   }
-  std::mt19937_64 rng(26);
+  std::mt19937_64 rng(26 + first);
   std::normal_distribution<double> noise(0.0, 1e-3);
   const auto t0 = std::chrono::steady_clock::now();
   int64_t n = 0, bytes = 0;
   for (; n < versions && Seconds(t0) < seconds; ++n) {
-    const int64_t motor = n / 2;
+    const int64_t motor = (first + n) / 2;
     const std::string serial = Serial(motor);
-    if (n % 2 == 0) {
+    if ((first + n) % 2 == 0) {
       fluxcal::storage::MotorRow m{serial, 4, 0.011, 0.0114, fluxcal::pipeline::StoreNowUtc()};
       if (auto s = (*store)->ImportMotor(m); !s.ok()) {
         std::fprintf(stderr, "motor %s: %s\n", serial.c_str(), std::string(s.message()).c_str());
@@ -201,7 +208,7 @@ int FleetQuery(const std::string& url, int64_t versions, int queries) {
 
 int main(int argc, char** argv) {
   if (argc >= 5 && std::strcmp(argv[1], "--fleet-ingest") == 0) {
-    return FleetIngest(argv[2], std::atoll(argv[3]), std::atof(argv[4]));
+    return FleetIngest(argv[2], std::atoll(argv[3]), std::atof(argv[4]), argc >= 6 ? std::atoll(argv[5]) : 0);
   }
   if (argc >= 5 && std::strcmp(argv[1], "--fleet-query") == 0) {
     return FleetQuery(argv[2], std::atoll(argv[3]), std::atoi(argv[4]));
