@@ -29,7 +29,7 @@ fit::FitData CorrectedFitData(const io::RecordingSet& set, const Model& m, const
   Params clean = final_p;
   // The test's drifts go too: the calibration holds the mean.
   for (Block b : {kDead, kRhf, kOffset, kGain, kDelay, kHarm, kSensorOffset, kUdcGain, kRImb, kDrift, kVth, kAngleHarm,
-                  kIronLoss, kPsiDrift}) {
+                  kIronLoss, kPsiDrift, kTorqueLoss}) {
     std::fill(clean.b[b].begin(), clean.b[b].end(), 0.0);
   }
   const auto pf = final_p.Ptrs(), pc = clean.Ptrs();
@@ -76,6 +76,10 @@ fit::FitData CorrectedFitData(const io::RecordingSet& set, const Model& m, const
     row.iq_a = it.imag();
     row.ud_ref_v = u_corr.real() / zoh;
     row.uq_ref_v = u_corr.imag() / zoh;
+    // The air-gap torque: the transducer's reading plus the mechanical loss.
+    if (row.torque_nm) {
+      *row.torque_nm += physics::MechanicalLossTorque(m.Friction(pf.data()), m.Viscous(pf.data()), o.speed_rpm);
+    }
   }
   return d;
 }

@@ -173,6 +173,12 @@ std::vector<H> ForSummarised(const Mismatch& m) {
                  "scale every held voltage with the current (or with the recording order for a drift)"});
     h.push_back({"the inverter's dead time or switch drop", "dead_time", "follow the sign of each phase current"});
   } else if (m.signal == "steady_state_voltage" || m.signal == "torque") {
+    if (m.signal == "torque") {
+      h.push_back({"friction and drag between the air gap and the torque transducer, or the transducer's zero",
+                   "torque_loss",
+                   "take about the same off every row's torque whatever its current (more at higher speed) and leave "
+                   "the voltages alone"});
+    }
     h.push_back({"a magnet flux off nominal (magnet temperature)", "magnet_temperature",
                  "change the back-EMF in proportion to speed, and the torque"});
     h.push_back({"an angle offset", "position_offset", "rotate the steady-state voltages and the HF saliency alike"});

@@ -51,9 +51,9 @@ constexpr double kTwoUdcRatio = 1.1;
 // the kPsi block.
 enum Block {
   kBase, kDead, kRs, kRhf, kOffset, kGain, kPsi, kDelay, kHarm, kSensorOffset, kUdcGain, kRImb, kDrift,
-  kVth, kAngleHarm, kIronLoss, kPsiDrift, kNumBlocks
+  kVth, kAngleHarm, kIronLoss, kPsiDrift, kTorqueLoss, kNumBlocks
 };
-constexpr int kBlockSize[kNumBlocks] = {0, 1, 1, 1, 1, 3, 1, 1, 1, 2, 1, 2, 1, 1, 2, 1, 1};
+constexpr int kBlockSize[kNumBlocks] = {0, 1, 1, 1, 1, 3, 1, 1, 1, 2, 1, 2, 1, 1, 2, 1, 1, 2};
 // Fit scales of the effect blocks, from the catalogue (simulation/effects.h):
 // value = neutral + scale x block value (psi_pm relative to its nominal).
 const double kScaleDead = sim::EffectParam("dead_time", "dead_time_s").fit_scale;
@@ -72,6 +72,8 @@ const double kScaleVth = sim::EffectParam("inverter_voltage_drop", "threshold_v"
 // iron_loss is fitted as the conductance 1 / R_fe (linear in the model).
 const double kScaleGfe = sim::EffectParam("iron_loss", "r_fe_ohm").fit_scale;
 const double kScaleAngleHarm = sim::EffectParam("position_sensor_harmonic", "harmonic_amplitude_rad").fit_scale;
+const double kScaleFriction = sim::EffectParam("torque_loss", "friction_nm").fit_scale;
+const double kScaleViscous = sim::EffectParam("torque_loss", "viscous_nm_per_rad_s").fit_scale;
 struct Candidate {
   std::string effect;
   Block block;
@@ -145,6 +147,10 @@ struct Model {
   // above kTwoUdcRatio the dead time and a switch threshold are separable.
   double udc_ratio = 1.0;
   double udc_nom_v = 0.0;   // the manifest's drive.udc_v
+  // The torque rows' mean mechanical speed |w_m| [rad/s]: the torque_loss
+  // block is (loss at this speed, drag), centred so that its two
+  // parameters are not collinear over a test's speeds.
+  double torque_ref_rad_s = 0.0;
 
   // The magnetics: the set's own calibration (fit::Fit of its identified
   // points and steady-state rows, the fit `fluxcal fit SET` makes), its
@@ -213,6 +219,12 @@ struct Model {
   // inverter_voltage_drop: the switches' threshold V_th (its slope r_on is
   // in series with Rs and lives in Rs(p); docs/diagnosis.md).
   double Vth(const double* const* p) const { return kScaleVth * p[kVth][0]; }
+  // torque_loss: friction T_f and drag b of T_loss = sign(n) (T_f + b |w_m|)
+  // (physics/torque.h), from the block (T at the reference speed, b).
+  double Viscous(const double* const* p) const { return kScaleViscous * p[kTorqueLoss][1]; }
+  double Friction(const double* const* p) const {
+    return kScaleFriction * p[kTorqueLoss][0] - Viscous(p) * torque_ref_rad_s;
+  }
   // iron_loss: conductance of the branch parallel to the magnetising one.
   double Gfe(const double* const* p) const { return kScaleGfe * p[kIronLoss][0]; }
   // Steady state with iron loss: the branch voltage e = w_e J psi(i_m) drives
@@ -376,7 +388,9 @@ struct Model {
     const Complex im = MagnetisingCurrent(p, it, o.w_e, o.progress);
     double pd, pq;
     SteadyFlux(p, im, &pd, &pq, o.progress);
-    return physics::ElectromagneticTorque(pole_pairs, pd, pq, im.real(), im.imag());
+    // The transducer reads it less the mechanical loss (torque_loss).
+    return physics::ElectromagneticTorque(pole_pairs, pd, pq, im.real(), im.imag()) -
+           physics::MechanicalLossTorque(Friction(p), Viscous(p), o.speed_rpm);
   }
 };
 

@@ -223,7 +223,14 @@ absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident:
   double dc2 = 0, t2 = 0;
   int nt = 0;
   for (const auto& d : m.dc) dc2 += std::norm(d.u);
-  for (const auto& o : m.ss) if (o.has_torque) { t2 += o.torque * o.torque; ++nt; }
+  double w_sum = 0;
+  for (const auto& o : m.ss) {
+    if (!o.has_torque) continue;
+    t2 += o.torque * o.torque;
+    w_sum += std::abs(physics::RpmToMechanicalRadS(o.speed_rpm));
+    ++nt;
+  }
+  if (nt) m.torque_ref_rad_s = w_sum / nt;
   if (!m.dc.empty()) m.dc_scale_v = std::max(0.01, std::sqrt(dc2 / m.dc.size()));
   double udc_lo = 0, udc_hi = 0;
   for (const auto& d : m.dc) {

@@ -163,6 +163,18 @@ Finding Describe(const Candidate& c, const Model& m, const FitOut& f) {
       }
       break;
     }
+    case kTorqueLoss: {
+      // Reported as friction and drag (physics/torque.h); the block's first
+      // parameter is the loss at the rows' mean speed, so the friction's
+      // deviation is that of T_ref - b w_ref (covariance neglected: the
+      // centring makes the two nearly independent).
+      const double sb = kScaleViscous * sd(kTorqueLoss, 1);
+      out.parameters["friction_nm"] = m.Friction(p);
+      out.parameter_std["friction_nm"] = std::hypot(kScaleFriction * sd(kTorqueLoss, 0), sb * m.torque_ref_rad_s);
+      out.parameters["viscous_nm_per_rad_s"] = m.Viscous(p);
+      out.parameter_std["viscous_nm_per_rad_s"] = sb;
+      break;
+    }
     case kDrift: {
       // A drift is reported as one (docs/diagnosis-report.md): Rs at the
       // first and the last point of the recording, and the rise.

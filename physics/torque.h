@@ -10,6 +10,8 @@
 #ifndef FLUXCAL_PHYSICS_TORQUE_H_
 #define FLUXCAL_PHYSICS_TORQUE_H_
 
+#include "physics/speed.h"
+
 namespace fluxcal::physics {
 
 // Torque [N m] from the flux linkages [Wb] and currents [A]. The flux and the
@@ -26,6 +28,21 @@ auto ElectromagneticTorque(int pole_pairs, const F& psi_d, const F& psi_q, const
 template <typename T>
 T TorqueSlopeIq(int pole_pairs, const T& psi_d, const T& ldq, const T& lqq, const T& id, const T& iq) {
   return 1.5 * pole_pairs * (psi_d + ldq * iq - lqq * id);
+}
+
+// What a shaft torque transducer reads below the air-gap torque: the
+// mechanical loss between them, bearing and seal friction T_f opposing the
+// rotation (Coulomb) and drag b w_m growing with the speed (windage,
+// lubricant), T_loss = T_f sign(n) + b w_m = sign(n) (T_f + b |w_m|), so
+// T_shaft = T_em - T_loss (a motoring machine delivers less, a braking one
+// brakes more). With one direction of rotation T_f is indistinguishable
+// from the transducer's zero offset (docs/diagnosis.md, "Torque loss").
+// Templated so that a Jet parameter differentiates through it.
+template <typename T>
+T MechanicalLossTorque(const T& friction_nm, const T& viscous_nm_per_rad_s, double speed_rpm) {
+  const double w_m = RpmToMechanicalRadS(speed_rpm);
+  const double s = speed_rpm > 0 ? 1.0 : (speed_rpm < 0 ? -1.0 : 0.0);
+  return s * (friction_nm + viscous_nm_per_rad_s * (s * w_m));
 }
 
 }  // namespace fluxcal::physics

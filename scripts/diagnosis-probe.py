@@ -111,6 +111,16 @@ for k, seed in enumerate((151, 152, 153)):
                 f'harmonic_amplitude_rad=0.02,harmonic_phase_rad={(0.3, 1.5, -1.0)[k]},gain_b=1.02', True, 'default'))
     EXT.append((f'pair_fe_rhf_s{seed}', seed, f'r_fe_ohm={(25, 30, 40)[k]},r_hf_ohm=0.02', True, 'b'))
     EXT.append((f'pair_fe_mt_s{seed}', seed, f'r_fe_ohm={(25, 30, 40)[k]},psi_pm_wb=0.0108', True, 'default'))
+# torque_loss: friction (with the transducer's zero) and drag, alone on both
+# motors and beside a magnet flux change and iron loss (which also move the
+# torque).
+for variant in ('b', 'default'):
+    for k, seed in enumerate((161, 162, 163)):
+        EXT.append((f'tl_{variant}_s{seed}', seed,
+                    f'friction_nm={(0.1, 0.2, 0.06)[k]},viscous_nm_per_rad_s={(0.0, 5e-4, 1e-3)[k]}', True, variant))
+for k, seed in enumerate((164, 165, 166)):
+    EXT.append((f'pair_tl_mt_s{seed}', seed, f'friction_nm={(0.1, 0.15, 0.2)[k]},psi_pm_wb=0.0108', True, 'default'))
+    EXT.append((f'pair_tl_fe_s{seed}', seed, f'friction_nm={(0.1, 0.15, 0.2)[k]},r_fe_ohm=30', True, 'b'))
 TWIN += EXT
 
 # Physics outside the vocabulary: an effect concealed with its catalogue
@@ -130,6 +140,7 @@ OUTSIDE = [
     ('outside_psh_s96', 96, 'harmonic_amplitude_rad=0.025,harmonic_phase_rad=1.0', True, 'default',
      'position_sensor_harmonic'),
     ('outside_fe_s97', 97, 'r_fe_ohm=20', True, 'b', 'iron_loss'),
+    ('outside_tl_s98', 98, 'friction_nm=0.15', True, 'b', 'torque_loss'),
 ]
 TWIN += [c[:5] for c in OUTSIDE]
 EXCLUDED = {c[0]: c[5] for c in OUTSIDE}
@@ -170,6 +181,13 @@ def within(truth, rep, tol=0.15):
         if e['effect'] == 'iron_loss':
             if abs(p['r_fe_ohm'] / t['r_fe_ohm'] - 1) > tol:
                 bad.append(f"r_fe_ohm {p['r_fe_ohm']:.2f} vs {t['r_fe_ohm']}")
+        if e['effect'] == 'torque_loss':
+            # The loss at 1500 rpm (the rows' middle speed): within 0.04 N m.
+            w = 1500 * 2 * math.pi / 60
+            lp = p['friction_nm'] + w * p['viscous_nm_per_rad_s']
+            lt = t['friction_nm'] + w * t['viscous_nm_per_rad_s']
+            if abs(lp - lt) > 0.04:
+                bad.append(f'torque loss at 1500 rpm {lp:.3f} vs {lt:.3f} N m')
         if e['effect'] == 'stator_temperature_drift':
             if abs(p['winding_temp_rise_k'] / t['winding_temp_rise_k'] - 1) > tol:
                 bad.append(f"winding_temp_rise_k {p['winding_temp_rise_k']:.2f} vs {t['winding_temp_rise_k']}")

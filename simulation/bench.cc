@@ -469,7 +469,12 @@ absl::StatusOr<SimulationResult> Simulate(const TwinConfig& cfg, const Plan& pla
       row.speed_rpm = ss.speed_rpm;
       row.ud_ref_v = run.mean_ud_cmd;
       row.uq_ref_v = run.mean_uq_cmd;
-      row.torque_nm = run.mean_torque_nm + tnoise(rng);
+      // The transducer reads the air-gap torque less the mechanical loss
+      // between them (torque_loss).
+      row.torque_nm = run.mean_torque_nm -
+                      physics::MechanicalLossTorque(cfg.effects.friction_nm, cfg.effects.viscous_nm_per_rad_s,
+                                                    ss.speed_rpm) +
+                      tnoise(rng);
       row.temperature_c = ss.temperature_c;
       // What the bench held over the window (PointRun says how each is taken).
       row.current_ripple_a = run.current_ripple_a;

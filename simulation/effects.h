@@ -84,6 +84,9 @@ struct Effects {
   // position_sensor_harmonic: measured angle = true + offset + amplitude sin(2 theta_e + phase).
   double harmonic_amplitude_rad = 0.0, harmonic_phase_rad = 0.0;
   double r_fe_ohm = 0.0;         // iron_loss: parallel (iron-loss) resistance; 0: none
+  // torque_loss: what the torque transducer reads below the air-gap torque,
+  // friction_nm sign(n) + viscous_nm_per_rad_s w_m (physics/torque.h).
+  double friction_nm = 0.0, viscous_nm_per_rad_s = 0.0;
   // Physics outside the catalogue (simulation/bench_effect.h): the twin
   // applies it, diagnosis never models it.
   BenchEffects unmodelled;

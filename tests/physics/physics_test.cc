@@ -61,6 +61,20 @@ TEST(Torque, EqualsTheCoEnergyDerivativeAtConstantPhaseCurrents) {
   }
 }
 
+// The transducer's loss opposes the rotation at any speed sign, is zero at
+// standstill, and is linear in its two parameters (a Jet sees T_f with
+// slope sign(n) and b with slope |w_m| sign(n) = w_m).
+TEST(Torque, MechanicalLossOpposesTheRotation) {
+  const double w = RpmToMechanicalRadS(1500.0);
+  EXPECT_NEAR(MechanicalLossTorque(0.1, 1e-3, 1500.0), 0.1 + 1e-3 * w, 1e-15);
+  EXPECT_NEAR(MechanicalLossTorque(0.1, 1e-3, -1500.0), -(0.1 + 1e-3 * w), 1e-15);
+  EXPECT_EQ(MechanicalLossTorque(0.1, 1e-3, 0.0), 0.0);
+  using J = ceres::Jet<double, 2>;
+  const J t = MechanicalLossTorque(J(0.1, 0), J(1e-3, 1), -1500.0);
+  EXPECT_NEAR(t.v[0], -1.0, 1e-15);
+  EXPECT_NEAR(t.v[1], -w, 1e-12);
+}
+
 TEST(Torque, SlopeIsTheDerivativeAlongIq) {
   const AnalyticFlux f;
   const int p = 3;
