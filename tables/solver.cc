@@ -21,6 +21,7 @@ using internal::MtpvLimit;
 using internal::RowLoci;
 using internal::SolveWithMax;
 using internal::TrySolve;
+using internal::VoltageFromFlux;
 
 double MachineLimits::UMaxV() const {
   return udc_v ? modulation_limit * *udc_v / std::sqrt(3.0) : std::numeric_limits<double>::quiet_NaN();
@@ -33,43 +34,65 @@ double TorqueNm(const sim::MagneticModel& m, int pp, double id, double iq, doubl
 
 double VoltageV(const sim::MagneticModel& m, const MachineLimits& lim, double id, double iq, double we) {
   if (!lim.rs_ohm) return std::numeric_limits<double>::quiet_NaN();
-  const double rs = *lim.rs_ohm;
-  const auto f = m.Flux(id, iq, lim.temperature_c);
-  return std::hypot(rs * id - we * f.psi_q_wb, rs * iq + we * f.psi_d_wb);
+  return internal::VoltageFromFlux(lim, id, iq, we, m.Flux(id, iq, lim.temperature_c));
 }
 
 namespace internal {
 
 bool SolveIqForTorque(const sim::MagneticModel& m, const MachineLimits& lim, double id, double t,
-                      double s, double* iq_out, double iq_guess_a) {
+                      double s, double* iq_out, double iq_guess_a, sim::FluxLinkage* flux_out, bool lazy_bracket) {
   const double target = std::abs(t);
   double lo = 0.0, hi = std::max(10.0, lim.i_max_a);
   auto torque = [&](double iq) { return s * TorqueNm(m, lim.pole_pairs, id, s * iq, lim.temperature_c); };
+  // The bracket's upper end: grown until the torque there reaches the
+  // target (false if it never does). `lazy_bracket` with a start inside the
+  // first [lo, hi]: grown only when hi is needed (a Newton step at or
+  // beyond it, a bisection, or the bracket's width), so a converging warm
+  // start skips that surface evaluation; the iterates are the same as
+  // when it is grown first, where the torque is monotone in iq.
   int grow = 0;
-  double t_hi;
-  while ((t_hi = torque(hi)) < target) {
-    hi *= 2;
-    if (++grow > 8) return false;
-  }
+  double t_hi = 0.0;
+  bool hi_known = false;
+  auto grow_hi = [&] {
+    while ((t_hi = torque(hi)) < target) {
+      hi *= 2;
+      if (++grow > 8) return false;
+    }
+    hi_known = true;
+    return true;
+  };
+  const bool warm = iq_guess_a > lo && iq_guess_a < hi;
+  if (!(lazy_bracket && warm) && !grow_hi()) return false;
   double iq = iq_guess_a > lo && iq_guess_a < hi
                   ? iq_guess_a
                   : std::clamp(target / std::max(1e-9, t_hi) * hi, lo, hi);
+  // The flux at the last iq evaluated (the root when the loop ends there).
+  sim::FluxLinkage F;
+  bool f_at_iq = false;
   for (int it = 0; it < 60; ++it) {
     // One surface evaluation per iteration serves both T and dT/diq (a
     // spline calibration shares the basis between flux and inductance).
-    sim::FluxLinkage F;
     sim::DifferentialInductance L;
     m.FluxAndInductance(id, s * iq, lim.temperature_c, &F, &L);
+    f_at_iq = true;
     const double f = s * physics::ElectromagneticTorque(lim.pole_pairs, F.psi_d_wb, F.psi_q_wb, id, s * iq) - target;
     if (std::abs(f) < 1e-10 * (1.0 + target)) break;
-    if (f > 0) hi = iq; else lo = iq;
+    if (f > 0) {
+      hi = iq;
+      hi_known = true;
+    } else {
+      lo = iq;
+    }
     const double d = physics::TorqueSlopeIq(lim.pole_pairs, F.psi_d_wb, L.ldq_h, L.lqq_h, id, s * iq);
     double next = iq - f / (d > 1e-12 ? d : 1e-12);
+    if (!hi_known && !(next > lo && next < hi && hi - lo >= 1e-12) && !grow_hi()) return false;
     if (!(next > lo && next < hi)) next = 0.5 * (lo + hi);
     if (hi - lo < 1e-12) break;
     iq = next;
+    f_at_iq = false;
   }
   *iq_out = s * iq;
+  if (flux_out != nullptr) *flux_out = f_at_iq ? F : m.Flux(id, s * iq, lim.temperature_c);
   return true;
 }
 
@@ -97,8 +120,9 @@ bool CurrentLimitSettled(double r) { return std::abs(r) > 1e-8; }
 int FastFieldWeakening(const sim::MagneticModel& m, const MachineLimits& lim, double t, double we, double s,
                        double id_mtpa, double iq_mtpa, RowLoci* row, OperatingPoint* op) {
   double id = 0.0, iq = 0.0;
-  const bool ok = (row->warm && FwNewton(m, lim, t, we, s, row->warm_id, row->warm_iq, id_mtpa, &id, &iq)) ||
-                  FwNewton(m, lim, t, we, s, id_mtpa, iq_mtpa, id_mtpa, &id, &iq);
+  sim::FluxLinkage f;
+  const bool ok = (row->warm && FwNewton(m, lim, t, we, s, row->warm_id, row->warm_iq, id_mtpa, &id, &iq, &f)) ||
+                  FwNewton(m, lim, t, we, s, id_mtpa, iq_mtpa, id_mtpa, &id, &iq, &f);
   if (!ok) return -1;
   const double r = std::hypot(id, iq) - lim.i_max_a * (1 + 1e-9);
   if (!CurrentLimitSettled(r)) return -1;
@@ -108,7 +132,7 @@ int FastFieldWeakening(const sim::MagneticModel& m, const MachineLimits& lim, do
   if (r > 0) return 0;
   op->id_a = id;
   op->iq_a = iq;
-  op->torque_nm = TorqueNm(m, lim.pole_pairs, id, iq, lim.temperature_c);
+  op->torque_nm = physics::ElectromagneticTorque(lim.pole_pairs, f.psi_d_wb, f.psi_q_wb, id, iq);   // TorqueNm
   return 1;
 }
 
@@ -130,32 +154,40 @@ bool TrySolve(const sim::MagneticModel& m, const MachineLimits& lim, double t, d
   // (Each locus point's Newton starts cold, from the bracket: where the
   // torque is not monotone in iq (far beyond the measured region) a start
   // carried over from a neighbouring point can settle on another root.)
-  auto iq_of = [&](double id, double* iq) {
+  // *f: the flux there (m.Flux(id, *iq)), for the voltage.
+  auto iq_of = [&](double id, double* iq, sim::FluxLinkage* f) {
     const bool kept = row != nullptr && (id == id_min || (mtpa_id != nullptr && id == *mtpa_id));
     if (kept) {
       for (const auto& p : row->points) {
         if (p.id == id) {
           *iq = p.iq;
+          *f = p.f;
           return p.ok;
         }
       }
     }
-    const bool ok = SolveIqForTorque(m, lim, id, t, s, iq);
-    if (kept) row->points.push_back({id, ok, ok ? *iq : 0.0});
+    const bool ok = SolveIqForTorque(m, lim, id, t, s, iq, 0.0, f);
+    if (kept) row->points.push_back({id, ok, ok ? *iq : 0.0, ok ? *f : sim::FluxLinkage{}});
     return ok;
   };
   auto cur2 = [&](double id) {
     double iq;
-    if (!iq_of(id, &iq)) return 1e30;
+    sim::FluxLinkage f;
+    if (!iq_of(id, &iq, &f)) return 1e30;
     return id * id + iq * iq;
   };
   // Unconstrained least current (MTPA) along the constant-torque locus.
   double id = t == 0.0 ? 0.0 : (mtpa_id ? *mtpa_id : MinimiseScalar(cur2, id_min, 0.0));
   double iq = 0.0;
-  if (t != 0.0 && !iq_of(id, &iq)) return false;
-  auto volt = [&](double d, double q) { return we > 0 ? VoltageV(m, lim, d, q, we) : 0.0; };
+  sim::FluxLinkage f_id;
+  if (t != 0.0 && !iq_of(id, &iq, &f_id)) return false;
+  if (t == 0.0) f_id = m.Flux(0.0, 0.0, lim.temperature_c);
+  // |u| at a locus point (d, q) from its flux f (VoltageV's value).
+  auto volt = [&](double d, double q, const sim::FluxLinkage& f) {
+    return we > 0 ? VoltageFromFlux(lim, d, q, we, f) : 0.0;
+  };
   const double u_max = lim.UMaxV();
-  if (we > 0 && volt(id, iq) > u_max) {
+  if (we > 0 && volt(id, iq, f_id) > u_max) {
     // The fast solve first (FwNewton), from the row's last voltage-limited
     // cell, else from the MTPA point; away from the limit torque only.
     if (row != nullptr && row->fast && std::abs(t) < row->fast_below) {
@@ -168,7 +200,8 @@ bool TrySolve(const sim::MagneticModel& m, const MachineLimits& lim, double t, d
     // where the voltage falls to u_max between the two.
     auto volt_on_locus = [&](double d) {
       double q;
-      return iq_of(d, &q) ? volt(d, q) : 1e30;
+      sim::FluxLinkage f;
+      return iq_of(d, &q, &f) ? volt(d, q, f) : 1e30;
     };
     double lo = id_min;
     if (volt_on_locus(lo) > u_max) {
@@ -180,19 +213,21 @@ bool TrySolve(const sim::MagneticModel& m, const MachineLimits& lim, double t, d
     // BIT 11, 1971): superlinear, the bracket is kept, and the answer is its
     // feasible end. Each iq(id) starts from the roots at the bracket's ends.
     double hi = id, q_lo;
-    if (!iq_of(lo, &q_lo)) return false;
+    sim::FluxLinkage f_lo;
+    if (!iq_of(lo, &q_lo, &f_lo)) return false;
     double q_hi = iq;
-    double g_lo = volt(lo, q_lo) - u_max, g_hi = volt(hi, q_hi) - u_max;
+    double g_lo = volt(lo, q_lo, f_lo) - u_max, g_hi = volt(hi, q_hi, f_id) - u_max;
     int side = 0;
     for (int k = 0; k < 100 && hi - lo > 2e-9 && g_lo < -1e-12 * u_max; ++k) {
       double x = hi - g_hi * (hi - lo) / (g_hi - g_lo);
       if (!(x > lo && x < hi)) x = 0.5 * (lo + hi);
       double q;
+      sim::FluxLinkage f;
       const double guess = std::abs(q_lo + (q_hi - q_lo) * (x - lo) / (hi - lo));
-      if (!SolveIqForTorque(m, lim, x, t, s, &q, guess)) { hi = x; g_hi = 1.0; side = 0; continue; }
-      const double g = volt(x, q) - u_max;
+      if (!SolveIqForTorque(m, lim, x, t, s, &q, guess, &f)) { hi = x; g_hi = 1.0; side = 0; continue; }
+      const double g = volt(x, q, f) - u_max;
       if (g <= 0) {
-        lo = x; g_lo = g; q_lo = q;
+        lo = x; g_lo = g; q_lo = q; f_lo = f;
         if (side == -1) g_hi *= 0.5;
         side = -1;
       } else {
@@ -203,6 +238,7 @@ bool TrySolve(const sim::MagneticModel& m, const MachineLimits& lim, double t, d
     }
     id = lo;
     iq = q_lo;
+    f_id = f_lo;
     if (row != nullptr) {
       row->warm = true;
       row->warm_id = id;
@@ -212,7 +248,8 @@ bool TrySolve(const sim::MagneticModel& m, const MachineLimits& lim, double t, d
   if (std::hypot(id, iq) > lim.i_max_a * (1 + 1e-9)) return false;
   op->id_a = id;
   op->iq_a = iq;
-  op->torque_nm = TorqueNm(m, lim.pole_pairs, id, iq, lim.temperature_c);
+  // TorqueNm's value, from the flux at (id, iq) already evaluated.
+  op->torque_nm = physics::ElectromagneticTorque(lim.pole_pairs, f_id.psi_d_wb, f_id.psi_q_wb, id, iq);
   return true;
 }
 
@@ -242,12 +279,13 @@ OperatingPoint SolveWithMax(const sim::MagneticModel& m, const MachineLimits& li
   if (row != nullptr && row->fast && limit != nullptr && limit->direct && we > 0 &&
       std::hypot(limit->id, limit->iq) >= lim.i_max_a * (1 - 1e-6)) {
     double id, iq;
-    if (FwNewton(m, lim, tt, we, s, limit->id, limit->iq, 0.0, &id, &iq)) {
+    sim::FluxLinkage f;
+    if (FwNewton(m, lim, tt, we, s, limit->id, limit->iq, 0.0, &id, &iq, &f)) {
       const double r = std::hypot(id, iq) - lim.i_max_a * (1 + 1e-9);
       if (r < 0 && CurrentLimitSettled(r)) {
         op.id_a = id;
         op.iq_a = iq;
-        op.torque_nm = TorqueNm(m, lim.pole_pairs, id, iq, lim.temperature_c);
+        op.torque_nm = physics::ElectromagneticTorque(lim.pole_pairs, f.psi_d_wb, f.psi_q_wb, id, iq);   // TorqueNm
         op.clamped = true;
         if (clamp != nullptr) *clamp = op;
         return op;
@@ -272,15 +310,17 @@ OperatingPoint SolveLeastCurrent(const sim::MagneticModel& m, const MachineLimit
 namespace {
 
 // h at one locus point: the locus solve from its cold start at id, or from
-// `iq_guess` (> 0, magnitude) when given; *iq_found (optional): the root's
-// magnitude.
+// `iq_guess` (> 0, magnitude) when given (with its bracket grown lazily:
+// SolveIqForTorque); *iq_found (optional): the root's magnitude. The
+// voltage from the flux the locus solve ends with (no second evaluation).
 double LocusPointH(const sim::MagneticModel& m, const MachineLimits& lim, double we, double s, double t, double id,
                    double iq_guess = 0.0, double* iq_found = nullptr) {
   double iq;
-  if (!SolveIqForTorque(m, lim, id, t, s, &iq, iq_guess)) return 1e30;
+  sim::FluxLinkage f;
+  if (!SolveIqForTorque(m, lim, id, t, s, &iq, iq_guess, &f, iq_guess > 0)) return 1e30;
   if (iq_found != nullptr) *iq_found = std::abs(iq);
   const double c = std::hypot(id, iq) / lim.i_max_a;
-  return we > 0 ? std::max(c, VoltageV(m, lim, id, iq, we) / lim.UMaxV()) : c;
+  return we > 0 ? std::max(c, internal::VoltageFromFlux(lim, id, iq, we, f) / lim.UMaxV()) : c;
 }
 
 // Whether torque request s t (t > 0) can be met within both limits: some
