@@ -3,6 +3,7 @@
 // units, scalars, text fields and flags, the format and C type names.
 #include <zlib.h>
 
+#include <bit>
 #include <charconv>
 #include <cmath>
 #include <cstdint>
@@ -161,11 +162,21 @@ const char* FluxcalVersion() { return FLUXCAL_VERSION; }
 
 std::string PayloadBytes(const Table& t) {
   std::string out;
+  size_t n = 0;
+  for (const auto& a : t.axes) n += a.values.size();
+  for (const auto& o : t.outputs) n += o.values.size();
+  out.reserve(8 * n);
+  // Each double's IEEE 754 bits, little-endian: on a little-endian host the
+  // bytes in memory, copied whole.
   auto put = [&](const std::vector<double>& v) {
-    for (double x : v) {
-      uint64_t bits;
-      std::memcpy(&bits, &x, 8);
-      for (int b = 0; b < 8; ++b) out.push_back(static_cast<char>((bits >> (8 * b)) & 0xff));
+    if constexpr (std::endian::native == std::endian::little) {
+      out.append(reinterpret_cast<const char*>(v.data()), 8 * v.size());
+    } else {
+      for (double x : v) {
+        uint64_t bits;
+        std::memcpy(&bits, &x, 8);
+        for (int b = 0; b < 8; ++b) out.push_back(static_cast<char>((bits >> (8 * b)) & 0xff));
+      }
     }
   };
   for (const auto& a : t.axes) put(a.values);
