@@ -323,6 +323,23 @@ double LocusPointH(const sim::MagneticModel& m, const MachineLimits& lim, double
   return we > 0 ? std::max(c, internal::VoltageFromFlux(lim, id, iq, we, f) / lim.UMaxV()) : c;
 }
 
+// h^2 at one locus point, from the locus solve started at `iq_guess` (> 0,
+// magnitude; its bracket grown lazily) or cold: max(|i|^2 / i_max^2,
+// |u|^2 / u_max^2), the square of LocusPointH's h without its two square
+// roots (h^2 <= 1 where h <= 1, and a search comparing h^2 compares h).
+double LocusPointH2(const sim::MagneticModel& m, const MachineLimits& lim, double we, double s, double t, double id,
+                    double iq_guess, double* iq_found) {
+  double iq;
+  sim::FluxLinkage f;
+  if (!SolveIqForTorque(m, lim, id, t, s, &iq, iq_guess, &f, iq_guess > 0)) return 1e30;
+  *iq_found = std::abs(iq);
+  const double c2 = (id * id + iq * iq) / (lim.i_max_a * lim.i_max_a);
+  if (!(we > 0) || !lim.rs_ohm) return c2;   // (as LocusPointH: no voltage without Rs)
+  const double rs = *lim.rs_ohm, u_max = lim.UMaxV();
+  const double ud = rs * id - we * f.psi_q_wb, uq = rs * iq + we * f.psi_d_wb;
+  return std::max(c2, (ud * ud + uq * uq) / (u_max * u_max));
+}
+
 // Whether torque request s t (t > 0) can be met within both limits: some
 // point of its constant-torque locus lies inside them, i.e. the minimum
 // over the locus of h = max(|i| / i_max, |u| / u_max) is at most 1. |i|
@@ -342,9 +359,10 @@ bool LocusFeasible(const sim::MagneticModel& m, const MachineLimits& lim, double
                    bool warm = false) {
   bool found = false;
   double q_last = 0.0;
+  // (Warm, the search runs on h^2: LocusPointH2.)
   auto h = [&](double id) {
     if (found) return 0.0;
-    const double v = LocusPointH(m, lim, we, s, t, id, warm ? q_last : 0.0, &q_last);
+    const double v = warm ? LocusPointH2(m, lim, we, s, t, id, q_last, &q_last) : LocusPointH(m, lim, we, s, t, id);
     found = v <= 1.0;
     return v;
   };
