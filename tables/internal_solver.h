@@ -63,10 +63,11 @@ std::vector<LimitTorque> LimitTorques(const sim::MagneticModel& m, const Machine
 // bracket's upper end is grown (a surface evaluation) only when a step
 // needs it; the root is the same where the torque is monotone in iq, but
 // where it is not, a root may be found where the bracket would have failed
-// (for searches that any root of the locus serves).
+// (for searches that any root of the locus serves). `slope_out` (optional):
+// the locus' slope d iq / d id at the root (-T_d / T_q), for the next start.
 bool SolveIqForTorque(const sim::MagneticModel& m, const MachineLimits& lim, double id, double t, double s,
                       double* iq_out, double iq_guess_a = 0.0, sim::FluxLinkage* flux_out = nullptr,
-                      bool lazy_bracket = false);
+                      bool lazy_bracket = false, double* slope_out = nullptr);
 
 // |u| at (id, iq) and electrical speed we from the flux there, `f`
 // (m.Flux(id, iq)): VoltageV without evaluating the surface again.

@@ -40,7 +40,8 @@ double VoltageV(const sim::MagneticModel& m, const MachineLimits& lim, double id
 namespace internal {
 
 bool SolveIqForTorque(const sim::MagneticModel& m, const MachineLimits& lim, double id, double t,
-                      double s, double* iq_out, double iq_guess_a, sim::FluxLinkage* flux_out, bool lazy_bracket) {
+                      double s, double* iq_out, double iq_guess_a, sim::FluxLinkage* flux_out, bool lazy_bracket,
+                      double* slope_out) {
   const double target = std::abs(t);
   double lo = 0.0, hi = std::max(10.0, lim.i_max_a);
   auto torque = [&](double iq) { return s * TorqueNm(m, lim.pole_pairs, id, s * iq, lim.temperature_c); };
@@ -68,11 +69,11 @@ bool SolveIqForTorque(const sim::MagneticModel& m, const MachineLimits& lim, dou
                   : std::clamp(target / std::max(1e-9, t_hi) * hi, lo, hi);
   // The flux at the last iq evaluated (the root when the loop ends there).
   sim::FluxLinkage F;
+  sim::DifferentialInductance L;
   bool f_at_iq = false;
   for (int it = 0; it < 60; ++it) {
     // One surface evaluation per iteration serves both T and dT/diq (a
     // spline calibration shares the basis between flux and inductance).
-    sim::DifferentialInductance L;
     m.FluxAndInductance(id, s * iq, lim.temperature_c, &F, &L);
     f_at_iq = true;
     const double f = s * physics::ElectromagneticTorque(lim.pole_pairs, F.psi_d_wb, F.psi_q_wb, id, s * iq) - target;
@@ -93,6 +94,13 @@ bool SolveIqForTorque(const sim::MagneticModel& m, const MachineLimits& lim, dou
   }
   *iq_out = s * iq;
   if (flux_out != nullptr) *flux_out = f_at_iq ? F : m.Flux(id, s * iq, lim.temperature_c);
+  if (slope_out != nullptr) {
+    if (!f_at_iq) m.FluxAndInductance(id, s * iq, lim.temperature_c, &F, &L);
+    // Along the locus d iq / d id = -T_d / T_q.
+    const double t_d = 1.5 * lim.pole_pairs * (L.ldd_h * s * iq - F.psi_q_wb - L.ldq_h * id);
+    const double t_q = physics::TorqueSlopeIq(lim.pole_pairs, F.psi_d_wb, L.ldq_h, L.lqq_h, id, s * iq);
+    *slope_out = -t_d / t_q;
+  }
   return true;
 }
 
@@ -328,10 +336,10 @@ double LocusPointH(const sim::MagneticModel& m, const MachineLimits& lim, double
 // |u|^2 / u_max^2), the square of LocusPointH's h without its two square
 // roots (h^2 <= 1 where h <= 1, and a search comparing h^2 compares h).
 double LocusPointH2(const sim::MagneticModel& m, const MachineLimits& lim, double we, double s, double t, double id,
-                    double iq_guess, double* iq_found) {
+                    double iq_guess, double* iq_found, double* slope) {
   double iq;
   sim::FluxLinkage f;
-  if (!SolveIqForTorque(m, lim, id, t, s, &iq, iq_guess, &f, iq_guess > 0)) return 1e30;
+  if (!SolveIqForTorque(m, lim, id, t, s, &iq, iq_guess, &f, iq_guess > 0, slope)) return 1e30;
   *iq_found = std::abs(iq);
   const double c2 = (id * id + iq * iq) / (lim.i_max_a * lim.i_max_a);
   if (!(we > 0) || !lim.rs_ohm) return c2;   // (as LocusPointH: no voltage without Rs)
@@ -358,11 +366,24 @@ double LocusPointH2(const sim::MagneticModel& m, const MachineLimits& lim, doubl
 bool LocusFeasible(const sim::MagneticModel& m, const MachineLimits& lim, double we, double s, double t,
                    bool warm = false) {
   bool found = false;
-  double q_last = 0.0;
-  // (Warm, the search runs on h^2: LocusPointH2.)
+  // Warm: the last root (id_last, q_last: |iq|) and the locus' slope there
+  // (d iq / d id), whose tangent gives the next start; the search runs on
+  // h^2 (LocusPointH2).
+  double id_last = 0.0, q_last = 0.0, slope = 0.0;
   auto h = [&](double id) {
     if (found) return 0.0;
-    const double v = warm ? LocusPointH2(m, lim, we, s, t, id, q_last, &q_last) : LocusPointH(m, lim, we, s, t, id);
+    double v;
+    if (warm) {
+      const double guess = q_last > 0 ? q_last + s * slope * (id - id_last) : 0.0;
+      double q = 0.0;
+      v = LocusPointH2(m, lim, we, s, t, id, guess > 0 && std::isfinite(guess) ? guess : q_last, &q, &slope);
+      if (v < 1e30) {
+        id_last = id;
+        q_last = q;
+      }
+    } else {
+      v = LocusPointH(m, lim, we, s, t, id);
+    }
     found = v <= 1.0;
     return v;
   };
