@@ -48,10 +48,18 @@ struct LimitTorque {
 // torque sign `sign`, with its point where the direct maximisation found it.
 // Where the speed's voltage limit admits the standstill limit torque's point,
 // the limit torque is the standstill one (see solver.cc). `fast`: a limit at
-// a corner of the limits starts the next speed's (CornerLimit), whose check
-// warm-starts its locus solves; only within the measured current limit.
+// a corner of the limits starts the next speed's (CornerLimit), and every
+// limit's check it computes (PassesLimitCheck) warm-starts its search above the
+// limit;
+// only within the measured current limit.
+// `standstill` (optional): this sign's limit at standstill, LimitTorqueAt(m,
+// lim, 0, sign), when already computed (the fw table's torque axis ends there).
 std::vector<LimitTorque> LimitTorques(const sim::MagneticModel& m, const MachineLimits& lim,
-                                      const std::vector<double>& we, double sign, bool fast);
+                                      const std::vector<double>& we, double sign, bool fast,
+                                      const LimitTorque* standstill = nullptr);
+
+// MaxTorqueNm with its point: MaxTorqueNm(m, lim, we, sign) is its t.
+LimitTorque LimitTorqueAt(const sim::MagneticModel& m, const MachineLimits& lim, double we, double sign);
 
 // iq (sign s) on the constant-torque locus through id: T(id, iq) = t.
 // Newton with a bisection safeguard; dT/diq = 1.5 p (psi_d + Ldq iq - Lqq id).

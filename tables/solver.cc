@@ -551,7 +551,10 @@ bool CornerLimit(const sim::MagneticModel& m, const MachineLimits& lim, double w
 }
 
 // MaxTorqueNm with its point: MaxTorqueDirect, checked.
-LimitTorque CheckedLimitTorque(const sim::MagneticModel& m, const MachineLimits& lim, double we, double s) {
+// `warm`: the check's search above the limit warm-starts its locus solves
+// (PassesLimitCheck; within the measured current limit only).
+LimitTorque CheckedLimitTorque(const sim::MagneticModel& m, const MachineLimits& lim, double we, double s,
+                               bool warm = false) {
   // The limit torque is the largest request some point of whose locus lies
   // inside both limits. It was found by bisection on the request
   // (MaxTorqueByBisection: ~30 x 67 locus points, each a Newton solve),
@@ -566,7 +569,7 @@ LimitTorque CheckedLimitTorque(const sim::MagneticModel& m, const MachineLimits&
   // (its |iq| is below the maximum's, where the column is feasible), and
   // one point inside both limits is what LocusFeasible's search looks for.
   LimitTorque d = MaxTorqueDirect(m, lim, we, s);
-  if (PassesLimitCheck(m, lim, we, s, &d)) return d;
+  if (PassesLimitCheck(m, lim, we, s, &d, warm)) return d;
   LimitTorque b;
   b.t = MaxTorqueByBisection(m, lim, we, s);
   return b;
@@ -581,8 +584,17 @@ double MaxTorqueNm(const sim::MagneticModel& m, const MachineLimits& lim, double
 
 namespace internal {
 
+LimitTorque LimitTorqueAt(const sim::MagneticModel& m, const MachineLimits& lim, double we, double sign) {
+  return CheckedLimitTorque(m, lim, we, sign < 0 ? -1.0 : 1.0);
+}
+
+}  // namespace internal
+
+namespace internal {
+
 std::vector<LimitTorque> LimitTorques(const sim::MagneticModel& m, const MachineLimits& lim,
-                                      const std::vector<double>& we, double sign, bool fast) {
+                                      const std::vector<double>& we, double sign, bool fast,
+                                      const LimitTorque* standstill) {
   const double s = sign < 0 ? -1.0 : 1.0;
   // At standstill only the current limit binds. The feasible set at a speed
   // (inside the current circle and the voltage limit) is part of the one at
@@ -590,7 +602,7 @@ std::vector<LimitTorque> LimitTorques(const sim::MagneticModel& m, const Machine
   // the standstill maximum's point also meets this speed's voltage limit,
   // it is in the set and the limit torque is the standstill one (below base
   // speed: one voltage evaluation instead of a maximisation and its checks).
-  const LimitTorque still = CheckedLimitTorque(m, lim, 0.0, s);
+  const LimitTorque still = standstill != nullptr ? *standstill : CheckedLimitTorque(m, lim, 0.0, s, fast);
   const double u_max = lim.UMaxV();
   std::vector<LimitTorque> out;
   out.reserve(we.size());
@@ -612,7 +624,7 @@ std::vector<LimitTorque> LimitTorques(const sim::MagneticModel& m, const Machine
                PassesLimitCheck(m, lim, w, s, &c, true)) {
       out.push_back(c);
     } else {
-      out.push_back(CheckedLimitTorque(m, lim, w, s));
+      out.push_back(CheckedLimitTorque(m, lim, w, s, fast));
     }
     const LimitTorque& l = out.back();
     const bool at_current_limit = std::hypot(l.id, l.iq) >= lim.i_max_a * (1 - 1e-6);
