@@ -48,10 +48,9 @@ struct LimitTorque {
 // torque sign `sign`, with its point where the direct maximisation found it.
 // Where the speed's voltage limit admits the standstill limit torque's point,
 // the limit torque is the standstill one (see solver.cc). `fast`: a limit at
-// a corner of the limits starts the next speed's (CornerLimit), and every
-// limit's check it computes (PassesLimitCheck) warm-starts its search above the
-// limit;
-// only within the measured current limit.
+// a corner of the limits starts the next speed's (CornerLimit), and the
+// check of every limit computed here (PassesLimitCheck) warm-starts its
+// search above the limit; only within the measured current limit.
 // `standstill` (optional): this sign's limit at standstill, LimitTorqueAt(m,
 // lim, 0, sign), when already computed (the fw table's torque axis ends there).
 std::vector<LimitTorque> LimitTorques(const sim::MagneticModel& m, const MachineLimits& lim,
