@@ -75,6 +75,12 @@ sim::DifferentialInductance Calibration::Inductance(double id, double iq, double
 void Calibration::FluxAndInductance(double id, double iq, double temperature_c, sim::FluxLinkage* f,
                                     sim::DifferentialInductance* l) const {
   if (spline_.empty()) {
+    if (family_.kind == Family::kAnalytic) {
+      // One pass for both (the same values as Flux and Inductance).
+      sim::SaturationFluxAndInductance(id, iq, params_.data(), &f->psi_d_wb, &f->psi_q_wb, &l->ldd_h, &l->lqq_h,
+                                       &l->ldq_h);
+      return;
+    }
     *f = Flux(id, iq, temperature_c);
     *l = Inductance(id, iq, temperature_c);
     return;

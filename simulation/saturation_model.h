@@ -60,6 +60,23 @@ void SaturationInductance(const T& id, const T& iq, const P* p, T* ldd, T* lqq, 
   *ldq = -p[5] * iq / p[6];
 }
 
+// Both at one point (the tables' Newton steps need both): the values of
+// SaturationFlux and SaturationInductance to the last bit (the same
+// operations in the same order), with the quotients and square roots they
+// share evaluated once.
+inline void SaturationFluxAndInductance(double id, double iq, const double* p, double* psi_d, double* psi_q,
+                                        double* ldd, double* lqq, double* ldq) {
+  const double xd = id / p[3], xq = iq / p[4];
+  const double sd = 1.0 + xd * xd, sq = 1.0 + xq * xq;
+  const double rd = std::sqrt(sd), rq = std::sqrt(sq);
+  const double cross = 1.0 + id / p[6];
+  *psi_d = p[0] + p[1] * id / rd - 0.5 * p[5] * iq * iq / p[6];
+  *psi_q = p[2] * iq / rq - p[5] * iq * cross;
+  *ldd = p[1] / (sd * rd);
+  *lqq = p[2] / (sq * rq) - p[5] * cross;
+  *ldq = -p[5] * iq / p[6];
+}
+
 }  // namespace fluxcal::sim
 
 #endif  // FLUXCAL_SIMULATION_SATURATION_MODEL_H_

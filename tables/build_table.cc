@@ -227,9 +227,11 @@ absl::Status MtpvRows(const sim::MagneticModel& m, const MachineLimits& lim, con
 }
 
 // Field weakening: the least-current point under both limits over round
-// torque requests (up to `tmax`) x round speeds.
-absl::Status FwRows(const sim::MagneticModel& m, const MachineLimits& lim, const TableSpec& spec, double tmax,
-                    Table* out) {
+// torque requests (up to the limit torque at standstill, `still`: its t) x
+// round speeds.
+absl::Status FwRows(const sim::MagneticModel& m, const MachineLimits& lim, const TableSpec& spec,
+                    const LimitTorque& still, Table* out) {
+  const double tmax = still.t;
   Table& t = *out;
   if (!(spec.speed_max_rpm > 0) || !std::isfinite(spec.speed_max_rpm)) {
     return absl::InvalidArgumentError("flag --speed-max-rpm: must be positive");
@@ -254,7 +256,7 @@ absl::Status FwRows(const sim::MagneticModel& m, const MachineLimits& lim, const
   const bool fast = !(meas > 0) || lim.i_max_a <= meas * (1 + 1e-9);
   std::vector<double> we_axis(n.size());
   for (size_t j = 0; j < n.size(); ++j) we_axis[j] = physics::RpmToElectricalRadS(n[j], lim.pole_pairs);
-  const std::vector<LimitTorque> tlim_motor = LimitTorques(m, lim, we_axis, 1.0, fast);
+  const std::vector<LimitTorque> tlim_motor = LimitTorques(m, lim, we_axis, 1.0, fast, &still);
   const std::vector<LimitTorque> tlim_gen =
       spec.include_generating ? LimitTorques(m, lim, we_axis, -1.0, fast) : std::vector<LimitTorque>(n.size());
   // The clamped point per speed and torque sign (SolveWithMax).
@@ -454,14 +456,17 @@ absl::StatusOr<Table> BuildTable(const sim::MagneticModel& m_in, const MachineLi
   const sim::MagneticModel& m = scaled ? *scaled : m_in;
   const double meas = spec.measured_current_limit_a;
   Table t = NewTable(m, lim, spec);
-  const double tmax = MaxTorqueNm(m, lim, 0.0);
+  // The limit torque at standstill (MaxTorqueNm), with its point: the fw
+  // table's limit below base speed too (computed once).
+  const LimitTorque still = internal::LimitTorqueAt(m, lim, 0.0, 1.0);
+  const double tmax = still.t;
   absl::Status rows;
   if (spec.kind == "mtpa") {
     rows = MtpaRows(m, lim, spec, tmax, &t);
   } else if (spec.kind == "mtpv") {
     rows = MtpvRows(m, lim, spec, &t);
   } else if (spec.kind == "fw") {
-    rows = FwRows(m, lim, spec, tmax, &t);
+    rows = FwRows(m, lim, spec, still, &t);
   } else if (spec.kind == "envelope") {
     rows = EnvelopeRows(m, lim, spec, &t);
   } else {

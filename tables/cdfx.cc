@@ -50,16 +50,22 @@ std::string Cdfx(const Table& t) {
   }
   const bool map = t.axes.size() > 1;
   const size_t n0 = t.axes[0].values.size(), n1 = map ? t.axes[1].values.size() : 1;
-  auto table = [&](const std::string& name, const std::string& unit, const std::vector<double>& vals,
-                   const std::string& what) {
+  // The file is mostly value lines (a 43 x 31 fw map: ~10^4 of them): the
+  // string is sized once, and each line is its fixed prefix, the number and
+  // "</V>\n", appended in place.
+  s.reserve(s.size() + (t.outputs.size() + Flags(t).size()) * (n0 * n1 * 48 + (n0 + n1) * 40 + 1024));
+  const std::string value_prefix = absl::StrCat(in, map ? "        " : "      ", "<V>");
+  const std::string axis_prefix = absl::StrCat(in, "        <V>");
+  // `value(k)` appends the k-th value's number.
+  auto table = [&](const std::string& name, const std::string& unit, const auto& value, const std::string& what) {
     head(name, what, map ? "MAP" : "CURVE");
     absl::StrAppend(&s, in, "  <SW-VALUE-CONT>\n", in, "    <UNIT-DISPLAY-NAME>", unit, "</UNIT-DISPLAY-NAME>\n", in,
                       "    <SW-VALUES-PHYS>\n");
     for (size_t i = 0; i < n0; ++i) {
       if (map) absl::StrAppend(&s, in, "      <VG>\n");
       for (size_t j = 0; j < n1; ++j) {
-        absl::StrAppend(&s, in, map ? "        " : "      ", "<V>");
-        AppendNum(&s, vals[i * n1 + j]);
+        s += value_prefix;
+        value(i * n1 + j);
         s += "</V>\n";
       }
       if (map) absl::StrAppend(&s, in, "      </VG>\n");
@@ -69,7 +75,11 @@ std::string Cdfx(const Table& t) {
       absl::StrAppend(&s, in, "    <SW-AXIS-CONT>\n", in, "      <CATEGORY>STD_AXIS</CATEGORY>\n", in,
                         "      <UNIT-DISPLAY-NAME>", UnitOf(a.name), "</UNIT-DISPLAY-NAME>\n", in,
                         "      <SW-VALUES-PHYS>\n");
-      for (double v : a.values) absl::StrAppend(&s, in, "        <V>", Num(v), "</V>\n");
+      for (double v : a.values) {
+        s += axis_prefix;
+        AppendNum(&s, v);
+        s += "</V>\n";
+      }
       absl::StrAppend(&s, in, "      </SW-VALUES-PHYS>\n", in, "    </SW-AXIS-CONT>\n");
     }
     absl::StrAppend(&s, in, "  </SW-AXIS-CONTS>\n", in, "</SW-INSTANCE>\n");
@@ -77,9 +87,15 @@ std::string Cdfx(const Table& t) {
   std::vector<std::string> axis_names;
   for (const auto& a : t.axes) axis_names.push_back(a.name);
   const std::string over = absl::StrJoin(axis_names, " x ");
-  for (const auto& o : t.outputs) table(o.name, UnitOf(o.name), o.values, absl::StrCat(o.name, " over ", over));
+  for (const auto& o : t.outputs) {
+    table(o.name, UnitOf(o.name), [&](size_t k) { AppendNum(&s, o.values[k]); }, absl::StrCat(o.name, " over ", over));
+  }
   for (const auto& [name, v] : Flags(t)) {
-    table(name, "-", AsDoubles(*v), absl::StrCat(name, " (0/1 per cell) over ", over));
+    // A flag is 0 or 1: its digit (what "%.17g" writes for a small whole
+    // number); any other value as a number.
+    const std::vector<uint8_t>& f = *v;
+    table(name, "-", [&](size_t k) { f[k] <= 9 ? s.push_back(static_cast<char>('0' + f[k])) : AppendNum(&s, f[k]); },
+          absl::StrCat(name, " (0/1 per cell) over ", over));
   }
   s += "        </SW-INSTANCE-TREE>\n      </SW-INSTANCE-SPEC>\n    </SW-SYSTEM>\n  </SW-SYSTEMS>\n</MSRSW>\n";
   return s;

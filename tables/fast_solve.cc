@@ -34,7 +34,7 @@ namespace internal {
 //    this root is the robust solve's.
 // Otherwise false, and the caller solves robustly.
 bool FwNewton(const sim::MagneticModel& m, const MachineLimits& lim, double t, double we, double s, double id0,
-              double iq0, double id_hi, double* id_out, double* iq_out) {
+              double iq0, double id_hi, double* id_out, double* iq_out, sim::FluxLinkage* flux_out) {
   const double u_max = lim.UMaxV(), u2 = u_max * u_max;
   const double rs = *lim.rs_ohm;   // a voltage limit (we > 0 in field weakening) has Rs
   const double k = 1.5 * lim.pole_pairs;
@@ -59,13 +59,15 @@ bool FwNewton(const sim::MagneticModel& m, const MachineLimits& lim, double t, d
       const double diq = -t_d / t_q;
       if (!(g_d + g_q * diq > 0) || !(id + iq * diq < 0)) return false;
       double iq_cold;
-      if (!SolveIqForTorque(m, lim, id, t, s, &iq_cold) ||
+      sim::FluxLinkage f_cold;
+      if (!SolveIqForTorque(m, lim, id, t, s, &iq_cold, 0.0, &f_cold) ||
           !(std::abs(iq_cold - iq) <= 1e-6 * (1.0 + std::abs(iq)))) {
         return false;
       }
       // iq as the robust solve gives it: from the locus solve at id.
       *id_out = id;
       *iq_out = iq_cold;
+      if (flux_out != nullptr) *flux_out = f_cold;
       return true;
     }
     // A step longer than a quarter of the current limit is shortened.

@@ -27,7 +27,7 @@ namespace fluxcal::tables::internal {
 // speed's cell: the cells of a row move little from one speed to the next.
 struct RowLoci {
   double t = std::numeric_limits<double>::quiet_NaN();
-  struct Point { double id; bool ok; double iq; };
+  struct Point { double id; bool ok; double iq; sim::FluxLinkage f; };   // f: the flux at (id, iq)
   std::vector<Point> points;
   bool fast = false;
   double fast_below = 0.0;
@@ -48,18 +48,41 @@ struct LimitTorque {
 // torque sign `sign`, with its point where the direct maximisation found it.
 // Where the speed's voltage limit admits the standstill limit torque's point,
 // the limit torque is the standstill one (see solver.cc). `fast`: a limit at
-// a corner of the limits starts the next speed's (CornerLimit), whose check
-// warm-starts its locus solves; only within the measured current limit.
+// a corner of the limits starts the next speed's (CornerLimit), and the
+// check of every limit computed here (PassesLimitCheck) warm-starts its
+// search above the limit; only within the measured current limit.
+// `standstill` (optional): this sign's limit at standstill, LimitTorqueAt(m,
+// lim, 0, sign), when already computed (the fw table's torque axis ends there).
 std::vector<LimitTorque> LimitTorques(const sim::MagneticModel& m, const MachineLimits& lim,
-                                      const std::vector<double>& we, double sign, bool fast);
+                                      const std::vector<double>& we, double sign, bool fast,
+                                      const LimitTorque* standstill = nullptr);
+
+// MaxTorqueNm with its point: MaxTorqueNm(m, lim, we, sign) is its t.
+LimitTorque LimitTorqueAt(const sim::MagneticModel& m, const MachineLimits& lim, double we, double sign);
 
 // iq (sign s) on the constant-torque locus through id: T(id, iq) = t.
 // Newton with a bisection safeguard; dT/diq = 1.5 p (psi_d + Ldq iq - Lqq id).
 // `iq_guess_a` (> 0, magnitude): a start close to the root, e.g. the root at
 // a neighbouring id; otherwise the start scales linearly from the bracket
-// (the cold start). False if no bracket is found.
+// (the cold start). False if no bracket is found. `flux_out` (optional):
+// the flux at the root, m.Flux(id, *iq_out) (from the last Newton step's
+// evaluation, which is there). `lazy_bracket`: with a start given, the
+// bracket's upper end is grown (a surface evaluation) only when a step
+// needs it; the root is the same where the torque is monotone in iq, but
+// where it is not, a root may be found where the bracket would have failed
+// (for searches that any root of the locus serves). `slope_out` (optional):
+// the locus' slope d iq / d id at the root (-T_d / T_q), for the next start.
 bool SolveIqForTorque(const sim::MagneticModel& m, const MachineLimits& lim, double id, double t, double s,
-                      double* iq_out, double iq_guess_a = 0.0);
+                      double* iq_out, double iq_guess_a = 0.0, sim::FluxLinkage* flux_out = nullptr,
+                      bool lazy_bracket = false, double* slope_out = nullptr);
+
+// |u| at (id, iq) and electrical speed we from the flux there, `f`
+// (m.Flux(id, iq)): VoltageV without evaluating the surface again.
+inline double VoltageFromFlux(const MachineLimits& lim, double id, double iq, double we, const sim::FluxLinkage& f) {
+  if (!lim.rs_ohm) return std::numeric_limits<double>::quiet_NaN();
+  const double rs = *lim.rs_ohm;
+  return std::hypot(rs * id - we * f.psi_q_wb, rs * iq + we * f.psi_d_wb);
+}
 
 // Least-current point for torque t under the limits; false if infeasible.
 // `mtpa_id` (optional): the least-current id of this torque without a
@@ -83,8 +106,9 @@ OperatingPoint SolveWithMax(const sim::MagneticModel& m, const MachineLimits& li
 // torque t on the voltage limit by a 2-D Newton from (id0, iq0), accepted
 // only where its checks place it at the robust solve's root (id <= id_hi,
 // the MTPA point's id when known); false otherwise.
+// `flux_out` (optional): the flux there, m.Flux(*id_out, *iq_out).
 bool FwNewton(const sim::MagneticModel& m, const MachineLimits& lim, double t, double we, double s, double id0,
-              double iq0, double id_hi, double* id_out, double* iq_out);
+              double iq0, double id_hi, double* id_out, double* iq_out, sim::FluxLinkage* flux_out = nullptr);
 
 // The MTPA point of torque t by a 2-D Newton from (id0, iq0) (the
 // neighbouring torque row's), accepted only where its checks place it at the

@@ -21,6 +21,7 @@ using internal::MtpvLimit;
 using internal::RowLoci;
 using internal::SolveWithMax;
 using internal::TrySolve;
+using internal::VoltageFromFlux;
 
 double MachineLimits::UMaxV() const {
   return udc_v ? modulation_limit * *udc_v / std::sqrt(3.0) : std::numeric_limits<double>::quiet_NaN();
@@ -33,43 +34,73 @@ double TorqueNm(const sim::MagneticModel& m, int pp, double id, double iq, doubl
 
 double VoltageV(const sim::MagneticModel& m, const MachineLimits& lim, double id, double iq, double we) {
   if (!lim.rs_ohm) return std::numeric_limits<double>::quiet_NaN();
-  const double rs = *lim.rs_ohm;
-  const auto f = m.Flux(id, iq, lim.temperature_c);
-  return std::hypot(rs * id - we * f.psi_q_wb, rs * iq + we * f.psi_d_wb);
+  return internal::VoltageFromFlux(lim, id, iq, we, m.Flux(id, iq, lim.temperature_c));
 }
 
 namespace internal {
 
 bool SolveIqForTorque(const sim::MagneticModel& m, const MachineLimits& lim, double id, double t,
-                      double s, double* iq_out, double iq_guess_a) {
+                      double s, double* iq_out, double iq_guess_a, sim::FluxLinkage* flux_out, bool lazy_bracket,
+                      double* slope_out) {
   const double target = std::abs(t);
   double lo = 0.0, hi = std::max(10.0, lim.i_max_a);
   auto torque = [&](double iq) { return s * TorqueNm(m, lim.pole_pairs, id, s * iq, lim.temperature_c); };
+  // The bracket's upper end: grown until the torque there reaches the
+  // target (false if it never does). `lazy_bracket` with a start inside the
+  // first [lo, hi]: grown only when hi is needed (a Newton step at or
+  // beyond it, a bisection, or the bracket's width), so a converging warm
+  // start skips that surface evaluation; the iterates are the same as
+  // when it is grown first, where the torque is monotone in iq.
   int grow = 0;
-  double t_hi;
-  while ((t_hi = torque(hi)) < target) {
-    hi *= 2;
-    if (++grow > 8) return false;
-  }
+  double t_hi = 0.0;
+  bool hi_known = false;
+  auto grow_hi = [&] {
+    while ((t_hi = torque(hi)) < target) {
+      hi *= 2;
+      if (++grow > 8) return false;
+    }
+    hi_known = true;
+    return true;
+  };
+  const bool warm = iq_guess_a > lo && iq_guess_a < hi;
+  if (!(lazy_bracket && warm) && !grow_hi()) return false;
   double iq = iq_guess_a > lo && iq_guess_a < hi
                   ? iq_guess_a
                   : std::clamp(target / std::max(1e-9, t_hi) * hi, lo, hi);
+  // The flux at the last iq evaluated (the root when the loop ends there).
+  sim::FluxLinkage F;
+  sim::DifferentialInductance L;
+  bool f_at_iq = false;
   for (int it = 0; it < 60; ++it) {
     // One surface evaluation per iteration serves both T and dT/diq (a
     // spline calibration shares the basis between flux and inductance).
-    sim::FluxLinkage F;
-    sim::DifferentialInductance L;
     m.FluxAndInductance(id, s * iq, lim.temperature_c, &F, &L);
+    f_at_iq = true;
     const double f = s * physics::ElectromagneticTorque(lim.pole_pairs, F.psi_d_wb, F.psi_q_wb, id, s * iq) - target;
     if (std::abs(f) < 1e-10 * (1.0 + target)) break;
-    if (f > 0) hi = iq; else lo = iq;
+    if (f > 0) {
+      hi = iq;
+      hi_known = true;
+    } else {
+      lo = iq;
+    }
     const double d = physics::TorqueSlopeIq(lim.pole_pairs, F.psi_d_wb, L.ldq_h, L.lqq_h, id, s * iq);
     double next = iq - f / (d > 1e-12 ? d : 1e-12);
+    if (!hi_known && !(next > lo && next < hi && hi - lo >= 1e-12) && !grow_hi()) return false;
     if (!(next > lo && next < hi)) next = 0.5 * (lo + hi);
     if (hi - lo < 1e-12) break;
     iq = next;
+    f_at_iq = false;
   }
   *iq_out = s * iq;
+  if (flux_out != nullptr) *flux_out = f_at_iq ? F : m.Flux(id, s * iq, lim.temperature_c);
+  if (slope_out != nullptr) {
+    if (!f_at_iq) m.FluxAndInductance(id, s * iq, lim.temperature_c, &F, &L);
+    // Along the locus d iq / d id = -T_d / T_q.
+    const double t_d = 1.5 * lim.pole_pairs * (L.ldd_h * s * iq - F.psi_q_wb - L.ldq_h * id);
+    const double t_q = physics::TorqueSlopeIq(lim.pole_pairs, F.psi_d_wb, L.ldq_h, L.lqq_h, id, s * iq);
+    *slope_out = -t_d / t_q;
+  }
   return true;
 }
 
@@ -97,8 +128,9 @@ bool CurrentLimitSettled(double r) { return std::abs(r) > 1e-8; }
 int FastFieldWeakening(const sim::MagneticModel& m, const MachineLimits& lim, double t, double we, double s,
                        double id_mtpa, double iq_mtpa, RowLoci* row, OperatingPoint* op) {
   double id = 0.0, iq = 0.0;
-  const bool ok = (row->warm && FwNewton(m, lim, t, we, s, row->warm_id, row->warm_iq, id_mtpa, &id, &iq)) ||
-                  FwNewton(m, lim, t, we, s, id_mtpa, iq_mtpa, id_mtpa, &id, &iq);
+  sim::FluxLinkage f;
+  const bool ok = (row->warm && FwNewton(m, lim, t, we, s, row->warm_id, row->warm_iq, id_mtpa, &id, &iq, &f)) ||
+                  FwNewton(m, lim, t, we, s, id_mtpa, iq_mtpa, id_mtpa, &id, &iq, &f);
   if (!ok) return -1;
   const double r = std::hypot(id, iq) - lim.i_max_a * (1 + 1e-9);
   if (!CurrentLimitSettled(r)) return -1;
@@ -108,7 +140,7 @@ int FastFieldWeakening(const sim::MagneticModel& m, const MachineLimits& lim, do
   if (r > 0) return 0;
   op->id_a = id;
   op->iq_a = iq;
-  op->torque_nm = TorqueNm(m, lim.pole_pairs, id, iq, lim.temperature_c);
+  op->torque_nm = physics::ElectromagneticTorque(lim.pole_pairs, f.psi_d_wb, f.psi_q_wb, id, iq);   // TorqueNm
   return 1;
 }
 
@@ -130,32 +162,40 @@ bool TrySolve(const sim::MagneticModel& m, const MachineLimits& lim, double t, d
   // (Each locus point's Newton starts cold, from the bracket: where the
   // torque is not monotone in iq (far beyond the measured region) a start
   // carried over from a neighbouring point can settle on another root.)
-  auto iq_of = [&](double id, double* iq) {
+  // *f: the flux there (m.Flux(id, *iq)), for the voltage.
+  auto iq_of = [&](double id, double* iq, sim::FluxLinkage* f) {
     const bool kept = row != nullptr && (id == id_min || (mtpa_id != nullptr && id == *mtpa_id));
     if (kept) {
       for (const auto& p : row->points) {
         if (p.id == id) {
           *iq = p.iq;
+          *f = p.f;
           return p.ok;
         }
       }
     }
-    const bool ok = SolveIqForTorque(m, lim, id, t, s, iq);
-    if (kept) row->points.push_back({id, ok, ok ? *iq : 0.0});
+    const bool ok = SolveIqForTorque(m, lim, id, t, s, iq, 0.0, f);
+    if (kept) row->points.push_back({id, ok, ok ? *iq : 0.0, ok ? *f : sim::FluxLinkage{}});
     return ok;
   };
   auto cur2 = [&](double id) {
     double iq;
-    if (!iq_of(id, &iq)) return 1e30;
+    sim::FluxLinkage f;
+    if (!iq_of(id, &iq, &f)) return 1e30;
     return id * id + iq * iq;
   };
   // Unconstrained least current (MTPA) along the constant-torque locus.
   double id = t == 0.0 ? 0.0 : (mtpa_id ? *mtpa_id : MinimiseScalar(cur2, id_min, 0.0));
   double iq = 0.0;
-  if (t != 0.0 && !iq_of(id, &iq)) return false;
-  auto volt = [&](double d, double q) { return we > 0 ? VoltageV(m, lim, d, q, we) : 0.0; };
+  sim::FluxLinkage f_id;
+  if (t != 0.0 && !iq_of(id, &iq, &f_id)) return false;
+  if (t == 0.0) f_id = m.Flux(0.0, 0.0, lim.temperature_c);
+  // |u| at a locus point (d, q) from its flux f (VoltageV's value).
+  auto volt = [&](double d, double q, const sim::FluxLinkage& f) {
+    return we > 0 ? VoltageFromFlux(lim, d, q, we, f) : 0.0;
+  };
   const double u_max = lim.UMaxV();
-  if (we > 0 && volt(id, iq) > u_max) {
+  if (we > 0 && volt(id, iq, f_id) > u_max) {
     // The fast solve first (FwNewton), from the row's last voltage-limited
     // cell, else from the MTPA point; away from the limit torque only.
     if (row != nullptr && row->fast && std::abs(t) < row->fast_below) {
@@ -168,7 +208,8 @@ bool TrySolve(const sim::MagneticModel& m, const MachineLimits& lim, double t, d
     // where the voltage falls to u_max between the two.
     auto volt_on_locus = [&](double d) {
       double q;
-      return iq_of(d, &q) ? volt(d, q) : 1e30;
+      sim::FluxLinkage f;
+      return iq_of(d, &q, &f) ? volt(d, q, f) : 1e30;
     };
     double lo = id_min;
     if (volt_on_locus(lo) > u_max) {
@@ -180,19 +221,21 @@ bool TrySolve(const sim::MagneticModel& m, const MachineLimits& lim, double t, d
     // BIT 11, 1971): superlinear, the bracket is kept, and the answer is its
     // feasible end. Each iq(id) starts from the roots at the bracket's ends.
     double hi = id, q_lo;
-    if (!iq_of(lo, &q_lo)) return false;
+    sim::FluxLinkage f_lo;
+    if (!iq_of(lo, &q_lo, &f_lo)) return false;
     double q_hi = iq;
-    double g_lo = volt(lo, q_lo) - u_max, g_hi = volt(hi, q_hi) - u_max;
+    double g_lo = volt(lo, q_lo, f_lo) - u_max, g_hi = volt(hi, q_hi, f_id) - u_max;
     int side = 0;
     for (int k = 0; k < 100 && hi - lo > 2e-9 && g_lo < -1e-12 * u_max; ++k) {
       double x = hi - g_hi * (hi - lo) / (g_hi - g_lo);
       if (!(x > lo && x < hi)) x = 0.5 * (lo + hi);
       double q;
+      sim::FluxLinkage f;
       const double guess = std::abs(q_lo + (q_hi - q_lo) * (x - lo) / (hi - lo));
-      if (!SolveIqForTorque(m, lim, x, t, s, &q, guess)) { hi = x; g_hi = 1.0; side = 0; continue; }
-      const double g = volt(x, q) - u_max;
+      if (!SolveIqForTorque(m, lim, x, t, s, &q, guess, &f)) { hi = x; g_hi = 1.0; side = 0; continue; }
+      const double g = volt(x, q, f) - u_max;
       if (g <= 0) {
-        lo = x; g_lo = g; q_lo = q;
+        lo = x; g_lo = g; q_lo = q; f_lo = f;
         if (side == -1) g_hi *= 0.5;
         side = -1;
       } else {
@@ -203,6 +246,7 @@ bool TrySolve(const sim::MagneticModel& m, const MachineLimits& lim, double t, d
     }
     id = lo;
     iq = q_lo;
+    f_id = f_lo;
     if (row != nullptr) {
       row->warm = true;
       row->warm_id = id;
@@ -212,7 +256,8 @@ bool TrySolve(const sim::MagneticModel& m, const MachineLimits& lim, double t, d
   if (std::hypot(id, iq) > lim.i_max_a * (1 + 1e-9)) return false;
   op->id_a = id;
   op->iq_a = iq;
-  op->torque_nm = TorqueNm(m, lim.pole_pairs, id, iq, lim.temperature_c);
+  // TorqueNm's value, from the flux at (id, iq) already evaluated.
+  op->torque_nm = physics::ElectromagneticTorque(lim.pole_pairs, f_id.psi_d_wb, f_id.psi_q_wb, id, iq);
   return true;
 }
 
@@ -242,12 +287,13 @@ OperatingPoint SolveWithMax(const sim::MagneticModel& m, const MachineLimits& li
   if (row != nullptr && row->fast && limit != nullptr && limit->direct && we > 0 &&
       std::hypot(limit->id, limit->iq) >= lim.i_max_a * (1 - 1e-6)) {
     double id, iq;
-    if (FwNewton(m, lim, tt, we, s, limit->id, limit->iq, 0.0, &id, &iq)) {
+    sim::FluxLinkage f;
+    if (FwNewton(m, lim, tt, we, s, limit->id, limit->iq, 0.0, &id, &iq, &f)) {
       const double r = std::hypot(id, iq) - lim.i_max_a * (1 + 1e-9);
       if (r < 0 && CurrentLimitSettled(r)) {
         op.id_a = id;
         op.iq_a = iq;
-        op.torque_nm = TorqueNm(m, lim.pole_pairs, id, iq, lim.temperature_c);
+        op.torque_nm = physics::ElectromagneticTorque(lim.pole_pairs, f.psi_d_wb, f.psi_q_wb, id, iq);   // TorqueNm
         op.clamped = true;
         if (clamp != nullptr) *clamp = op;
         return op;
@@ -272,15 +318,34 @@ OperatingPoint SolveLeastCurrent(const sim::MagneticModel& m, const MachineLimit
 namespace {
 
 // h at one locus point: the locus solve from its cold start at id, or from
-// `iq_guess` (> 0, magnitude) when given; *iq_found (optional): the root's
-// magnitude.
+// `iq_guess` (> 0, magnitude) when given (with its bracket grown lazily:
+// SolveIqForTorque); *iq_found (optional): the root's magnitude. The
+// voltage from the flux the locus solve ends with (no second evaluation).
 double LocusPointH(const sim::MagneticModel& m, const MachineLimits& lim, double we, double s, double t, double id,
                    double iq_guess = 0.0, double* iq_found = nullptr) {
   double iq;
-  if (!SolveIqForTorque(m, lim, id, t, s, &iq, iq_guess)) return 1e30;
+  sim::FluxLinkage f;
+  if (!SolveIqForTorque(m, lim, id, t, s, &iq, iq_guess, &f, iq_guess > 0)) return 1e30;
   if (iq_found != nullptr) *iq_found = std::abs(iq);
   const double c = std::hypot(id, iq) / lim.i_max_a;
-  return we > 0 ? std::max(c, VoltageV(m, lim, id, iq, we) / lim.UMaxV()) : c;
+  return we > 0 ? std::max(c, internal::VoltageFromFlux(lim, id, iq, we, f) / lim.UMaxV()) : c;
+}
+
+// h^2 at one locus point, from the locus solve started at `iq_guess` (> 0,
+// magnitude; its bracket grown lazily) or cold: max(|i|^2 / i_max^2,
+// |u|^2 / u_max^2), the square of LocusPointH's h without its two square
+// roots (h^2 <= 1 where h <= 1, and a search comparing h^2 compares h).
+double LocusPointH2(const sim::MagneticModel& m, const MachineLimits& lim, double we, double s, double t, double id,
+                    double iq_guess, double* iq_found, double* slope) {
+  double iq;
+  sim::FluxLinkage f;
+  if (!SolveIqForTorque(m, lim, id, t, s, &iq, iq_guess, &f, iq_guess > 0, slope)) return 1e30;
+  *iq_found = std::abs(iq);
+  const double c2 = (id * id + iq * iq) / (lim.i_max_a * lim.i_max_a);
+  if (!(we > 0) || !lim.rs_ohm) return c2;   // (as LocusPointH: no voltage without Rs)
+  const double rs = *lim.rs_ohm, u_max = lim.UMaxV();
+  const double ud = rs * id - we * f.psi_q_wb, uq = rs * iq + we * f.psi_d_wb;
+  return std::max(c2, (ud * ud + uq * uq) / (u_max * u_max));
 }
 
 // Whether torque request s t (t > 0) can be met within both limits: some
@@ -301,10 +366,24 @@ double LocusPointH(const sim::MagneticModel& m, const MachineLimits& lim, double
 bool LocusFeasible(const sim::MagneticModel& m, const MachineLimits& lim, double we, double s, double t,
                    bool warm = false) {
   bool found = false;
-  double q_last = 0.0;
+  // Warm: the last root (id_last, q_last: |iq|) and the locus' slope there
+  // (d iq / d id), whose tangent gives the next start; the search runs on
+  // h^2 (LocusPointH2).
+  double id_last = 0.0, q_last = 0.0, slope = 0.0;
   auto h = [&](double id) {
     if (found) return 0.0;
-    const double v = LocusPointH(m, lim, we, s, t, id, warm ? q_last : 0.0, &q_last);
+    double v;
+    if (warm) {
+      const double guess = q_last > 0 ? q_last + s * slope * (id - id_last) : 0.0;
+      double q = 0.0;
+      v = LocusPointH2(m, lim, we, s, t, id, guess > 0 && std::isfinite(guess) ? guess : q_last, &q, &slope);
+      if (v < 1e30) {
+        id_last = id;
+        q_last = q;
+      }
+    } else {
+      v = LocusPointH(m, lim, we, s, t, id);
+    }
     found = v <= 1.0;
     return v;
   };
@@ -472,7 +551,10 @@ bool CornerLimit(const sim::MagneticModel& m, const MachineLimits& lim, double w
 }
 
 // MaxTorqueNm with its point: MaxTorqueDirect, checked.
-LimitTorque CheckedLimitTorque(const sim::MagneticModel& m, const MachineLimits& lim, double we, double s) {
+// `warm`: the check's search above the limit warm-starts its locus solves
+// (PassesLimitCheck; within the measured current limit only).
+LimitTorque CheckedLimitTorque(const sim::MagneticModel& m, const MachineLimits& lim, double we, double s,
+                               bool warm = false) {
   // The limit torque is the largest request some point of whose locus lies
   // inside both limits. It was found by bisection on the request
   // (MaxTorqueByBisection: ~30 x 67 locus points, each a Newton solve),
@@ -487,7 +569,7 @@ LimitTorque CheckedLimitTorque(const sim::MagneticModel& m, const MachineLimits&
   // (its |iq| is below the maximum's, where the column is feasible), and
   // one point inside both limits is what LocusFeasible's search looks for.
   LimitTorque d = MaxTorqueDirect(m, lim, we, s);
-  if (PassesLimitCheck(m, lim, we, s, &d)) return d;
+  if (PassesLimitCheck(m, lim, we, s, &d, warm)) return d;
   LimitTorque b;
   b.t = MaxTorqueByBisection(m, lim, we, s);
   return b;
@@ -502,8 +584,17 @@ double MaxTorqueNm(const sim::MagneticModel& m, const MachineLimits& lim, double
 
 namespace internal {
 
+LimitTorque LimitTorqueAt(const sim::MagneticModel& m, const MachineLimits& lim, double we, double sign) {
+  return CheckedLimitTorque(m, lim, we, sign < 0 ? -1.0 : 1.0);
+}
+
+}  // namespace internal
+
+namespace internal {
+
 std::vector<LimitTorque> LimitTorques(const sim::MagneticModel& m, const MachineLimits& lim,
-                                      const std::vector<double>& we, double sign, bool fast) {
+                                      const std::vector<double>& we, double sign, bool fast,
+                                      const LimitTorque* standstill) {
   const double s = sign < 0 ? -1.0 : 1.0;
   // At standstill only the current limit binds. The feasible set at a speed
   // (inside the current circle and the voltage limit) is part of the one at
@@ -511,7 +602,7 @@ std::vector<LimitTorque> LimitTorques(const sim::MagneticModel& m, const Machine
   // the standstill maximum's point also meets this speed's voltage limit,
   // it is in the set and the limit torque is the standstill one (below base
   // speed: one voltage evaluation instead of a maximisation and its checks).
-  const LimitTorque still = CheckedLimitTorque(m, lim, 0.0, s);
+  const LimitTorque still = standstill != nullptr ? *standstill : CheckedLimitTorque(m, lim, 0.0, s, fast);
   const double u_max = lim.UMaxV();
   std::vector<LimitTorque> out;
   out.reserve(we.size());
@@ -533,7 +624,7 @@ std::vector<LimitTorque> LimitTorques(const sim::MagneticModel& m, const Machine
                PassesLimitCheck(m, lim, w, s, &c, true)) {
       out.push_back(c);
     } else {
-      out.push_back(CheckedLimitTorque(m, lim, w, s));
+      out.push_back(CheckedLimitTorque(m, lim, w, s, fast));
     }
     const LimitTorque& l = out.back();
     const bool at_current_limit = std::hypot(l.id, l.iq) >= lim.i_max_a * (1 - 1e-6);

@@ -220,6 +220,40 @@ TEST(SplineFamily, CalibrationSurfacesEqualTheFamilyExactly) {
   }
 }
 
+// The analytic family's one-pass FluxAndInductance (the tables' Newton
+// steps) gives Flux's and Inductance's values to the last bit, with and
+// without cross saturation, beyond the saturation currents and at zero.
+TEST(AnalyticFamily, FluxAndInductanceEqualFluxAndInductanceExactly) {
+  Family f;
+  f.kind = Family::kAnalytic;
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> u(0.5, 2.0);
+  for (int k = 0; k < 20; ++k) {
+    sim::SaturationParams sp;
+    std::vector<double> p(sim::kSaturationParams);
+    sim::ToArray(sp, p.data());
+    if (k > 0) {
+      for (double& x : p) x *= u(rng);
+      if (k % 2 == 0) p[5] = 0.0;   // no cross saturation
+      if (k % 3 == 0) p[5] = 3e-5 * u(rng);
+    }
+    const Calibration cal("S", f, p, {}, 4, std::nullopt, -110, 8, 0, 110);
+    for (double id : {-900.0, -150.0, -37.3, -1e-3, 0.0, 6.0}) {
+      for (double iq : {-600.0, -60.0, -0.5, 0.0, 0.7, 55.1, 109.0, 900.0}) {
+        const auto F = cal.Flux(id, iq);
+        const auto L = cal.Inductance(id, iq);
+        sim::FluxLinkage F2;
+        sim::DifferentialInductance L2;
+        cal.FluxAndInductance(id, iq, 25.0, &F2, &L2);
+        for (const auto& [x, y] : {std::pair{F2.psi_d_wb, F.psi_d_wb}, {F2.psi_q_wb, F.psi_q_wb}, {L2.ldd_h, L.ldd_h},
+                                   {L2.lqq_h, L.lqq_h}, {L2.ldq_h, L.ldq_h}}) {
+          EXPECT_EQ(x, y) << "at " << id << ", " << iq;
+        }
+      }
+    }
+  }
+}
+
 // Fits with known truth: both twin magnetics families, spline only.
 TEST(SplineFit, RecoversTruthOnBothMagneticsFamilies) {
   sim::MotorParams mp;

@@ -8,6 +8,8 @@
 // would settle on the wrong root is refused.
 #include <cmath>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "fitting/fit.h"
 #include "gtest/gtest.h"
@@ -155,6 +157,79 @@ TEST(FastFieldWeakening, RefusesTheRootBeyondTheMtpvPoint) {
     }
   }
   ASSERT_TRUE(found) << "no request with two crossings of the voltage limit inside the current limit";
+}
+
+// The limit torques of the fw table (LimitTorques: the standstill limit
+// below base speed, Newton limits above it, each checked by the warm
+// feasibility search) against MaxTorqueNm's (the direct maximisation,
+// checked by the cold search) at every speed of the table, both signs, on
+// the bench calibration (corners of the limits) and on the twin motor past
+// its MTPV onset (MTPV points): the same to 1e-8.
+TEST(FastFieldWeakening, LimitTorquesAsMaxTorqueNm) {
+  const fit::Calibration cal = BenchCalibration();
+  auto rule = BuildExportTable(cal, TableSpec{}, {});
+  ASSERT_TRUE(rule.ok()) << rule.status();
+  sim::MotorParams p;
+  p.sat.g_cross_h = 3e-5;
+  const sim::AnalyticMotor twin(p);
+  const std::vector<std::pair<const sim::MagneticModel*, MachineLimits>> cases = {{&cal, rule->table.limits},
+                                                                                   {&twin, TwinLimits()}};
+  for (const auto& [m, lim] : cases) {
+    std::vector<double> we;
+    for (double rpm = 0; rpm <= 9000; rpm += 250) we.push_back(physics::RpmToElectricalRadS(rpm, lim.pole_pairs));
+    int above_base = 0;
+    for (double sign : {1.0, -1.0}) {
+      const std::vector<internal::LimitTorque> fast = internal::LimitTorques(*m, lim, we, sign, true);
+      ASSERT_EQ(fast.size(), we.size());
+      for (size_t j = 0; j < we.size(); ++j) {
+        const double ref = MaxTorqueNm(*m, lim, we[j], sign);
+        EXPECT_NEAR(fast[j].t, ref, 1e-8 * std::max(1.0, ref)) << "sign " << sign << " at " << we[j] << " rad/s";
+        above_base += fast[j].t < fast[0].t * (1 - 1e-6);
+      }
+    }
+    EXPECT_GT(above_base, 10);   // limits above base speed were compared
+  }
+}
+
+// The locus solve's options (SolveIqForTorque) change no root: from a warm
+// start with the bracket grown lazily the iq is the same as with it grown
+// first (where the torque is monotone in iq: within the measured region),
+// the flux it returns is m.Flux at the root, and the locus' slope is the
+// one the inductances give there (d iq / d id = -T_d / T_q).
+TEST(FastFieldWeakening, LocusSolveOptionsChangeNoRoot) {
+  sim::MotorParams p;
+  p.sat.g_cross_h = 3e-5;
+  const sim::AnalyticMotor twin(p);
+  const MachineLimits lim = TwinLimits();
+  int compared = 0;
+  for (double s : {1.0, -1.0}) {
+    for (double id = -lim.i_max_a; id <= 0; id += lim.i_max_a / 13) {
+      for (double t : {0.5, 3.0, 10.0, 25.0}) {
+        double cold;
+        if (!internal::SolveIqForTorque(twin, lim, id, s * t, s, &cold)) continue;
+        for (double f : {0.5, 0.9, 0.999, 1.0, 1.001, 1.2}) {
+          const double guess = f * std::abs(cold);
+          double eager, lazy;
+          sim::FluxLinkage fl;
+          double slope;
+          const bool ok_eager = internal::SolveIqForTorque(twin, lim, id, s * t, s, &eager, guess);
+          const bool ok_lazy = internal::SolveIqForTorque(twin, lim, id, s * t, s, &lazy, guess, &fl, true, &slope);
+          ASSERT_EQ(ok_eager, ok_lazy) << id << " A, " << s * t << " N m, start " << guess;
+          if (!ok_eager) continue;
+          EXPECT_EQ(eager, lazy) << id << " A, " << s * t << " N m, start " << guess;
+          const sim::FluxLinkage F = twin.Flux(id, lazy, lim.temperature_c);
+          EXPECT_EQ(fl.psi_d_wb, F.psi_d_wb) << id << " A, " << s * t << " N m, start " << guess;
+          EXPECT_EQ(fl.psi_q_wb, F.psi_q_wb);
+          const sim::DifferentialInductance L = twin.Inductance(id, lazy, lim.temperature_c);
+          const double t_d = 1.5 * lim.pole_pairs * (L.ldd_h * lazy - F.psi_q_wb - L.ldq_h * id);
+          const double t_q = 1.5 * lim.pole_pairs * (F.psi_d_wb + L.ldq_h * lazy - L.lqq_h * id);
+          EXPECT_DOUBLE_EQ(slope, -t_d / t_q) << id << " A, " << s * t << " N m";
+          ++compared;
+        }
+      }
+    }
+  }
+  EXPECT_GT(compared, 300);
 }
 
 }  // namespace
