@@ -17,6 +17,7 @@
 #include "absl/strings/str_split.h"
 #include "cli/args.h"
 #include "cli/command.h"
+#include "cli/support_output.h"
 #include "cli/support_flux_map.h"
 #include "io/flux_map.h"
 #include "nlohmann/json.hpp"
@@ -26,10 +27,7 @@
 namespace fluxcal::cli {
 namespace {
 
-int Fail(const std::string& m, int code = 1) {
-  std::fprintf(stderr, "fluxcal compare: %s\n", m.c_str());
-  return code;
-}
+int Fail(const std::string& m, int code = 1) { return CommandError("compare", m, code); }
 
 // "IDMIN:IDMAX,IQMIN:IQMAX", finite, min <= max on each axis.
 bool ParseRegion(const std::string& s, tables::CurrentRegion* r) {
@@ -49,7 +47,7 @@ const FlagSpecs kCompareFlags = [] {
   FlagSpecs f = {
       {"region", "IDMIN:IDMAX,IQMIN:IQMAX", "current region compared, A (default the calibration's measured region)"},
       {"sym", "", "compare against the map's symmetrised columns (psi_d_sym_*, psi_q_sym_*) instead of the raw ones"},
-      {"json", "", "print the result as one JSON document"},
+      kJsonFlag,
   };
   for (const auto& c : FluxMapConventionFlags()) f.push_back(c);
   return f;

@@ -28,7 +28,7 @@ const FlagSpecs kDiagnoseFlags = {
     {"exclude-effects", "A,B", "effects not to consider (names as in `fluxcal simulate --effects`)"},
     {"calibration-out", "FILE", "write the diagnosed model as a calibration JSON (refitted without the findings)"},
     {"table1", "CSV", "diagnose the paper's Table 1 instead of a recording set"},
-    {"server", "ADDR", "diagnose a serial's stored raw recording at the service instead, HOST[:PORT] (default port 50051)"},
+    ServerFlag("diagnose a serial's stored raw recording at the service instead"),
     {"store", "", "with --server: store the diagnosed model as a new calibration version marked with the findings"},
     {"json", "", "print the diagnosis report as one JSON document (docs/diagnosis-report.md)"},
     kForceFlag,

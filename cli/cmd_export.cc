@@ -20,6 +20,7 @@
 #include "absl/strings/str_join.h"
 #include "cli/args.h"
 #include "cli/command.h"
+#include "cli/support_output.h"
 #include "cli/support_remote.h"
 #include "io/csv.h"
 #include "nlohmann/json.hpp"
@@ -31,15 +32,12 @@
 namespace fluxcal::cli {
 namespace {
 
-int Fail(const std::string& m, int code = 1) {
-  std::fprintf(stderr, "fluxcal export: %s\n", m.c_str());
-  return code;
-}
+int Fail(const std::string& m, int code = 1) { return CommandError("export", m, code); }
 
 // Local (calibration file) and remote (--server, serial) export share these;
 // --svg and --sign-key are local only, --server and --version remote only.
 const FlagSpecs kExportFlags = {
-    {"out", "FILE", "table file to write (required; - for stdout)"},
+    OutFlag("table file"),
     {"table", "T", "mtpa|mtpv|fw|envelope (default mtpa; envelope: max torque and power over speed)"},
     {"format", "F", "csv|json|h|cdfx|dcm|a2l (default csv)"},
     {"points", "N", "at most N rows of a curve / torque axis of the fw map, round breakpoints (default 64)"},
@@ -61,9 +59,9 @@ const FlagSpecs kExportFlags = {
     {"allow-extrapolation", "", "compute beyond the measured current region (cells flagged extrapolated)"},
     {"svg", "FILE", "local only: also plot the curves / map (SVG)"},
     {"sign-key", "KEY", "local only: Ed25519 private key; writes OUT.sig (not with --out -)"},
-    {"server", "ADDR", "export a serial's stored calibration from the service, HOST[:PORT] (default port 50051)"},
-    {"version", "N", "with --server: calibration version (default the latest)"},
-    {"json", "", "print a summary (checksums, limits, verdict) as one JSON document"},
+    ServerFlag("export a serial's stored calibration from the service"),
+    kServerVersionFlag,
+    JsonFlag("a summary (checksums, limits, verdict)"),
     kForceFlag,
 };
 

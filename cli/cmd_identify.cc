@@ -21,7 +21,7 @@ const FlagSpecs kIdentifyFlags = {
     {"method", "M", "paper|lsq: the paper's estimator or least squares over the record (default lsq)"},
     {"no-compensation", "", "do not compensate the delay and filters of the measurement chain"},
     {"csv", "", "print the points as CSV"},
-    {"json", "", "print the result as one JSON document"},
+    kJsonFlag,
 };
 
 int RunIdentify(const std::vector<std::string>& argv) {

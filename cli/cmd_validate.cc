@@ -16,7 +16,7 @@ namespace fluxcal::cli {
 namespace {
 
 const FlagSpecs kValidateFlags = {
-    {"json", "", "print the validation result as one JSON document"},
+    JsonFlag("the validation result"),
 };
 
 int RunValidate(const std::vector<std::string>& argv) {
