@@ -7,11 +7,11 @@
 #include <filesystem>
 #include <iostream>
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include <grpcpp/grpcpp.h>
-#include <grpcpp/support/client_interceptor.h>
 
 #include "absl/strings/numbers.h"
 #include "cli/args.h"
@@ -20,6 +20,7 @@
 #include "nlohmann/json.hpp"
 #include "io/sha256.h"
 #include "pipeline/export.h"
+#include "server/bearer.h"
 
 namespace fluxcal::cli {
 
@@ -67,32 +68,6 @@ std::string TakeClientFlags(std::vector<std::string>* args) {
 }
 
 namespace {
-
-// Adds the bearer token to every call on the channel.
-class TokenInterceptor final : public grpc::experimental::Interceptor {
- public:
-  explicit TokenInterceptor(std::string header) : header_(std::move(header)) {}
-  void Intercept(grpc::experimental::InterceptorBatchMethods* m) override {
-    if (m->QueryInterceptionHookPoint(grpc::experimental::InterceptionHookPoints::PRE_SEND_INITIAL_METADATA)) {
-      m->GetSendInitialMetadata()->insert({"authorization", header_});
-    }
-    m->Proceed();
-  }
-
- private:
-  std::string header_;
-};
-
-class TokenInterceptorFactory final : public grpc::experimental::ClientInterceptorFactoryInterface {
- public:
-  explicit TokenInterceptorFactory(std::string header) : header_(std::move(header)) {}
-  grpc::experimental::Interceptor* CreateClientInterceptor(grpc::experimental::ClientRpcInfo*) override {
-    return new TokenInterceptor(header_);
-  }
-
- private:
-  std::string header_;
-};
 
 // The target of the last MakeStub, for the error hints.
 std::string& LastTarget() {
@@ -143,18 +118,16 @@ std::unique_ptr<v1::CalibrationService::Stub> MakeStub(const std::string& server
   } else {
     creds = grpc::InsecureChannelCredentials();
   }
-  std::vector<std::unique_ptr<grpc::experimental::ClientInterceptorFactoryInterface>> interceptors;
+  std::optional<std::string> token;
   if (!o.token_file.empty()) {
-    auto token = io::ReadFileToString(o.token_file);
-    if (!token.ok()) {
+    auto text = io::ReadFileToString(o.token_file);
+    if (!text.ok()) {
       std::fprintf(stderr, "fluxcal: %s: cannot read --token-file\n", o.token_file.c_str());
       return nullptr;
     }
-    std::string t = token->substr(0, token->find_first_of("\r\n"));
-    interceptors.push_back(std::make_unique<TokenInterceptorFactory>("Bearer " + t));
+    token = text->substr(0, text->find_first_of("\r\n"));
   }
-  return v1::CalibrationService::NewStub(
-      grpc::experimental::CreateCustomChannelWithInterceptors(address, creds, args, std::move(interceptors)));
+  return v1::CalibrationService::NewStub(server::BearerChannel(address, creds, token, args));
 }
 
 int ReportRpcError(const char* cmd, const grpc::Status& s) {

@@ -16,7 +16,6 @@
 
 #include <grpcpp/generic/generic_stub.h>
 #include <grpcpp/grpcpp.h>
-#include <grpcpp/support/client_interceptor.h>
 
 #include "grpc/reflection/v1/reflection.grpc.pb.h"
 #include "grpc/reflection/v1alpha/reflection.grpc.pb.h"
@@ -24,6 +23,7 @@
 #include "io/csv.h"
 #include "io/net.h"
 #include "server/auth.h"
+#include "server/bearer.h"
 #include "io/sha256.h"
 #include "pipeline/anchor.h"
 #include "server/service.h"
@@ -39,32 +39,10 @@ std::string TempPath(const std::string& name) {
   return (fs::temp_directory_path() / ("fluxcal_auth_" + std::to_string(::getpid()) + "_" + name)).string();
 }
 
-// Adds a bearer token to every call (what the CLI does with --token-file).
-class Bearer final : public grpc::experimental::Interceptor {
- public:
-  explicit Bearer(std::string t) : t_(std::move(t)) {}
-  void Intercept(grpc::experimental::InterceptorBatchMethods* m) override {
-    if (m->QueryInterceptionHookPoint(grpc::experimental::InterceptionHookPoints::PRE_SEND_INITIAL_METADATA)) {
-      m->GetSendInitialMetadata()->insert({"authorization", "Bearer " + t_});
-    }
-    m->Proceed();
-  }
-  std::string t_;
-};
-class BearerFactory final : public grpc::experimental::ClientInterceptorFactoryInterface {
- public:
-  explicit BearerFactory(std::string t) : t_(std::move(t)) {}
-  grpc::experimental::Interceptor* CreateClientInterceptor(grpc::experimental::ClientRpcInfo*) override {
-    return new Bearer(t_);
-  }
-  std::string t_;
-};
-
+// A channel sending token with every call (what the CLI does with --token-file); "" sends none.
 std::shared_ptr<grpc::Channel> Channel(const std::string& addr, std::shared_ptr<grpc::ChannelCredentials> creds,
                                        const std::string& token) {
-  std::vector<std::unique_ptr<grpc::experimental::ClientInterceptorFactoryInterface>> f;
-  if (!token.empty()) f.push_back(std::make_unique<BearerFactory>(token));
-  return grpc::experimental::CreateCustomChannelWithInterceptors(addr, creds, grpc::ChannelArguments(), std::move(f));
+  return BearerChannel(addr, creds, TokenOrNone(token));
 }
 
 // The smallest run the service takes: six distinct operating points.

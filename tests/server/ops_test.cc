@@ -24,12 +24,12 @@
 #include <thread>
 
 #include <grpcpp/grpcpp.h>
-#include <grpcpp/support/client_interceptor.h>
 
 #include "gtest/gtest.h"
 #include "io/csv.h"
 #include "io/sha256.h"
 #include "server/auth.h"
+#include "server/bearer.h"
 #include "server/limits.h"
 #include "server/service.h"
 #include "storage/store.h"
@@ -44,35 +44,12 @@ std::string TempPath(const std::string& name) {
   return (fs::temp_directory_path() / ("fluxcal_ops_" + std::to_string(::getpid()) + "_" + name)).string();
 }
 
-class Bearer final : public grpc::experimental::Interceptor {
- public:
-  explicit Bearer(std::string t) : t_(std::move(t)) {}
-  void Intercept(grpc::experimental::InterceptorBatchMethods* m) override {
-    if (m->QueryInterceptionHookPoint(grpc::experimental::InterceptionHookPoints::PRE_SEND_INITIAL_METADATA)) {
-      m->GetSendInitialMetadata()->insert({"authorization", "Bearer " + t_});
-    }
-    m->Proceed();
-  }
-  std::string t_;
-};
-class BearerFactory final : public grpc::experimental::ClientInterceptorFactoryInterface {
- public:
-  explicit BearerFactory(std::string t) : t_(std::move(t)) {}
-  grpc::experimental::Interceptor* CreateClientInterceptor(grpc::experimental::ClientRpcInfo*) override {
-    return new Bearer(t_);
-  }
-  std::string t_;
-};
-
 std::unique_ptr<v1::CalibrationService::Stub> Stub(const std::string& addr, const std::string& token,
                                                    int max_send_bytes = -1) {
-  std::vector<std::unique_ptr<grpc::experimental::ClientInterceptorFactoryInterface>> f;
-  if (!token.empty()) f.push_back(std::make_unique<BearerFactory>(token));
   grpc::ChannelArguments args;
   args.SetMaxSendMessageSize(max_send_bytes);
   return v1::CalibrationService::NewStub(
-      grpc::experimental::CreateCustomChannelWithInterceptors(addr, grpc::InsecureChannelCredentials(), args,
-                                                              std::move(f)));
+      BearerChannel(addr, grpc::InsecureChannelCredentials(), TokenOrNone(token), args));
 }
 
 // A server with identities (two stations, an engineer, a health check) on
@@ -346,12 +323,10 @@ TEST(PreAuth, AnUnauthenticatedLargeMessageIsRefusedUnread) {
   auto measure = [&](const std::string& token, grpc::StatusCode* code, std::string* message) {
     CountingProxy proxy(f.port);
     EXPECT_TRUE(proxy.ok());
-    std::vector<std::unique_ptr<grpc::experimental::ClientInterceptorFactoryInterface>> fs;
-    if (!token.empty()) fs.push_back(std::make_unique<BearerFactory>(token));
     grpc::ChannelArguments args;
     args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);   // a connection of its own
-    auto stub = v1::CalibrationService::NewStub(grpc::experimental::CreateCustomChannelWithInterceptors(
-        "127.0.0.1:" + std::to_string(proxy.port()), grpc::InsecureChannelCredentials(), args, std::move(fs)));
+    auto stub = v1::CalibrationService::NewStub(BearerChannel(
+        "127.0.0.1:" + std::to_string(proxy.port()), grpc::InsecureChannelCredentials(), TokenOrNone(token), args));
     grpc::ClientContext c;
     c.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(20));
     v1::QueryFluxResponse r;
