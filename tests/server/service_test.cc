@@ -36,6 +36,7 @@
 #include "simulation/twin.h"
 #include "storage/store.h"
 #include "tables/signature.h"
+#include "tests/server/test_support.h"
 #include "tests/support/pg_cluster.h"
 
 namespace fluxcal::server {
@@ -47,26 +48,9 @@ std::string TempPath(const std::string& name) {
   return (fs::temp_directory_path() / ("fluxcal_srv_" + std::to_string(::getpid()) + "_" + name)).string();
 }
 
+using test_support::TwinGridPoints;
 // 36 points of the paper's grid from the twin's analytic motor.
-std::vector<v1::HfPoint> GridPoints(double scale = 1.0) {
-  sim::MotorParams mp;
-  sim::AnalyticMotor m(mp);
-  std::vector<v1::HfPoint> out;
-  for (int a = 0; a < 6; ++a) {
-    for (int b = 0; b < 6; ++b) {
-      v1::HfPoint p;
-      p.set_point_id("p" + std::to_string(6 * a + b));
-      p.set_id_a(-100 + 20 * a);
-      p.set_iq_a(20 * b);
-      const auto L = m.Inductance(p.id_a(), p.iq_a());
-      p.set_ld_h(scale * L.ldd_h); p.set_lq_h(scale * L.lqq_h); p.set_ldq_h(L.ldq_h);
-      p.set_ld_h_std(1e-7); p.set_lq_h_std(1e-7); p.set_ldq_h_std(1e-7);
-      p.set_temperature_c(25); p.set_reliable(true);
-      out.push_back(p);
-    }
-  }
-  return out;
-}
+std::vector<v1::HfPoint> GridPoints(double scale = 1.0) { return TwinGridPoints(scale); }
 
 // Param: false SQLite file, true PostgreSQL.
 class ServiceTest : public ::testing::TestWithParam<bool> {
@@ -795,22 +779,7 @@ TEST_P(ServiceTest, IngestRecordingThenDiagnose) {
 // The files of a short twin recording set for `serial`, as IngestRecording
 // takes them (relative names, bytes as on disk).
 io::RecordingFiles TwinSetFiles(const std::string& serial) {
-  sim::TwinConfig cfg;
-  cfg.serial = serial;
-  sim::Plan plan = sim::DefaultPlan();
-  plan.record_s = 0.05;
-  auto r = sim::Simulate(cfg, plan);
-  EXPECT_TRUE(r.ok());
-  const std::string dir = TempPath("recfiles_" + serial);
-  fs::remove_all(dir);
-  EXPECT_TRUE(io::WriteRecordingSet(dir, r->set).ok());
-  io::RecordingFiles files;
-  for (const auto& e : fs::recursive_directory_iterator(dir)) {
-    if (!e.is_regular_file()) continue;
-    files[fs::relative(e.path(), dir).string()] = *io::ReadFileToString(e.path().string());
-  }
-  fs::remove_all(dir);
-  return files;
+  return test_support::TwinSetFiles(serial, 0.05, TempPath("recfiles_" + serial));
 }
 
 // An IngestRecording stream as bytes: one chunk per file (`send`), the first
@@ -1377,6 +1346,29 @@ std::string WithoutWriteTime(const std::string& html) {
 // `fluxcal report SERIAL --server` writes the page the service builds
 // (GetReport) byte for byte: its SHA-256 is the one the service sent, and
 // the page equals one fetched directly but for the time it was built.
+// GridPoints ingested for serial (4 pole pairs, Rs and psi_pm stated) and
+// fitted over stub.
+::testing::AssertionResult IngestGridAndFit(v1::CalibrationService::Stub* stub, const std::string& serial) {
+  grpc::ClientContext c;
+  v1::IngestHfResultsResponse r;
+  auto w = stub->IngestHfResults(&c, &r);
+  v1::IngestHfResultsRequest m;
+  m.set_serial(serial);
+  m.mutable_motor()->set_pole_pairs(4);
+  m.mutable_motor()->set_rs_ohm(0.011);
+  m.mutable_motor()->set_psi_pm_wb(0.0114);
+  for (const auto& p : GridPoints()) *m.add_points() = p;
+  w->Write(m);
+  w->WritesDone();
+  if (auto st = w->Finish(); !st.ok()) return ::testing::AssertionFailure() << serial << ": ingest: " << st.error_message();
+  grpc::ClientContext fc;
+  v1::FitRequest f;
+  f.set_serial(serial);
+  v1::FitResponse fr;
+  if (auto st = stub->Fit(&fc, f, &fr); !st.ok()) return ::testing::AssertionFailure() << serial << ": fit: " << st.error_message();
+  return ::testing::AssertionSuccess();
+}
+
 // With a local extra the page is built here from the same stored facts;
 // an unknown serial fails.
 TEST(ReportCli, WritesThePageTheServiceBuilt) {
@@ -1389,25 +1381,7 @@ TEST(ReportCli, WritesThePageTheServiceBuilt) {
   const std::string& addr = serve.addr;
   auto stub = v1::CalibrationService::NewStub(grpc::CreateChannel(addr, grpc::InsecureChannelCredentials()));
   ASSERT_TRUE(WaitUntilUp(stub.get())) << "fluxcal serve did not come up on " << addr;
-  {
-    grpc::ClientContext c;
-    v1::IngestHfResultsResponse r;
-    auto w = stub->IngestHfResults(&c, &r);
-    v1::IngestHfResultsRequest m;
-    m.set_serial("IPM-CLI-RPT");
-    m.mutable_motor()->set_pole_pairs(4);
-    m.mutable_motor()->set_rs_ohm(0.011);
-    m.mutable_motor()->set_psi_pm_wb(0.0114);
-    for (const auto& p : GridPoints()) *m.add_points() = p;
-    w->Write(m);
-    w->WritesDone();
-    ASSERT_TRUE(w->Finish().ok());
-    grpc::ClientContext fc;
-    v1::FitRequest f;
-    f.set_serial("IPM-CLI-RPT");
-    v1::FitResponse fr;
-    ASSERT_TRUE(stub->Fit(&fc, f, &fr).ok());
-  }
+  ASSERT_TRUE(IngestGridAndFit(stub.get(), "IPM-CLI-RPT"));
   v1::GetReportRequest req;
   req.set_serial("IPM-CLI-RPT");
   req.set_speed_rpm(3000);
@@ -1491,25 +1465,7 @@ TEST(ExportCli, UdcAxisAndTheGeneratingEnvelopeOverTheService) {
   const std::string& addr = serve.addr;
   auto stub = v1::CalibrationService::NewStub(grpc::CreateChannel(addr, grpc::InsecureChannelCredentials()));
   ASSERT_TRUE(WaitUntilUp(stub.get())) << "fluxcal serve did not come up on " << addr;
-  {
-    grpc::ClientContext c;
-    v1::IngestHfResultsResponse r;
-    auto w = stub->IngestHfResults(&c, &r);
-    v1::IngestHfResultsRequest m;
-    m.set_serial("IPM-CLI-AX");
-    m.mutable_motor()->set_pole_pairs(4);
-    m.mutable_motor()->set_rs_ohm(0.011);
-    m.mutable_motor()->set_psi_pm_wb(0.0114);
-    for (const auto& p : GridPoints()) *m.add_points() = p;
-    w->Write(m);
-    w->WritesDone();
-    ASSERT_TRUE(w->Finish().ok());
-    grpc::ClientContext fc;
-    v1::FitRequest f;
-    f.set_serial("IPM-CLI-AX");
-    v1::FitResponse fr;
-    ASSERT_TRUE(stub->Fit(&fc, f, &fr).ok());
-  }
+  ASSERT_TRUE(IngestGridAndFit(stub.get(), "IPM-CLI-AX"));
   const std::string common = "export IPM-CLI-AX --server " + addr + " --table envelope --generating --format dcm "
                              "--speed-points 8 --rs-ohm 0.011 --allow-clamped";
   auto j = JsonOf(Fluxcal(common + " --udc-axis-v 40,62.5 --out " + dir + "/env.dcm --json"));

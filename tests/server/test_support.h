@@ -1,0 +1,90 @@
+// What the service's tests build their requests from: the paper's grid of
+// HF points from the twin's analytic motor, a short simulated recording
+// set as IngestRecording takes it, and one IngestRecording upload.
+#ifndef FLUXCAL_TESTS_SERVER_TEST_SUPPORT_H_
+#define FLUXCAL_TESTS_SERVER_TEST_SUPPORT_H_
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <grpcpp/grpcpp.h>
+
+#include "fluxcal/v1/calibration.grpc.pb.h"
+#include "gtest/gtest.h"
+#include "io/csv.h"
+#include "io/recording_set.h"
+#include "simulation/twin.h"
+
+namespace fluxcal::server::test_support {
+
+// 36 points of the paper's grid (id -100..0 A, iq 0..100 A in 20 A steps)
+// from the twin's analytic motor; scale multiplies Ldd and Lqq.
+inline std::vector<v1::HfPoint> TwinGridPoints(double scale = 1.0) {
+  sim::MotorParams mp;
+  sim::AnalyticMotor m(mp);
+  std::vector<v1::HfPoint> out;
+  for (int a = 0; a < 6; ++a) {
+    for (int b = 0; b < 6; ++b) {
+      v1::HfPoint p;
+      p.set_point_id("p" + std::to_string(6 * a + b));
+      p.set_id_a(-100 + 20 * a);
+      p.set_iq_a(20 * b);
+      const auto L = m.Inductance(p.id_a(), p.iq_a());
+      p.set_ld_h(scale * L.ldd_h); p.set_lq_h(scale * L.lqq_h); p.set_ldq_h(L.ldq_h);
+      p.set_ld_h_std(1e-7); p.set_lq_h_std(1e-7); p.set_ldq_h_std(1e-7);
+      p.set_temperature_c(25); p.set_reliable(true);
+      out.push_back(p);
+    }
+  }
+  return out;
+}
+
+// The files of a twin recording set for serial, record_s seconds a point,
+// as IngestRecording takes them (relative names, bytes as on disk); the
+// set is written to scratch_dir and removed again.
+inline io::RecordingFiles TwinSetFiles(const std::string& serial, double record_s, const std::string& scratch_dir) {
+  namespace fs = std::filesystem;
+  sim::TwinConfig cfg;
+  cfg.serial = serial;
+  sim::Plan plan = sim::DefaultPlan();
+  plan.record_s = record_s;
+  auto r = sim::Simulate(cfg, plan);
+  EXPECT_TRUE(r.ok());
+  fs::remove_all(scratch_dir);
+  EXPECT_TRUE(io::WriteRecordingSet(scratch_dir, r->set).ok());
+  io::RecordingFiles files;
+  for (const auto& e : fs::recursive_directory_iterator(scratch_dir)) {
+    if (!e.is_regular_file()) continue;
+    files[fs::relative(e.path(), scratch_dir).generic_string()] = *io::ReadFileToString(e.path().string());
+  }
+  fs::remove_all(scratch_dir);
+  return files;
+}
+
+// One IngestRecording stream: a chunk per (name, bytes) of files in their
+// order, the first with serial and station.
+template <class Files>
+grpc::Status UploadRecording(v1::CalibrationService::Stub* stub, const std::string& serial,
+                             const std::string& station, const Files& files, v1::IngestRecordingResponse* resp) {
+  grpc::ClientContext ctx;
+  auto w = stub->IngestRecording(&ctx, resp);
+  bool first = true;
+  for (const auto& [name, data] : files) {
+    v1::RecordingChunk c;
+    if (first) {
+      c.set_serial(serial);
+      c.set_station_id(station);
+      first = false;
+    }
+    c.set_path(name);
+    c.set_data(data);
+    if (!w->Write(c)) break;
+  }
+  w->WritesDone();
+  return w->Finish();
+}
+
+}  // namespace fluxcal::server::test_support
+
+#endif  // FLUXCAL_TESTS_SERVER_TEST_SUPPORT_H_
