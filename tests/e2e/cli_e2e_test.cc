@@ -12,28 +12,15 @@
 
 #include "gtest/gtest.h"
 #include "nlohmann/json.hpp"
+#include "tests/e2e/fluxcal_run.h"
 
 namespace {
 
 namespace fs = std::filesystem;
 
-struct Run {
-  int code = 0;
-  std::string out;
-};
-
-// Runs the binary; stdout captured, stderr discarded.
-Run Fluxcal(const std::string& args) {
-  const std::string cmd = std::string(FLUXCAL_BINARY) + " " + args + " 2>/dev/null";
-  Run r;
-  FILE* p = popen(cmd.c_str(), "r");
-  std::array<char, 4096> buf;
-  size_t n;
-  while ((n = fread(buf.data(), 1, buf.size(), p)) > 0) r.out.append(buf.data(), n);
-  const int st = pclose(p);
-  r.code = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
-  return r;
-}
+using Run = fluxcal::e2e::RunResult;
+// Runs the binary; stdout and stderr captured.
+Run Fluxcal(const std::string& args) { return fluxcal::e2e::RunFluxcal(args); }
 
 nlohmann::json Json(const Run& r) {
   EXPECT_EQ(r.code, 0) << r.out;

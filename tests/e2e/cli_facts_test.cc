@@ -34,7 +34,6 @@ nlohmann::json JsonOf(const RunResult& r) {
   return nlohmann::json::parse(r.out);
 }
 
-bool Has(const std::string& text, const std::string& what) { return text.find(what) != std::string::npos; }
 
 // The first column of a table CSV (comment lines skipped), distinct values
 // in order.

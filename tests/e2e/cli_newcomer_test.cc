@@ -30,12 +30,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-bool Has(const std::string& s, const std::string& what) { return s.find(what) != std::string::npos; }
-
-std::string Slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  return std::string(std::istreambuf_iterator<char>(in), {});
-}
 
 // The stdout of a shell command.
 std::string Shell(const std::string& cmd) {
@@ -86,7 +80,7 @@ TEST_F(Newcomer, FitRefusesAnExistingOutputBeforeAnyWork) {
   EXPECT_EQ(r.code, 1) << r.err;
   EXPECT_TRUE(Has(r.err, Refusal("out", out) + "; not overwritten (give --force to replace it)")) << r.err;
   EXPECT_FALSE(Has(r.err, "identifying point")) << "refused before identifying: " << r.err;
-  EXPECT_EQ(Slurp(out), "kept\n");
+  EXPECT_EQ(ReadFile(out), "kept\n");
   const std::string svg = Existing("fit.svg");
   const RunResult s = RunFluxcal("fit " + Path("set") + " --model analytic --out " + Path("fit_new.json") + " --svg " + svg);
   EXPECT_EQ(s.code, 1) << s.err;
@@ -94,8 +88,8 @@ TEST_F(Newcomer, FitRefusesAnExistingOutputBeforeAnyWork) {
   EXPECT_FALSE(fs::exists(Path("fit_new.json"))) << "nothing written on a refusal";
   const RunResult f = RunFluxcal("fit " + Path("set") + " --model analytic --force --out " + out + " --svg " + svg);
   ASSERT_EQ(f.code, 0) << f.err;
-  EXPECT_EQ(nlohmann::json::parse(Slurp(out))["format"], "fluxcal.calibration.v1");
-  EXPECT_TRUE(Has(Slurp(svg), "<svg"));
+  EXPECT_EQ(nlohmann::json::parse(ReadFile(out))["format"], "fluxcal.calibration.v1");
+  EXPECT_TRUE(Has(ReadFile(svg), "<svg"));
 }
 
 TEST_F(Newcomer, ExportRefusesAnExistingTableOrSignature) {
@@ -104,7 +98,7 @@ TEST_F(Newcomer, ExportRefusesAnExistingTableOrSignature) {
   const RunResult r = RunFluxcal("export " + cal + " --table mtpa --out " + out);
   EXPECT_EQ(r.code, 1) << r.err;
   EXPECT_TRUE(Has(r.err, Refusal("out", out))) << r.err;
-  EXPECT_EQ(Slurp(out), "kept\n");
+  EXPECT_EQ(ReadFile(out), "kept\n");
   // A signature beside the file name counts: it would vouch for other bytes.
   const std::string fresh = Path("fresh.csv");
   const std::string sig = Existing("fresh.csv.sig");
@@ -129,9 +123,9 @@ TEST_F(Newcomer, ReportMapExportSimulateDiagnoseAndKeygenShareTheRule) {
     const RunResult r = RunFluxcal("report " + cal + " --out " + page);
     EXPECT_EQ(r.code, 1) << r.err;
     EXPECT_TRUE(Has(r.err, Refusal("out", page))) << r.err;
-    EXPECT_EQ(Slurp(page), "kept\n");
+    EXPECT_EQ(ReadFile(page), "kept\n");
     EXPECT_EQ(RunFluxcal("report " + cal + " --force --out " + page).code, 0);
-    EXPECT_TRUE(Has(Slurp(page), "<html"));
+    EXPECT_TRUE(Has(ReadFile(page), "<html"));
   }
   {
     const std::string map = Existing("map.csv");
@@ -174,7 +168,7 @@ TEST_F(Newcomer, ReportMapExportSimulateDiagnoseAndKeygenShareTheRule) {
     EXPECT_TRUE(Has(r.err, Refusal("out", pub))) << r.err;
     EXPECT_FALSE(fs::exists(Path("k.key"))) << "no half key pair";
     EXPECT_EQ(RunFluxcal("admin keygen --force --out " + Path("k")).code, 0);
-    EXPECT_TRUE(Has(Slurp(pub), "PUBLIC KEY"));
+    EXPECT_TRUE(Has(ReadFile(pub), "PUBLIC KEY"));
   }
 }
 
@@ -198,9 +192,9 @@ TEST(OverwriteRule, CheckOverwrite) {
   EXPECT_EQ(cli::CheckOverwrite(*forced, {{"out", (dir / "file").string()}, {"out", (dir / "full").string()}}), "");
   const absl::Status w = cli::WriteNewOutput(*args, {"out", (dir / "file").string()}, "new");
   EXPECT_TRUE(absl::IsFailedPrecondition(w)) << w;
-  EXPECT_EQ(Slurp(dir / "file"), "x");
+  EXPECT_EQ(ReadFile(dir / "file"), "x");
   EXPECT_TRUE(cli::WriteNewOutput(*forced, {"out", (dir / "file").string()}, "new").ok());
-  EXPECT_EQ(Slurp(dir / "file"), "new");
+  EXPECT_EQ(ReadFile(dir / "file"), "new");
   fs::remove_all(dir);
 }
 
@@ -301,7 +295,7 @@ TEST(Version, UnknownOutsideAGitCheckout) {
                           "' -DOUT='" + header + "' -DBUILD_TYPE=Debug -P '" + FLUXCAL_SOURCE_DIR +
                           "/cmake/build_info.cmake'";
   ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
-  const std::string text = Slurp(header);
+  const std::string text = ReadFile(header);
   EXPECT_TRUE(Has(text, "#define FLUXCAL_GIT_DESCRIBE \"unknown\"")) << text;
   EXPECT_TRUE(Has(text, "#define FLUXCAL_BUILD_TYPE \"Debug\"")) << text;
   fs::remove_all(dir);
