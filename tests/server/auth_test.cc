@@ -24,6 +24,7 @@
 #include "io/net.h"
 #include "server/auth.h"
 #include "server/bearer.h"
+#include "tests/server/authorized_server.h"
 #include "io/sha256.h"
 #include "pipeline/anchor.h"
 #include "server/service.h"
@@ -134,37 +135,18 @@ grpc::StatusCode HealthCheck(const std::shared_ptr<grpc::Channel>& ch) {
   return st.error_code();
 }
 
-struct Fixture {
-  std::string db;
-  std::unique_ptr<storage::Store> store;
-  std::unique_ptr<CalibrationServiceImpl> service;
-  std::unique_ptr<Authorizer> auth;
-  std::unique_ptr<grpc::Server> server;
+// A token for one identity of every role but health (and the extra keys).
+struct Fixture : test_support::AuthorizedServer {
   std::map<Role, std::string> tokens;
-  int port = 0;
 
   explicit Fixture(const std::string& name, const ServerOptions& base = {}, Keys extra = {}) {
-    db = TempPath(name + ".db");
-    for (auto sfx : {"", "-wal", "-shm"}) fs::remove(db + sfx);
-    store = std::move(*storage::Store::Open(db));
-    service = std::make_unique<CalibrationServiceImpl>(store.get());
     Keys keys = std::move(extra);
     for (Role r : {Role::kStation, Role::kRelease, Role::kFlasher, Role::kEngineer, Role::kAdmin}) {
       tokens[r] = *NewToken();
       keys.entries.push_back({std::string(RoleName(r)) + "-1", r, io::Sha256Hex(tokens[r]), ""});
     }
-    auth = std::make_unique<Authorizer>(keys);
-    service->set_authorizer(auth.get());
-    ServerOptions opt = base;
-    opt.authorizer = auth.get();
-    server = StartServer(service.get(), "127.0.0.1:0", &port, opt);
+    Start(TempPath(name + ".db"), keys, base);
   }
-  ~Fixture() {
-    server->Shutdown();
-    store.reset();
-    for (auto sfx : {"", "-wal", "-shm"}) fs::remove(db + sfx);
-  }
-  std::string addr() const { return "127.0.0.1:" + std::to_string(port); }
 };
 
 TEST(Roles, MatrixOfEveryRoleAndRpc) {

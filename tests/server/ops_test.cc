@@ -30,6 +30,7 @@
 #include "io/sha256.h"
 #include "server/auth.h"
 #include "server/bearer.h"
+#include "tests/server/authorized_server.h"
 #include "server/limits.h"
 #include "server/service.h"
 #include "storage/store.h"
@@ -54,39 +55,18 @@ std::unique_ptr<v1::CalibrationService::Stub> Stub(const std::string& addr, cons
 
 // A server with identities (two stations, an engineer, a health check) on
 // loopback, with the given limits.
-struct Fixture {
-  std::string db;
-  std::unique_ptr<storage::Store> store;
-  std::unique_ptr<CalibrationServiceImpl> service;
-  std::unique_ptr<Authorizer> auth;
-  std::unique_ptr<grpc::Server> server;
+struct Fixture : test_support::AuthorizedServer {
   std::map<std::string, std::string> tokens;   // by identity name
-  int port = 0;
 
   Fixture(const std::string& name, IdentityLimits limits) {
-    db = TempPath(name + ".db");
-    for (auto sfx : {"", "-wal", "-shm"}) fs::remove(db + sfx);
-    store = std::move(*storage::Store::Open(db));
-    service = std::make_unique<CalibrationServiceImpl>(store.get());
     Keys keys;
     for (auto [who, role] : {std::pair{"station-1", Role::kStation}, {"station-2", Role::kStation},
                              {"engineer-1", Role::kEngineer}, {"health-1", Role::kHealth}}) {
       tokens[who] = *NewToken();
       keys.entries.push_back({who, role, io::Sha256Hex(tokens[who]), ""});
     }
-    auth = std::make_unique<Authorizer>(keys);
-    service->set_authorizer(auth.get());
-    service->set_limits(limits);
-    ServerOptions opt;
-    opt.authorizer = auth.get();
-    server = StartServer(service.get(), "127.0.0.1:0", &port, opt);
+    Start(TempPath(name + ".db"), keys, ServerOptions{}, &limits);
   }
-  ~Fixture() {
-    server->Shutdown();
-    store.reset();
-    for (auto sfx : {"", "-wal", "-shm"}) fs::remove(db + sfx);
-  }
-  std::string addr() const { return "127.0.0.1:" + std::to_string(port); }
   // Waits (at most 20 s) until `who` has `streams` calls open on the server.
   bool WaitForStreams(const std::string& who, int streams) const {
     const auto until = Clock::now() + std::chrono::seconds(20);

@@ -689,31 +689,10 @@ TEST_P(ServiceTest, IngestRecordingThenDiagnose) {
   sim::TwinConfig cfg;
   cfg.serial = "IPM-REC-1";
   cfg.effects.dead_time_s = 2e-6;
-  sim::Plan plan = sim::DefaultPlan();
-  plan.record_s = 0.05;
-  auto r = sim::Simulate(cfg, plan);
-  ASSERT_TRUE(r.ok());
-  const std::string dir = TempPath("recset");
-  fs::remove_all(dir);
-  ASSERT_TRUE(io::WriteRecordingSet(dir, r->set).ok());
-  grpc::ClientContext ctx;
+  const io::RecordingFiles files = test_support::TwinSetFiles(cfg, 0.05, TempPath("recset"));
+  ASSERT_FALSE(files.empty());
   v1::IngestRecordingResponse resp;
-  auto w = stub_->IngestRecording(&ctx, &resp);
-  bool first = true;
-  for (const auto& e : fs::recursive_directory_iterator(dir)) {
-    if (!e.is_regular_file()) continue;
-    std::ifstream f(e.path(), std::ios::binary);
-    std::string data((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
-    for (size_t off = 0; off < data.size(); off += 64 * 1024) {
-      v1::RecordingChunk c;
-      if (first) { c.set_serial("IPM-REC-1"); first = false; }
-      c.set_path(fs::relative(e.path(), dir).string());
-      c.set_data(data.substr(off, 64 * 1024));
-      w->Write(c);
-    }
-  }
-  w->WritesDone();
-  ASSERT_TRUE(w->Finish().ok());
+  ASSERT_TRUE(test_support::UploadRecording(stub_.get(), "IPM-REC-1", "", files, &resp, 64 * 1024).ok());
   EXPECT_EQ(resp.points(), 40);
   EXPECT_EQ(resp.recording_sha256().size(), 64u);
   EXPECT_LT(resp.stored_bytes(), resp.recording_bytes());
@@ -763,7 +742,6 @@ TEST_P(ServiceTest, IngestRecordingThenDiagnose) {
     EXPECT_EQ(page.html().find("Mismatches against the baseline"), std::string::npos)
         << "the marks carry no mismatches; the page must not count zero";
   }
-  fs::remove_all(dir);
   // A set whose manifest names another serial is refused.
   grpc::ClientContext c2;
   v1::IngestRecordingResponse r2;
@@ -859,34 +837,13 @@ TEST_P(ServiceTest, RecordingStreamRules) {
 // DEADLINE_EXCEEDED soon after it, and the abandoned Fit stores no version
 // and no audit row (a later Fit is version 1). Timings are loose (seconds).
 TEST_P(ServiceTest, ClientDeadlineStopsTheWorkAndStoresNothing) {
-  sim::TwinConfig cfg;
-  cfg.serial = "IPM-DL-1";
-  sim::Plan plan = sim::DefaultPlan();
-  // Long records: identifying the set takes far longer than the deadline.
-  plan.record_s = 0.6;
-  auto r = sim::Simulate(cfg, plan);
-  ASSERT_TRUE(r.ok());
-  const std::string dir = TempPath("dlset");
-  fs::remove_all(dir);
-  ASSERT_TRUE(io::WriteRecordingSet(dir, r->set).ok());
   {
-    grpc::ClientContext ctx;
+    // Long records: identifying the set takes far longer than the deadline.
+    const io::RecordingFiles files = test_support::TwinSetFiles("IPM-DL-1", 0.6, TempPath("dlset"));
+    ASSERT_FALSE(files.empty());
     v1::IngestRecordingResponse resp;
-    auto w = stub_->IngestRecording(&ctx, &resp);
-    bool first = true;
-    for (const auto& e : fs::recursive_directory_iterator(dir)) {
-      if (!e.is_regular_file()) continue;
-      std::ifstream f(e.path(), std::ios::binary);
-      v1::RecordingChunk c;
-      if (first) { c.set_serial("IPM-DL-1"); first = false; }
-      c.set_path(fs::relative(e.path(), dir).string());
-      c.set_data(std::string((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>()));
-      w->Write(c);
-    }
-    w->WritesDone();
-    ASSERT_TRUE(w->Finish().ok());
+    ASSERT_TRUE(test_support::UploadRecording(stub_.get(), "IPM-DL-1", "", files, &resp).ok());
   }
-  fs::remove_all(dir);
   using Clock = std::chrono::steady_clock;
   auto seconds = [](Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); };
   // The whole work, once, for scale.

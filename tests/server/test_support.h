@@ -4,6 +4,7 @@
 #ifndef FLUXCAL_TESTS_SERVER_TEST_SUPPORT_H_
 #define FLUXCAL_TESTS_SERVER_TEST_SUPPORT_H_
 
+#include <algorithm>
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -40,13 +41,11 @@ inline std::vector<v1::HfPoint> TwinGridPoints(double scale = 1.0) {
   return out;
 }
 
-// The files of a twin recording set for serial, record_s seconds a point,
+// The files of the twin's recording set for cfg, record_s seconds a point,
 // as IngestRecording takes them (relative names, bytes as on disk); the
 // set is written to scratch_dir and removed again.
-inline io::RecordingFiles TwinSetFiles(const std::string& serial, double record_s, const std::string& scratch_dir) {
+inline io::RecordingFiles TwinSetFiles(const sim::TwinConfig& cfg, double record_s, const std::string& scratch_dir) {
   namespace fs = std::filesystem;
-  sim::TwinConfig cfg;
-  cfg.serial = serial;
   sim::Plan plan = sim::DefaultPlan();
   plan.record_s = record_s;
   auto r = sim::Simulate(cfg, plan);
@@ -61,25 +60,39 @@ inline io::RecordingFiles TwinSetFiles(const std::string& serial, double record_
   fs::remove_all(scratch_dir);
   return files;
 }
+// The same for the default twin named serial.
+inline io::RecordingFiles TwinSetFiles(const std::string& serial, double record_s, const std::string& scratch_dir) {
+  sim::TwinConfig cfg;
+  cfg.serial = serial;
+  return TwinSetFiles(cfg, record_s, scratch_dir);
+}
 
-// One IngestRecording stream: a chunk per (name, bytes) of files in their
-// order, the first with serial and station.
+// One IngestRecording stream: the (name, bytes) of files in their order, a
+// chunk each (with chunk_bytes > 0: chunks of at most that many bytes), the
+// first with serial and station.
 template <class Files>
 grpc::Status UploadRecording(v1::CalibrationService::Stub* stub, const std::string& serial,
-                             const std::string& station, const Files& files, v1::IngestRecordingResponse* resp) {
+                             const std::string& station, const Files& files, v1::IngestRecordingResponse* resp,
+                             size_t chunk_bytes = 0) {
   grpc::ClientContext ctx;
   auto w = stub->IngestRecording(&ctx, resp);
   bool first = true;
   for (const auto& [name, data] : files) {
-    v1::RecordingChunk c;
-    if (first) {
-      c.set_serial(serial);
-      c.set_station_id(station);
-      first = false;
+    const size_t step = chunk_bytes > 0 ? chunk_bytes : std::max<size_t>(data.size(), 1);
+    for (size_t off = 0; off == 0 || off < data.size(); off += step) {
+      v1::RecordingChunk c;
+      if (first) {
+        c.set_serial(serial);
+        c.set_station_id(station);
+        first = false;
+      }
+      c.set_path(name);
+      c.set_data(data.substr(off, step));
+      if (!w->Write(c)) {
+        w->WritesDone();
+        return w->Finish();
+      }
     }
-    c.set_path(name);
-    c.set_data(data);
-    if (!w->Write(c)) break;
   }
   w->WritesDone();
   return w->Finish();
