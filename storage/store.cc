@@ -134,6 +134,19 @@ absl::StatusOr<ChainHead::Head> SerialHead(Store& store, const std::string& seri
   return ChainHead::Head{serial, link->version, link->row_sha256};
 }
 
+absl::Status SetNewestRelease(Store& store, ChainHead* head) {
+  auto rel = store.ReleaseLinkAt(0);
+  if (rel.ok()) {
+    head->release_seq = rel->seq;
+    head->release_serial = rel->serial;
+    head->release_version = rel->version;
+    head->release_sha256 = rel->row_sha256;
+  } else if (rel.status().code() != absl::StatusCode::kNotFound) {
+    return rel.status();
+  }
+  return absl::OkStatus();
+}
+
 absl::StatusOr<ChainHead> CurrentChainHead(Store& store) {
   // From the links alone (small rows): the newest chained version of every
   // serial. Versions from before the chain (schema < 6) have no link and
@@ -147,15 +160,7 @@ absl::StatusOr<ChainHead> CurrentChainHead(Store& store) {
   }
   ChainHead out;
   for (auto& [serial, h] : newest) out.calibrations.push_back(std::move(h));
-  auto rel = store.ReleaseLinkAt(0);
-  if (rel.ok()) {
-    out.release_seq = rel->seq;
-    out.release_serial = rel->serial;
-    out.release_version = rel->version;
-    out.release_sha256 = rel->row_sha256;
-  } else if (rel.status().code() != absl::StatusCode::kNotFound) {
-    return rel.status();
-  }
+  if (auto s = SetNewestRelease(store, &out); !s.ok()) return s;
   out.digest_sha256 = ChainHeadDigest(out);
   return out;
 }
