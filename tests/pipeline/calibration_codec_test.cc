@@ -25,6 +25,7 @@
 #include "pipeline/store.h"
 #include "simulation/twin.h"
 #include "storage/sqlite.h"
+#include "tests/support/old_schema.h"
 #include "tests/support/pg_cluster.h"
 
 namespace fluxcal::pipeline {
@@ -236,13 +237,7 @@ TEST_P(MigrationTest, OldJsonRowsConvertAndStillVerify) {
   // The layout before v8: migrations 1..6 as they are (v7 links the
   // releases already stored when the store opens).
   const auto& migrations = pg ? storage::PostgresMigrations() : storage::SqliteMigrations();
-  ASSERT_TRUE(raw("CREATE TABLE schema_version (version INTEGER NOT NULL)"));
-  for (int v = 0; v < 6; ++v) {
-    ASSERT_TRUE(raw(migrations[v])) << "migration " << v + 1;
-    ASSERT_TRUE(raw("INSERT INTO schema_version (version) VALUES (" + std::to_string(v + 1) + ")"));
-  }
-  ASSERT_TRUE(raw("INSERT INTO motors (serial, pole_pairs, rs_ohm, psi_pm_wb, created_utc) "
-                  "VALUES ('IPM-OLD', 4, 0.011, 0.0114, '2024-01-01T00:00:00Z')"));
+  ASSERT_TRUE(fluxcal::testing::OldSchemaWithMotor(raw, migrations, 6));
   // Versions as FitSerial stored them: the JSON with the covariance in full
   // double digits (scaled off float precision, as a fit's covariance was).
   auto legacy_json = [](const fit::Calibration& cal) {
