@@ -96,9 +96,7 @@ TEST(CliConventions, BadFlagFailsBeforeAnyWork) {
 }
 
 TEST(CliConventions, OutDashWritesToStdout) {
-  const fs::path dir = fs::temp_directory_path() / ("fluxcal_conv_out_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
+  const fs::path dir = fluxcal::e2e::FreshTempDir("fluxcal_conv_out_");
   const std::string measured = std::string(FLUXCAL_SOURCE_DIR) + "/data/real/baldor_fluxmap_measured.csv";
   const std::string cal = (dir / "cal.json").string();
   const std::string fit_args = "fit --map " + measured + " --pole-pairs 2 --serial BALDOR-OUT-1 ";
@@ -152,9 +150,7 @@ TEST(CliConventions, OutDashWritesToStdout) {
 }
 
 TEST(CliConventions, ServeRefusesWithoutDb) {
-  const fs::path dir = fs::temp_directory_path() / ("fluxcal_conv_serve_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
+  const fs::path dir = fluxcal::e2e::FreshTempDir("fluxcal_conv_serve_");
   const std::string cmd = "cd " + dir.string() + " && " + std::string(FLUXCAL_BINARY) +
                           " serve --listen 127.0.0.1:0 --quiet 2>&1; echo rc=$?";
   FILE* p = popen(cmd.c_str(), "r");

@@ -28,9 +28,7 @@ nlohmann::json Json(const Run& r) {
 }
 
 TEST(Cli, EndToEnd) {
-  const fs::path dir = fs::temp_directory_path() / ("fluxcal_e2e_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
+  const fs::path dir = fluxcal::e2e::FreshTempDir("fluxcal_e2e_");
   const std::string set = (dir / "set").string();
   auto sim = Json(Fluxcal("simulate --out " + set + " --seed 5 --serial IPM-E2E-1 --effects dead_time_s=1.5e-6 --json"));
   EXPECT_EQ(sim["serial"], "IPM-E2E-1");
@@ -134,9 +132,7 @@ TEST(Cli, EndToEnd) {
 // reproduced to its sensor noise, open loop and closed loop (the twin's
 // default bench controller is what the replay assumes by default).
 TEST(Cli, ReplayReproducesACleanSet) {
-  const fs::path dir = fs::temp_directory_path() / ("fluxcal_e2e_replay_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
+  const fs::path dir = fluxcal::e2e::FreshTempDir("fluxcal_e2e_replay_");
   const std::string set = (dir / "set").string(), cal = (dir / "cal.json").string();
   Json(Fluxcal("simulate --out " + set + " --seed 6 --serial IPM-E2E-2 --json"));
   Json(Fluxcal("fit " + set + " --out " + cal + " --json"));
@@ -152,9 +148,7 @@ TEST(Cli, ReplayReproducesACleanSet) {
 }
 
 TEST(Cli, BadInputNamesTheFile) {
-  const fs::path dir = fs::temp_directory_path() / ("fluxcal_e2e_bad_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
+  const fs::path dir = fluxcal::e2e::FreshTempDir("fluxcal_e2e_bad_");
   std::ofstream(dir / "manifest.json") << "{\"format\": \"fluxcal.recording.v1\", \"serial\": \"bad serial\"}";
   const std::string cmd = std::string(FLUXCAL_BINARY) + " identify " + dir.string() + " --json 2>&1";
   FILE* p = popen(cmd.c_str(), "r");
@@ -182,9 +176,7 @@ TEST(Cli, BadInputNamesTheFile) {
 // that does not exist (and an empty file), naming the flag and the path,
 // and create nothing.
 TEST(Cli, ReadOnlyAdminCommandsRefuseAMissingStore) {
-  const fs::path dir = fs::temp_directory_path() / ("fluxcal_e2e_typo_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
+  const fs::path dir = fluxcal::e2e::FreshTempDir("fluxcal_e2e_typo_");
   const std::string typo = (dir / "typo.db").string();
   for (const std::string cmd : {"admin verify-db --db ", "admin verify-db --json --db sqlite:", "admin hash --db ",
                                 "admin anchor --db "}) {
@@ -212,9 +204,7 @@ TEST(Cli, ReadOnlyAdminCommandsRefuseAMissingStore) {
 // machine, compare it with that map, export it as a map and an inverse map,
 // and compare it with its own export; each --json output is one document.
 TEST(Cli, FluxMapsInAndOut) {
-  const fs::path dir = fs::temp_directory_path() / ("fluxcal_e2e_maps_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
+  const fs::path dir = fluxcal::e2e::FreshTempDir("fluxcal_e2e_maps_");
   const std::string measured = std::string(FLUXCAL_SOURCE_DIR) + "/data/real/baldor_fluxmap_measured.csv";
   const std::string cal = (dir / "cal.json").string(), map = (dir / "map.csv").string(),
                     inv = (dir / "inv.csv").string();
@@ -289,9 +279,7 @@ TEST(Cli, FluxMapsInAndOut) {
 // "by symmetry". Asked for an asymmetric model by name, the other half is
 // extrapolated.
 TEST(Cli, BothTorqueDirectionsFromOneMeasuredHalf) {
-  const fs::path dir = fs::temp_directory_path() / ("fluxcal_e2e_sym_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
+  const fs::path dir = fluxcal::e2e::FreshTempDir("fluxcal_e2e_sym_");
   const std::string real = std::string(FLUXCAL_SOURCE_DIR) + "/data/real";
   const std::string map = real + "/baldor_fluxmap_measured.csv", cal = (dir / "c.json").string();
   Json(Fluxcal("fit " + real + "/baldor_eol --out " + cal + " --json"));

@@ -56,9 +56,7 @@ std::vector<double> Column(const std::string& path, const std::string& name) {
 TEST(EnvelopeCli, UdcAxisFilesEqualSingleExportsAndTheFigureHasACurvePerUdc) {
   const std::string set = std::string(FLUXCAL_SOURCE_DIR) + "/data/real/baldor_eol";
   ASSERT_TRUE(fs::exists(set + "/manifest.json")) << "in-repo fixture missing: " << set;
-  const fs::path dir = fs::temp_directory_path() / ("fluxcal_envelope_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
+  const fs::path dir = fluxcal::e2e::FreshTempDir("fluxcal_envelope_");
   auto path = [&](const std::string& name) { return (dir / name).string(); };
   const std::string cal = path("c.json");
   ASSERT_EQ(RunFluxcal("fit " + set + " --out " + cal).code, 0);
@@ -132,9 +130,7 @@ TEST(EnvelopeCli, UdcAxisFilesEqualSingleExportsAndTheFigureHasACurvePerUdc) {
 TEST(EnvelopeCli, GeneratingEnvelopeUnderLabelsOfItsOwn) {
   const std::string set = std::string(FLUXCAL_SOURCE_DIR) + "/data/real/baldor_eol";
   ASSERT_TRUE(fs::exists(set + "/manifest.json")) << "in-repo fixture missing: " << set;
-  const fs::path dir = fs::temp_directory_path() / ("fluxcal_generating_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
+  const fs::path dir = fluxcal::e2e::FreshTempDir("fluxcal_generating_");
   auto path = [&](const std::string& name) { return (dir / name).string(); };
   const std::string cal = path("c.json");
   ASSERT_EQ(RunFluxcal("fit " + set + " --out " + cal).code, 0);
@@ -196,9 +192,7 @@ TEST(EnvelopeCli, GeneratingEnvelopeUnderLabelsOfItsOwn) {
 // MTPA table at 100 degC states both and psi_pm x (1 - 0.0012 x 75). A bad
 // coefficient is refused naming the manifest's line and field.
 TEST(EnvelopeCli, MagnetTemperatureFromTheSetOrTheFlags) {
-  const fs::path dir = fs::temp_directory_path() / ("fluxcal_magnet_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
+  const fs::path dir = fluxcal::e2e::FreshTempDir("fluxcal_magnet_");
   auto path = [&](const std::string& name) { return (dir / name).string(); };
   ASSERT_EQ(RunFluxcal("simulate --serial IPM-MAGNET-E2E --out " + path("set")).code, 0);
   const std::string manifest = path("set/manifest.json");

@@ -64,9 +64,7 @@ void Write(const std::string& path, const std::string& header,
 }
 
 TEST(CliMaps, ForeignConventionsAreReadOrRefusedWithTheirCause) {
-  const fs::path dir = fs::temp_directory_path() / ("fluxcal_e2e_conv_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
+  const fs::path dir = fluxcal::e2e::FreshTempDir("fluxcal_e2e_conv_");
   auto path = [&](const char* name) { return (dir / name).string(); };
   Write(path("native.csv"), "id_A,iq_A,psi_d_Vs,psi_q_Vs",
         [](const Node& n) { return std::array<double, 4>{n.id, n.iq, n.pd, n.pq}; });

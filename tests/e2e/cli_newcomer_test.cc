@@ -51,9 +51,7 @@ std::string Refusal(const std::string& flag, const std::string& path) {
 class Newcomer : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    dir_ = new fs::path(fs::temp_directory_path() / ("fluxcal_newcomer_" + std::to_string(::getpid())));
-    fs::remove_all(*dir_);
-    fs::create_directories(*dir_);
+    dir_ = new fs::path(fluxcal::e2e::FreshTempDir("fluxcal_newcomer_"));
     ASSERT_EQ(RunFluxcal("simulate --out " + Path("set") + " --seed 3 --serial IPM-NEW-1").code, 0);
     ASSERT_EQ(RunFluxcal("fit " + Path("set") + " --model analytic --out " + Path("cal.json")).code, 0);
   }

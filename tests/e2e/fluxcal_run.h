@@ -24,6 +24,14 @@ inline std::string ReadFile(const std::filesystem::path& path) {
 
 inline bool Has(const std::string& text, const std::string& what) { return text.find(what) != std::string::npos; }
 
+// An empty directory <tmp>/<prefix><pid> (one left by an earlier run removed).
+inline std::filesystem::path FreshTempDir(const std::string& prefix) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / (prefix + std::to_string(::getpid()));
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  return dir;
+}
+
 struct RunResult {
   int code = 0;
   std::string out, err;
