@@ -59,22 +59,29 @@ std::vector<v1::HfPoint> SmallGrid() {
   return out;
 }
 
+// One IngestHfResults stream on ctx: SmallGrid for serial (4 pole pairs),
+// with a station id when one is given.
+grpc::Status IngestSmallGrid(v1::CalibrationService::Stub* stub, grpc::ClientContext* ctx, const std::string& serial,
+                             const std::string& station = "") {
+  v1::IngestHfResultsResponse r;
+  auto w = stub->IngestHfResults(ctx, &r);
+  v1::IngestHfResultsRequest m;
+  m.set_serial(serial);
+  if (!station.empty()) m.set_station_id(station);
+  m.mutable_motor()->set_pole_pairs(4);
+  for (const auto& p : SmallGrid()) *m.add_points() = p;
+  w->Write(m);
+  w->WritesDone();
+  return w->Finish();
+}
+
 // Calls `rpc` with a small request; the status is all that matters here.
 grpc::Status Call(v1::CalibrationService::Stub* stub, Rpc rpc) {
   grpc::ClientContext ctx;
   ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(20));
   switch (rpc) {
-    case Rpc::kIngestHfResults: {
-      v1::IngestHfResultsResponse r;
-      auto w = stub->IngestHfResults(&ctx, &r);
-      v1::IngestHfResultsRequest m;
-      m.set_serial("IPM-AUTH-1");
-      m.mutable_motor()->set_pole_pairs(4);
-      for (const auto& p : SmallGrid()) *m.add_points() = p;
-      w->Write(m);
-      w->WritesDone();
-      return w->Finish();
-    }
+    case Rpc::kIngestHfResults:
+      return IngestSmallGrid(stub, &ctx, "IPM-AUTH-1");
     case Rpc::kIngestRecording: {
       v1::IngestRecordingResponse r;
       auto w = stub->IngestRecording(&ctx, &r);
@@ -273,16 +280,7 @@ TEST(Roles, AStationIngestsAsItselfAndCannotLoosenTheVerdict) {
       Channel(f.addr(), grpc::InsecureChannelCredentials(), f.tokens[Role::kStation]));
   {
     grpc::ClientContext ctx;
-    v1::IngestHfResultsResponse r;
-    auto w = stub->IngestHfResults(&ctx, &r);
-    v1::IngestHfResultsRequest m;
-    m.set_serial("IPM-AUTH-2");
-    m.set_station_id("someone-else");
-    m.mutable_motor()->set_pole_pairs(4);
-    for (const auto& p : SmallGrid()) *m.add_points() = p;
-    w->Write(m);
-    w->WritesDone();
-    const grpc::Status s = w->Finish();
+    const grpc::Status s = IngestSmallGrid(stub.get(), &ctx, "IPM-AUTH-2", "someone-else");
     EXPECT_EQ(s.error_code(), grpc::StatusCode::PERMISSION_DENIED) << s.error_message();
     EXPECT_NE(s.error_message().find("not the caller's identity 'station-1'"), std::string::npos) << s.error_message();
   }
@@ -587,15 +585,7 @@ TEST(Audit, RequestIdFromTheClientIsKept) {
       Channel(f.addr(), grpc::InsecureChannelCredentials(), f.tokens[Role::kStation]));
   grpc::ClientContext ctx;
   ctx.AddMetadata("x-request-id", "eol-7-run-0042");
-  v1::IngestHfResultsResponse r;
-  auto w = st->IngestHfResults(&ctx, &r);
-  v1::IngestHfResultsRequest m;
-  m.set_serial("IPM-AUD-1");
-  m.mutable_motor()->set_pole_pairs(4);
-  for (const auto& p : SmallGrid()) *m.add_points() = p;
-  w->Write(m);
-  w->WritesDone();
-  ASSERT_TRUE(w->Finish().ok());
+  ASSERT_TRUE(IngestSmallGrid(st.get(), &ctx, "IPM-AUD-1").ok());
   auto rows = f.store->AuditOf("IPM-AUD-1");
   ASSERT_TRUE(rows.ok());
   ASSERT_EQ(rows->size(), 1u);
