@@ -14,6 +14,7 @@
 #include <grpcpp/grpcpp.h>
 
 #include "absl/strings/numbers.h"
+#include "absl/strings/str_replace.h"
 #include "cli/args.h"
 #include "io/csv.h"
 #include "io/net.h"
@@ -143,44 +144,35 @@ int ReportRpcError(const char* cmd, const grpc::Status& s) {
     for (auto& ch : lower) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
     return lower.find(what) != std::string::npos;
   };
-  switch (s.error_code()) {
-    case grpc::StatusCode::UNAVAILABLE: {
-      const char* why = contains("connection refused")   ? "connection refused"
-                        : contains("handshake") || contains("ssl") || contains("tls") ? "TLS handshake failed"
-                        : contains("dns") || contains("resolve") ? "name not resolved"
-                                                                  : "unavailable";
-      if (std::string(why) == "name not resolved") {
-        std::fprintf(stderr, "fluxcal %s: cannot reach %s (%s): check the host name given to --server\n", cmd,
-                     target.c_str(), why);
-        break;
-      }
-      std::fprintf(stderr,
-                   "fluxcal %s: cannot reach %s (%s): is `fluxcal serve` running there? TLS: pass --ca (its CA; "
-                   "--cert and --key if it requires client certificates), or --insecure for a plaintext test server "
-                   "off loopback\n",
-                   cmd, target.c_str(), why);
-      break;
-    }
-    case grpc::StatusCode::DEADLINE_EXCEEDED:
-      std::fprintf(stderr,
-                   "fluxcal %s: %s did not answer in time: is the address right (a firewall drops, not refuses)? "
-                   "a server under load or a long fit may need a retry\n",
-                   cmd, target.c_str());
-      break;
-    case grpc::StatusCode::UNAUTHENTICATED:
-      std::fprintf(stderr,
-                   "fluxcal %s: %s wants credentials: give --token-file FILE (made by `fluxcal admin add-key`) or a "
-                   "client certificate (--cert, --key) it accepts\n",
-                   cmd, target.c_str());
-      break;
-    case grpc::StatusCode::PERMISSION_DENIED:
-      std::fprintf(stderr,
-                   "fluxcal %s: the identity of your token/certificate lacks the role for this call on %s: "
-                   "see `fluxcal admin list-keys` on the server side\n",
-                   cmd, target.c_str());
-      break;
-    default:
-      break;
+  // A hint for the codes a setup mistake gives ($target and $why filled in).
+  static const std::map<grpc::StatusCode, std::string> kHints = {
+      {grpc::StatusCode::DEADLINE_EXCEEDED,
+       "$target did not answer in time: is the address right (a firewall drops, not refuses)? "
+       "a server under load or a long fit may need a retry"},
+      {grpc::StatusCode::UNAUTHENTICATED,
+       "$target wants credentials: give --token-file FILE (made by `fluxcal admin add-key`) or a "
+       "client certificate (--cert, --key) it accepts"},
+      {grpc::StatusCode::PERMISSION_DENIED,
+       "the identity of your token/certificate lacks the role for this call on $target: "
+       "see `fluxcal admin list-keys` on the server side"},
+  };
+  std::string hint, why;
+  if (s.error_code() == grpc::StatusCode::UNAVAILABLE) {
+    why = contains("connection refused")                                ? "connection refused"
+          : contains("handshake") || contains("ssl") || contains("tls") ? "TLS handshake failed"
+          : contains("dns") || contains("resolve")                      ? "name not resolved"
+                                                                         : "unavailable";
+    hint = why == "name not resolved"
+               ? "cannot reach $target ($why): check the host name given to --server"
+               : "cannot reach $target ($why): is `fluxcal serve` running there? TLS: pass --ca (its CA; "
+                 "--cert and --key if it requires client certificates), or --insecure for a plaintext test server "
+                 "off loopback";
+  } else if (auto it = kHints.find(s.error_code()); it != kHints.end()) {
+    hint = it->second;
+  }
+  if (!hint.empty()) {
+    std::fprintf(stderr, "fluxcal %s: %s\n", cmd,
+                 absl::StrReplaceAll(hint, {{"$target", target}, {"$why", why}}).c_str());
   }
   std::fprintf(stderr, "fluxcal %s: %s: %s\n", cmd, c >= 0 && c <= 16 ? kNames[c] : "ERROR", msg.c_str());
   return 1;
