@@ -25,17 +25,15 @@ const FlagSpecs kAnchorFlags = {
 };
 
 int RunAnchor(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, kAnchorFlags);
-  if (!args.ok() || !args->Get("db") || !args->positional.empty()) {
-    if (!args.ok()) CommandError("admin anchor", std::string(args.status().message()));
-    return UsageError(kAnchorUsage);
+  ParsedArgs args;
+  std::unique_ptr<storage::Store> store;
+  if (int rc = ParseArgsAndOpenStore("admin anchor", argv, kAnchorFlags, kAnchorUsage, &args, &store); rc != 0) {
+    return rc;
   }
-  auto store = OpenExistingStore("admin anchor", *args);
-  if (!store) return 1;
-  const std::string out = args->Get("out").value_or("");
+  const std::string out = args.Get("out").value_or("");
   auto head = pipeline::AnchorStore(*store, out);
   if (!head.ok()) return CommandError("admin anchor", (out.empty() ? "" : "flag --out: ") + std::string(head.status().message()));
-  if (args->Has("json")) {
+  if (args.Has("json")) {
     std::cout << pipeline::AnchorLine(*head, "snapshot", store->Backend(), pipeline::StoreNowUtc()) << "\n";
   } else {
     std::printf("anchor %s: %zu serials", head->digest_sha256.c_str(), head->calibrations.size());

@@ -28,20 +28,19 @@ const FlagSpecs kVerifyDbFlags = {
 };
 
 int RunVerifyDb(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, kVerifyDbFlags);
-  if (!args.ok() || !args->Get("db") || !args->positional.empty()) {
-    if (!args.ok()) CommandError("admin verify-db", std::string(args.status().message()));
-    return UsageError(kVerifyDbUsage);
+  ParsedArgs args;
+  std::unique_ptr<storage::Store> store;
+  if (int rc = ParseArgsAndOpenStore("admin verify-db", argv, kVerifyDbFlags, kVerifyDbUsage, &args, &store);
+      rc != 0) {
+    return rc;
   }
-  auto store = OpenExistingStore("admin verify-db", *args);
-  if (!store) return 1;
-  const std::string anchor = args->Get("anchor").value_or("");
+  const std::string anchor = args.Get("anchor").value_or("");
   auto rep = pipeline::VerifyStore(*store, anchor);
   if (!rep.ok()) {
     return CommandError("admin verify-db", (anchor.empty() ? "" : "flag --anchor: ") + std::string(rep.status().message()));
   }
   const bool intact = rep->problems.empty();
-  if (args->Has("json")) {
+  if (args.Has("json")) {
     nlohmann::json j = {{"intact", intact},
                         {"chained", rep->chained},
                         {"unchained", rep->unchained},
