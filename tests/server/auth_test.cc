@@ -25,6 +25,7 @@
 #include "server/auth.h"
 #include "server/bearer.h"
 #include "tests/server/authorized_server.h"
+#include "tests/server/test_support.h"
 #include "io/sha256.h"
 #include "pipeline/anchor.h"
 #include "server/service.h"
@@ -46,34 +47,7 @@ std::shared_ptr<grpc::Channel> Channel(const std::string& addr, std::shared_ptr<
   return BearerChannel(addr, creds, TokenOrNone(token));
 }
 
-// The smallest run the service takes: six distinct operating points.
-std::vector<v1::HfPoint> SmallGrid() {
-  std::vector<v1::HfPoint> out;
-  for (int k = 0; k < 6; ++k) {
-    v1::HfPoint p;
-    p.set_point_id("p" + std::to_string(k));
-    p.set_id_a(-20.0 * (k % 3)); p.set_iq_a(40.0 * (k / 3)); p.set_ld_h(1e-4); p.set_lq_h(2e-4);
-    p.set_temperature_c(25); p.set_reliable(true);
-    out.push_back(p);
-  }
-  return out;
-}
-
-// One IngestHfResults stream on ctx: SmallGrid for serial (4 pole pairs),
-// with a station id when one is given.
-grpc::Status IngestSmallGrid(v1::CalibrationService::Stub* stub, grpc::ClientContext* ctx, const std::string& serial,
-                             const std::string& station = "") {
-  v1::IngestHfResultsResponse r;
-  auto w = stub->IngestHfResults(ctx, &r);
-  v1::IngestHfResultsRequest m;
-  m.set_serial(serial);
-  if (!station.empty()) m.set_station_id(station);
-  m.mutable_motor()->set_pole_pairs(4);
-  for (const auto& p : SmallGrid()) *m.add_points() = p;
-  w->Write(m);
-  w->WritesDone();
-  return w->Finish();
-}
+using test_support::IngestSmallGrid;
 
 // Calls `rpc` with a small request; the status is all that matters here.
 grpc::Status Call(v1::CalibrationService::Stub* stub, Rpc rpc) {

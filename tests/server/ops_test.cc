@@ -31,6 +31,7 @@
 #include "server/auth.h"
 #include "server/bearer.h"
 #include "tests/server/authorized_server.h"
+#include "tests/server/test_support.h"
 #include "server/limits.h"
 #include "server/service.h"
 #include "storage/store.h"
@@ -500,19 +501,7 @@ TEST(Roles, AHealthIdentityProvesTheDatabaseAnswersAndSeesNoData) {
   {
     auto st = Stub(f.addr(), f.tokens["station-1"]);
     grpc::ClientContext c;
-    v1::IngestHfResultsResponse r;
-    auto w = st->IngestHfResults(&c, &r);
-    v1::IngestHfResultsRequest m;
-    m.set_serial("IPM-HEALTH-1");
-    m.mutable_motor()->set_pole_pairs(4);
-    for (int k = 0; k < 6; ++k) {
-      auto* p = m.add_points();
-      p->set_id_a(-20.0 * (k % 3)); p->set_iq_a(40.0 * (k / 3)); p->set_ld_h(1e-4); p->set_lq_h(2e-4);
-      p->set_temperature_c(25); p->set_reliable(true);
-    }
-    w->Write(m);
-    w->WritesDone();
-    ASSERT_TRUE(w->Finish().ok());
+    ASSERT_TRUE(test_support::IngestSmallGrid(st.get(), &c, "IPM-HEALTH-1").ok());
   }
   auto list = [&](const std::string& who, v1::ListMotorsResponse* r) {
     grpc::ClientContext c;

@@ -1,6 +1,7 @@
 // What the service's tests build their requests from: the paper's grid of
-// HF points from the twin's analytic motor, a short simulated recording
-// set as IngestRecording takes it, and one IngestRecording upload.
+// HF points from the twin's analytic motor, the smallest run the service
+// takes, a short simulated recording set as IngestRecording takes it, and
+// the streams that send them.
 #ifndef FLUXCAL_TESTS_SERVER_TEST_SUPPORT_H_
 #define FLUXCAL_TESTS_SERVER_TEST_SUPPORT_H_
 
@@ -94,6 +95,35 @@ grpc::Status UploadRecording(v1::CalibrationService::Stub* stub, const std::stri
       }
     }
   }
+  w->WritesDone();
+  return w->Finish();
+}
+
+// The smallest run the service takes: six distinct operating points.
+inline std::vector<v1::HfPoint> SmallGrid() {
+  std::vector<v1::HfPoint> out;
+  for (int k = 0; k < 6; ++k) {
+    v1::HfPoint p;
+    p.set_point_id("p" + std::to_string(k));
+    p.set_id_a(-20.0 * (k % 3)); p.set_iq_a(40.0 * (k / 3)); p.set_ld_h(1e-4); p.set_lq_h(2e-4);
+    p.set_temperature_c(25); p.set_reliable(true);
+    out.push_back(p);
+  }
+  return out;
+}
+
+// One IngestHfResults stream on ctx: SmallGrid for serial (4 pole pairs),
+// with a station id when one is given.
+inline grpc::Status IngestSmallGrid(v1::CalibrationService::Stub* stub, grpc::ClientContext* ctx,
+                                    const std::string& serial, const std::string& station = "") {
+  v1::IngestHfResultsResponse r;
+  auto w = stub->IngestHfResults(ctx, &r);
+  v1::IngestHfResultsRequest m;
+  m.set_serial(serial);
+  if (!station.empty()) m.set_station_id(station);
+  m.mutable_motor()->set_pole_pairs(4);
+  for (const auto& p : SmallGrid()) *m.add_points() = p;
+  w->Write(m);
   w->WritesDone();
   return w->Finish();
 }
