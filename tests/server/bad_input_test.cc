@@ -37,6 +37,20 @@ v1::MotorInfo Motor() {
   return m;
 }
 
+// A call of rpc whose request names IPM-GOOD and is then changed by set.
+template <class Req, class Resp>
+std::function<grpc::Status(Stub*)> AboutGoodSerial(grpc::Status (Stub::*rpc)(grpc::ClientContext*, const Req&, Resp*),
+                                                   std::function<void(Req*)> set) {
+  return [rpc, set](Stub* st) {
+    grpc::ClientContext c;
+    Req q;
+    q.set_serial("IPM-GOOD");
+    set(&q);
+    Resp r;
+    return (st->*rpc)(&c, q, &r);
+  };
+}
+
 // One IngestHfResults stream of the given messages.
 grpc::Status Stream(Stub* stub, const std::vector<v1::IngestHfResultsRequest>& msgs, v1::IngestHfResultsResponse* r) {
   grpc::ClientContext ctx;
@@ -329,14 +343,7 @@ std::vector<Case> Cases() {
 
   // --- ExportTable.
   auto exp = [](std::function<void(v1::ExportTableRequest*)> set) {
-    return [set](Stub* st) {
-      grpc::ClientContext c;
-      v1::ExportTableRequest q;
-      q.set_serial("IPM-GOOD");
-      set(&q);
-      v1::ExportTableResponse r;
-      return st->ExportTable(&c, q, &r);
-    };
+    return AboutGoodSerial(&Stub::ExportTable, std::move(set));
   };
   add("ExportTable points 1", exp([](auto* q) { q->set_points(1); }));
   add("ExportTable points 5000", exp([](auto* q) { q->set_points(5000); }));
@@ -392,14 +399,7 @@ std::vector<Case> Cases() {
 
   // --- GetReport.
   auto report = [](std::function<void(v1::GetReportRequest*)> set) {
-    return [set](Stub* st) {
-      grpc::ClientContext c;
-      v1::GetReportRequest q;
-      q.set_serial("IPM-GOOD");
-      set(&q);
-      v1::GetReportResponse r;
-      return st->GetReport(&c, q, &r);
-    };
+    return AboutGoodSerial(&Stub::GetReport, std::move(set));
   };
   for (const auto& s : bad_serials) {
     add("GetReport serial '" + io::Printable(s.substr(0, 20)) + "'", report([s](auto* q) { q->set_serial(s); }));
