@@ -150,14 +150,9 @@ TEST(Cli, ReplayReproducesACleanSet) {
 TEST(Cli, BadInputNamesTheFile) {
   const fs::path dir = fluxcal::e2e::FreshTempDir("fluxcal_e2e_bad_");
   std::ofstream(dir / "manifest.json") << "{\"format\": \"fluxcal.recording.v1\", \"serial\": \"bad serial\"}";
-  const std::string cmd = std::string(FLUXCAL_BINARY) + " identify " + dir.string() + " --json 2>&1";
-  FILE* p = popen(cmd.c_str(), "r");
-  std::string out;
-  std::array<char, 4096> buf;
-  size_t n;
-  while ((n = fread(buf.data(), 1, buf.size(), p)) > 0) out.append(buf.data(), n);
-  const int st = pclose(p);
-  EXPECT_EQ(WEXITSTATUS(st), 1);
+  const auto id = Fluxcal("identify " + dir.string() + " --json");
+  const std::string out = id.out + id.err;
+  EXPECT_EQ(id.code, 1);
   EXPECT_NE(out.find("manifest.json"), std::string::npos) << out;
   EXPECT_NE(out.find("field 'serial'"), std::string::npos) << out;
   // validate: the same message as one JSON document, exit 1.
@@ -180,14 +175,9 @@ TEST(Cli, ReadOnlyAdminCommandsRefuseAMissingStore) {
   const std::string typo = (dir / "typo.db").string();
   for (const std::string cmd : {"admin verify-db --db ", "admin verify-db --json --db sqlite:", "admin hash --db ",
                                 "admin anchor --db "}) {
-    const std::string full = std::string(FLUXCAL_BINARY) + " " + cmd + typo + " 2>&1";
-    FILE* p = popen(full.c_str(), "r");
-    std::string out;
-    std::array<char, 4096> buf;
-    size_t n;
-    while ((n = fread(buf.data(), 1, buf.size(), p)) > 0) out.append(buf.data(), n);
-    const int st = pclose(p);
-    EXPECT_EQ(WEXITSTATUS(st), 1) << cmd << ": " << out;
+    const auto r = Fluxcal(cmd + typo);
+    const std::string out = r.out + r.err;
+    EXPECT_EQ(r.code, 1) << cmd << ": " << out;
     EXPECT_NE(out.find("flag --db: sqlite: no store at '" + typo + "': the file does not exist"), std::string::npos)
         << cmd << ": " << out;
     EXPECT_EQ(out.find("intact"), std::string::npos) << cmd << ": " << out;
@@ -260,13 +250,9 @@ TEST(Cli, FluxMapsInAndOut) {
   // Bad input: exit 1, the message names file, line and field.
   const std::string bad = (dir / "bad.csv").string();
   std::ofstream(bad) << "id_A,iq_A,psi_d_Vs,psi_q_Vs\n0,0,0.44,0\n0,2,0.45,x\n";
-  const std::string cmd = std::string(FLUXCAL_BINARY) + " compare " + cal + " " + bad + " --json 2>&1";
-  FILE* p = popen(cmd.c_str(), "r");
-  std::string out;
-  std::array<char, 4096> buf;
-  size_t n;
-  while ((n = fread(buf.data(), 1, buf.size(), p)) > 0) out.append(buf.data(), n);
-  EXPECT_EQ(WEXITSTATUS(pclose(p)), 1);
+  const auto refused = Fluxcal("compare " + cal + " " + bad + " --json");
+  const std::string out = refused.out + refused.err;
+  EXPECT_EQ(refused.code, 1);
   EXPECT_NE(out.find(bad + ":3: field 'psi_q_Vs': expected a number, got 'x'"), std::string::npos) << out;
   EXPECT_EQ(Fluxcal("compare " + cal + " " + measured + " --region 0:1").code, 2);
   fs::remove_all(dir);
