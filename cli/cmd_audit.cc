@@ -15,15 +15,8 @@ namespace {
 constexpr char kAuditUsage[] = "fluxcal audit SERIAL --server ADDR [--json]";
 const FlagSpecs kAuditFlags = {kServerFlag, kJsonFlag};
 
-int RunAudit(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, kAuditFlags);
-  if (!args.ok() || args->positional.size() != 1 || !args->Get("server")) return UsageError(kAuditUsage);
-  v1::AuditRequest req;
-  req.set_serial(args->positional[0]);
-  v1::AuditResponse resp;
-  const std::string server = *args->Get("server");
-  if (int rc = CallService("audit", server, &v1::CalibrationService::Stub::Audit, req, &resp); rc != 0) return rc;
-  if (args->Has("json")) {
+int PrintAudit(const v1::AuditResponse& resp, bool json) {
+  if (json) {
     nlohmann::json arr = nlohmann::json::array();
     for (const auto& e : resp.entries()) {
       arr.push_back({{"id", e.id()}, {"utc", e.utc()}, {"identity", e.identity()}, {"role", e.role()},
@@ -37,6 +30,10 @@ int RunAudit(const std::vector<std::string>& argv) {
                 e.role().c_str(), e.rpc().c_str(), e.peer().c_str(), e.detail().c_str(), e.request_id().c_str());
   }
   return 0;
+}
+
+int RunAudit(const std::vector<std::string>& argv) {
+  return RunSerialCall("audit", kAuditUsage, argv, kAuditFlags, &v1::CalibrationService::Stub::Audit, PrintAudit);
 }
 
 }  // namespace

@@ -152,20 +152,13 @@ constexpr char kHistoryUsage[] = "fluxcal history SERIAL --server ADDR [--json]"
 // history and fleet: the service's answer and nothing else to ask for.
 const FlagSpecs kServerJsonFlags = {kServerFlag, kJsonFlag};
 
-int RunHistory(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, kServerJsonFlags);
-  if (!args.ok() || args->positional.size() != 1 || !args->Get("server")) return UsageError(kHistoryUsage);
-  v1::HistoryRequest req;
-  req.set_serial(args->positional[0]);
-  v1::HistoryResponse resp;
-  const std::string server = *args->Get("server");
-  if (int rc = CallService("history", server, &v1::CalibrationService::Stub::History, req, &resp); rc != 0) return rc;
+int PrintHistory(const v1::HistoryResponse& resp, bool json) {
   nlohmann::json ev = nlohmann::json::array();
   for (const auto& e : resp.events()) {
     ev.push_back({{"created_utc", e.created_utc()}, {"kind", e.kind()}, {"run_id", e.run_id()},
                   {"version", e.version()}, {"detail", e.detail()}});
   }
-  if (args->Has("json")) {
+  if (json) {
     PrintJson({{"serial", resp.serial()}, {"events", ev}});
   } else {
     for (const auto& e : ev) {
@@ -175,6 +168,11 @@ int RunHistory(const std::vector<std::string>& argv) {
     }
   }
   return 0;
+}
+
+int RunHistory(const std::vector<std::string>& argv) {
+  return RunSerialCall("history", kHistoryUsage, argv, kServerJsonFlags, &v1::CalibrationService::Stub::History,
+                       PrintHistory);
 }
 
 constexpr char kFleetUsage[] = "fluxcal fleet --server ADDR [--json]";

@@ -69,6 +69,23 @@ int CallService(const char* cmd, const std::string& server,
   return 0;
 }
 
+// `fluxcal CMD SERIAL --server ADDR [--json]`: argv parsed by flags (the
+// usage error otherwise), the one call about SERIAL made, and its answer
+// printed by print(resp, json), whose return is the exit status.
+template <class Req, class Resp, class Print>
+int RunSerialCall(const char* cmd, const std::string& usage, const std::vector<std::string>& argv,
+                  const FlagSpecs& flags,
+                  grpc::Status (v1::CalibrationService::Stub::*rpc)(grpc::ClientContext*, const Req&, Resp*),
+                  Print print) {
+  auto args = ParseArgs(argv, flags);
+  if (!args.ok() || args->positional.size() != 1 || !args->Get("server")) return UsageError(usage);
+  Req req;
+  req.set_serial(args->positional[0]);
+  Resp resp;
+  if (int rc = CallService(cmd, *args->Get("server"), rpc, req, &resp); rc != 0) return rc;
+  return print(resp, args->Has("json"));
+}
+
 // `query` and `export` with --server; flags: what the mode accepts.
 int RunRemoteQuery(const std::vector<std::string>& argv, const FlagSpecs& flags);
 int RunRemoteExport(const std::vector<std::string>& argv, const FlagSpecs& flags);
