@@ -109,7 +109,7 @@ int RunCompare(const std::vector<std::string>& argv) {
          {{"id_a", c->worst.id_a}, {"iq_a", c->worst.iq_a}, {"error_wb", c->max_wb}, {"error_relative", worst_rel},
           {"error_d_wb", c->worst_error_d_wb}, {"error_q_wb", c->worst_error_q_wb},
           {"map_psi_d_wb", c->worst.psi_d_wb}, {"map_psi_q_wb", c->worst.psi_q_wb}}}};
-    std::cout << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
+    PrintJson(j);
   } else {
     std::printf("serial %s (%s) against %s (%s columns): %d nodes in id %g..%g A, iq %g..%g A\n",
                 cal->serial().c_str(), cal->family().Name().c_str(), map_path.c_str(),

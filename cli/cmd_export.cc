@@ -163,7 +163,7 @@ int RunUdcAxisExport(const ParsedArgs& args, const fit::Calibration& cal, const 
                         {"rs_ohm", lim.limits.rs_ohm ? nlohmann::json(*lim.limits.rs_ohm) : nlohmann::json()},
                         {"ctype", pipeline::ExportCTypeName(ctype)}, {"files", files}, {"svg", svg}};
     j["sources"] = {{"i_max_a", lim.i_max_source}, {"udc_v", "--udc-axis-v"}, {"rs_ohm", lim.rs_source}};
-    std::cout << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
+    PrintJson(j);
   }
   return 0;
 }
@@ -337,7 +337,7 @@ int RunExport(const std::vector<std::string>& argv) {
       j["fixed_point"].push_back({{"unit", q.unit}, {"arrays", q.arrays}, {"bits", q.bits}, {"lsb", q.lsb},
                                   {"offset", q.offset}, {"min_value", q.min_value}, {"max_value", q.max_value}});
     }
-    std::cout << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
+    PrintJson(j);
   } else {
     const std::string u_max = lim.udc_v ? absl::StrFormat("u_max %.6g V", lim.UMaxV()) : "no voltage limit (Udc not known)";
     std::fprintf(to_stdout ? stderr : stdout, "%s: %s table, %zu cells (%zu clamped at limits, %zu extrapolated), i_max %.6g A, %s\n"

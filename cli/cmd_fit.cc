@@ -206,7 +206,7 @@ int RunFit(const std::vector<std::string>& argv) {
                   {"psi_scale_wb", sum.flux_scale_wb},
                   {"convention", FluxMapConventionJson(map->convention)}};
     }
-    std::cout << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
+    PrintJson(j);
   } else if (map) {
     std::fprintf(to_stdout ? stderr : stdout, "serial %s: model %s, %d observations, flux error against the map's %d nodes "
                 "RMS %.3f %% max %.3f %% (of %.4g Wb), psi_pm %.6g Wb -> %s\n",

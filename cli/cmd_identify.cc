@@ -9,6 +9,7 @@
 #include "absl/strings/str_join.h"
 #include "cli/args.h"
 #include "cli/command.h"
+#include "cli/support_output.h"
 #include "cli/support_progress.h"
 #include "io/recording_set.h"
 #include "nlohmann/json.hpp"
@@ -80,7 +81,7 @@ int RunIdentify(const std::vector<std::string>& argv) {
       }
       j["points"].push_back(p);
     }
-    std::cout << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
+    PrintJson(j);
     return 0;
   }
   // CSV is the default human/machine form (--csv accepted for clarity).

@@ -126,7 +126,7 @@ int RunMapExport(const std::vector<std::string>& argv) {
   summary["bytes"] = text.size();
   summary["sha256"] = sha;
   if (args->Has("json")) {
-    std::cout << summary.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
+    PrintJson(summary);
   } else if (inverse) {
     std::fprintf(to_stdout ? stderr : stdout, "%s: inverse flux map of %s, %zu nodes (%d valid), sha256 %s\n", out.c_str(), cal->serial().c_str(),
                 rows, summary["valid"].get<int>(), sha.c_str());

@@ -102,7 +102,7 @@ int RunQueryLocal(const std::vector<std::string>& argv) {
         if (args->Has("json")) arr.push_back(ToJson(id, iq, p)); else csv += CsvRow(id, iq, p);
       }
     }
-    if (args->Has("json")) std::cout << nlohmann::json{{"serial", cal->serial()}, {"points", arr}}.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
+    if (args->Has("json")) PrintJson({{"serial", cal->serial()}, {"points", arr}});
     else std::cout << csv;
     return 0;
   }
@@ -113,7 +113,7 @@ int RunQueryLocal(const std::vector<std::string>& argv) {
   }
   const auto p = cal->Predict(**id, **iq);
   if (args->Has("json")) {
-    std::cout << ToJson(**id, **iq, p).dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
+    PrintJson(ToJson(**id, **iq, p));
   } else if (args->Has("csv")) {
     std::cout << kCsvHeader << CsvRow(**id, **iq, p);
   } else {

@@ -91,7 +91,7 @@ int RunReplay(const std::vector<std::string>& argv) {
       j["controller"] = {{"bandwidth_hz", rep->bandwidth_hz}, {"ld_nominal_h", rep->ld_nominal_h},
                          {"lq_nominal_h", rep->lq_nominal_h}, {"settle_s", rep->settle_s}};
     }
-    std::printf("%s\n", j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace).c_str());
+    PrintJson(j);
     return 0;
   }
   std::printf("%-8s %9s %9s %9s %14s\n", "point", "id_ref_a", "iq_ref_a", "speed_rpm", "residual_rms_a");

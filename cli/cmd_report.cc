@@ -140,11 +140,9 @@ struct Written {
 
 void PrintSummary(const Written& w, bool json) {
   if (json) {
-    std::cout << nlohmann::json{{"out", w.out}, {"serial", w.serial}, {"version", w.version},
-                                {"verdict", w.verdict}, {"figures", w.figures}, {"bytes", w.bytes},
-                                {"voltage_limit_speed_rpm", w.voltage_limit_speed_rpm}, {"sha256", w.sha256}}
-                     .dump(2, ' ', false, nlohmann::json::error_handler_t::replace)
-              << "\n";
+    PrintJson({{"out", w.out}, {"serial", w.serial}, {"version", w.version},
+               {"verdict", w.verdict}, {"figures", w.figures}, {"bytes", w.bytes},
+               {"voltage_limit_speed_rpm", w.voltage_limit_speed_rpm}, {"sha256", w.sha256}});
   } else {
     std::fprintf(w.out == "-" ? stderr : stdout, "%s: report for %s v%d (%s), %d figures, %zu bytes\n", w.out.c_str(),
                  w.serial.c_str(), w.version, w.verdict.c_str(), w.figures, w.bytes);

@@ -92,7 +92,7 @@ int RunSimulate(const std::vector<std::string>& argv) {
                         {"points", setup.points()}, {"steady_state_rows", setup.steady_state_rows()},
                         {"effects", setup.ActiveEffects()}, {"seconds", secs},
                         {"clipped", res->clipped}};
-    std::cout << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
+    PrintJson(j);
   } else {
     std::cout << dir << "\n" << truth << "\n";
   }

@@ -16,6 +16,7 @@
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_replace.h"
 #include "cli/args.h"
+#include "cli/support_output.h"
 #include "io/csv.h"
 #include "io/net.h"
 #include "nlohmann/json.hpp"
@@ -178,12 +179,6 @@ int ReportRpcError(const char* cmd, const grpc::Status& s) {
   return 1;
 }
 
-namespace {
-void Deadline(grpc::ClientContext* ctx, int seconds) {
-  ctx->set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(seconds));
-}
-}  // namespace
-
 int RunRemoteQuery(const std::vector<std::string>& argv, const FlagSpecs& flags) {
   auto args = ParseArgs(argv, flags);
   if (!args.ok()) std::fprintf(stderr, "fluxcal query: %s\n", std::string(args.status().message()).c_str());
@@ -208,23 +203,20 @@ int RunRemoteQuery(const std::vector<std::string>& argv, const FlagSpecs& flags)
   p->set_id_a(**id);
   p->set_iq_a(**iq);
   v1::QueryFluxResponse resp;
-  grpc::ClientContext ctx;
-  Deadline(&ctx, 30);
-  auto s = stub->QueryFlux(&ctx, req, &resp);
-  if (!s.ok()) return ReportRpcError("query", s);
+  if (auto s = CallWithDeadline(*stub, &v1::CalibrationService::Stub::QueryFlux, req, &resp); !s.ok()) {
+    return ReportRpcError("query", s);
+  }
   const auto& v = resp.values(0);
   if (args->Has("json")) {
-    std::cout << nlohmann::json{{"serial", resp.serial()}, {"version", resp.version()}, {"id_a", v.id_a()},
-                                {"iq_a", v.iq_a()}, {"psi_d_wb", v.psi_d_wb()}, {"psi_q_wb", v.psi_q_wb()},
-                                {"ldd_h", v.ldd_h()}, {"lqq_h", v.lqq_h()}, {"ldq_h", v.ldq_h()},
-                                {"ld_app_h", v.ld_app_h()}, {"lq_app_h", v.lq_app_h()}, {"torque_nm", v.torque_nm()},
-                                {"psi_d_wb_std", v.psi_d_wb_std()}, {"ldd_h_std", v.ldd_h_std()},
-                                {"lqq_h_std", v.lqq_h_std()}, {"torque_nm_std", v.torque_nm_std()},
-                                {"extrapolated", v.extrapolated()},
-                                {"region", v.region().empty() ? (v.extrapolated() ? "extrapolated" : "measured") : v.region()},
-                                {"valid", !v.invalid()}, {"invalid_reason", v.invalid_reason()}}
-                     .dump(2, ' ', false, nlohmann::json::error_handler_t::replace)
-              << "\n";
+    PrintJson({{"serial", resp.serial()}, {"version", resp.version()}, {"id_a", v.id_a()},
+               {"iq_a", v.iq_a()}, {"psi_d_wb", v.psi_d_wb()}, {"psi_q_wb", v.psi_q_wb()},
+               {"ldd_h", v.ldd_h()}, {"lqq_h", v.lqq_h()}, {"ldq_h", v.ldq_h()},
+               {"ld_app_h", v.ld_app_h()}, {"lq_app_h", v.lq_app_h()}, {"torque_nm", v.torque_nm()},
+               {"psi_d_wb_std", v.psi_d_wb_std()}, {"ldd_h_std", v.ldd_h_std()},
+               {"lqq_h_std", v.lqq_h_std()}, {"torque_nm_std", v.torque_nm_std()},
+               {"extrapolated", v.extrapolated()},
+               {"region", v.region().empty() ? (v.extrapolated() ? "extrapolated" : "measured") : v.region()},
+               {"valid", !v.invalid()}, {"invalid_reason", v.invalid_reason()}});
   } else {
     std::printf("serial %s v%d at id = %g A, iq = %g A: psi_d %.6g Wb, psi_q %.6g Wb, Ldd %.5g mH, Lqq %.5g mH, "
                 "Ldq %.4g mH, torque %.4g N m%s\n",
@@ -293,11 +285,9 @@ int WriteRemoteUdcAxis(const ParsedArgs& args, const v1::ExportTableRequest& req
     }
   }
   if (args.Has("json")) {
-    std::cout << nlohmann::json{{"serial", resp.serial()}, {"version", resp.version()}, {"table", req.table()},
-                                {"generating", req.generating()}, {"format", req.format()}, {"udc_axis_v", udcs},
-                                {"verdict", resp.verdict()}, {"released", resp.released()}, {"files", files}}
-                     .dump(2, ' ', false, nlohmann::json::error_handler_t::replace)
-              << "\n";
+    PrintJson({{"serial", resp.serial()}, {"version", resp.version()}, {"table", req.table()},
+               {"generating", req.generating()}, {"format", req.format()}, {"udc_axis_v", udcs},
+               {"verdict", resp.verdict()}, {"released", resp.released()}, {"files", files}});
   }
   return 0;
 }
@@ -383,10 +373,9 @@ int RunRemoteExport(const std::vector<std::string>& argv, const FlagSpecs& flags
   auto stub = MakeStub(*args->Get("server"));
   if (!stub) return 1;
   v1::ExportTableResponse resp;
-  grpc::ClientContext ctx;
-  Deadline(&ctx, 120);
-  auto s = stub->ExportTable(&ctx, req, &resp);
-  if (!s.ok()) return ReportRpcError("export", s);
+  if (auto s = CallWithDeadline(*stub, &v1::CalibrationService::Stub::ExportTable, req, &resp, 120); !s.ok()) {
+    return ReportRpcError("export", s);
+  }
   if (!udcs.empty()) return WriteRemoteUdcAxis(*args, req, resp, udcs);
   if (auto st = WriteNewOutput(*args, out_path, resp.data()); !st.ok()) {
     std::fprintf(stderr, "fluxcal export: %s\n", std::string(st.message()).c_str());
@@ -413,15 +402,13 @@ int RunRemoteExport(const std::vector<std::string>& argv, const FlagSpecs& flags
                  resp.clamped_cells(), resp.cells(), 100 * clamped_share);
   }
   if (args->Has("json")) {
-    std::cout << nlohmann::json{{"out", *args->Get("out")}, {"serial", resp.serial()}, {"version", resp.version()},
-                                {"table", req.table()}, {"generating", req.generating()},
-                                {"format", req.format()}, {"sha256", file_sha256},
-                                {"payload_crc32", resp.crc32()}, {"payload_sha256", resp.sha256()},
-                                {"cells", resp.cells()}, {"clamped_cells", resp.clamped_cells()},
-                                {"clamped_share", clamped_share}, {"verdict", resp.verdict()},
-                                {"released", resp.released()}, {"bytes", resp.data().size()}}
-                     .dump(2, ' ', false, nlohmann::json::error_handler_t::replace)
-              << "\n";
+    PrintJson({{"out", *args->Get("out")}, {"serial", resp.serial()}, {"version", resp.version()},
+               {"table", req.table()}, {"generating", req.generating()},
+               {"format", req.format()}, {"sha256", file_sha256},
+               {"payload_crc32", resp.crc32()}, {"payload_sha256", resp.sha256()},
+               {"cells", resp.cells()}, {"clamped_cells", resp.clamped_cells()},
+               {"clamped_share", clamped_share}, {"verdict", resp.verdict()},
+               {"released", resp.released()}, {"bytes", resp.data().size()}});
   } else {
     std::fprintf(to_stdout ? stderr : stdout, "%s: %s v%d %s table (%s), verdict %s, %s\n  sha256 %s (file)\n  payload_crc32 %s payload_sha256 %s (values)\n",
                 args->Get("out")->c_str(), resp.serial().c_str(), resp.version(), req.table().c_str(),
