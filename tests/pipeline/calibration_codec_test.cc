@@ -366,25 +366,22 @@ TEST_P(MigrationTest, OldJsonRowsConvertAndStillVerify) {
     }
   }
 
+  // The SQL that lets a row of table be edited: its trigger off (PostgreSQL)
+  // or dropped (SQLite).
+  auto allow_update = [&](const std::string& table, const std::string& trigger) {
+    return raw(pg ? "ALTER TABLE " + table + " DISABLE TRIGGER " + trigger : "DROP TRIGGER " + trigger);
+  };
   // A converted row edited behind the service is found.
-  if (pg) {
-    ASSERT_TRUE(raw("ALTER TABLE calibrations DISABLE TRIGGER calibrations_no_update"));
-    ASSERT_TRUE(raw("UPDATE calibrations SET model_pb = model_pb || '\\x00'::bytea WHERE version = 1"));
-  } else {
-    ASSERT_TRUE(raw("DROP TRIGGER calibrations_no_update"));
-    ASSERT_TRUE(raw("UPDATE calibrations SET model_pb = model_pb || x'00' WHERE version = 1"));
-  }
+  ASSERT_TRUE(allow_update("calibrations", "calibrations_no_update"));
+  ASSERT_TRUE(raw(pg ? "UPDATE calibrations SET model_pb = model_pb || '\\x00'::bytea WHERE version = 1"
+                     : "UPDATE calibrations SET model_pb = model_pb || x'00' WHERE version = 1"));
   report = storage::VerifyChains(**store);
   ASSERT_TRUE(report.ok());
   ASSERT_EQ(report->problems.size(), 1u);
   EXPECT_EQ(report->problems[0], "IPM-OLD v1: row changed after the v8 migration converted it to binary");
   EXPECT_EQ(storage::VerifyReleasedVersion(**store, "IPM-OLD", 1).code(), absl::StatusCode::kDataLoss);
   // So is an edited conversion record.
-  if (pg) {
-    ASSERT_TRUE(raw("ALTER TABLE calibration_conversions DISABLE TRIGGER conversions_no_update"));
-  } else {
-    ASSERT_TRUE(raw("DROP TRIGGER conversions_no_update"));
-  }
+  ASSERT_TRUE(allow_update("calibration_conversions", "conversions_no_update"));
   ASSERT_TRUE(raw("UPDATE calibration_conversions SET json_sha256 = 'x' WHERE version = 2"));
   report = storage::VerifyChains(**store);
   ASSERT_TRUE(report.ok());
