@@ -52,18 +52,13 @@ class HostileTest : public ::testing::Test {
   void SetUp() override {
     db_ = TempPath(::testing::UnitTest::GetInstance()->current_test_info()->name() + std::string(".db"));
     for (auto sfx : {"", "-wal", "-shm"}) fs::remove(db_ + sfx);
-    auto s = storage::Store::Open(db_);
-    ASSERT_TRUE(s.ok());
-    store_ = std::move(*s);
-    service_ = std::make_unique<CalibrationServiceImpl>(store_.get());
     int port = 0;
-    server_ = StartServer(service_.get(), "127.0.0.1:0", &port);
-    ASSERT_NE(server_, nullptr);
+    ASSERT_TRUE(test_support::ServeStore(db_, &store_, &service_, &server_, &port));
     stub_ = v1::CalibrationService::NewStub(
         grpc::CreateChannel("127.0.0.1:" + std::to_string(port), grpc::InsecureChannelCredentials()));
   }
   void TearDown() override {
-    server_->Shutdown();
+    if (server_) server_->Shutdown();
     store_.reset();
     for (auto sfx : {"", "-wal", "-shm"}) fs::remove(db_ + sfx);
   }

@@ -70,13 +70,8 @@ class ServiceTest : public ::testing::TestWithParam<bool> {
       ASSERT_TRUE(pg->CreateDatabase(name));
       url = pg->Url(name);
     }
-    auto s = storage::Store::Open(url);
-    ASSERT_TRUE(s.ok());
-    store_ = std::move(*s);
-    service_ = std::make_unique<CalibrationServiceImpl>(store_.get());
     int port = 0;
-    server_ = StartServer(service_.get(), "127.0.0.1:0", &port);
-    ASSERT_GT(port, 0);
+    ASSERT_TRUE(test_support::ServeStore(url, &store_, &service_, &server_, &port));
     channel_ = grpc::CreateChannel("127.0.0.1:" + std::to_string(port), grpc::InsecureChannelCredentials());
     stub_ = v1::CalibrationService::NewStub(channel_);
   }

@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <filesystem>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -16,9 +17,26 @@
 #include "gtest/gtest.h"
 #include "io/csv.h"
 #include "io/recording_set.h"
+#include "server/service.h"
+#include "storage/store.h"
 #include "simulation/twin.h"
 
 namespace fluxcal::server::test_support {
+
+// A service on the store at url, served on a free loopback port (*port)
+// without an authorizer: fails naming what did not open or start.
+inline ::testing::AssertionResult ServeStore(const std::string& url, std::unique_ptr<storage::Store>* store,
+                                             std::unique_ptr<CalibrationServiceImpl>* service,
+                                             std::unique_ptr<grpc::Server>* server, int* port) {
+  auto s = storage::Store::Open(url);
+  if (!s.ok()) return ::testing::AssertionFailure() << url << ": " << s.status();
+  *store = std::move(*s);
+  *service = std::make_unique<CalibrationServiceImpl>(store->get());
+  *port = 0;
+  *server = StartServer(service->get(), "127.0.0.1:0", port);
+  if (*server == nullptr || *port <= 0) return ::testing::AssertionFailure() << "the server did not start";
+  return ::testing::AssertionSuccess();
+}
 
 // 36 points of the paper's grid (id -100..0 A, iq 0..100 A in 20 A steps)
 // from the twin's analytic motor; scale multiplies Ldd and Lqq.
