@@ -53,13 +53,20 @@ std::vector<double> Column(const std::string& path, const std::string& name) {
   return v;
 }
 
-TEST(EnvelopeCli, UdcAxisFilesEqualSingleExportsAndTheFigureHasACurvePerUdc) {
+// The published Baldor EOL set (in the repository) fitted into cal.
+::testing::AssertionResult FitBaldorEol(const std::string& cal) {
   const std::string set = std::string(FLUXCAL_SOURCE_DIR) + "/data/real/baldor_eol";
-  ASSERT_TRUE(fs::exists(set + "/manifest.json")) << "in-repo fixture missing: " << set;
+  if (!fs::exists(set + "/manifest.json")) return ::testing::AssertionFailure() << "in-repo fixture missing: " << set;
+  const RunResult fit = RunFluxcal("fit " + set + " --out " + cal);
+  if (fit.code != 0) return ::testing::AssertionFailure() << "fit exited " << fit.code << ": " << fit.err;
+  return ::testing::AssertionSuccess();
+}
+
+TEST(EnvelopeCli, UdcAxisFilesEqualSingleExportsAndTheFigureHasACurvePerUdc) {
   const fs::path dir = fluxcal::e2e::FreshTempDir("fluxcal_envelope_");
   auto path = [&](const std::string& name) { return (dir / name).string(); };
   const std::string cal = path("c.json");
-  ASSERT_EQ(RunFluxcal("fit " + set + " --out " + cal).code, 0);
+  ASSERT_TRUE(FitBaldorEol(cal));
 
   const std::vector<int> udcs = {300, 400, 540};
   const RunResult axis = RunFluxcal("export " + cal + " --table envelope --udc-axis-v 300,400,540 --out " +
@@ -128,12 +135,10 @@ TEST(EnvelopeCli, UdcAxisFilesEqualSingleExportsAndTheFigureHasACurvePerUdc) {
 // over a Udc axis; the flag with another table a usage error naming it,
 // nothing written.
 TEST(EnvelopeCli, GeneratingEnvelopeUnderLabelsOfItsOwn) {
-  const std::string set = std::string(FLUXCAL_SOURCE_DIR) + "/data/real/baldor_eol";
-  ASSERT_TRUE(fs::exists(set + "/manifest.json")) << "in-repo fixture missing: " << set;
   const fs::path dir = fluxcal::e2e::FreshTempDir("fluxcal_generating_");
   auto path = [&](const std::string& name) { return (dir / name).string(); };
   const std::string cal = path("c.json");
-  ASSERT_EQ(RunFluxcal("fit " + set + " --out " + cal).code, 0);
+  ASSERT_TRUE(FitBaldorEol(cal));
 
   const RunResult mot = RunFluxcal("export " + cal + " --table envelope --out " + path("m.csv") + " --json");
   ASSERT_EQ(mot.code, 0) << mot.err;
