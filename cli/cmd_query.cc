@@ -143,8 +143,8 @@ int RunQuery(const std::vector<std::string>& argv) {
 }  // namespace
 
 FLUXCAL_REGISTER_COMMAND("query", "flux linkage and inductance of a calibration at any (id, iq)", RunQuery,
-                         "fluxcal query calibration.json (--id-a A --iq-a A | --grid IDMIN:IDMAX:N,IQMIN:IQMAX:M) [--json|--csv]\n"
-                         "fluxcal query SERIAL --server ADDR --id-a A --iq-a A [--version N] [--json]",
+                         "fluxcal query calibration.json (--id-a A --iq-a A | --grid IDMIN:IDMAX:N,IQMIN:IQMAX:M) [--json|--csv]\n" +
+                             std::string(kRemoteQueryUsage),
                          kQueryFlags);
 
 }  // namespace fluxcal::cli

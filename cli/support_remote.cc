@@ -182,10 +182,7 @@ int ReportRpcError(const char* cmd, const grpc::Status& s) {
 int RunRemoteQuery(const std::vector<std::string>& argv, const FlagSpecs& flags) {
   auto args = ParseArgs(argv, flags);
   if (!args.ok()) std::fprintf(stderr, "fluxcal query: %s\n", std::string(args.status().message()).c_str());
-  if (!args.ok() || args->positional.size() != 1) {
-    std::fprintf(stderr, "usage: fluxcal query SERIAL --server ADDR --id-a A --iq-a A [--version N] [--json]\n");
-    return 2;
-  }
+  if (!args.ok() || args->positional.size() != 1) return UsageError(kRemoteQueryUsage);
   auto id = args->GetDouble("id-a");
   auto iq = args->GetDouble("iq-a");
   if (!id.ok() || !iq.ok() || !id->has_value() || !iq->has_value()) {

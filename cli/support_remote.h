@@ -86,6 +86,10 @@ int RunSerialCall(const char* cmd, const std::string& usage, const std::vector<s
   return print(resp, args->Has("json"));
 }
 
+// `query` with --server: its usage error and the second line of its help.
+inline constexpr char kRemoteQueryUsage[] =
+    "fluxcal query SERIAL --server ADDR --id-a A --iq-a A [--version N] [--json]";
+
 // `query` and `export` with --server; flags: what the mode accepts.
 int RunRemoteQuery(const std::vector<std::string>& argv, const FlagSpecs& flags);
 int RunRemoteExport(const std::vector<std::string>& argv, const FlagSpecs& flags);
