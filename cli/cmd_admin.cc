@@ -7,7 +7,6 @@
 // itself. PostgreSQL is backed up with pg_dump (docs/service.md).
 #include <cstdio>
 #include <filesystem>
-#include <iostream>
 #include <system_error>
 
 #include "absl/strings/match.h"

@@ -6,7 +6,6 @@
 // service user reads it (docs/security.md). A running server picks up the
 // change within a second, or at once on SIGHUP.
 #include <cstdio>
-#include <iostream>
 
 #include "cli/args.h"
 #include "cli/command.h"

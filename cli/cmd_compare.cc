@@ -10,7 +10,6 @@
 // and refused when implausible (io/flux_map.h).
 #include <cmath>
 #include <cstdio>
-#include <iostream>
 #include <vector>
 
 #include "absl/strings/numbers.h"

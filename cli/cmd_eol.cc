@@ -7,12 +7,10 @@
 // the reply's count and digest of what the service stored must equal what
 // was sent, or eol stops (exit 1) before anything is fitted. Here: flags,
 // the stub, the table files and the summary.
-#include <chrono>
 #include <thread>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <iostream>
 #include <optional>
 
 #include <grpcpp/grpcpp.h>

@@ -11,7 +11,6 @@
 // their own names (`payload_crc32`, `payload_sha256`).
 #include <cstdio>
 #include <filesystem>
-#include <iostream>
 #include <system_error>
 
 #include "absl/status/status.h"
