@@ -12,14 +12,19 @@
 
 namespace {
 
+// The timed loop of every benchmark here: set diagnosed.
+void TimeDiagnose(benchmark::State& state, const fluxcal::io::RecordingSet& set) {
+  for (auto _ : state) {
+    auto r = fluxcal::diag::Diagnose(set);
+    benchmark::DoNotOptimize(r);
+  }
+}
+
 void BM_Diagnose(benchmark::State& state) {
   fluxcal::sim::TwinConfig cfg;
   cfg.effects.dead_time_s = 2e-6;
   static auto sim = fluxcal::sim::Simulate(cfg, fluxcal::sim::DefaultPlan());
-  for (auto _ : state) {
-    auto r = fluxcal::diag::Diagnose(sim->set);
-    benchmark::DoNotOptimize(r);
-  }
+  TimeDiagnose(state, sim->set);
 }
 BENCHMARK(BM_Diagnose)->Unit(benchmark::kMillisecond);
 
@@ -41,10 +46,7 @@ void BM_DiagnoseEolExtensionsPair(benchmark::State& state) {
   cfg.effects.udc_sense_gain = 1.03;
   cfg.effects.offset_b_a = 1.2;
   static auto sim = fluxcal::sim::Simulate(cfg, *plan);
-  for (auto _ : state) {
-    auto r = fluxcal::diag::Diagnose(sim->set);
-    benchmark::DoNotOptimize(r);
-  }
+  TimeDiagnose(state, sim->set);
 }
 BENCHMARK(BM_DiagnoseEolExtensionsPair)->Unit(benchmark::kMillisecond);
 
@@ -60,10 +62,7 @@ void BM_DiagnoseOutsideTheCatalogue(benchmark::State& state) {
     return;
   }
   static auto sim = fluxcal::sim::Simulate(cfg, fluxcal::sim::DefaultPlan());
-  for (auto _ : state) {
-    auto r = fluxcal::diag::Diagnose(sim->set);
-    benchmark::DoNotOptimize(r);
-  }
+  TimeDiagnose(state, sim->set);
 }
 BENCHMARK(BM_DiagnoseOutsideTheCatalogue)->Unit(benchmark::kMillisecond);
 
@@ -81,10 +80,7 @@ void BM_DiagnoseRealMagneticsBench(benchmark::State& state) {
     state.SkipWithError("baldor_bench_dead_time does not read");
     return;
   }
-  for (auto _ : state) {
-    auto r = fluxcal::diag::Diagnose(*set);
-    benchmark::DoNotOptimize(r);
-  }
+  TimeDiagnose(state, *set);
 }
 BENCHMARK(BM_DiagnoseRealMagneticsBench)->Unit(benchmark::kMillisecond);
 

@@ -70,16 +70,17 @@ const std::map<std::string, Calibration>& Fits() {
   return *fits;
 }
 
+// The sizes of cal in both forms, and its model (range(0)) as the label.
 void Sizes(benchmark::State& state, const Calibration& cal) {
   state.counters["json_bytes"] = static_cast<double>(cal.ToJson().dump().size());
   state.counters["model_bytes"] = static_cast<double>(fluxcal::pipeline::EncodeCalibration(cal).size());
+  state.SetLabel(kModels[state.range(0)]);
 }
 
 void BM_EncodeModel(benchmark::State& state) {
   const Calibration& cal = Fits().at(kModels[state.range(0)]);
   for (auto _ : state) benchmark::DoNotOptimize(fluxcal::pipeline::EncodeCalibration(cal));
   Sizes(state, cal);
-  state.SetLabel(kModels[state.range(0)]);
 }
 BENCHMARK(BM_EncodeModel)->DenseRange(0, 4)->Unit(benchmark::kMicrosecond);
 
@@ -88,7 +89,6 @@ void BM_DecodeModel(benchmark::State& state) {
   const std::string bytes = fluxcal::pipeline::EncodeCalibration(cal);
   for (auto _ : state) benchmark::DoNotOptimize(fluxcal::pipeline::DecodeCalibration(bytes));
   Sizes(state, cal);
-  state.SetLabel(kModels[state.range(0)]);
 }
 BENCHMARK(BM_DecodeModel)->DenseRange(0, 4)->Unit(benchmark::kMicrosecond);
 
@@ -98,7 +98,6 @@ void BM_DecodeJson(benchmark::State& state) {
   const std::string text = cal.ToJson().dump();
   for (auto _ : state) benchmark::DoNotOptimize(Calibration::FromJson(nlohmann::json::parse(text)));
   Sizes(state, cal);
-  state.SetLabel(kModels[state.range(0)]);
 }
 BENCHMARK(BM_DecodeJson)->DenseRange(0, 4)->Unit(benchmark::kMicrosecond);
 

@@ -39,12 +39,18 @@ const Fixture& Baldor() {
   return f;
 }
 
-void BM_ReportPage(benchmark::State& state) {
+// Baldor(), or nullptr with the benchmark skipped when it did not load.
+const Fixture* BaldorOrSkip(benchmark::State& state) {
   const Fixture& f = Baldor();
-  if (!f.ok) {
-    state.SkipWithError("data/real/baldor_eol");
-    return;
-  }
+  if (f.ok) return &f;
+  state.SkipWithError("data/real/baldor_eol");
+  return nullptr;
+}
+
+void BM_ReportPage(benchmark::State& state) {
+  const Fixture* baldor = BaldorOrSkip(state);
+  if (baldor == nullptr) return;
+  const Fixture& f = *baldor;
   fluxcal::report::ReportInputs in;
   in.calibration = &f.cal;
   in.calibration_json = f.cal.ToJson();
@@ -61,11 +67,9 @@ void BM_ReportPage(benchmark::State& state) {
 BENCHMARK(BM_ReportPage)->Unit(benchmark::kMillisecond);
 
 void BM_ReportTablesOnly(benchmark::State& state) {
-  const Fixture& f = Baldor();
-  if (!f.ok) {
-    state.SkipWithError("data/real/baldor_eol");
-    return;
-  }
+  const Fixture* baldor = BaldorOrSkip(state);
+  if (baldor == nullptr) return;
+  const Fixture& f = *baldor;
   fluxcal::tables::MachineLimits lim;
   lim.pole_pairs = f.cal.pole_pairs();
   lim.rs_ohm = f.cal.rs_ohm();

@@ -14,11 +14,10 @@
 
 #include <grpcpp/grpcpp.h>
 
-#include <grpcpp/support/client_interceptor.h>
-
 #include "benchmark/benchmark.h"
 #include "io/csv.h"
 #include "server/auth.h"
+#include "server/bearer.h"
 #include "server/service.h"
 #include "storage/store.h"
 #include "io/sha256.h"
@@ -28,27 +27,6 @@ namespace {
 
 // N servers (each its own store object, i.e. its own connections) on one
 // database; the channels a load balancer would spread clients over.
-// Adds the bearer token to every call (what the CLI's --token-file does).
-class Bearer final : public grpc::experimental::Interceptor {
- public:
-  explicit Bearer(std::string h) : h_(std::move(h)) {}
-  void Intercept(grpc::experimental::InterceptorBatchMethods* m) override {
-    if (m->QueryInterceptionHookPoint(grpc::experimental::InterceptionHookPoints::PRE_SEND_INITIAL_METADATA)) {
-      m->GetSendInitialMetadata()->insert({"authorization", h_});
-    }
-    m->Proceed();
-  }
-  std::string h_;
-};
-class BearerFactory final : public grpc::experimental::ClientInterceptorFactoryInterface {
- public:
-  explicit BearerFactory(std::string h) : h_(std::move(h)) {}
-  grpc::experimental::Interceptor* CreateClientInterceptor(grpc::experimental::ClientRpcInfo*) override {
-    return new Bearer(h_);
-  }
-  std::string h_;
-};
-
 struct Fixture {
   std::vector<std::unique_ptr<fluxcal::storage::Store>> stores;
   std::vector<std::unique_ptr<fluxcal::server::CalibrationServiceImpl>> services;
@@ -89,10 +67,7 @@ struct Fixture {
       }
       grpc::SslCredentialsOptions ssl;
       ssl.pem_root_certs = opt.tls_cert_pem;
-      std::vector<std::unique_ptr<grpc::experimental::ClientInterceptorFactoryInterface>> f;
-      f.push_back(std::make_unique<BearerFactory>("Bearer " + token));
-      channels.push_back(grpc::experimental::CreateCustomChannelWithInterceptors(addr, grpc::SslCredentials(ssl),
-                                                                                  grpc::ChannelArguments(), std::move(f)));
+      channels.push_back(fluxcal::server::BearerChannel(addr, grpc::SslCredentials(ssl), token));
     }
   }
 };

@@ -37,15 +37,21 @@ fluxcal::tables::MachineLimits Limits() {
   return lim;
 }
 
-void BM_Mtpa256(benchmark::State& state) {
-  const auto m = Motor();
-  fluxcal::tables::TableSpec spec;
-  spec.points = 256;
+// The timed loop: the table of spec built from m under Limits().
+void TimeBuildTable(benchmark::State& state, const fluxcal::sim::AnalyticMotor& m,
+                    const fluxcal::tables::TableSpec& spec) {
   for (auto _ : state) {
     auto t = fluxcal::tables::BuildTable(m, Limits(), spec);
     if (!t.ok()) state.SkipWithError(std::string(t.status().message()).c_str());
     benchmark::DoNotOptimize(t);
   }
+}
+
+void BM_Mtpa256(benchmark::State& state) {
+  const auto m = Motor();
+  fluxcal::tables::TableSpec spec;
+  spec.points = 256;
+  TimeBuildTable(state, m, spec);
 }
 BENCHMARK(BM_Mtpa256)->Unit(benchmark::kMillisecond);
 
@@ -55,11 +61,7 @@ void BM_FieldWeakening64x64(benchmark::State& state) {
   spec.kind = "fw";
   spec.points = 64;
   spec.speed_points = 64;
-  for (auto _ : state) {
-    auto t = fluxcal::tables::BuildTable(m, Limits(), spec);
-    if (!t.ok()) state.SkipWithError(std::string(t.status().message()).c_str());
-    benchmark::DoNotOptimize(t);
-  }
+  TimeBuildTable(state, m, spec);
 }
 BENCHMARK(BM_FieldWeakening64x64)->Unit(benchmark::kMillisecond);
 

@@ -86,6 +86,19 @@ FlagSpecs WithoutFlags(const FlagSpecs& flags, const std::set<std::string>& name
   return out;
 }
 
+FlagSpec JsonFlag(const std::string& what) { return {"json", "", "print " + what + " as one JSON document"}; }
+
+FlagSpec ServerFlag(const std::string& use) {
+  return {"server", "ADDR", absl::StrCat(use, ", HOST[:PORT] (default port ", kDefaultPort, ")")};
+}
+
+FlagSpec OutFlag(const std::string& what) { return {"out", "FILE", what + " to write (required; - for stdout)"}; }
+
+int UsageError(const std::string& usage) {
+  std::fprintf(stderr, "usage: %s\n", usage.c_str());
+  return 2;
+}
+
 bool WantsHelp(const std::vector<std::string>& args, const FlagSpecs& flags) {
   for (size_t i = 0; i < args.size(); ++i) {
     const std::string& a = args[i];

@@ -46,6 +46,25 @@ absl::StatusOr<ParsedArgs> ParseArgs(const std::vector<std::string>& args, const
 // flags without the named ones (a mode of a command that takes fewer).
 FlagSpecs WithoutFlags(const FlagSpecs& flags, const std::set<std::string>& names);
 
+// The flags many commands take, each said one way everywhere.
+// --json: "print WHAT as one JSON document" (cli/command.h: exactly one).
+FlagSpec JsonFlag(const std::string& what);
+inline const FlagSpec kJsonFlag = JsonFlag("the result");
+// --server ADDR of a command that only talks to the service.
+inline const FlagSpec kServerFlag = {"server", "ADDR", "the service, HOST[:PORT] (default port 50051; required)"};
+// --server ADDR of a command that works locally too: "USE, HOST[:PORT] ...".
+FlagSpec ServerFlag(const std::string& use);
+// --version N beside such a --server.
+inline const FlagSpec kServerVersionFlag = {"version", "N", "with --server: calibration version (default the latest)"};
+// --db URL of a command that only reads a store that exists.
+inline const FlagSpec kExistingDbFlag = {"db", "URL",
+                                         "the store: SQLite PATH or postgresql://... (required; must exist)"};
+// --out FILE that may be "-" (CheckOutToStdout): "WHAT to write (required; - for stdout)".
+FlagSpec OutFlag(const std::string& what);
+
+// Prints "usage: USAGE" on stderr and returns 2 (the exit status of a usage error).
+int UsageError(const std::string& usage);
+
 // True if args ask for help (--help or -h where a flag may stand, i.e. not as
 // the value of a flag that takes one).
 bool WantsHelp(const std::vector<std::string>& args, const FlagSpecs& flags);

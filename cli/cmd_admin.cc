@@ -7,12 +7,13 @@
 // itself. PostgreSQL is backed up with pg_dump (docs/service.md).
 #include <cstdio>
 #include <filesystem>
-#include <iostream>
 #include <system_error>
 
 #include "absl/strings/match.h"
 #include "cli/args.h"
 #include "cli/command.h"
+#include "cli/support_output.h"
+#include "cli/support_store.h"
 #include "nlohmann/json.hpp"
 #include "pipeline/pipeline.h"
 #include "pipeline/store.h"
@@ -20,14 +21,11 @@
 namespace fluxcal::cli {
 namespace {
 
-int Fail(const std::string& m, int code = 1) {
-  std::fprintf(stderr, "fluxcal admin: %s\n", m.c_str());
-  return code;
-}
+int Fail(const std::string& m, int code = 1) { return CommandError("admin", m, code); }
 
 void Print(const nlohmann::json& j, bool json, const std::string& text) {
   if (json) {
-    std::cout << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
+    PrintJson(j);
   } else {
     std::printf("%s\n", text.c_str());
   }
@@ -96,11 +94,11 @@ int Hash(const ParsedArgs& a) {
   const auto db = a.Get("db");
   if (!db) return Fail("usage: fluxcal admin hash --db URL [--json]", 2);
   // Only reads: a store that does not exist is refused, not created.
-  auto store = pipeline::OpenStore(*db, /*create=*/false);
-  if (!store.ok()) return Fail("flag --db: " + std::string(store.status().message()));
-  auto h = pipeline::ContentHash(**store);
+  auto store = OpenExistingStore("admin", a);
+  if (!store) return 1;
+  auto h = pipeline::ContentHash(*store);
   if (!h.ok()) return Fail(std::string(h.status().message()));
-  Print({{"backend", (*store)->Backend()}, {"content_sha256", *h}}, a.Has("json"), *h);
+  Print({{"backend", store->Backend()}, {"content_sha256", *h}}, a.Has("json"), *h);
   return 0;
 }
 
@@ -109,7 +107,7 @@ const FlagSpecs kAdminFlags = {
     {"to", "URL", "migrate: target store, postgresql://USER@HOST:PORT/DB"},
     {"db", "URL", "backup, hash: the store (SQLite PATH; hash also postgresql://...)"},
     {"out", "FILE", "backup: the SQLite backup file to write"},
-    {"json", "", "print the result as one JSON document"},
+    kJsonFlag,
     {kForceFlag.name, kForceFlag.value, "backup: " + kForceFlag.help},
 };
 

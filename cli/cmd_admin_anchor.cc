@@ -10,39 +10,31 @@
 
 #include "cli/args.h"
 #include "cli/command.h"
+#include "cli/support_output.h"
+#include "cli/support_store.h"
 #include "pipeline/anchor.h"
-#include "pipeline/store.h"
 
 namespace fluxcal::cli {
 namespace {
 
+constexpr char kAnchorUsage[] = "fluxcal admin anchor --db PATH|postgresql://... [--out FILE] [--json]";
 const FlagSpecs kAnchorFlags = {
-    {"db", "URL", "the store: SQLite PATH or postgresql://... (required; must exist)"},
+    kExistingDbFlag,
     {"out", "FILE", "append the anchor line to FILE (created if missing)"},
-    {"json", "", "print the anchor as one JSON document"},
+    JsonFlag("the anchor"),
 };
 
 int RunAnchor(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, kAnchorFlags);
-  if (!args.ok() || !args->Get("db") || !args->positional.empty()) {
-    if (!args.ok()) std::fprintf(stderr, "fluxcal admin anchor: %s\n", std::string(args.status().message()).c_str());
-    std::fprintf(stderr, "usage: fluxcal admin anchor --db PATH|postgresql://... [--out FILE] [--json]\n");
-    return 2;
+  ParsedArgs args;
+  std::unique_ptr<storage::Store> store;
+  if (int rc = ParseArgsAndOpenStore("admin anchor", argv, kAnchorFlags, kAnchorUsage, &args, &store); rc != 0) {
+    return rc;
   }
-  auto store = pipeline::OpenStore(*args->Get("db"), /*create=*/false);
-  if (!store.ok()) {
-    std::fprintf(stderr, "fluxcal admin anchor: flag --db: %s\n", std::string(store.status().message()).c_str());
-    return 1;
-  }
-  const std::string out = args->Get("out").value_or("");
-  auto head = pipeline::AnchorStore(**store, out);
-  if (!head.ok()) {
-    std::fprintf(stderr, "fluxcal admin anchor: %s%s\n", out.empty() ? "" : "flag --out: ",
-                 std::string(head.status().message()).c_str());
-    return 1;
-  }
-  if (args->Has("json")) {
-    std::cout << pipeline::AnchorLine(*head, "snapshot", (*store)->Backend(), pipeline::StoreNowUtc()) << "\n";
+  const std::string out = args.Get("out").value_or("");
+  auto head = pipeline::AnchorStore(*store, out);
+  if (!head.ok()) return CommandError("admin anchor", (out.empty() ? "" : "flag --out: ") + std::string(head.status().message()));
+  if (args.Has("json")) {
+    std::cout << pipeline::AnchorLine(*head, "snapshot", store->Backend(), pipeline::StoreNowUtc()) << "\n";
   } else {
     std::printf("anchor %s: %zu serials", head->digest_sha256.c_str(), head->calibrations.size());
     if (head->release_seq > 0) {
@@ -57,6 +49,6 @@ int RunAnchor(const std::vector<std::string>& argv) {
 }  // namespace
 
 FLUXCAL_REGISTER_COMMAND("admin anchor", "print or append the chain heads to keep outside the database", RunAnchor,
-                         "fluxcal admin anchor --db PATH|postgresql://... [--out FILE] [--json]", kAnchorFlags);
+                         kAnchorUsage, kAnchorFlags);
 
 }  // namespace fluxcal::cli

@@ -6,10 +6,10 @@
 // service user reads it (docs/security.md). A running server picks up the
 // change within a second, or at once on SIGHUP.
 #include <cstdio>
-#include <iostream>
 
 #include "cli/args.h"
 #include "cli/command.h"
+#include "cli/support_output.h"
 #include "io/csv.h"
 #include "io/recording_set.h"
 #include "nlohmann/json.hpp"
@@ -36,36 +36,25 @@ int Fail(const char* cmd, const absl::Status& s) {
 constexpr char kGroupHelp[] =
     "group of the service user (name or number): the keys file becomes mode 0640 in it (default: a new file is "
     "0600, an existing one keeps its owner, group and mode)";
-const FlagSpecs kAddKeyFlags = {
-    {"keys", "KEYS.json", "the keys file of `fluxcal serve --auth` (created if missing)"},
-    {"name", "NAME", "identity (unique in the keys file; logged in the audit trail)"},
-    {"role", "ROLE", "station|release|flasher|engineer|admin|health"},
-    {"group", "GROUP", kGroupHelp},
-    {"json", "", "print the result as one JSON document"},
-};
-const FlagSpecs kAddCertFlags = {
-    {"keys", "KEYS.json", "the keys file of `fluxcal serve --auth` (created if missing)"},
-    {"name", "NAME", "identity (unique in the keys file; logged in the audit trail)"},
-    {"role", "ROLE", "station|release|flasher|engineer|admin|health"},
-    {"cn", "CN", "the client certificate's subject common name"},
-    {"group", "GROUP", kGroupHelp},
-    {"json", "", "print the result as one JSON document"},
-};
-const FlagSpecs kRevokeFlags = {
-    {"keys", "KEYS.json", "the keys file of `fluxcal serve --auth`"},
-    {"name", "NAME", "identity to remove"},
-    {"group", "GROUP", kGroupHelp},
-    {"json", "", "print the result as one JSON document"},
-};
-const FlagSpecs kListKeysFlags = {
-    {"keys", "KEYS.json", "the keys file of `fluxcal serve --auth`"},
-    {"json", "", "print the result as one JSON document"},
-};
+const FlagSpec kKeysFlag = {"keys", "KEYS.json", "the keys file of `fluxcal serve --auth`"};
+const FlagSpec kNewKeysFlag = {"keys", "KEYS.json", kKeysFlag.help + " (created if missing)"};
+const FlagSpec kGroupFlag = {"group", "GROUP", kGroupHelp};
+// add-key and add-cert: who, with which role (add-cert: and its certificate).
+const FlagSpec kNameFlag = {"name", "NAME", "identity (unique in the keys file; logged in the audit trail)"};
+const FlagSpec kRoleFlag = {"role", "ROLE", "station|release|flasher|engineer|admin|health"};
+const FlagSpec kCnFlag = {"cn", "CN", "the client certificate's subject common name"};
+const FlagSpecs kAddKeyFlags = {kNewKeysFlag, kNameFlag, kRoleFlag, kGroupFlag, kJsonFlag};
+const FlagSpecs kAddCertFlags = {kNewKeysFlag, kNameFlag, kRoleFlag, kCnFlag, kGroupFlag, kJsonFlag};
+const FlagSpecs kRevokeFlags = {kKeysFlag, {"name", "NAME", "identity to remove"}, kGroupFlag, kJsonFlag};
+const FlagSpecs kListKeysFlags = {kKeysFlag, kJsonFlag};
 const FlagSpecs kKeygenFlags = {
     {"out", "PREFIX", "writes PREFIX.key (private, for serve --signing-key / export --sign-key) and PREFIX.pub"},
-    {"json", "", "print the result as one JSON document"},
+    kJsonFlag,
     kForceFlag,
 };
+constexpr char kRevokeUsage[] = "fluxcal admin revoke --keys KEYS.json --name NAME [--group GROUP] [--json]";
+constexpr char kListKeysUsage[] = "fluxcal admin list-keys --keys KEYS.json [--json]";
+constexpr char kKeygenUsage[] = "fluxcal admin keygen --out PREFIX [--force] [--json]";
 
 int AddEntry(const std::vector<std::string>& argv, bool cert) {
   const char* cmd = cert ? "add-cert" : "add-key";
@@ -107,7 +96,7 @@ int AddEntry(const std::vector<std::string>& argv, bool cert) {
   if (args->Has("json")) {
     nlohmann::json j = {{"name", name}, {"role", std::string(server::RoleName(*role))}};
     if (cert) j["cert_cn"] = e.cert_cn; else j["token"] = token;
-    std::cout << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
+    PrintJson(j);
   } else if (cert) {
     std::printf("%s (%s): client certificate CN '%s'\n", name.c_str(), std::string(server::RoleName(*role)).c_str(),
                 e.cert_cn.c_str());
@@ -124,10 +113,7 @@ int RunAddCert(const std::vector<std::string>& argv) { return AddEntry(argv, tru
 
 int RunRevoke(const std::vector<std::string>& argv) {
   auto args = ParseArgs(argv, kRevokeFlags);
-  if (!args.ok() || !args->Get("keys") || !args->Get("name")) {
-    std::fprintf(stderr, "usage: fluxcal admin revoke --keys KEYS.json --name NAME [--group GROUP] [--json]\n");
-    return 2;
-  }
+  if (!args.ok() || !args->Get("keys") || !args->Get("name")) return UsageError(kRevokeUsage);
   auto keys = server::LoadKeys(*args->Get("keys"));
   if (!keys.ok()) return Fail("revoke", keys.status());
   const size_t before = keys->entries.size();
@@ -139,7 +125,7 @@ int RunRevoke(const std::vector<std::string>& argv) {
     return Fail("revoke", s);
   }
   if (args->Has("json")) {
-    std::cout << nlohmann::json{{"revoked", *args->Get("name")}}.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
+    PrintJson({{"revoked", *args->Get("name")}});
   } else {
     std::printf("revoked %s (a running server drops it within a second, or at once on SIGHUP)\n",
                 args->Get("name")->c_str());
@@ -149,10 +135,7 @@ int RunRevoke(const std::vector<std::string>& argv) {
 
 int RunListKeys(const std::vector<std::string>& argv) {
   auto args = ParseArgs(argv, kListKeysFlags);
-  if (!args.ok() || !args->Get("keys")) {
-    std::fprintf(stderr, "usage: fluxcal admin list-keys --keys KEYS.json [--json]\n");
-    return 2;
-  }
+  if (!args.ok() || !args->Get("keys")) return UsageError(kListKeysUsage);
   auto keys = server::LoadKeys(*args->Get("keys"));
   if (!keys.ok()) return Fail("list-keys", keys.status());
   nlohmann::json arr = nlohmann::json::array();
@@ -164,16 +147,13 @@ int RunListKeys(const std::vector<std::string>& argv) {
                   e.cert_cn.empty() ? "token" : ("certificate CN " + e.cert_cn).c_str());
     }
   }
-  if (args->Has("json")) std::cout << nlohmann::json{{"keys", arr}}.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
+  if (args->Has("json")) PrintJson({{"keys", arr}});
   return 0;
 }
 
 int RunKeygen(const std::vector<std::string>& argv) {
   auto args = ParseArgs(argv, kKeygenFlags);
-  if (!args.ok() || !args->Get("out")) {
-    std::fprintf(stderr, "usage: fluxcal admin keygen --out PREFIX [--force] [--json]   (writes PREFIX.key, PREFIX.pub)\n");
-    return 2;
-  }
+  if (!args.ok() || !args->Get("out")) return UsageError(std::string(kKeygenUsage) + "   (writes PREFIX.key, PREFIX.pub)");
   const std::string key = *args->Get("out") + ".key", pub = *args->Get("out") + ".pub";
   // The overwrite rule (cli/args.h): a key pair in use is never replaced
   // unless --force says so.
@@ -189,7 +169,7 @@ int RunKeygen(const std::vector<std::string>& argv) {
   if (auto s2 = WriteNewOutput(*args, {"out", pub}, kp->public_pem); !s2.ok()) return Fail("keygen", s2);
   auto id = pipeline::SigningKeyId(kp->public_pem);
   if (args->Has("json")) {
-    std::cout << nlohmann::json{{"private_key", key}, {"public_key", pub}, {"key_id", id.value_or("")}}.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
+    PrintJson({{"private_key", key}, {"public_key", pub}, {"key_id", id.value_or("")}});
   } else {
     std::printf("%s (private, keep on the server), %s (public, give to flashers), key id %s\n", key.c_str(),
                 pub.c_str(), id.value_or("?").c_str());
@@ -199,8 +179,7 @@ int RunKeygen(const std::vector<std::string>& argv) {
 
 }  // namespace
 
-FLUXCAL_REGISTER_COMMAND("admin keygen", "make an Ed25519 key pair for signing exports", RunKeygen,
-                         "fluxcal admin keygen --out PREFIX [--force] [--json]",
+FLUXCAL_REGISTER_COMMAND("admin keygen", "make an Ed25519 key pair for signing exports", RunKeygen, kKeygenUsage,
                          kKeygenFlags);
 FLUXCAL_REGISTER_COMMAND("admin add-key", "make a bearer token for an identity with a role (printed once)",
                          RunAddKey,
@@ -210,11 +189,9 @@ FLUXCAL_REGISTER_COMMAND("admin add-cert", "accept a client certificate common n
                          "fluxcal admin add-cert --keys KEYS.json --name NAME --role ROLE --cn CERT_COMMON_NAME\n"
                          "  [--group GROUP] [--json]",
                          kAddCertFlags);
-FLUXCAL_REGISTER_COMMAND("admin revoke", "remove an identity from a keys file", RunRevoke,
-                         "fluxcal admin revoke --keys KEYS.json --name NAME [--group GROUP] [--json]",
+FLUXCAL_REGISTER_COMMAND("admin revoke", "remove an identity from a keys file", RunRevoke, kRevokeUsage,
                          kRevokeFlags);
-FLUXCAL_REGISTER_COMMAND("admin list-keys", "list identities and roles of a keys file", RunListKeys,
-                         "fluxcal admin list-keys --keys KEYS.json [--json]",
+FLUXCAL_REGISTER_COMMAND("admin list-keys", "list identities and roles of a keys file", RunListKeys, kListKeysUsage,
                          kListKeysFlags);
 
 }  // namespace fluxcal::cli

@@ -9,44 +9,38 @@
 // store that does not exist is refused, never created. Exit 0 intact, 1
 // not (or no store).
 #include <cstdio>
-#include <iostream>
 
 #include "cli/args.h"
 #include "cli/command.h"
+#include "cli/support_output.h"
+#include "cli/support_store.h"
 #include "nlohmann/json.hpp"
 #include "pipeline/anchor.h"
-#include "pipeline/store.h"
 
 namespace fluxcal::cli {
 namespace {
 
+constexpr char kVerifyDbUsage[] = "fluxcal admin verify-db --db PATH|postgresql://... [--anchor FILE] [--json]";
 const FlagSpecs kVerifyDbFlags = {
-    {"db", "URL", "the store: SQLite PATH or postgresql://... (required; must exist)"},
+    kExistingDbFlag,
     {"anchor", "FILE", "chain heads kept outside the database (fluxcal admin anchor --out, serve --anchor-file)"},
-    {"json", "", "print the result as one JSON document"},
+    kJsonFlag,
 };
 
 int RunVerifyDb(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, kVerifyDbFlags);
-  if (!args.ok() || !args->Get("db") || !args->positional.empty()) {
-    if (!args.ok()) std::fprintf(stderr, "fluxcal admin verify-db: %s\n", std::string(args.status().message()).c_str());
-    std::fprintf(stderr, "usage: fluxcal admin verify-db --db PATH|postgresql://... [--anchor FILE] [--json]\n");
-    return 2;
+  ParsedArgs args;
+  std::unique_ptr<storage::Store> store;
+  if (int rc = ParseArgsAndOpenStore("admin verify-db", argv, kVerifyDbFlags, kVerifyDbUsage, &args, &store);
+      rc != 0) {
+    return rc;
   }
-  auto store = pipeline::OpenStore(*args->Get("db"), /*create=*/false);
-  if (!store.ok()) {
-    std::fprintf(stderr, "fluxcal admin verify-db: flag --db: %s\n", std::string(store.status().message()).c_str());
-    return 1;
-  }
-  const std::string anchor = args->Get("anchor").value_or("");
-  auto rep = pipeline::VerifyStore(**store, anchor);
+  const std::string anchor = args.Get("anchor").value_or("");
+  auto rep = pipeline::VerifyStore(*store, anchor);
   if (!rep.ok()) {
-    std::fprintf(stderr, "fluxcal admin verify-db: %s%s\n", anchor.empty() ? "" : "flag --anchor: ",
-                 std::string(rep.status().message()).c_str());
-    return 1;
+    return CommandError("admin verify-db", (anchor.empty() ? "" : "flag --anchor: ") + std::string(rep.status().message()));
   }
   const bool intact = rep->problems.empty();
-  if (args->Has("json")) {
+  if (args.Has("json")) {
     nlohmann::json j = {{"intact", intact},
                         {"chained", rep->chained},
                         {"unchained", rep->unchained},
@@ -57,7 +51,7 @@ int RunVerifyDb(const std::vector<std::string>& argv) {
       j["anchor"] = anchor;
       j["anchored"] = rep->anchored;
     }
-    std::cout << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
+    PrintJson(j);
   } else {
     std::printf("%s: %d calibration versions chained, %d from before the chain, %d releases chained", intact ? "intact" : "TAMPERED",
                 rep->chained, rep->unchained, rep->releases_chained);
@@ -73,7 +67,6 @@ int RunVerifyDb(const std::vector<std::string>& argv) {
 }  // namespace
 
 FLUXCAL_REGISTER_COMMAND("admin verify-db", "check the hash chains over calibrations and releases (tampering)",
-                         RunVerifyDb, "fluxcal admin verify-db --db PATH|postgresql://... [--anchor FILE] [--json]",
-                         kVerifyDbFlags);
+                         RunVerifyDb, kVerifyDbUsage, kVerifyDbFlags);
 
 }  // namespace fluxcal::cli

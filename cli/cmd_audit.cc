@@ -3,47 +3,26 @@
 // release) with the authenticated identity and role, the peer address, the
 // time and the request id. Needs the engineer, release or admin role.
 #include <cstdio>
-#include <iostream>
-
-#include <grpcpp/grpcpp.h>
 
 #include "cli/args.h"
 #include "cli/command.h"
+#include "cli/support_output.h"
 #include "cli/support_remote.h"
-#include "nlohmann/json.hpp"
 
 namespace fluxcal::cli {
 namespace {
 
-const FlagSpecs kAuditFlags = {
-    {"server", "ADDR", "the service, HOST[:PORT] (default port 50051; required)"},
-    {"json", "", "print the result as one JSON document"},
-};
+constexpr char kAuditUsage[] = "fluxcal audit SERIAL --server ADDR [--json]";
+const FlagSpecs kAuditFlags = {kServerFlag, kJsonFlag};
 
-int RunAudit(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, kAuditFlags);
-  if (!args.ok() || args->positional.size() != 1 || !args->Get("server")) {
-    std::fprintf(stderr, "usage: fluxcal audit SERIAL --server ADDR [--json]\n");
-    return 2;
-  }
-  auto stub = MakeStub(*args->Get("server"));
-  if (!stub) return 1;
-  v1::AuditRequest req;
-  req.set_serial(args->positional[0]);
-  v1::AuditResponse resp;
-  grpc::ClientContext ctx;
-  ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
-  auto s = stub->Audit(&ctx, req, &resp);
-  if (!s.ok()) return ReportRpcError("audit", s);
-  if (args->Has("json")) {
+int PrintAudit(const v1::AuditResponse& resp, bool json) {
+  if (json) {
     nlohmann::json arr = nlohmann::json::array();
     for (const auto& e : resp.entries()) {
       arr.push_back({{"id", e.id()}, {"utc", e.utc()}, {"identity", e.identity()}, {"role", e.role()},
                      {"peer", e.peer()}, {"request_id", e.request_id()}, {"rpc", e.rpc()}, {"detail", e.detail()}});
     }
-    std::cout << nlohmann::json{{"serial", resp.serial()}, {"entries", arr}}
-                     .dump(2, ' ', false, nlohmann::json::error_handler_t::replace)
-              << "\n";
+    PrintJson({{"serial", resp.serial()}, {"entries", arr}});
     return 0;
   }
   for (const auto& e : resp.entries()) {
@@ -53,10 +32,13 @@ int RunAudit(const std::vector<std::string>& argv) {
   return 0;
 }
 
+int RunAudit(const std::vector<std::string>& argv) {
+  return RunSerialCall("audit", kAuditUsage, argv, kAuditFlags, &v1::CalibrationService::Stub::Audit, PrintAudit);
+}
+
 }  // namespace
 
-FLUXCAL_REGISTER_COMMAND("audit", "a serial's audit trail: who wrote what, from where, when", RunAudit,
-                         "fluxcal audit SERIAL --server ADDR [--json]",
+FLUXCAL_REGISTER_COMMAND("audit", "a serial's audit trail: who wrote what, from where, when", RunAudit, kAuditUsage,
                          kAuditFlags);
 
 }  // namespace fluxcal::cli

@@ -10,13 +10,13 @@
 // and refused when implausible (io/flux_map.h).
 #include <cmath>
 #include <cstdio>
-#include <iostream>
 #include <vector>
 
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_split.h"
 #include "cli/args.h"
 #include "cli/command.h"
+#include "cli/support_output.h"
 #include "cli/support_flux_map.h"
 #include "io/flux_map.h"
 #include "nlohmann/json.hpp"
@@ -26,10 +26,7 @@
 namespace fluxcal::cli {
 namespace {
 
-int Fail(const std::string& m, int code = 1) {
-  std::fprintf(stderr, "fluxcal compare: %s\n", m.c_str());
-  return code;
-}
+int Fail(const std::string& m, int code = 1) { return CommandError("compare", m, code); }
 
 // "IDMIN:IDMAX,IQMIN:IQMAX", finite, min <= max on each axis.
 bool ParseRegion(const std::string& s, tables::CurrentRegion* r) {
@@ -49,7 +46,7 @@ const FlagSpecs kCompareFlags = [] {
   FlagSpecs f = {
       {"region", "IDMIN:IDMAX,IQMIN:IQMAX", "current region compared, A (default the calibration's measured region)"},
       {"sym", "", "compare against the map's symmetrised columns (psi_d_sym_*, psi_q_sym_*) instead of the raw ones"},
-      {"json", "", "print the result as one JSON document"},
+      kJsonFlag,
   };
   for (const auto& c : FluxMapConventionFlags()) f.push_back(c);
   return f;
@@ -111,7 +108,7 @@ int RunCompare(const std::vector<std::string>& argv) {
          {{"id_a", c->worst.id_a}, {"iq_a", c->worst.iq_a}, {"error_wb", c->max_wb}, {"error_relative", worst_rel},
           {"error_d_wb", c->worst_error_d_wb}, {"error_q_wb", c->worst_error_q_wb},
           {"map_psi_d_wb", c->worst.psi_d_wb}, {"map_psi_q_wb", c->worst.psi_q_wb}}}};
-    std::cout << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
+    PrintJson(j);
   } else {
     std::printf("serial %s (%s) against %s (%s columns): %d nodes in id %g..%g A, iq %g..%g A\n",
                 cal->serial().c_str(), cal->family().Name().c_str(), map_path.c_str(),

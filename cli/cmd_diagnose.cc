@@ -14,6 +14,7 @@
 
 #include "cli/args.h"
 #include "cli/command.h"
+#include "cli/support_output.h"
 #include "cli/support_remote.h"
 #include "absl/strings/str_split.h"
 #include "io/csv.h"
@@ -28,7 +29,7 @@ const FlagSpecs kDiagnoseFlags = {
     {"exclude-effects", "A,B", "effects not to consider (names as in `fluxcal simulate --effects`)"},
     {"calibration-out", "FILE", "write the diagnosed model as a calibration JSON (refitted without the findings)"},
     {"table1", "CSV", "diagnose the paper's Table 1 instead of a recording set"},
-    {"server", "ADDR", "diagnose a serial's stored raw recording at the service instead, HOST[:PORT] (default port 50051)"},
+    ServerFlag("diagnose a serial's stored raw recording at the service instead"),
     {"store", "", "with --server: store the diagnosed model as a new calibration version marked with the findings"},
     {"json", "", "print the diagnosis report as one JSON document (docs/diagnosis-report.md)"},
     kForceFlag,
@@ -69,7 +70,7 @@ int RunRemoteDiagnose(const ParsedArgs& args, const std::string& server) {
     nlohmann::json j = nlohmann::json::parse(resp.report_json(), nullptr, false);
     if (j.is_discarded()) j = nlohmann::json::object();
     if (resp.stored_version() > 0) j["stored"] = {{"version", resp.stored_version()}, {"verdict", resp.stored_verdict()}};
-    std::cout << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
+    PrintJson(j);
   } else {
     std::printf("%s: %s", resp.serial().c_str(), resp.verdict().c_str());
     for (int k = 0; k < resp.effects_size(); ++k) std::printf("%s%s", k ? ", " : " (", resp.effects(k).c_str());
@@ -95,21 +96,19 @@ int RunDiagnose(const std::vector<std::string>& argv) {
     }
     const auto& r = *table1;
     if (args->Has("json")) {
-      std::cout << nlohmann::json{{"finding", r.finding}, {"rms_before", r.rms_before}, {"rms_after", r.rms_after},
-                                  {"trend_slope_per_a", r.trend_slope_per_a}, {"trend_sigma", r.trend_sigma},
-                                  {"lq_app_from_hf_h", r.lq_app_from_hf_h},
-                                  {"max_before", r.max_before}, {"max_after", r.max_after},
-                                  {"alternatives", [&] {
-                                     nlohmann::json alts = nlohmann::json::array();
-                                     for (const auto& x : r.alternatives) {
-                                       alts.push_back({{"name", x.name}, {"meaning", x.meaning},
-                                                       {"parameter", x.parameter}, {"unit", x.unit},
-                                                       {"rms", x.rms}, {"max", x.max}, {"delta_bic", x.delta_bic}});
-                                     }
-                                     return alts;
-                                   }()}}
-                       .dump(2, ' ', false, nlohmann::json::error_handler_t::replace)
-                << "\n";
+      PrintJson({{"finding", r.finding}, {"rms_before", r.rms_before}, {"rms_after", r.rms_after},
+                 {"trend_slope_per_a", r.trend_slope_per_a}, {"trend_sigma", r.trend_sigma},
+                 {"lq_app_from_hf_h", r.lq_app_from_hf_h},
+                 {"max_before", r.max_before}, {"max_after", r.max_after},
+                 {"alternatives", [&] {
+                    nlohmann::json alts = nlohmann::json::array();
+                    for (const auto& x : r.alternatives) {
+                      alts.push_back({{"name", x.name}, {"meaning", x.meaning},
+                                      {"parameter", x.parameter}, {"unit", x.unit},
+                                      {"rms", x.rms}, {"max", x.max}, {"delta_bic", x.delta_bic}});
+                    }
+                    return alts;
+                  }()}});
     } else {
       std::printf("Paper Table 1: HF Lq vs steady-state Lq: relative mismatch grows with iq (%.3g %%/A, %.1f sigma).\n"
                   "Finding: %s. RMS error %.2f %% with the differential Lq taken as apparent, %.2f %% with the apparent Lq\n"
@@ -197,7 +196,7 @@ int RunDiagnose(const std::vector<std::string>& argv) {
     }
     std::fprintf(stderr, "diagnose: calibration (%s) in %s\n", j.value("model", std::string("?")).c_str(), out->c_str());
   }
-  if (args->Has("json")) std::cout << pipeline::DiagnosisJson(*rep).dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
+  if (args->Has("json")) PrintJson(pipeline::DiagnosisJson(*rep));
   else std::cout << pipeline::DiagnosisText(*rep);
   return 0;
 }

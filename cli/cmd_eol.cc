@@ -7,18 +7,17 @@
 // the reply's count and digest of what the service stored must equal what
 // was sent, or eol stops (exit 1) before anything is fitted. Here: flags,
 // the stub, the table files and the summary.
-#include <chrono>
 #include <thread>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <iostream>
 #include <optional>
 
 #include <grpcpp/grpcpp.h>
 
 #include "cli/args.h"
 #include "cli/command.h"
+#include "cli/support_output.h"
 #include "cli/support_remote.h"
 #include "io/recording_set.h"
 #include "io/sha256.h"
@@ -29,27 +28,23 @@ namespace fluxcal::cli {
 namespace {
 
 const FlagSpecs kEolFlags = {
-    {"server", "ADDR", "the service, HOST[:PORT] (default port 50051; required)"},
+    kServerFlag,
     {"station", "ID", "station id recorded with the run (default eol)"},
     {"model", "M", "model family the service fits, as `fluxcal fit --model` (default auto)"},
     {"tables-dir", "DIR", "on a pass, fetch the MTPA (CDFX) and field-weakening (DCM) tables there"},
     {"upload-recording", "", "also upload the raw waveforms (replayable on the service)"},
-    {"json", "", "print the result as one JSON document"},
+    kJsonFlag,
     {kForceFlag.name, kForceFlag.value, "replace table files in --tables-dir that exist (refused otherwise)"},
 };
 
 int RunEol(const std::vector<std::string>& argv) {
   auto args = ParseArgs(argv, kEolFlags);
   if (!args.ok() || args->positional.size() != 1 || !args->Get("server")) {
-    std::fprintf(stderr, "usage: fluxcal eol <recording-set> --server ADDR [--station ID] [--model M] "
-                         "[--tables-dir DIR [--force]] [--upload-recording] [--json]\n");
-    return 2;
+    return UsageError("fluxcal eol <recording-set> --server ADDR [--station ID] [--model M] "
+                      "[--tables-dir DIR [--force]] [--upload-recording] [--json]");
   }
   auto set = io::ReadRecordingSet(args->positional[0]);
-  if (!set.ok()) {
-    std::fprintf(stderr, "fluxcal eol: %s\n", std::string(set.status().message()).c_str());
-    return 1;
-  }
+  if (!set.ok()) return CommandError("eol", std::string(set.status().message()));
   const std::string serial = set->manifest.serial;
   auto stub = MakeStub(*args->Get("server"));
   if (!stub) return 1;
@@ -82,8 +77,7 @@ int RunEol(const std::vector<std::string>& argv) {
   auto r = pipeline::RunEolStation(*stub, *set, o, &rpc_error);
   if (!r.ok()) {
     if (!rpc_error.ok()) return ReportRpcError("eol", rpc_error);
-    std::fprintf(stderr, "fluxcal eol: %s\n", std::string(r.status().message()).c_str());
-    return 1;
+    return CommandError("eol", std::string(r.status().message()));
   }
   const v1::IngestHfResultsResponse& ing = r->ingest;
   const v1::FitResponse& fit = r->fit;
@@ -99,7 +93,7 @@ int RunEol(const std::vector<std::string>& argv) {
                         {"files_sha256", rec->files_sha256()}};
   }
   if (args->Has("json")) {
-    std::cout << out.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
+    PrintJson(out);
   } else {
     std::printf("%s: calibration v%d (%s), verdict %s, psi_pm %.5g Wb, fit rms %.3f %%\n", serial.c_str(),
                 fit.calibration().version(), fit.calibration().model().c_str(), fit.calibration().verdict().c_str(),
@@ -109,20 +103,18 @@ int RunEol(const std::vector<std::string>& argv) {
   return fit.pass() ? 0 : 3;
 }
 
+constexpr char kListUsage[] = "fluxcal list --server ADDR [--prefix P] [--failed] [--json]";
 const FlagSpecs kListFlags = {
-    {"server", "ADDR", "the service, HOST[:PORT] (default port 50051; required)"},
+    kServerFlag,
     {"prefix", "P", "only serials starting with P"},
     {"failed", "", "only motors whose latest verdict is a fail"},
     {"page-size", "N", "accepted for compatibility; has no effect (all pages are fetched)"},
-    {"json", "", "print the result as one JSON document"},
+    kJsonFlag,
 };
 
 int RunList(const std::vector<std::string>& argv) {
   auto args = ParseArgs(argv, kListFlags);
-  if (!args.ok() || !args->Get("server")) {
-    std::fprintf(stderr, "usage: fluxcal list --server ADDR [--prefix P] [--failed] [--json]\n");
-    return 2;
-  }
+  if (!args.ok() || !args->Get("server")) return UsageError(kListUsage);
   auto stub = MakeStub(*args->Get("server"));
   if (!stub) return 1;
   nlohmann::json all = nlohmann::json::array();
@@ -134,9 +126,7 @@ int RunList(const std::vector<std::string>& argv) {
     req.set_page_size(200);
     req.set_page_token(token);
     v1::ListMotorsResponse resp;
-    grpc::ClientContext ctx;
-    ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
-    auto s = stub->ListMotors(&ctx, req, &resp);
+    auto s = CallWithDeadline(*stub, &v1::CalibrationService::Stub::ListMotors, req, &resp);
     if (!s.ok()) return ReportRpcError("list", s);
     for (const auto& m : resp.motors()) {
       all.push_back({{"serial", m.serial()}, {"latest_version", m.latest_version()}, {"verdict", m.verdict()},
@@ -145,7 +135,7 @@ int RunList(const std::vector<std::string>& argv) {
     token = resp.next_page_token();
   } while (!token.empty());
   if (args->Has("json")) {
-    std::cout << nlohmann::json{{"motors", all}}.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
+    PrintJson({{"motors", all}});
   } else {
     std::printf("%-24s %7s %5s  %-20s %s\n", "serial", "version", "runs", "updated", "verdict");
     for (const auto& m : all) {
@@ -156,33 +146,18 @@ int RunList(const std::vector<std::string>& argv) {
   return 0;
 }
 
-const FlagSpecs kHistoryFlags = {
-    {"server", "ADDR", "the service, HOST[:PORT] (default port 50051; required)"},
-    {"json", "", "print the result as one JSON document"},
-};
+constexpr char kHistoryUsage[] = "fluxcal history SERIAL --server ADDR [--json]";
+// history and fleet: the service's answer and nothing else to ask for.
+const FlagSpecs kServerJsonFlags = {kServerFlag, kJsonFlag};
 
-int RunHistory(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, kHistoryFlags);
-  if (!args.ok() || args->positional.size() != 1 || !args->Get("server")) {
-    std::fprintf(stderr, "usage: fluxcal history SERIAL --server ADDR [--json]\n");
-    return 2;
-  }
-  auto stub = MakeStub(*args->Get("server"));
-  if (!stub) return 1;
-  v1::HistoryRequest req;
-  req.set_serial(args->positional[0]);
-  v1::HistoryResponse resp;
-  grpc::ClientContext ctx;
-  ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
-  auto s = stub->History(&ctx, req, &resp);
-  if (!s.ok()) return ReportRpcError("history", s);
+int PrintHistory(const v1::HistoryResponse& resp, bool json) {
   nlohmann::json ev = nlohmann::json::array();
   for (const auto& e : resp.events()) {
     ev.push_back({{"created_utc", e.created_utc()}, {"kind", e.kind()}, {"run_id", e.run_id()},
                   {"version", e.version()}, {"detail", e.detail()}});
   }
-  if (args->Has("json")) {
-    std::cout << nlohmann::json{{"serial", resp.serial()}, {"events", ev}}.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
+  if (json) {
+    PrintJson({{"serial", resp.serial()}, {"events", ev}});
   } else {
     for (const auto& e : ev) {
       std::printf("%s  %-12s run %-5lld v%-3d %s\n", e["created_utc"].get<std::string>().c_str(),
@@ -193,25 +168,21 @@ int RunHistory(const std::vector<std::string>& argv) {
   return 0;
 }
 
-const FlagSpecs kFleetFlags = {
-    {"server", "ADDR", "the service, HOST[:PORT] (default port 50051; required)"},
-    {"json", "", "print the result as one JSON document"},
-};
+int RunHistory(const std::vector<std::string>& argv) {
+  return RunSerialCall("history", kHistoryUsage, argv, kServerJsonFlags, &v1::CalibrationService::Stub::History,
+                       PrintHistory);
+}
+
+constexpr char kFleetUsage[] = "fluxcal fleet --server ADDR [--json]";
 
 int RunFleet(const std::vector<std::string>& argv) {
-  auto args = ParseArgs(argv, kFleetFlags);
-  if (!args.ok() || !args->Get("server")) {
-    std::fprintf(stderr, "usage: fluxcal fleet --server ADDR [--json]\n");
-    return 2;
-  }
-  auto stub = MakeStub(*args->Get("server"));
-  if (!stub) return 1;
+  auto args = ParseArgs(argv, kServerJsonFlags);
+  if (!args.ok() || !args->Get("server")) return UsageError(kFleetUsage);
   v1::FleetStatisticsRequest req;
   v1::FleetStatisticsResponse resp;
-  grpc::ClientContext ctx;
-  ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
-  auto s = stub->FleetStatistics(&ctx, req, &resp);
-  if (!s.ok()) return ReportRpcError("fleet", s);
+  const std::string server = *args->Get("server");
+  const auto rpc = &v1::CalibrationService::Stub::FleetStatistics;
+  if (int rc = CallService("fleet", server, rpc, req, &resp, /*seconds=*/60); rc != 0) return rc;
   nlohmann::json pts = nlohmann::json::array();
   for (const auto& p : resp.points()) {
     pts.push_back({{"id_a", p.id_a()}, {"iq_a", p.iq_a()}, {"serials", p.serials()},
@@ -222,7 +193,7 @@ int RunFleet(const std::vector<std::string>& argv) {
                    {"outliers", std::vector<std::string>(p.outliers().begin(), p.outliers().end())}});
   }
   if (args->Has("json")) {
-    std::cout << nlohmann::json{{"points", pts}}.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
+    PrintJson({{"points", pts}});
   } else {
     for (const auto& p : pts) {
       std::printf("(%6.1f, %6.1f) A: %d serials, Ldd %.4f +- %.4f mH, Lqq %.4f +- %.4f mH, torque %.3f +- %.3f N m, outliers %s\n",
@@ -240,14 +211,10 @@ int RunFleet(const std::vector<std::string>& argv) {
 FLUXCAL_REGISTER_COMMAND("eol", "EOL station: identify, stream to the service, fit, verdict, fetch tables", RunEol,
                          "fluxcal eol <recording-set> --server ADDR [--station ID] [--model M] [--tables-dir DIR] [--upload-recording] [--json]",
                          kEolFlags);
-FLUXCAL_REGISTER_COMMAND("list", "list motors known to the service", RunList,
-                         "fluxcal list --server ADDR [--prefix P] [--failed] [--json]",
-                         kListFlags);
-FLUXCAL_REGISTER_COMMAND("history", "a serial's runs and calibration versions", RunHistory,
-                         "fluxcal history SERIAL --server ADDR [--json]",
-                         kHistoryFlags);
-FLUXCAL_REGISTER_COMMAND("fleet", "fleet statistics per operating point, outlier serials", RunFleet,
-                         "fluxcal fleet --server ADDR [--json]",
-                         kFleetFlags);
+FLUXCAL_REGISTER_COMMAND("list", "list motors known to the service", RunList, kListUsage, kListFlags);
+FLUXCAL_REGISTER_COMMAND("history", "a serial's runs and calibration versions", RunHistory, kHistoryUsage,
+                         kServerJsonFlags);
+FLUXCAL_REGISTER_COMMAND("fleet", "fleet statistics per operating point, outlier serials", RunFleet, kFleetUsage,
+                         kServerJsonFlags);
 
 }  // namespace fluxcal::cli

@@ -11,7 +11,6 @@
 // their own names (`payload_crc32`, `payload_sha256`).
 #include <cstdio>
 #include <filesystem>
-#include <iostream>
 #include <system_error>
 
 #include "absl/status/status.h"
@@ -20,6 +19,7 @@
 #include "absl/strings/str_join.h"
 #include "cli/args.h"
 #include "cli/command.h"
+#include "cli/support_output.h"
 #include "cli/support_remote.h"
 #include "io/csv.h"
 #include "nlohmann/json.hpp"
@@ -31,15 +31,12 @@
 namespace fluxcal::cli {
 namespace {
 
-int Fail(const std::string& m, int code = 1) {
-  std::fprintf(stderr, "fluxcal export: %s\n", m.c_str());
-  return code;
-}
+int Fail(const std::string& m, int code = 1) { return CommandError("export", m, code); }
 
 // Local (calibration file) and remote (--server, serial) export share these;
 // --svg and --sign-key are local only, --server and --version remote only.
 const FlagSpecs kExportFlags = {
-    {"out", "FILE", "table file to write (required; - for stdout)"},
+    OutFlag("table file"),
     {"table", "T", "mtpa|mtpv|fw|envelope (default mtpa; envelope: max torque and power over speed)"},
     {"format", "F", "csv|json|h|cdfx|dcm|a2l (default csv)"},
     {"points", "N", "at most N rows of a curve / torque axis of the fw map, round breakpoints (default 64)"},
@@ -61,9 +58,9 @@ const FlagSpecs kExportFlags = {
     {"allow-extrapolation", "", "compute beyond the measured current region (cells flagged extrapolated)"},
     {"svg", "FILE", "local only: also plot the curves / map (SVG)"},
     {"sign-key", "KEY", "local only: Ed25519 private key; writes OUT.sig (not with --out -)"},
-    {"server", "ADDR", "export a serial's stored calibration from the service, HOST[:PORT] (default port 50051)"},
-    {"version", "N", "with --server: calibration version (default the latest)"},
-    {"json", "", "print a summary (checksums, limits, verdict) as one JSON document"},
+    ServerFlag("export a serial's stored calibration from the service"),
+    kServerVersionFlag,
+    JsonFlag("a summary (checksums, limits, verdict)"),
     kForceFlag,
 };
 
@@ -165,7 +162,7 @@ int RunUdcAxisExport(const ParsedArgs& args, const fit::Calibration& cal, const 
                         {"rs_ohm", lim.limits.rs_ohm ? nlohmann::json(*lim.limits.rs_ohm) : nlohmann::json()},
                         {"ctype", pipeline::ExportCTypeName(ctype)}, {"files", files}, {"svg", svg}};
     j["sources"] = {{"i_max_a", lim.i_max_source}, {"udc_v", "--udc-axis-v"}, {"rs_ohm", lim.rs_source}};
-    std::cout << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
+    PrintJson(j);
   }
   return 0;
 }
@@ -339,7 +336,7 @@ int RunExport(const std::vector<std::string>& argv) {
       j["fixed_point"].push_back({{"unit", q.unit}, {"arrays", q.arrays}, {"bits", q.bits}, {"lsb", q.lsb},
                                   {"offset", q.offset}, {"min_value", q.min_value}, {"max_value", q.max_value}});
     }
-    std::cout << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
+    PrintJson(j);
   } else {
     const std::string u_max = lim.udc_v ? absl::StrFormat("u_max %.6g V", lim.UMaxV()) : "no voltage limit (Udc not known)";
     std::fprintf(to_stdout ? stderr : stdout, "%s: %s table, %zu cells (%zu clamped at limits, %zu extrapolated), i_max %.6g A, %s\n"

@@ -15,13 +15,13 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <iostream>
 #include <optional>
 
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "cli/args.h"
 #include "cli/command.h"
+#include "cli/support_output.h"
 #include "cli/support_flux_map.h"
 #include "cli/support_progress.h"
 #include "io/csv.h"
@@ -35,14 +35,11 @@
 namespace fluxcal::cli {
 namespace {
 
-int Fail(const std::string& m, int code = 1) {
-  std::fprintf(stderr, "fluxcal fit: %s\n", m.c_str());
-  return code;
-}
+int Fail(const std::string& m, int code = 1) { return CommandError("fit", m, code); }
 
 const FlagSpecs kFitFlags = [] {
   FlagSpecs f = {
-    {"out", "FILE", "calibration JSON to write (required; - for stdout)"},
+    OutFlag("calibration JSON"),
     {"model", "M", "auto|analytic|poly|polyN (N 2..10)|spline|splineN (N 1..8)|smooth|smooth-asym (default auto: best by BIC)"},
     {"svg", "FILE", "also plot the fit against the identified inductances (SVG; not with --map)"},
     {"map", "CSV", "fit a flux map psi(id, iq) instead of a recording set (no positional argument)"},
@@ -56,7 +53,7 @@ const FlagSpecs kFitFlags = [] {
     {"magnet-reference-c", "C", "magnet temperature the data were taken at, degC, for data that record none "
                                 "(a flux map; refused when they record temperature_c)"},
     {"psi-std-wb", "S", "with --map: flux standard deviation per component, Wb (default 0.2 % of the largest |psi|)"},
-    {"json", "", "print the calibration and fit summary as one JSON document"},
+    JsonFlag("the calibration and fit summary"),
     kForceFlag,
   };
   for (auto c : FluxMapConventionFlags()) {
@@ -208,7 +205,7 @@ int RunFit(const std::vector<std::string>& argv) {
                   {"psi_scale_wb", sum.flux_scale_wb},
                   {"convention", FluxMapConventionJson(map->convention)}};
     }
-    std::cout << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
+    PrintJson(j);
   } else if (map) {
     std::fprintf(to_stdout ? stderr : stdout, "serial %s: model %s, %d observations, flux error against the map's %d nodes "
                 "RMS %.3f %% max %.3f %% (of %.4g Wb), psi_pm %.6g Wb -> %s\n",

@@ -9,6 +9,7 @@
 #include "absl/strings/str_join.h"
 #include "cli/args.h"
 #include "cli/command.h"
+#include "cli/support_output.h"
 #include "cli/support_progress.h"
 #include "io/recording_set.h"
 #include "nlohmann/json.hpp"
@@ -21,7 +22,7 @@ const FlagSpecs kIdentifyFlags = {
     {"method", "M", "paper|lsq: the paper's estimator or least squares over the record (default lsq)"},
     {"no-compensation", "", "do not compensate the delay and filters of the measurement chain"},
     {"csv", "", "print the points as CSV"},
-    {"json", "", "print the result as one JSON document"},
+    kJsonFlag,
 };
 
 int RunIdentify(const std::vector<std::string>& argv) {
@@ -80,7 +81,7 @@ int RunIdentify(const std::vector<std::string>& argv) {
       }
       j["points"].push_back(p);
     }
-    std::cout << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
+    PrintJson(j);
     return 0;
   }
   // CSV is the default human/machine form (--csv accepted for clarity).

@@ -12,13 +12,13 @@
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
-#include <iostream>
 #include <vector>
 
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_split.h"
 #include "cli/args.h"
 #include "cli/command.h"
+#include "cli/support_output.h"
 #include "io/csv.h"
 #include "io/flux_map.h"
 #include "nlohmann/json.hpp"
@@ -29,10 +29,7 @@
 namespace fluxcal::cli {
 namespace {
 
-int Fail(const std::string& m, int code = 1) {
-  std::fprintf(stderr, "fluxcal map export: %s\n", m.c_str());
-  return code;
-}
+int Fail(const std::string& m, int code = 1) { return CommandError("map export", m, code); }
 
 // "MIN:MAX:N,MIN:MAX:M" -> two axes (checked again by the library).
 bool ParseGrid(const std::string& s, tables::LinearAxis* a, tables::LinearAxis* b) {
@@ -52,11 +49,11 @@ bool ParseGrid(const std::string& s, tables::LinearAxis* a, tables::LinearAxis* 
 nlohmann::json AxisJson(const tables::LinearAxis& a) { return {{"min", a.min}, {"max", a.max}, {"n", a.n}}; }
 
 const FlagSpecs kMapExportFlags = {
-    {"out", "FILE", "flux map CSV to write (required; - for stdout)"},
+    OutFlag("flux map CSV"),
     {"grid", "IDMIN:IDMAX:N,IQMIN:IQMAX:M", "current grid of the forward map, A (default the measured region, 21 x 21)"},
     {"inverse", "", "write the inverse map i(psi) instead of psi(id, iq)"},
     {"psi-grid", "PDMIN:PDMAX:N,PQMIN:PQMAX:M", "with --inverse: flux grid, Wb (default the fluxes of the measured region)"},
-    {"json", "", "print a summary (nodes, sha256) as one JSON document"},
+    JsonFlag("a summary (nodes, sha256)"),
     kForceFlag,
 };
 
@@ -128,7 +125,7 @@ int RunMapExport(const std::vector<std::string>& argv) {
   summary["bytes"] = text.size();
   summary["sha256"] = sha;
   if (args->Has("json")) {
-    std::cout << summary.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
+    PrintJson(summary);
   } else if (inverse) {
     std::fprintf(to_stdout ? stderr : stdout, "%s: inverse flux map of %s, %zu nodes (%d valid), sha256 %s\n", out.c_str(), cal->serial().c_str(),
                 rows, summary["valid"].get<int>(), sha.c_str());

@@ -12,6 +12,7 @@
 #include "absl/strings/str_split.h"
 #include "cli/args.h"
 #include "cli/command.h"
+#include "cli/support_output.h"
 #include "cli/support_remote.h"
 #include "nlohmann/json.hpp"
 #include "pipeline/pipeline.h"
@@ -19,10 +20,7 @@
 namespace fluxcal::cli {
 namespace {
 
-int Fail(const std::string& m, int code = 1) {
-  std::fprintf(stderr, "fluxcal query: %s\n", m.c_str());
-  return code;
-}
+int Fail(const std::string& m, int code = 1) { return CommandError("query", m, code); }
 
 nlohmann::json ToJson(double id, double iq, const fit::FluxPrediction& p) {
   return {{"id_a", id}, {"iq_a", iq}, {"psi_d_wb", p.psi_d_wb}, {"psi_q_wb", p.psi_q_wb},
@@ -72,9 +70,9 @@ const FlagSpecs kQueryFlags = {
     {"iq-a", "A", "q-axis current, A"},
     {"grid", "IDMIN:IDMAX:N,IQMIN:IQMAX:M", "local only: a grid of points instead of one (CSV on stdout), A"},
     {"csv", "", "local only: one point as a CSV row with header"},
-    {"server", "ADDR", "ask the service about a serial's stored calibration, HOST[:PORT] (default port 50051)"},
-    {"version", "N", "with --server: calibration version (default the latest)"},
-    {"json", "", "print the result as one JSON document"},
+    ServerFlag("ask the service about a serial's stored calibration"),
+    kServerVersionFlag,
+    kJsonFlag,
 };
 }  // namespace
 
@@ -104,7 +102,7 @@ int RunQueryLocal(const std::vector<std::string>& argv) {
         if (args->Has("json")) arr.push_back(ToJson(id, iq, p)); else csv += CsvRow(id, iq, p);
       }
     }
-    if (args->Has("json")) std::cout << nlohmann::json{{"serial", cal->serial()}, {"points", arr}}.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
+    if (args->Has("json")) PrintJson({{"serial", cal->serial()}, {"points", arr}});
     else std::cout << csv;
     return 0;
   }
@@ -115,7 +113,7 @@ int RunQueryLocal(const std::vector<std::string>& argv) {
   }
   const auto p = cal->Predict(**id, **iq);
   if (args->Has("json")) {
-    std::cout << ToJson(**id, **iq, p).dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
+    PrintJson(ToJson(**id, **iq, p));
   } else if (args->Has("csv")) {
     std::cout << kCsvHeader << CsvRow(**id, **iq, p);
   } else {
@@ -145,8 +143,8 @@ int RunQuery(const std::vector<std::string>& argv) {
 }  // namespace
 
 FLUXCAL_REGISTER_COMMAND("query", "flux linkage and inductance of a calibration at any (id, iq)", RunQuery,
-                         "fluxcal query calibration.json (--id-a A --iq-a A | --grid IDMIN:IDMAX:N,IQMIN:IQMAX:M) [--json|--csv]\n"
-                         "fluxcal query SERIAL --server ADDR --id-a A --iq-a A [--version N] [--json]",
+                         "fluxcal query calibration.json (--id-a A --iq-a A | --grid IDMIN:IDMAX:N,IQMIN:IQMAX:M) [--json|--csv]\n" +
+                             std::string(kRemoteQueryUsage),
                          kQueryFlags);
 
 }  // namespace fluxcal::cli

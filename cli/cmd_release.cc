@@ -3,23 +3,21 @@
 // role; only a version whose verdict is "pass"). Flashing stations then get
 // it as "latest released" from `fluxcal export SERIAL --server ...`.
 #include <cstdio>
-#include <iostream>
-
-#include <grpcpp/grpcpp.h>
 
 #include "absl/strings/numbers.h"
 #include "cli/args.h"
 #include "cli/command.h"
+#include "cli/support_output.h"
 #include "cli/support_remote.h"
-#include "nlohmann/json.hpp"
 
 namespace fluxcal::cli {
 namespace {
 
+constexpr char kReleaseUsage[] = "fluxcal release SERIAL --version N --server ADDR [--json]";
 const FlagSpecs kReleaseFlags = {
-    {"server", "ADDR", "the service, HOST[:PORT] (default port 50051; required)"},
+    kServerFlag,
     {"version", "N", "the calibration version to release (required)"},
-    {"json", "", "print the result as one JSON document"},
+    kJsonFlag,
 };
 
 int RunRelease(const std::vector<std::string>& argv) {
@@ -27,24 +25,16 @@ int RunRelease(const std::vector<std::string>& argv) {
   int version = 0;
   if (!args.ok() || args->positional.size() != 1 || !args->Get("server") || !args->Get("version") ||
       !absl::SimpleAtoi(*args->Get("version"), &version) || version <= 0) {
-    std::fprintf(stderr, "usage: fluxcal release SERIAL --version N --server ADDR [--json]\n");
-    return 2;
+    return UsageError(kReleaseUsage);
   }
-  auto stub = MakeStub(*args->Get("server"));
-  if (!stub) return 1;
   v1::ReleaseRequest req;
   req.set_serial(args->positional[0]);
   req.set_version(version);
   v1::ReleaseResponse resp;
-  grpc::ClientContext ctx;
-  ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
-  auto s = stub->Release(&ctx, req, &resp);
-  if (!s.ok()) return ReportRpcError("release", s);
+  const std::string server = *args->Get("server");
+  if (int rc = CallService("release", server, &v1::CalibrationService::Stub::Release, req, &resp); rc != 0) return rc;
   if (args->Has("json")) {
-    std::cout << nlohmann::json{{"serial", resp.serial()}, {"version", resp.version()},
-                                {"released_by", resp.released_by()}}
-                     .dump(2, ' ', false, nlohmann::json::error_handler_t::replace)
-              << "\n";
+    PrintJson({{"serial", resp.serial()}, {"version", resp.version()}, {"released_by", resp.released_by()}});
   } else {
     std::printf("%s v%d released for flashing by %s\n", resp.serial().c_str(), resp.version(),
                 resp.released_by().c_str());
@@ -55,7 +45,6 @@ int RunRelease(const std::vector<std::string>& argv) {
 }  // namespace
 
 FLUXCAL_REGISTER_COMMAND("release", "approve a passing calibration version for flashing (release role)", RunRelease,
-                         "fluxcal release SERIAL --version N --server ADDR [--json]",
-                         kReleaseFlags);
+                         kReleaseUsage, kReleaseFlags);
 
 }  // namespace fluxcal::cli

@@ -15,6 +15,7 @@
 #include "absl/strings/str_format.h"
 #include "cli/args.h"
 #include "cli/command.h"
+#include "cli/support_output.h"
 #include "io/recording_set.h"
 #include "nlohmann/json.hpp"
 #include "pipeline/pipeline.h"
@@ -23,10 +24,7 @@
 namespace fluxcal::cli {
 namespace {
 
-int Fail(const std::string& m, int code = 1) {
-  std::fprintf(stderr, "fluxcal replay: %s\n", m.c_str());
-  return code;
-}
+int Fail(const std::string& m, int code = 1) { return CommandError("replay", m, code); }
 
 const FlagSpecs kReplayFlags = {
     {"calibration", "FILE", "calibration JSON driving the twin (required)"},
@@ -35,7 +33,7 @@ const FlagSpecs kReplayFlags = {
     {"ld-nominal-h", "L", "closed loop: controller's nominal Ld, H (default 0.18e-3)"},
     {"lq-nominal-h", "L", "closed loop: controller's nominal Lq, H (default 0.35e-3)"},
     {"settle-s", "S", "closed loop: settling time before recording, s (default 0.03)"},
-    {"json", "", "print the result as one JSON document"},
+    kJsonFlag,
 };
 
 int RunReplay(const std::vector<std::string>& argv) {
@@ -93,7 +91,7 @@ int RunReplay(const std::vector<std::string>& argv) {
       j["controller"] = {{"bandwidth_hz", rep->bandwidth_hz}, {"ld_nominal_h", rep->ld_nominal_h},
                          {"lq_nominal_h", rep->lq_nominal_h}, {"settle_s", rep->settle_s}};
     }
-    std::printf("%s\n", j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace).c_str());
+    PrintJson(j);
     return 0;
   }
   std::printf("%-8s %9s %9s %9s %14s\n", "point", "id_ref_a", "iq_ref_a", "speed_rpm", "residual_rms_a");

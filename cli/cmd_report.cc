@@ -22,12 +22,12 @@
 #include <cstdio>
 #include <ctime>
 #include <filesystem>
-#include <iostream>
 
 #include "absl/strings/numbers.h"
 
 #include "cli/args.h"
 #include "cli/command.h"
+#include "cli/support_output.h"
 #include "cli/support_flux_map.h"
 #include "cli/support_progress.h"
 #include "cli/support_remote.h"
@@ -42,10 +42,7 @@
 namespace fluxcal::cli {
 namespace {
 
-int Fail(const std::string& m, int code = 1) {
-  std::fprintf(stderr, "fluxcal report: %s\n", m.c_str());
-  return code;
-}
+int Fail(const std::string& m, int code = 1) { return CommandError("report", m, code); }
 
 std::string FileMtimeUtc(const std::string& path) {
   std::error_code ec;
@@ -142,11 +139,9 @@ struct Written {
 
 void PrintSummary(const Written& w, bool json) {
   if (json) {
-    std::cout << nlohmann::json{{"out", w.out}, {"serial", w.serial}, {"version", w.version},
-                                {"verdict", w.verdict}, {"figures", w.figures}, {"bytes", w.bytes},
-                                {"voltage_limit_speed_rpm", w.voltage_limit_speed_rpm}, {"sha256", w.sha256}}
-                     .dump(2, ' ', false, nlohmann::json::error_handler_t::replace)
-              << "\n";
+    PrintJson({{"out", w.out}, {"serial", w.serial}, {"version", w.version},
+               {"verdict", w.verdict}, {"figures", w.figures}, {"bytes", w.bytes},
+               {"voltage_limit_speed_rpm", w.voltage_limit_speed_rpm}, {"sha256", w.sha256}});
   } else {
     std::fprintf(w.out == "-" ? stderr : stdout, "%s: report for %s v%d (%s), %d figures, %zu bytes\n", w.out.c_str(),
                  w.serial.c_str(), w.version, w.verdict.c_str(), w.figures, w.bytes);
@@ -188,10 +183,10 @@ int RunRemoteReport(const ParsedArgs& args, const std::string& server, const std
 
 FlagSpecs ReportFlags() {
   FlagSpecs flags = {
-    {"out", "FILE", "HTML page to write (required; - for stdout)"},
+    OutFlag("HTML page"),
     {"server", "ADDR",
      "the positional argument is a SERIAL stored there, HOST[:PORT] (default port 50051); the service builds the page"},
-    {"version", "N", "with --server: calibration version (default the latest)"},
+    kServerVersionFlag,
     {"set", "DIR",
      "recording set: draws the identified points, judges the verdict, gives the DC-link voltage "
      "(with --server: page built here)"},
@@ -201,7 +196,7 @@ FlagSpecs ReportFlags() {
     {"speed-rpm", "RPM", "speed of the voltage-limit curve, mechanical rpm (default 1.5 x base speed)"},
     {"udc-v", "V", "DC-link voltage, V (default the set's manifest drive.udc_v, else the calibration's; none: no "
                    "voltage limit or field weakening drawn)"},
-    {"json", "", "print a summary (verdict, figures, bytes, sha256) as one JSON document"},
+    JsonFlag("a summary (verdict, figures, bytes, sha256)"),
     kForceFlag,
   };
   for (auto c : FluxMapConventionFlags()) {

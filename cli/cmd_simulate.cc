@@ -11,6 +11,7 @@
 #include "absl/strings/str_join.h"
 #include "cli/args.h"
 #include "cli/command.h"
+#include "cli/support_output.h"
 #include "io/csv.h"
 #include "io/recording_set.h"
 #include "nlohmann/json.hpp"
@@ -19,10 +20,7 @@
 namespace fluxcal::cli {
 namespace {
 
-int Fail(const std::string& msg, int code = 1) {
-  std::fprintf(stderr, "fluxcal simulate: %s\n", msg.c_str());
-  return code;
-}
+int Fail(const std::string& msg, int code = 1) { return CommandError("simulate", msg, code); }
 
 const FlagSpecs kSimulateFlags = {
     {"out", "DIR", "recording set directory to write (required)"},
@@ -35,7 +33,7 @@ const FlagSpecs kSimulateFlags = {
     {"serial", "S", "motor serial written to the manifest"},
     {"spread", "", "perturb the motor as production spread (from --seed)"},
     {"noise-a", "A", "accepted for compatibility; has no effect (use --effects noise_a=A)"},
-    {"json", "", "print the result as one JSON document"},
+    kJsonFlag,
     kForceFlag,
 };
 
@@ -94,7 +92,7 @@ int RunSimulate(const std::vector<std::string>& argv) {
                         {"points", setup.points()}, {"steady_state_rows", setup.steady_state_rows()},
                         {"effects", setup.ActiveEffects()}, {"seconds", secs},
                         {"clipped", res->clipped}};
-    std::cout << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
+    PrintJson(j);
   } else {
     std::cout << dir << "\n" << truth << "\n";
   }

@@ -9,6 +9,7 @@
 
 #include "cli/args.h"
 #include "cli/command.h"
+#include "cli/support_output.h"
 #include "io/recording_set.h"
 #include "nlohmann/json.hpp"
 
@@ -16,7 +17,7 @@ namespace fluxcal::cli {
 namespace {
 
 const FlagSpecs kValidateFlags = {
-    {"json", "", "print the validation result as one JSON document"},
+    JsonFlag("the validation result"),
 };
 
 int RunValidate(const std::vector<std::string>& argv) {
@@ -30,7 +31,7 @@ int RunValidate(const std::vector<std::string>& argv) {
   if (!set.ok()) {
     std::fprintf(stderr, "fluxcal validate: %s\n", std::string(set.status().message()).c_str());
     if (json) {
-      std::printf("%s\n", nlohmann::json{{"valid", false}, {"error", std::string(set.status().message())}}.dump(2, ' ', false, nlohmann::json::error_handler_t::replace).c_str());
+      PrintJson({{"valid", false}, {"error", std::string(set.status().message())}});
     }
     return 1;
   }
@@ -56,7 +57,7 @@ int RunValidate(const std::vector<std::string>& argv) {
                       {"steady_state_rows", set->steady_state.size()},
                       {"hf_results_rows", set->hf_results.size()}};
   if (json) {
-    std::printf("%s\n", j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace).c_str());
+    PrintJson(j);
   } else {
     std::printf("%s: valid %s set, serial %s: %zu points (%zu rotating), %zu samples at %g Hz, "
                 "injection %g Hz, %zu steady-state rows, %zu hf_results rows\n",

@@ -3,10 +3,10 @@
 // (pipeline/signing.h). Exit 0: valid; 1: not valid (the reason on stderr,
 // and in the JSON document); 2: usage.
 #include <cstdio>
-#include <iostream>
 
 #include "cli/args.h"
 #include "cli/command.h"
+#include "cli/support_output.h"
 #include "io/csv.h"
 #include "nlohmann/json.hpp"
 #include "pipeline/signing.h"
@@ -14,18 +14,16 @@
 namespace fluxcal::cli {
 namespace {
 
+constexpr char kVerifyUsage[] = "fluxcal verify FILE --pubkey KEY.pub [--sig FILE.sig] [--json]";
 const FlagSpecs kVerifyFlags = {
     {"pubkey", "KEY.pub", "Ed25519 public key PEM (fluxcal admin keygen; required)"},
     {"sig", "FILE", "detached signature (default FILE.sig)"},
-    {"json", "", "print the result as one JSON document"},
+    kJsonFlag,
 };
 
 int RunVerify(const std::vector<std::string>& argv) {
   auto args = ParseArgs(argv, kVerifyFlags);
-  if (!args.ok() || args->positional.size() != 1 || !args->Get("pubkey")) {
-    std::fprintf(stderr, "usage: fluxcal verify FILE --pubkey KEY.pub [--sig FILE.sig] [--json]\n");
-    return 2;
-  }
+  if (!args.ok() || args->positional.size() != 1 || !args->Get("pubkey")) return UsageError(kVerifyUsage);
   const std::string file = args->positional[0];
   const std::string sig_path = args->Get("sig").value_or(file + ".sig");
   absl::Status st;
@@ -42,21 +40,16 @@ int RunVerify(const std::vector<std::string>& argv) {
     if (pub.ok()) {
       if (auto id = pipeline::SigningKeyId(*pub); id.ok()) j["key_id"] = *id;
     }
-    std::cout << j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
+    PrintJson(j);
   } else if (st.ok()) {
     std::printf("%s: signature valid\n", file.c_str());
   }
-  if (!st.ok()) {
-    std::fprintf(stderr, "fluxcal verify: %s: %s\n", file.c_str(), std::string(st.message()).c_str());
-    return 1;
-  }
-  return 0;
+  return st.ok() ? 0 : CommandError("verify", file + ": " + std::string(st.message()));
 }
 
 }  // namespace
 
-FLUXCAL_REGISTER_COMMAND("verify", "check an exported table against its Ed25519 signature", RunVerify,
-                         "fluxcal verify FILE --pubkey KEY.pub [--sig FILE.sig] [--json]",
+FLUXCAL_REGISTER_COMMAND("verify", "check an exported table against its Ed25519 signature", RunVerify, kVerifyUsage,
                          kVerifyFlags);
 
 }  // namespace fluxcal::cli

@@ -1,25 +1,26 @@
 #include "cli/support_remote.h"
 
 #include <cctype>
-#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
-#include <iostream>
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include <grpcpp/grpcpp.h>
-#include <grpcpp/support/client_interceptor.h>
 
 #include "absl/strings/numbers.h"
+#include "absl/strings/str_replace.h"
 #include "cli/args.h"
+#include "cli/support_output.h"
 #include "io/csv.h"
 #include "io/net.h"
 #include "nlohmann/json.hpp"
 #include "io/sha256.h"
 #include "pipeline/export.h"
+#include "server/bearer.h"
 
 namespace fluxcal::cli {
 
@@ -67,32 +68,6 @@ std::string TakeClientFlags(std::vector<std::string>* args) {
 }
 
 namespace {
-
-// Adds the bearer token to every call on the channel.
-class TokenInterceptor final : public grpc::experimental::Interceptor {
- public:
-  explicit TokenInterceptor(std::string header) : header_(std::move(header)) {}
-  void Intercept(grpc::experimental::InterceptorBatchMethods* m) override {
-    if (m->QueryInterceptionHookPoint(grpc::experimental::InterceptionHookPoints::PRE_SEND_INITIAL_METADATA)) {
-      m->GetSendInitialMetadata()->insert({"authorization", header_});
-    }
-    m->Proceed();
-  }
-
- private:
-  std::string header_;
-};
-
-class TokenInterceptorFactory final : public grpc::experimental::ClientInterceptorFactoryInterface {
- public:
-  explicit TokenInterceptorFactory(std::string header) : header_(std::move(header)) {}
-  grpc::experimental::Interceptor* CreateClientInterceptor(grpc::experimental::ClientRpcInfo*) override {
-    return new TokenInterceptor(header_);
-  }
-
- private:
-  std::string header_;
-};
 
 // The target of the last MakeStub, for the error hints.
 std::string& LastTarget() {
@@ -143,18 +118,16 @@ std::unique_ptr<v1::CalibrationService::Stub> MakeStub(const std::string& server
   } else {
     creds = grpc::InsecureChannelCredentials();
   }
-  std::vector<std::unique_ptr<grpc::experimental::ClientInterceptorFactoryInterface>> interceptors;
+  std::optional<std::string> token;
   if (!o.token_file.empty()) {
-    auto token = io::ReadFileToString(o.token_file);
-    if (!token.ok()) {
+    auto text = io::ReadFileToString(o.token_file);
+    if (!text.ok()) {
       std::fprintf(stderr, "fluxcal: %s: cannot read --token-file\n", o.token_file.c_str());
       return nullptr;
     }
-    std::string t = token->substr(0, token->find_first_of("\r\n"));
-    interceptors.push_back(std::make_unique<TokenInterceptorFactory>("Bearer " + t));
+    token = text->substr(0, text->find_first_of("\r\n"));
   }
-  return v1::CalibrationService::NewStub(
-      grpc::experimental::CreateCustomChannelWithInterceptors(address, creds, args, std::move(interceptors)));
+  return v1::CalibrationService::NewStub(server::BearerChannel(address, creds, token, args));
 }
 
 int ReportRpcError(const char* cmd, const grpc::Status& s) {
@@ -170,62 +143,44 @@ int ReportRpcError(const char* cmd, const grpc::Status& s) {
     for (auto& ch : lower) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
     return lower.find(what) != std::string::npos;
   };
-  switch (s.error_code()) {
-    case grpc::StatusCode::UNAVAILABLE: {
-      const char* why = contains("connection refused")   ? "connection refused"
-                        : contains("handshake") || contains("ssl") || contains("tls") ? "TLS handshake failed"
-                        : contains("dns") || contains("resolve") ? "name not resolved"
-                                                                  : "unavailable";
-      if (std::string(why) == "name not resolved") {
-        std::fprintf(stderr, "fluxcal %s: cannot reach %s (%s): check the host name given to --server\n", cmd,
-                     target.c_str(), why);
-        break;
-      }
-      std::fprintf(stderr,
-                   "fluxcal %s: cannot reach %s (%s): is `fluxcal serve` running there? TLS: pass --ca (its CA; "
-                   "--cert and --key if it requires client certificates), or --insecure for a plaintext test server "
-                   "off loopback\n",
-                   cmd, target.c_str(), why);
-      break;
-    }
-    case grpc::StatusCode::DEADLINE_EXCEEDED:
-      std::fprintf(stderr,
-                   "fluxcal %s: %s did not answer in time: is the address right (a firewall drops, not refuses)? "
-                   "a server under load or a long fit may need a retry\n",
-                   cmd, target.c_str());
-      break;
-    case grpc::StatusCode::UNAUTHENTICATED:
-      std::fprintf(stderr,
-                   "fluxcal %s: %s wants credentials: give --token-file FILE (made by `fluxcal admin add-key`) or a "
-                   "client certificate (--cert, --key) it accepts\n",
-                   cmd, target.c_str());
-      break;
-    case grpc::StatusCode::PERMISSION_DENIED:
-      std::fprintf(stderr,
-                   "fluxcal %s: the identity of your token/certificate lacks the role for this call on %s: "
-                   "see `fluxcal admin list-keys` on the server side\n",
-                   cmd, target.c_str());
-      break;
-    default:
-      break;
+  // A hint for the codes a setup mistake gives ($target and $why filled in).
+  static const std::map<grpc::StatusCode, std::string> kHints = {
+      {grpc::StatusCode::DEADLINE_EXCEEDED,
+       "$target did not answer in time: is the address right (a firewall drops, not refuses)? "
+       "a server under load or a long fit may need a retry"},
+      {grpc::StatusCode::UNAUTHENTICATED,
+       "$target wants credentials: give --token-file FILE (made by `fluxcal admin add-key`) or a "
+       "client certificate (--cert, --key) it accepts"},
+      {grpc::StatusCode::PERMISSION_DENIED,
+       "the identity of your token/certificate lacks the role for this call on $target: "
+       "see `fluxcal admin list-keys` on the server side"},
+  };
+  std::string hint, why;
+  if (s.error_code() == grpc::StatusCode::UNAVAILABLE) {
+    why = contains("connection refused")                                ? "connection refused"
+          : contains("handshake") || contains("ssl") || contains("tls") ? "TLS handshake failed"
+          : contains("dns") || contains("resolve")                      ? "name not resolved"
+                                                                         : "unavailable";
+    hint = why == "name not resolved"
+               ? "cannot reach $target ($why): check the host name given to --server"
+               : "cannot reach $target ($why): is `fluxcal serve` running there? TLS: pass --ca (its CA; "
+                 "--cert and --key if it requires client certificates), or --insecure for a plaintext test server "
+                 "off loopback";
+  } else if (auto it = kHints.find(s.error_code()); it != kHints.end()) {
+    hint = it->second;
+  }
+  if (!hint.empty()) {
+    std::fprintf(stderr, "fluxcal %s: %s\n", cmd,
+                 absl::StrReplaceAll(hint, {{"$target", target}, {"$why", why}}).c_str());
   }
   std::fprintf(stderr, "fluxcal %s: %s: %s\n", cmd, c >= 0 && c <= 16 ? kNames[c] : "ERROR", msg.c_str());
   return 1;
 }
 
-namespace {
-void Deadline(grpc::ClientContext* ctx, int seconds) {
-  ctx->set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(seconds));
-}
-}  // namespace
-
 int RunRemoteQuery(const std::vector<std::string>& argv, const FlagSpecs& flags) {
   auto args = ParseArgs(argv, flags);
   if (!args.ok()) std::fprintf(stderr, "fluxcal query: %s\n", std::string(args.status().message()).c_str());
-  if (!args.ok() || args->positional.size() != 1) {
-    std::fprintf(stderr, "usage: fluxcal query SERIAL --server ADDR --id-a A --iq-a A [--version N] [--json]\n");
-    return 2;
-  }
+  if (!args.ok() || args->positional.size() != 1) return UsageError(kRemoteQueryUsage);
   auto id = args->GetDouble("id-a");
   auto iq = args->GetDouble("iq-a");
   if (!id.ok() || !iq.ok() || !id->has_value() || !iq->has_value()) {
@@ -243,23 +198,20 @@ int RunRemoteQuery(const std::vector<std::string>& argv, const FlagSpecs& flags)
   p->set_id_a(**id);
   p->set_iq_a(**iq);
   v1::QueryFluxResponse resp;
-  grpc::ClientContext ctx;
-  Deadline(&ctx, 30);
-  auto s = stub->QueryFlux(&ctx, req, &resp);
-  if (!s.ok()) return ReportRpcError("query", s);
+  if (auto s = CallWithDeadline(*stub, &v1::CalibrationService::Stub::QueryFlux, req, &resp); !s.ok()) {
+    return ReportRpcError("query", s);
+  }
   const auto& v = resp.values(0);
   if (args->Has("json")) {
-    std::cout << nlohmann::json{{"serial", resp.serial()}, {"version", resp.version()}, {"id_a", v.id_a()},
-                                {"iq_a", v.iq_a()}, {"psi_d_wb", v.psi_d_wb()}, {"psi_q_wb", v.psi_q_wb()},
-                                {"ldd_h", v.ldd_h()}, {"lqq_h", v.lqq_h()}, {"ldq_h", v.ldq_h()},
-                                {"ld_app_h", v.ld_app_h()}, {"lq_app_h", v.lq_app_h()}, {"torque_nm", v.torque_nm()},
-                                {"psi_d_wb_std", v.psi_d_wb_std()}, {"ldd_h_std", v.ldd_h_std()},
-                                {"lqq_h_std", v.lqq_h_std()}, {"torque_nm_std", v.torque_nm_std()},
-                                {"extrapolated", v.extrapolated()},
-                                {"region", v.region().empty() ? (v.extrapolated() ? "extrapolated" : "measured") : v.region()},
-                                {"valid", !v.invalid()}, {"invalid_reason", v.invalid_reason()}}
-                     .dump(2, ' ', false, nlohmann::json::error_handler_t::replace)
-              << "\n";
+    PrintJson({{"serial", resp.serial()}, {"version", resp.version()}, {"id_a", v.id_a()},
+               {"iq_a", v.iq_a()}, {"psi_d_wb", v.psi_d_wb()}, {"psi_q_wb", v.psi_q_wb()},
+               {"ldd_h", v.ldd_h()}, {"lqq_h", v.lqq_h()}, {"ldq_h", v.ldq_h()},
+               {"ld_app_h", v.ld_app_h()}, {"lq_app_h", v.lq_app_h()}, {"torque_nm", v.torque_nm()},
+               {"psi_d_wb_std", v.psi_d_wb_std()}, {"ldd_h_std", v.ldd_h_std()},
+               {"lqq_h_std", v.lqq_h_std()}, {"torque_nm_std", v.torque_nm_std()},
+               {"extrapolated", v.extrapolated()},
+               {"region", v.region().empty() ? (v.extrapolated() ? "extrapolated" : "measured") : v.region()},
+               {"valid", !v.invalid()}, {"invalid_reason", v.invalid_reason()}});
   } else {
     std::printf("serial %s v%d at id = %g A, iq = %g A: psi_d %.6g Wb, psi_q %.6g Wb, Ldd %.5g mH, Lqq %.5g mH, "
                 "Ldq %.4g mH, torque %.4g N m%s\n",
@@ -328,11 +280,9 @@ int WriteRemoteUdcAxis(const ParsedArgs& args, const v1::ExportTableRequest& req
     }
   }
   if (args.Has("json")) {
-    std::cout << nlohmann::json{{"serial", resp.serial()}, {"version", resp.version()}, {"table", req.table()},
-                                {"generating", req.generating()}, {"format", req.format()}, {"udc_axis_v", udcs},
-                                {"verdict", resp.verdict()}, {"released", resp.released()}, {"files", files}}
-                     .dump(2, ' ', false, nlohmann::json::error_handler_t::replace)
-              << "\n";
+    PrintJson({{"serial", resp.serial()}, {"version", resp.version()}, {"table", req.table()},
+               {"generating", req.generating()}, {"format", req.format()}, {"udc_axis_v", udcs},
+               {"verdict", resp.verdict()}, {"released", resp.released()}, {"files", files}});
   }
   return 0;
 }
@@ -418,10 +368,9 @@ int RunRemoteExport(const std::vector<std::string>& argv, const FlagSpecs& flags
   auto stub = MakeStub(*args->Get("server"));
   if (!stub) return 1;
   v1::ExportTableResponse resp;
-  grpc::ClientContext ctx;
-  Deadline(&ctx, 120);
-  auto s = stub->ExportTable(&ctx, req, &resp);
-  if (!s.ok()) return ReportRpcError("export", s);
+  if (auto s = CallWithDeadline(*stub, &v1::CalibrationService::Stub::ExportTable, req, &resp, 120); !s.ok()) {
+    return ReportRpcError("export", s);
+  }
   if (!udcs.empty()) return WriteRemoteUdcAxis(*args, req, resp, udcs);
   if (auto st = WriteNewOutput(*args, out_path, resp.data()); !st.ok()) {
     std::fprintf(stderr, "fluxcal export: %s\n", std::string(st.message()).c_str());
@@ -448,15 +397,13 @@ int RunRemoteExport(const std::vector<std::string>& argv, const FlagSpecs& flags
                  resp.clamped_cells(), resp.cells(), 100 * clamped_share);
   }
   if (args->Has("json")) {
-    std::cout << nlohmann::json{{"out", *args->Get("out")}, {"serial", resp.serial()}, {"version", resp.version()},
-                                {"table", req.table()}, {"generating", req.generating()},
-                                {"format", req.format()}, {"sha256", file_sha256},
-                                {"payload_crc32", resp.crc32()}, {"payload_sha256", resp.sha256()},
-                                {"cells", resp.cells()}, {"clamped_cells", resp.clamped_cells()},
-                                {"clamped_share", clamped_share}, {"verdict", resp.verdict()},
-                                {"released", resp.released()}, {"bytes", resp.data().size()}}
-                     .dump(2, ' ', false, nlohmann::json::error_handler_t::replace)
-              << "\n";
+    PrintJson({{"out", *args->Get("out")}, {"serial", resp.serial()}, {"version", resp.version()},
+               {"table", req.table()}, {"generating", req.generating()},
+               {"format", req.format()}, {"sha256", file_sha256},
+               {"payload_crc32", resp.crc32()}, {"payload_sha256", resp.sha256()},
+               {"cells", resp.cells()}, {"clamped_cells", resp.clamped_cells()},
+               {"clamped_share", clamped_share}, {"verdict", resp.verdict()},
+               {"released", resp.released()}, {"bytes", resp.data().size()}});
   } else {
     std::fprintf(to_stdout ? stderr : stdout, "%s: %s v%d %s table (%s), verdict %s, %s\n  sha256 %s (file)\n  payload_crc32 %s payload_sha256 %s (values)\n",
                 args->Get("out")->c_str(), resp.serial().c_str(), resp.version(), req.table().c_str(),

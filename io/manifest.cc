@@ -40,6 +40,32 @@ absl::StatusOr<double> GetNumber(const ManifestCtx& ctx, const json& obj,
   return v;
 }
 
+// An optional number that, when present, must be positive (or, with
+// zero_allowed, not negative): into *out then, else *out unchanged.
+template <class T>
+absl::Status GetOptionalSignedNumber(const ManifestCtx& ctx, const json& obj, const std::string& key,
+                                     const std::string& field, bool zero_allowed, T* out) {
+  bool present = false;
+  auto v = GetNumber(ctx, obj, key, field, false, 0, &present);
+  if (!v.ok()) return v.status();
+  if (!present) return absl::OkStatus();
+  if (zero_allowed ? *v < 0 : *v <= 0) return ctx.Error(field, zero_allowed ? "must not be negative" : "must be positive");
+  *out = *v;
+  return absl::OkStatus();
+}
+
+// The object j[key] a section's fields are in; missing or not an object:
+// refused naming first_field (the section's first required field).
+absl::StatusOr<const json*> GetSection(const ManifestCtx& ctx, const json& j, const std::string& key,
+                                       const std::string& first_field) {
+  auto it = j.find(key);
+  if (it == j.end() || !it->is_object()) {
+    return ctx.Error(first_field, it == j.end() ? "required field is missing" : "'" + key + "' must be an object",
+                     it == j.end() ? 1 : 0);
+  }
+  return &*it;
+}
+
 absl::StatusOr<std::string> GetString(const ManifestCtx& ctx, const json& obj,
                                       const std::string& key, const std::string& field,
                                       bool required, bool* present, size_t line_hint = 0) {
@@ -98,14 +124,10 @@ absl::Status ParseIdentity(const ManifestCtx& ctx, const json& j, Manifest* m) {
 
 absl::Status ParseMotor(const ManifestCtx& ctx, const json& j, Manifest* m) {
   bool present = false;
-  auto mit = j.find("motor");
-  if (mit == j.end() || !mit->is_object()) {
-    return ctx.Error("motor.pole_pairs",
-                     mit == j.end() ? "required field is missing" : "'motor' must be an object",
-                     mit == j.end() ? 1 : 0);
-  }
+  auto section = GetSection(ctx, j, "motor", "motor.pole_pairs");
+  if (!section.ok()) return section.status();
   {
-    const json& mo = *mit;
+    const json& mo = **section;
     const size_t hint = LineOfKey(ctx.text, "motor");
     auto it = mo.find("pole_pairs");
     if (it == mo.end()) return ctx.Error("motor.pole_pairs", "required field is missing", hint);
@@ -117,17 +139,9 @@ absl::Status ParseMotor(const ManifestCtx& ctx, const json& j, Manifest* m) {
       return ctx.Error("motor.pole_pairs", absl::StrCat("must be 1..100, got ", it->dump()));
     }
     m->motor.pole_pairs = static_cast<int>(pp);
-    auto rs = GetNumber(ctx, mo, "rs_ohm", "motor.rs_ohm", false, 0, &present);
-    if (!rs.ok()) return rs.status();
-    if (present) {
-      if (*rs < 0) return ctx.Error("motor.rs_ohm", "must not be negative");
-      m->motor.rs_ohm = *rs;
-    }
-    auto pm = GetNumber(ctx, mo, "psi_pm_wb", "motor.psi_pm_wb", false, 0, &present);
-    if (!pm.ok()) return pm.status();
-    if (present) {
-      if (*pm < 0) return ctx.Error("motor.psi_pm_wb", "must not be negative");
-      m->motor.psi_pm_wb = *pm;
+    if (auto s = GetOptionalSignedNumber(ctx, mo, "rs_ohm", "motor.rs_ohm", true, &m->motor.rs_ohm); !s.ok()) return s;
+    if (auto s = GetOptionalSignedNumber(ctx, mo, "psi_pm_wb", "motor.psi_pm_wb", true, &m->motor.psi_pm_wb); !s.ok()) {
+      return s;
     }
     auto tc = GetNumber(ctx, mo, "psi_pm_temp_coeff_per_k", "motor.psi_pm_temp_coeff_per_k", false, 0, &present);
     if (!tc.ok()) return tc.status();
@@ -146,36 +160,20 @@ absl::Status ParseMotor(const ManifestCtx& ctx, const json& j, Manifest* m) {
 
 absl::Status ParseDrive(const ManifestCtx& ctx, const json& j, Manifest* m) {
   bool present = false;
-  auto dit = j.find("drive");
-  if (dit == j.end() || !dit->is_object()) {
-    return ctx.Error("drive.f_sample_hz",
-                     dit == j.end() ? "required field is missing" : "'drive' must be an object",
-                     dit == j.end() ? 1 : 0);
-  }
+  auto section = GetSection(ctx, j, "drive", "drive.f_sample_hz");
+  if (!section.ok()) return section.status();
   {
-    const json& d = *dit;
+    const json& d = **section;
     const size_t hint = LineOfKey(ctx.text, "drive");
     auto fs_hz = GetNumber(ctx, d, "f_sample_hz", "drive.f_sample_hz", true, 0, &present, hint);
     if (!fs_hz.ok()) return fs_hz.status();
     if (*fs_hz <= 0) return ctx.Error("drive.f_sample_hz", "must be positive");
     m->drive.f_sample_hz = *fs_hz;
-    auto udc = GetNumber(ctx, d, "udc_v", "drive.udc_v", false, 0, &present);
-    if (!udc.ok()) return udc.status();
-    if (present) {
-      if (*udc <= 0) return ctx.Error("drive.udc_v", "must be positive");
-      m->drive.udc_v = *udc;
-    }
-    auto fpwm = GetNumber(ctx, d, "f_pwm_hz", "drive.f_pwm_hz", false, 0, &present);
-    if (!fpwm.ok()) return fpwm.status();
-    if (present) {
-      if (*fpwm <= 0) return ctx.Error("drive.f_pwm_hz", "must be positive");
-      m->drive.f_pwm_hz = *fpwm;
-    }
-    auto td = GetNumber(ctx, d, "dead_time_s", "drive.dead_time_s", false, 0, &present);
-    if (!td.ok()) return td.status();
-    if (present) {
-      if (*td < 0) return ctx.Error("drive.dead_time_s", "must not be negative");
-      m->drive.dead_time_s = *td;
+    for (auto [key, field, zero_allowed, out] :
+         {std::tuple{"udc_v", "drive.udc_v", false, &m->drive.udc_v},
+          std::tuple{"f_pwm_hz", "drive.f_pwm_hz", false, &m->drive.f_pwm_hz},
+          std::tuple{"dead_time_s", "drive.dead_time_s", true, &m->drive.dead_time_s}}) {
+      if (auto s = GetOptionalSignedNumber(ctx, d, key, field, zero_allowed, out); !s.ok()) return s;
     }
     auto it = d.find("dead_time_compensated");
     if (it != d.end() && !it->is_null()) {

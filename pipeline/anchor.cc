@@ -156,15 +156,7 @@ absl::Status AppendAnchorEvent(storage::Store& store, const std::string& path, c
   } else if (h.status().code() != absl::StatusCode::kNotFound) {
     return h.status();
   }
-  auto rel = store.ReleaseLinkAt(0);
-  if (rel.ok()) {
-    head.release_seq = rel->seq;
-    head.release_serial = rel->serial;
-    head.release_version = rel->version;
-    head.release_sha256 = rel->row_sha256;
-  } else if (rel.status().code() != absl::StatusCode::kNotFound) {
-    return rel.status();
-  }
+  if (auto s = storage::SetNewestRelease(store, &head); !s.ok()) return s;
   return AppendAnchorLine(path, AnchorLine(head, "event", store.Backend(), storage::NowUtc()));
 }
 

@@ -1,14 +1,8 @@
 #include "pipeline/signing.h"
 
-#include "tables/signature.h"
-
 namespace fluxcal::pipeline {
 
-absl::StatusOr<SigningKeyPair> GenerateSigningKeyPair() {
-  auto kp = tables::GenerateEd25519();
-  if (!kp.ok()) return kp.status();
-  return SigningKeyPair{std::move(kp->private_pem), std::move(kp->public_pem)};
-}
+absl::StatusOr<SigningKeyPair> GenerateSigningKeyPair() { return tables::GenerateEd25519(); }
 
 absl::StatusOr<std::string> SigningKeyId(const std::string& public_pem) { return tables::KeyId(public_pem); }
 

@@ -11,12 +11,12 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "tables/signature.h"
 
 namespace fluxcal::pipeline {
 
-struct SigningKeyPair {
-  std::string private_pem, public_pem;
-};
+// private_pem, public_pem.
+using SigningKeyPair = tables::KeyPairPem;
 // A new Ed25519 key pair (PEM, PKCS#8 / SubjectPublicKeyInfo).
 absl::StatusOr<SigningKeyPair> GenerateSigningKeyPair();
 // The key id of a public key (first 16 hex digits of SHA-256 of its DER).
@@ -25,9 +25,8 @@ absl::StatusOr<std::string> SigningKeyId(const std::string& public_pem);
 absl::Status CheckSigningKey(const std::string& private_pem);
 // The detached signature file of `data` (an exported table's bytes).
 absl::StatusOr<std::string> SignExport(std::string_view data, const std::string& private_pem);
-// OK when `sig_file` is a valid signature of `data` by `public_pem`;
-// InvalidArgument (malformed signature file), PermissionDenied (wrong key,
-// changed data) otherwise, with the reason.
+// tables::VerifyDetached: OK, InvalidArgument (malformed signature file)
+// or PermissionDenied (wrong key, changed data), with the reason.
 absl::Status VerifyExportSignature(std::string_view data, std::string_view sig_file, const std::string& public_pem);
 
 }  // namespace fluxcal::pipeline

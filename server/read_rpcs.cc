@@ -27,9 +27,8 @@ using internal::ToProto;
 
 grpc::Status CalibrationServiceImpl::GetCalibration(grpc::ServerContext* ctx, const v1::GetCalibrationRequest* req,
                                                     v1::CalibrationRecord* resp) {
-  auto who = Admit(ctx, Rpc::kGetCalibration);
+  auto who = AdmitForSerial(ctx, Rpc::kGetCalibration, req->serial());
   if (!who.ok()) return ToGrpcStatus(who.status());
-  if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
   if (auto s = ValidateVersion(req->version()); !s.ok()) return ToGrpcStatus(s);
   auto row = pipeline::GetCalibrationRecord(*store_, req->serial(), req->version());
   if (!row.ok()) return ToGrpcStatus(row.status());
@@ -61,9 +60,8 @@ grpc::Status CalibrationServiceImpl::ListMotors(grpc::ServerContext* ctx, const 
 
 grpc::Status CalibrationServiceImpl::History(grpc::ServerContext* ctx, const v1::HistoryRequest* req,
                                              v1::HistoryResponse* resp) {
-  auto who = Admit(ctx, Rpc::kHistory);
+  auto who = AdmitForSerial(ctx, Rpc::kHistory, req->serial());
   if (!who.ok()) return ToGrpcStatus(who.status());
-  if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
   auto rows = pipeline::MotorHistory(*store_, req->serial());
   if (!rows.ok()) return ToGrpcStatus(rows.status());
   resp->set_serial(req->serial());
@@ -77,9 +75,8 @@ grpc::Status CalibrationServiceImpl::History(grpc::ServerContext* ctx, const v1:
 
 grpc::Status CalibrationServiceImpl::QueryFlux(grpc::ServerContext* ctx, const v1::QueryFluxRequest* req,
                                                v1::QueryFluxResponse* resp) {
-  auto who = Admit(ctx, Rpc::kQueryFlux);
+  auto who = AdmitForSerial(ctx, Rpc::kQueryFlux, req->serial());
   if (!who.ok()) return ToGrpcStatus(who.status());
-  if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
   if (auto s = ValidateVersion(req->version()); !s.ok()) return ToGrpcStatus(s);
   if (req->points_size() > kMaxQueryPoints) {
     return ToGrpcStatus(absl::ResourceExhaustedError(absl::StrCat("points: at most ", kMaxQueryPoints, " per call")));
@@ -114,9 +111,8 @@ grpc::Status CalibrationServiceImpl::QueryFlux(grpc::ServerContext* ctx, const v
 
 grpc::Status CalibrationServiceImpl::ExportTable(grpc::ServerContext* ctx, const v1::ExportTableRequest* req,
                                                  v1::ExportTableResponse* resp) {
-  auto who = Admit(ctx, Rpc::kExportTable);
+  auto who = AdmitForSerial(ctx, Rpc::kExportTable, req->serial());
   if (!who.ok()) return ToGrpcStatus(who.status());
-  if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
   tables::TableSpec spec;
   spec.kind = req->table().empty() ? "mtpa" : req->table();
   if (req->points() != 0) spec.points = req->points();
@@ -267,9 +263,8 @@ grpc::Status CalibrationServiceImpl::FleetStatistics(grpc::ServerContext* ctx, c
 
 grpc::Status CalibrationServiceImpl::Audit(grpc::ServerContext* ctx, const v1::AuditRequest* req,
                                            v1::AuditResponse* resp) {
-  auto who = Admit(ctx, Rpc::kAudit);
+  auto who = AdmitForSerial(ctx, Rpc::kAudit, req->serial());
   if (!who.ok()) return ToGrpcStatus(who.status());
-  if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
   auto rows = pipeline::AuditTrail(*store_, req->serial());
   if (!rows.ok()) return ToGrpcStatus(rows.status());
   resp->set_serial(req->serial());
@@ -283,9 +278,8 @@ grpc::Status CalibrationServiceImpl::Audit(grpc::ServerContext* ctx, const v1::A
 
 grpc::Status CalibrationServiceImpl::GetReport(grpc::ServerContext* ctx, const v1::GetReportRequest* req,
                                                v1::GetReportResponse* resp) {
-  auto who = Admit(ctx, Rpc::kGetReport);
+  auto who = AdmitForSerial(ctx, Rpc::kGetReport, req->serial());
   if (!who.ok()) return ToGrpcStatus(who.status());
-  if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
   if (auto s = ValidateVersion(req->version()); !s.ok()) return ToGrpcStatus(s);
   if (auto s = ValidateDefaultable("speed_rpm", req->speed_rpm(), kMaxSpeedRpm, "rpm"); !s.ok()) return ToGrpcStatus(s);
   if (auto s = ValidateDefaultable("udc_v", req->udc_v(), kMaxUdcV, "V"); !s.ok()) return ToGrpcStatus(s);

@@ -116,6 +116,14 @@ absl::StatusOr<Admission> CalibrationServiceImpl::Admit(grpc::ServerContext* ctx
   return a;
 }
 
+absl::StatusOr<Admission> CalibrationServiceImpl::AdmitForSerial(grpc::ServerContext* ctx, Rpc rpc,
+                                                                 const std::string& serial) {
+  auto who = Admit(ctx, rpc);
+  if (!who.ok()) return who.status();
+  if (auto s = ValidateSerial(serial); !s.ok()) return s;
+  return who;
+}
+
 storage::AuditContext CalibrationServiceImpl::AuditFor(grpc::ServerContext* ctx, const Identity& who, Rpc rpc,
                                                       const std::string& serial,
                                                       std::function<std::string(int64_t, bool)> detail) {

@@ -82,6 +82,8 @@ class CalibrationServiceImpl final : public fluxcal::v1::CalibrationService::Ser
   // Authorize + a place in the caller's limits: UNAUTHENTICATED,
   // PERMISSION_DENIED or RESOURCE_EXHAUSTED.
   absl::StatusOr<Admission> Admit(grpc::ServerContext* ctx, Rpc rpc);
+  // Admit, then the request's serial checked (INVALID_ARGUMENT naming it).
+  absl::StatusOr<Admission> AdmitForSerial(grpc::ServerContext* ctx, Rpc rpc, const std::string& serial);
   storage::AuditContext AuditFor(grpc::ServerContext* ctx, const Identity& who, Rpc rpc, const std::string& serial,
                                  std::function<std::string(int64_t, bool)> detail);
 

@@ -18,9 +18,8 @@ using internal::StoppedOr;
 using internal::ToProto;
 
 grpc::Status CalibrationServiceImpl::Fit(grpc::ServerContext* ctx, const v1::FitRequest* req, v1::FitResponse* resp) {
-  auto who = Admit(ctx, Rpc::kFit);
+  auto who = AdmitForSerial(ctx, Rpc::kFit, req->serial());
   if (!who.ok()) return ToGrpcStatus(who.status());
-  if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
   // Verdict tolerances are policy (pipeline::RequestedTolerances): a client
   // may tighten them, never loosen them.
   auto tol = pipeline::RequestedTolerances(req->max_rms_relative(), req->psi_pm_tolerance_relative());
@@ -38,9 +37,8 @@ grpc::Status CalibrationServiceImpl::Fit(grpc::ServerContext* ctx, const v1::Fit
 
 grpc::Status CalibrationServiceImpl::Diagnose(grpc::ServerContext* ctx, const v1::DiagnoseRequest* req,
                                               v1::DiagnoseResponse* resp) {
-  auto who = Admit(ctx, Rpc::kDiagnose);
+  auto who = AdmitForSerial(ctx, Rpc::kDiagnose, req->serial());
   if (!who.ok()) return ToGrpcStatus(who.status());
-  if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
   auto rep = pipeline::DiagnoseStored(*store_, req->serial(), CancelledBy(ctx));
   if (!rep.ok()) return StoppedOr(ctx, rep.status());
   resp->set_serial(req->serial());
@@ -60,9 +58,8 @@ grpc::Status CalibrationServiceImpl::Diagnose(grpc::ServerContext* ctx, const v1
 
 grpc::Status CalibrationServiceImpl::Release(grpc::ServerContext* ctx, const v1::ReleaseRequest* req,
                                              v1::ReleaseResponse* resp) {
-  auto who = Admit(ctx, Rpc::kRelease);
+  auto who = AdmitForSerial(ctx, Rpc::kRelease, req->serial());
   if (!who.ok()) return ToGrpcStatus(who.status());
-  if (auto s = ValidateSerial(req->serial()); !s.ok()) return ToGrpcStatus(s);
   if (req->version() <= 0) {
     return ToGrpcStatus(absl::InvalidArgumentError("version: a release names the version it approves (> 0)"));
   }

@@ -134,6 +134,19 @@ absl::StatusOr<ChainHead::Head> SerialHead(Store& store, const std::string& seri
   return ChainHead::Head{serial, link->version, link->row_sha256};
 }
 
+absl::Status SetNewestRelease(Store& store, ChainHead* head) {
+  auto rel = store.ReleaseLinkAt(0);
+  if (rel.ok()) {
+    head->release_seq = rel->seq;
+    head->release_serial = rel->serial;
+    head->release_version = rel->version;
+    head->release_sha256 = rel->row_sha256;
+  } else if (rel.status().code() != absl::StatusCode::kNotFound) {
+    return rel.status();
+  }
+  return absl::OkStatus();
+}
+
 absl::StatusOr<ChainHead> CurrentChainHead(Store& store) {
   // From the links alone (small rows): the newest chained version of every
   // serial. Versions from before the chain (schema < 6) have no link and
@@ -147,15 +160,7 @@ absl::StatusOr<ChainHead> CurrentChainHead(Store& store) {
   }
   ChainHead out;
   for (auto& [serial, h] : newest) out.calibrations.push_back(std::move(h));
-  auto rel = store.ReleaseLinkAt(0);
-  if (rel.ok()) {
-    out.release_seq = rel->seq;
-    out.release_serial = rel->serial;
-    out.release_version = rel->version;
-    out.release_sha256 = rel->row_sha256;
-  } else if (rel.status().code() != absl::StatusCode::kNotFound) {
-    return rel.status();
-  }
+  if (auto s = SetNewestRelease(store, &out); !s.ok()) return s;
   out.digest_sha256 = ChainHeadDigest(out);
   return out;
 }
@@ -257,38 +262,33 @@ absl::StatusOr<ChainReport> VerifyChains(Store& store, const ChainHead* anchor, 
   for (const auto& l : *rlinks) {
     const std::pair<std::string, int> key{l.serial, l.version};
     bool ok = true;
+    // A problem of this link: reported, and the link not counted as chained.
+    auto problem = [&](const std::string& what) {
+      rep.problems.push_back(Rel(l) + what);
+      ok = false;
+    };
     if (l.seq != expected_seq) {
       for (int64_t k = expected_seq; k < l.seq; ++k) {
         rep.problems.push_back(absl::StrCat("release #", k, ": chain link removed"));
       }
       ok = false;
     } else if (l.prev_sha256 != rprev) {
-      rep.problems.push_back(Rel(l) + kReleaseChainBroken);
-      ok = false;
+      problem(kReleaseChainBroken);
     }
     auto it = release_by_key.find(key);
     if (it == release_by_key.end()) {
-      rep.problems.push_back(Rel(l) + ": release row removed");
-      ok = false;
+      problem(": release row removed");
     } else {
       linked.insert(key);
       if (ReleaseRowSha256(l.prev_sha256, l.seq, it->second, l.calibration_sha256) != l.row_sha256) {
-        rep.problems.push_back(Rel(l) + kReleaseChanged);
-        ok = false;
+        problem(kReleaseChanged);
       }
       auto cal = stored.find(key);
       if (cal == stored.end()) {
-        rep.problems.push_back(Rel(l) + ": the released calibration version is gone");
-        ok = false;
+        problem(": the released calibration version is gone");
       } else {
-        if (cal->second.first != l.calibration_sha256) {
-          rep.problems.push_back(Rel(l) + kReleasedCalChanged);
-          ok = false;
-        }
-        if (cal->second.second != "pass") {
-          rep.problems.push_back(Rel(l) + NotPass(cal->second.second));
-          ok = false;
-        }
+        if (cal->second.first != l.calibration_sha256) problem(kReleasedCalChanged);
+        if (cal->second.second != "pass") problem(NotPass(cal->second.second));
       }
     }
     if (ok) ++rep.releases_chained;

@@ -337,6 +337,9 @@ struct ChainHead {
 absl::StatusOr<ChainHead> CurrentChainHead(Store& store);
 // The newest version of one serial as a head entry (NotFound: none).
 absl::StatusOr<ChainHead::Head> SerialHead(Store& store, const std::string& serial);
+// The newest release link (ReleaseLinkAt(0)) as head's release_*; head
+// unchanged while no release is chained.
+absl::Status SetNewestRelease(Store& store, ChainHead* head);
 // SHA-256 over "serial\tversion\trow_sha256\n" per calibration head (in
 // the order given) and "release\tseq\tserial\tversion\trow_sha256\n".
 std::string ChainHeadDigest(const ChainHead& head);

@@ -63,10 +63,15 @@ struct Violation {
   std::string include;
 };
 
-std::vector<Violation> Violations(const std::string& folder, const std::set<std::string>& allowed = kAllowed) {
-  const std::set<std::string> repo = RepositoryFolders();
-  const std::regex include_re(R"(^\s*#\s*include\s*["<]([A-Za-z0-9_.-]+)/([^">]+)[">])");
-  std::vector<Violation> out;
+// An include line naming a repository path: its first folder, the rest.
+constexpr char kIncludePattern[] = R"(^\s*#\s*include\s*["<]([A-Za-z0-9_.-]+)/([^">]+)[">])";
+
+// Calls visit(file relative to the source root, line number, first folder,
+// rest of the path) for every `#include "X/..."` (or <X/...>) in the .cc
+// and .h files below folder.
+template <class Visit>
+void ForEachInclude(const std::string& folder, Visit visit) {
+  const std::regex include_re(kIncludePattern);
   for (const auto& e : fs::recursive_directory_iterator(fs::path(FLUXCAL_SOURCE_DIR) / folder)) {
     const std::string ext = e.path().extension().string();
     if (!e.is_regular_file() || (ext != ".cc" && ext != ".h")) continue;
@@ -76,13 +81,19 @@ std::vector<Violation> Violations(const std::string& folder, const std::set<std:
     while (std::getline(in, line)) {
       ++n;
       std::smatch m;
-      if (!std::regex_search(line, m, include_re)) continue;
-      const std::string top = m[1];
-      if (repo.count(top) != 0 && top != folder && allowed.count(top) == 0) {
-        out.push_back({fs::relative(e.path(), FLUXCAL_SOURCE_DIR).string(), n, top + "/" + m[2].str()});
+      if (std::regex_search(line, m, include_re)) {
+        visit(fs::relative(e.path(), FLUXCAL_SOURCE_DIR).string(), n, m[1].str(), m[2].str());
       }
     }
   }
+}
+
+std::vector<Violation> Violations(const std::string& folder, const std::set<std::string>& allowed = kAllowed) {
+  const std::set<std::string> repo = RepositoryFolders();
+  std::vector<Violation> out;
+  ForEachInclude(folder, [&](const std::string& file, int n, const std::string& top, const std::string& rest) {
+    if (repo.count(top) != 0 && top != folder && allowed.count(top) == 0) out.push_back({file, n, top + "/" + rest});
+  });
   return out;
 }
 
@@ -138,27 +149,14 @@ bool DeclaresInternalNamespace(const fs::path& header) {
 }
 
 TEST(Layers, InternalHeadersStayInTheirLibrary) {
-  const std::regex include_re(R"(^\s*#\s*include\s*["<]([A-Za-z0-9_.-]+)/([^">]+)[">])");
   std::vector<Violation> v;
   for (const auto& [folder, allowed] : kLayers) {
-    const fs::path dir = fs::path(FLUXCAL_SOURCE_DIR) / folder;
-    if (!fs::is_directory(dir)) continue;
-    for (const auto& e : fs::recursive_directory_iterator(dir)) {
-      const std::string ext = e.path().extension().string();
-      if (!e.is_regular_file() || (ext != ".cc" && ext != ".h")) continue;
-      std::ifstream in(e.path());
-      std::string line;
-      int n = 0;
-      while (std::getline(in, line)) {
-        ++n;
-        std::smatch m;
-        if (!std::regex_search(line, m, include_re) || m[1].str() == folder) continue;
-        const fs::path header = fs::path(FLUXCAL_SOURCE_DIR) / m[1].str() / m[2].str();
-        if (fs::is_regular_file(header) && DeclaresInternalNamespace(header)) {
-          v.push_back({fs::relative(e.path(), FLUXCAL_SOURCE_DIR).string(), n, m[1].str() + "/" + m[2].str()});
-        }
-      }
-    }
+    if (!fs::is_directory(fs::path(FLUXCAL_SOURCE_DIR) / folder)) continue;
+    ForEachInclude(folder, [&](const std::string& file, int n, const std::string& top, const std::string& rest) {
+      if (top == folder) return;
+      const fs::path header = fs::path(FLUXCAL_SOURCE_DIR) / top / rest;
+      if (fs::is_regular_file(header) && DeclaresInternalNamespace(header)) v.push_back({file, n, top + "/" + rest});
+    });
   }
   EXPECT_TRUE(v.empty()) << "a library's internal header included from another folder:\n" << Describe(v);
 }
@@ -172,7 +170,7 @@ TEST(Layers, FindsTheInternalHeaders) {
 TEST(Layers, CatchesAnInclude) {
   const fs::path dir = fs::path(FLUXCAL_SOURCE_DIR) / "fitting";
   ASSERT_TRUE(fs::is_directory(dir));
-  const std::regex include_re(R"(^\s*#\s*include\s*["<]([A-Za-z0-9_.-]+)/([^">]+)[">])");
+  const std::regex include_re(kIncludePattern);
   std::smatch m;
   const std::string line = "#include \"fitting/fit.h\"";
   ASSERT_TRUE(std::regex_search(line, m, include_re));

@@ -14,38 +14,16 @@
 #include "cli/args.h"
 #include "gtest/gtest.h"
 #include "nlohmann/json.hpp"
+#include "tests/e2e/fluxcal_run.h"
 
 namespace {
 
 namespace fs = std::filesystem;
 
-struct Result {
-  int code = 0;
-  std::string out, err;
-};
-
-std::string Slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  return std::string(std::istreambuf_iterator<char>(in), {});
-}
-
+using Result = fluxcal::e2e::RunResult;
+using fluxcal::e2e::ReadFile;
 // Runs the binary; stdout and stderr captured.
-Result Fluxcal(const std::string& args) {
-  static int n = 0;
-  const fs::path err = fs::temp_directory_path() /
-                       ("fluxcal_conv_err_" + std::to_string(::getpid()) + "_" + std::to_string(n++));
-  const std::string cmd = std::string(FLUXCAL_BINARY) + " " + args + " 2>" + err.string();
-  Result r;
-  FILE* p = popen(cmd.c_str(), "r");
-  std::array<char, 4096> buf;
-  size_t k;
-  while ((k = fread(buf.data(), 1, buf.size(), p)) > 0) r.out.append(buf.data(), k);
-  const int st = pclose(p);
-  r.code = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
-  r.err = Slurp(err);
-  fs::remove(err);
-  return r;
-}
+Result Fluxcal(const std::string& args) { return fluxcal::e2e::RunFluxcal(args); }
 
 nlohmann::json Registry() {
   const Result r = Fluxcal("help --json");
@@ -118,9 +96,7 @@ TEST(CliConventions, BadFlagFailsBeforeAnyWork) {
 }
 
 TEST(CliConventions, OutDashWritesToStdout) {
-  const fs::path dir = fs::temp_directory_path() / ("fluxcal_conv_out_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
+  const fs::path dir = fluxcal::e2e::FreshTempDir("fluxcal_conv_out_");
   const std::string measured = std::string(FLUXCAL_SOURCE_DIR) + "/data/real/baldor_fluxmap_measured.csv";
   const std::string cal = (dir / "cal.json").string();
   const std::string fit_args = "fit --map " + measured + " --pole-pairs 2 --serial BALDOR-OUT-1 ";
@@ -146,14 +122,14 @@ TEST(CliConventions, OutDashWritesToStdout) {
     if (at != std::string::npos) text.erase(at, text.find('\n', at) - at);
     return text;
   };
-  EXPECT_EQ(without_time(ex.out), without_time(Slurp(csv)));
+  EXPECT_EQ(without_time(ex.out), without_time(ReadFile(csv)));
 
   // map export.
   const std::string map = (dir / "map.csv").string();
   ASSERT_EQ(Fluxcal("map export " + cal + " --out " + map).code, 0);
   const Result me = Fluxcal("map export " + cal + " --out -");
   ASSERT_EQ(me.code, 0) << me.err;
-  EXPECT_EQ(me.out, Slurp(map));
+  EXPECT_EQ(me.out, ReadFile(map));
 
   // report: the HTML page.
   const Result rep = Fluxcal("report " + cal + " --out -");
@@ -174,9 +150,7 @@ TEST(CliConventions, OutDashWritesToStdout) {
 }
 
 TEST(CliConventions, ServeRefusesWithoutDb) {
-  const fs::path dir = fs::temp_directory_path() / ("fluxcal_conv_serve_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
+  const fs::path dir = fluxcal::e2e::FreshTempDir("fluxcal_conv_serve_");
   const std::string cmd = "cd " + dir.string() + " && " + std::string(FLUXCAL_BINARY) +
                           " serve --listen 127.0.0.1:0 --quiet 2>&1; echo rc=$?";
   FILE* p = popen(cmd.c_str(), "r");

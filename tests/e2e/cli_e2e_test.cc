@@ -12,28 +12,15 @@
 
 #include "gtest/gtest.h"
 #include "nlohmann/json.hpp"
+#include "tests/e2e/fluxcal_run.h"
 
 namespace {
 
 namespace fs = std::filesystem;
 
-struct Run {
-  int code = 0;
-  std::string out;
-};
-
-// Runs the binary; stdout captured, stderr discarded.
-Run Fluxcal(const std::string& args) {
-  const std::string cmd = std::string(FLUXCAL_BINARY) + " " + args + " 2>/dev/null";
-  Run r;
-  FILE* p = popen(cmd.c_str(), "r");
-  std::array<char, 4096> buf;
-  size_t n;
-  while ((n = fread(buf.data(), 1, buf.size(), p)) > 0) r.out.append(buf.data(), n);
-  const int st = pclose(p);
-  r.code = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
-  return r;
-}
+using Run = fluxcal::e2e::RunResult;
+// Runs the binary; stdout and stderr captured.
+Run Fluxcal(const std::string& args) { return fluxcal::e2e::RunFluxcal(args); }
 
 nlohmann::json Json(const Run& r) {
   EXPECT_EQ(r.code, 0) << r.out;
@@ -41,9 +28,7 @@ nlohmann::json Json(const Run& r) {
 }
 
 TEST(Cli, EndToEnd) {
-  const fs::path dir = fs::temp_directory_path() / ("fluxcal_e2e_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
+  const fs::path dir = fluxcal::e2e::FreshTempDir("fluxcal_e2e_");
   const std::string set = (dir / "set").string();
   auto sim = Json(Fluxcal("simulate --out " + set + " --seed 5 --serial IPM-E2E-1 --effects dead_time_s=1.5e-6 --json"));
   EXPECT_EQ(sim["serial"], "IPM-E2E-1");
@@ -147,9 +132,7 @@ TEST(Cli, EndToEnd) {
 // reproduced to its sensor noise, open loop and closed loop (the twin's
 // default bench controller is what the replay assumes by default).
 TEST(Cli, ReplayReproducesACleanSet) {
-  const fs::path dir = fs::temp_directory_path() / ("fluxcal_e2e_replay_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
+  const fs::path dir = fluxcal::e2e::FreshTempDir("fluxcal_e2e_replay_");
   const std::string set = (dir / "set").string(), cal = (dir / "cal.json").string();
   Json(Fluxcal("simulate --out " + set + " --seed 6 --serial IPM-E2E-2 --json"));
   Json(Fluxcal("fit " + set + " --out " + cal + " --json"));
@@ -165,18 +148,11 @@ TEST(Cli, ReplayReproducesACleanSet) {
 }
 
 TEST(Cli, BadInputNamesTheFile) {
-  const fs::path dir = fs::temp_directory_path() / ("fluxcal_e2e_bad_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
+  const fs::path dir = fluxcal::e2e::FreshTempDir("fluxcal_e2e_bad_");
   std::ofstream(dir / "manifest.json") << "{\"format\": \"fluxcal.recording.v1\", \"serial\": \"bad serial\"}";
-  const std::string cmd = std::string(FLUXCAL_BINARY) + " identify " + dir.string() + " --json 2>&1";
-  FILE* p = popen(cmd.c_str(), "r");
-  std::string out;
-  std::array<char, 4096> buf;
-  size_t n;
-  while ((n = fread(buf.data(), 1, buf.size(), p)) > 0) out.append(buf.data(), n);
-  const int st = pclose(p);
-  EXPECT_EQ(WEXITSTATUS(st), 1);
+  const auto id = Fluxcal("identify " + dir.string() + " --json");
+  const std::string out = id.out + id.err;
+  EXPECT_EQ(id.code, 1);
   EXPECT_NE(out.find("manifest.json"), std::string::npos) << out;
   EXPECT_NE(out.find("field 'serial'"), std::string::npos) << out;
   // validate: the same message as one JSON document, exit 1.
@@ -195,20 +171,13 @@ TEST(Cli, BadInputNamesTheFile) {
 // that does not exist (and an empty file), naming the flag and the path,
 // and create nothing.
 TEST(Cli, ReadOnlyAdminCommandsRefuseAMissingStore) {
-  const fs::path dir = fs::temp_directory_path() / ("fluxcal_e2e_typo_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
+  const fs::path dir = fluxcal::e2e::FreshTempDir("fluxcal_e2e_typo_");
   const std::string typo = (dir / "typo.db").string();
   for (const std::string cmd : {"admin verify-db --db ", "admin verify-db --json --db sqlite:", "admin hash --db ",
                                 "admin anchor --db "}) {
-    const std::string full = std::string(FLUXCAL_BINARY) + " " + cmd + typo + " 2>&1";
-    FILE* p = popen(full.c_str(), "r");
-    std::string out;
-    std::array<char, 4096> buf;
-    size_t n;
-    while ((n = fread(buf.data(), 1, buf.size(), p)) > 0) out.append(buf.data(), n);
-    const int st = pclose(p);
-    EXPECT_EQ(WEXITSTATUS(st), 1) << cmd << ": " << out;
+    const auto r = Fluxcal(cmd + typo);
+    const std::string out = r.out + r.err;
+    EXPECT_EQ(r.code, 1) << cmd << ": " << out;
     EXPECT_NE(out.find("flag --db: sqlite: no store at '" + typo + "': the file does not exist"), std::string::npos)
         << cmd << ": " << out;
     EXPECT_EQ(out.find("intact"), std::string::npos) << cmd << ": " << out;
@@ -225,9 +194,7 @@ TEST(Cli, ReadOnlyAdminCommandsRefuseAMissingStore) {
 // machine, compare it with that map, export it as a map and an inverse map,
 // and compare it with its own export; each --json output is one document.
 TEST(Cli, FluxMapsInAndOut) {
-  const fs::path dir = fs::temp_directory_path() / ("fluxcal_e2e_maps_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
+  const fs::path dir = fluxcal::e2e::FreshTempDir("fluxcal_e2e_maps_");
   const std::string measured = std::string(FLUXCAL_SOURCE_DIR) + "/data/real/baldor_fluxmap_measured.csv";
   const std::string cal = (dir / "cal.json").string(), map = (dir / "map.csv").string(),
                     inv = (dir / "inv.csv").string();
@@ -283,13 +250,9 @@ TEST(Cli, FluxMapsInAndOut) {
   // Bad input: exit 1, the message names file, line and field.
   const std::string bad = (dir / "bad.csv").string();
   std::ofstream(bad) << "id_A,iq_A,psi_d_Vs,psi_q_Vs\n0,0,0.44,0\n0,2,0.45,x\n";
-  const std::string cmd = std::string(FLUXCAL_BINARY) + " compare " + cal + " " + bad + " --json 2>&1";
-  FILE* p = popen(cmd.c_str(), "r");
-  std::string out;
-  std::array<char, 4096> buf;
-  size_t n;
-  while ((n = fread(buf.data(), 1, buf.size(), p)) > 0) out.append(buf.data(), n);
-  EXPECT_EQ(WEXITSTATUS(pclose(p)), 1);
+  const auto refused = Fluxcal("compare " + cal + " " + bad + " --json");
+  const std::string out = refused.out + refused.err;
+  EXPECT_EQ(refused.code, 1);
   EXPECT_NE(out.find(bad + ":3: field 'psi_q_Vs': expected a number, got 'x'"), std::string::npos) << out;
   EXPECT_EQ(Fluxcal("compare " + cal + " " + measured + " --region 0:1").code, 2);
   fs::remove_all(dir);
@@ -302,9 +265,7 @@ TEST(Cli, FluxMapsInAndOut) {
 // "by symmetry". Asked for an asymmetric model by name, the other half is
 // extrapolated.
 TEST(Cli, BothTorqueDirectionsFromOneMeasuredHalf) {
-  const fs::path dir = fs::temp_directory_path() / ("fluxcal_e2e_sym_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
+  const fs::path dir = fluxcal::e2e::FreshTempDir("fluxcal_e2e_sym_");
   const std::string real = std::string(FLUXCAL_SOURCE_DIR) + "/data/real";
   const std::string map = real + "/baldor_fluxmap_measured.csv", cal = (dir / "c.json").string();
   Json(Fluxcal("fit " + real + "/baldor_eol --out " + cal + " --json"));

@@ -28,12 +28,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-bool Has(const std::string& text, const std::string& what) { return text.find(what) != std::string::npos; }
-
-std::string Read(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  return std::string((std::istreambuf_iterator<char>(in)), {});
-}
 
 // Column `name` of a table CSV (comment lines skipped).
 std::vector<double> Column(const std::string& path, const std::string& name) {
@@ -59,15 +53,20 @@ std::vector<double> Column(const std::string& path, const std::string& name) {
   return v;
 }
 
-TEST(EnvelopeCli, UdcAxisFilesEqualSingleExportsAndTheFigureHasACurvePerUdc) {
+// The published Baldor EOL set (in the repository) fitted into cal.
+::testing::AssertionResult FitBaldorEol(const std::string& cal) {
   const std::string set = std::string(FLUXCAL_SOURCE_DIR) + "/data/real/baldor_eol";
-  ASSERT_TRUE(fs::exists(set + "/manifest.json")) << "in-repo fixture missing: " << set;
-  const fs::path dir = fs::temp_directory_path() / ("fluxcal_envelope_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
+  if (!fs::exists(set + "/manifest.json")) return ::testing::AssertionFailure() << "in-repo fixture missing: " << set;
+  const RunResult fit = RunFluxcal("fit " + set + " --out " + cal);
+  if (fit.code != 0) return ::testing::AssertionFailure() << "fit exited " << fit.code << ": " << fit.err;
+  return ::testing::AssertionSuccess();
+}
+
+TEST(EnvelopeCli, UdcAxisFilesEqualSingleExportsAndTheFigureHasACurvePerUdc) {
+  const fs::path dir = fluxcal::e2e::FreshTempDir("fluxcal_envelope_");
   auto path = [&](const std::string& name) { return (dir / name).string(); };
   const std::string cal = path("c.json");
-  ASSERT_EQ(RunFluxcal("fit " + set + " --out " + cal).code, 0);
+  ASSERT_TRUE(FitBaldorEol(cal));
 
   const std::vector<int> udcs = {300, 400, 540};
   const RunResult axis = RunFluxcal("export " + cal + " --table envelope --udc-axis-v 300,400,540 --out " +
@@ -102,7 +101,7 @@ TEST(EnvelopeCli, UdcAxisFilesEqualSingleExportsAndTheFigureHasACurvePerUdc) {
   }
   // At 300 V the envelope is far below the 540 V one at the top speed.
   EXPECT_LT(torque[0].back(), 0.5 * torque[2].back());
-  const std::string svg = Read(path("env.svg"));
+  const std::string svg = ReadFile(path("env.svg"));
   for (int u : udcs) EXPECT_TRUE(Has(svg, "Udc " + std::to_string(u) + " V")) << u;
 
   // A field-weakening header per Udc, labels carrying the voltage.
@@ -111,7 +110,7 @@ TEST(EnvelopeCli, UdcAxisFilesEqualSingleExportsAndTheFigureHasACurvePerUdc) {
   ASSERT_EQ(fw.code, 0) << fw.err;
   const auto f = nlohmann::json::parse(fw.out);
   ASSERT_EQ(f["files"].size(), 2u);
-  EXPECT_TRUE(Has(Read(path("fw_udc540v.h")), "fluxcal_fw_udc540v_id_a["));
+  EXPECT_TRUE(Has(ReadFile(path("fw_udc540v.h")), "fluxcal_fw_udc540v_id_a["));
   const RunResult fw540 = RunFluxcal("export " + cal + " --table fw --format h --out " + path("fw540.h") + " --json");
   ASSERT_EQ(fw540.code, 0) << fw540.err;
   EXPECT_EQ(f["files"][1]["payload_sha256"], nlohmann::json::parse(fw540.out)["payload_sha256"]);
@@ -136,14 +135,10 @@ TEST(EnvelopeCli, UdcAxisFilesEqualSingleExportsAndTheFigureHasACurvePerUdc) {
 // over a Udc axis; the flag with another table a usage error naming it,
 // nothing written.
 TEST(EnvelopeCli, GeneratingEnvelopeUnderLabelsOfItsOwn) {
-  const std::string set = std::string(FLUXCAL_SOURCE_DIR) + "/data/real/baldor_eol";
-  ASSERT_TRUE(fs::exists(set + "/manifest.json")) << "in-repo fixture missing: " << set;
-  const fs::path dir = fs::temp_directory_path() / ("fluxcal_generating_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
+  const fs::path dir = fluxcal::e2e::FreshTempDir("fluxcal_generating_");
   auto path = [&](const std::string& name) { return (dir / name).string(); };
   const std::string cal = path("c.json");
-  ASSERT_EQ(RunFluxcal("fit " + set + " --out " + cal).code, 0);
+  ASSERT_TRUE(FitBaldorEol(cal));
 
   const RunResult mot = RunFluxcal("export " + cal + " --table envelope --out " + path("m.csv") + " --json");
   ASSERT_EQ(mot.code, 0) << mot.err;
@@ -156,7 +151,7 @@ TEST(EnvelopeCli, GeneratingEnvelopeUnderLabelsOfItsOwn) {
   EXPECT_EQ(jg["label_tag"], "generating");
   EXPECT_EQ(jg["udc_v"], 540.0) << "the set's DC link";
   EXPECT_NE(jg["payload_sha256"], jm["payload_sha256"]);
-  EXPECT_TRUE(Has(Read(path("g.csv")), "# fluxcal envelope (generating) table\n"));
+  EXPECT_TRUE(Has(ReadFile(path("g.csv")), "# fluxcal envelope (generating) table\n"));
   const auto tm = Column(path("m.csv"), "torque_nm"), tg = Column(path("g.csv"), "torque_nm");
   const auto pg = Column(path("g.csv"), "power_w");
   ASSERT_EQ(tm.size(), tg.size());
@@ -167,12 +162,12 @@ TEST(EnvelopeCli, GeneratingEnvelopeUnderLabelsOfItsOwn) {
     EXPECT_GE(-tg[i], tm[i] * (1 - 1e-6)) << "row " << i << ": generating limit below the motoring one";
   }
   EXPECT_NEAR(-tg[0], tm[0], 1e-9 * tm[0]);
-  EXPECT_TRUE(Has(Read(path("g.svg")), "<svg"));
+  EXPECT_TRUE(Has(ReadFile(path("g.svg")), "<svg"));
 
   // A2L and C header: labels of their own, so that both directions flash side by side.
   ASSERT_EQ(RunFluxcal("export " + cal + " --table envelope --generating --format a2l --out " + path("g.a2l")).code, 0);
   ASSERT_EQ(RunFluxcal("export " + cal + " --table envelope --generating --format h --out " + path("g.h")).code, 0);
-  const std::string a2l = Read(path("g.a2l")), h = Read(path("g.h"));
+  const std::string a2l = ReadFile(path("g.a2l")), h = ReadFile(path("g.h"));
   EXPECT_TRUE(Has(a2l, "/begin CHARACTERISTIC FLUXCAL_ENVELOPE_GENERATING_TORQUE_NM")) << a2l.substr(0, 2000);
   EXPECT_FALSE(Has(a2l, "FLUXCAL_ENVELOPE_TORQUE_NM"));
   EXPECT_TRUE(Has(h, "#define FLUXCAL_ENVELOPE_GENERATING_TORQUE_SIGN -1\n"));
@@ -183,7 +178,7 @@ TEST(EnvelopeCli, GeneratingEnvelopeUnderLabelsOfItsOwn) {
                                     "--out " + path("g.dcm") + " --json");
   ASSERT_EQ(axis.code, 0) << axis.err;
   EXPECT_EQ(nlohmann::json::parse(axis.out)["files"][1]["label_tag"], "generating_udc540v");
-  EXPECT_TRUE(Has(Read(path("g_udc540v.dcm")), "KENNLINIE FLUXCAL_ENVELOPE_GENERATING_UDC540V_TORQUE_NM "));
+  EXPECT_TRUE(Has(ReadFile(path("g_udc540v.dcm")), "KENNLINIE FLUXCAL_ENVELOPE_GENERATING_UDC540V_TORQUE_NM "));
 
   // Only with the envelope: a usage error naming the flag, nothing written.
   for (const char* table : {"mtpa", "mtpv", "fw"}) {
@@ -202,13 +197,11 @@ TEST(EnvelopeCli, GeneratingEnvelopeUnderLabelsOfItsOwn) {
 // MTPA table at 100 degC states both and psi_pm x (1 - 0.0012 x 75). A bad
 // coefficient is refused naming the manifest's line and field.
 TEST(EnvelopeCli, MagnetTemperatureFromTheSetOrTheFlags) {
-  const fs::path dir = fs::temp_directory_path() / ("fluxcal_magnet_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
+  const fs::path dir = fluxcal::e2e::FreshTempDir("fluxcal_magnet_");
   auto path = [&](const std::string& name) { return (dir / name).string(); };
   ASSERT_EQ(RunFluxcal("simulate --serial IPM-MAGNET-E2E --out " + path("set")).code, 0);
   const std::string manifest = path("set/manifest.json");
-  nlohmann::json m = nlohmann::json::parse(Read(manifest));
+  nlohmann::json m = nlohmann::json::parse(ReadFile(manifest));
   m["motor"]["psi_pm_temp_coeff_per_k"] = -0.0012;
   std::ofstream(manifest) << m.dump(2);
   const RunResult fit = RunFluxcal("fit " + path("set") + " --out " + path("c.json"));
@@ -219,7 +212,7 @@ TEST(EnvelopeCli, MagnetTemperatureFromTheSetOrTheFlags) {
                                    path("hot.csv"));
   ASSERT_EQ(hot.code, 0) << hot.err;
   EXPECT_TRUE(Has(hot.err, "export: note: magnets at 100 degC: psi_pm x 0.91 ")) << hot.err;
-  const std::string csv = Read(path("hot.csv"));
+  const std::string csv = ReadFile(path("hot.csv"));
   for (const char* line : {"# magnet_temperature_c: 100 degC", "# magnet_reference_c: 25 degC",
                            "# magnet_reference_spread_k: 0 K", "# magnet_alpha_per_k: -0.00119999999",
                            "# psi_pm_scale: 0.9100000000"}) {
@@ -246,7 +239,7 @@ TEST(EnvelopeCli, MagnetTemperatureFromTheSetOrTheFlags) {
   EXPECT_EQ(aj["magnet_temperature"]["reference_c"], 60.0) << at.out;
   EXPECT_EQ(aj["magnet_temperature"]["reference_spread_k"], 0.0) << at.out;
   EXPECT_NEAR(aj["magnet_temperature"]["psi_pm_scale"].get<double>(), 1 - 0.0011 * 60, 1e-12) << at.out;
-  EXPECT_TRUE(Has(Read(path("map120.h")), "MAGNET_REFERENCE_C")) << Read(path("map120.h")).substr(0, 3000);
+  EXPECT_TRUE(Has(ReadFile(path("map120.h")), "MAGNET_REFERENCE_C")) << ReadFile(path("map120.h")).substr(0, 3000);
   const RunResult no_ref_fit = RunFluxcal(fit_map + "--out " + path("map.json"));
   ASSERT_EQ(no_ref_fit.code, 0) << no_ref_fit.err;
   const RunResult no_ref = RunFluxcal("export " + path("map.json") + " --table mtpa --magnet-temp-c 120 --out " +

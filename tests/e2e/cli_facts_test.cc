@@ -34,7 +34,6 @@ nlohmann::json JsonOf(const RunResult& r) {
   return nlohmann::json::parse(r.out);
 }
 
-bool Has(const std::string& text, const std::string& what) { return text.find(what) != std::string::npos; }
 
 // The first column of a table CSV (comment lines skipped), distinct values
 // in order.
@@ -78,9 +77,7 @@ void ExpectRoundAxis(const std::vector<double>& v, const std::string& what) {
 class Facts : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    dir_ = new fs::path(fs::temp_directory_path() / ("fluxcal_facts_" + std::to_string(::getpid())));
-    fs::remove_all(*dir_);
-    fs::create_directories(*dir_);
+    dir_ = new fs::path(fluxcal::e2e::FreshTempDir("fluxcal_facts_"));
     const std::string set = Path("set");
     ASSERT_EQ(RunFluxcal("simulate --out " + set + " --seed 7 --serial IPM-FACTS-1").code, 0);
     // The bench's own identification as a bare hf_results.csv: no manifest,

@@ -23,31 +23,15 @@
 
 #include "gtest/gtest.h"
 #include "nlohmann/json.hpp"
+#include "tests/e2e/fluxcal_run.h"
 
 namespace {
 
 namespace fs = std::filesystem;
 
-struct Result {
-  int code = 0;
-  std::string out, err;
-};
-
+using Result = fluxcal::e2e::RunResult;
 // Runs the binary: stdout and stderr captured apart.
-Result Fluxcal(const std::string& args, const fs::path& dir) {
-  const std::string err_file = (dir / "stderr.txt").string();
-  const std::string cmd = std::string(FLUXCAL_BINARY) + " " + args + " 2>" + err_file;
-  Result r;
-  FILE* p = popen(cmd.c_str(), "r");
-  std::array<char, 4096> buf;
-  size_t n;
-  while ((n = fread(buf.data(), 1, buf.size(), p)) > 0) r.out.append(buf.data(), n);
-  const int st = pclose(p);
-  r.code = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
-  std::ifstream e(err_file);
-  r.err.assign(std::istreambuf_iterator<char>(e), std::istreambuf_iterator<char>());
-  return r;
-}
+Result Fluxcal(const std::string& args) { return fluxcal::e2e::RunFluxcal(args); }
 
 struct Node {
   double id, iq, pd, pq;
@@ -80,9 +64,7 @@ void Write(const std::string& path, const std::string& header,
 }
 
 TEST(CliMaps, ForeignConventionsAreReadOrRefusedWithTheirCause) {
-  const fs::path dir = fs::temp_directory_path() / ("fluxcal_e2e_conv_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
+  const fs::path dir = fluxcal::e2e::FreshTempDir("fluxcal_e2e_conv_");
   auto path = [&](const char* name) { return (dir / name).string(); };
   Write(path("native.csv"), "id_A,iq_A,psi_d_Vs,psi_q_Vs",
         [](const Node& n) { return std::array<double, 4>{n.id, n.iq, n.pd, n.pq}; });
@@ -97,7 +79,7 @@ TEST(CliMaps, ForeignConventionsAreReadOrRefusedWithTheirCause) {
   });
   const std::string fit = "fit --pole-pairs 2 --serial BALDOR-CONV-1 --json --map ";
 
-  const Result native = Fluxcal(fit + path("native.csv") + " --out " + path("native.json"), dir);
+  const Result native = Fluxcal(fit + path("native.csv") + " --out " + path("native.json"));
   ASSERT_EQ(native.code, 0) << native.err;
   const auto nj = nlohmann::json::parse(native.out);
   const double psi_pm = nj["psi_pm_wb"];
@@ -114,7 +96,7 @@ TEST(CliMaps, ForeignConventionsAreReadOrRefusedWithTheirCause) {
   // SyR-e's axes, detected and given: the same calibration (the conversion
   // is exact, so the fit sees the same numbers).
   for (const std::string flags : {"", " --convention syre"}) {
-    const Result syre = Fluxcal(fit + path("syre.csv") + flags + " --force --out " + path("syre.json"), dir);
+    const Result syre = Fluxcal(fit + path("syre.csv") + flags + " --force --out " + path("syre.json"));
     ASSERT_EQ(syre.code, 0) << flags << ": " << syre.err;
     const auto sj = nlohmann::json::parse(syre.out);
     EXPECT_NEAR(sj["psi_pm_wb"].get<double>(), psi_pm, 1e-9 * psi_pm) << flags << ": psi_pm, Wb";
@@ -124,7 +106,7 @@ TEST(CliMaps, ForeignConventionsAreReadOrRefusedWithTheirCause) {
     EXPECT_EQ(sj["map"]["convention"]["axes_source"], flags.empty() ? "detected" : "flag");
     EXPECT_NE(syre.err.find("id = -Iq, iq = Id, psi_d = -Fq, psi_q = Fd"), std::string::npos) << syre.err;
   }
-  const Result as_fluxcal = Fluxcal(fit + path("syre.csv") + " --convention fluxcal --out " + path("x.json"), dir);
+  const Result as_fluxcal = Fluxcal(fit + path("syre.csv") + " --convention fluxcal --out " + path("x.json"));
   EXPECT_EQ(as_fluxcal.code, 1);
   EXPECT_NE(as_fluxcal.err.find("syre.csv:285: field 'Fq': the magnet lies on the -q axis"), std::string::npos)
       << as_fluxcal.err;
@@ -132,22 +114,22 @@ TEST(CliMaps, ForeignConventionsAreReadOrRefusedWithTheirCause) {
   EXPECT_NE(as_fluxcal.err.find("give --convention syre"), std::string::npos) << as_fluxcal.err;
 
   // Swapped flux columns.
-  const Result swapped = Fluxcal(fit + path("swapped.csv") + " --out " + path("x.json"), dir);
+  const Result swapped = Fluxcal(fit + path("swapped.csv") + " --out " + path("x.json"));
   EXPECT_EQ(swapped.code, 1);
   EXPECT_NE(swapped.err.find("the psi_d and psi_q columns look exchanged"), std::string::npos) << swapped.err;
   EXPECT_FALSE(fs::exists(path("x.json"))) << "nothing written for a refused map";
 
   // mWb under a Vs header.
-  const Result mwb = Fluxcal(fit + path("mwb.csv") + " --out " + path("x.json"), dir);
+  const Result mwb = Fluxcal(fit + path("mwb.csv") + " --out " + path("x.json"));
   EXPECT_EQ(mwb.code, 1);
   EXPECT_NE(mwb.err.find("psi_pm 444.1 Wb"), std::string::npos) << mwb.err;
   EXPECT_NE(mwb.err.find("is the flux in mWb? give --units mWb"), std::string::npos) << mwb.err;
-  const Result mwb_ok = Fluxcal(fit + path("mwb.csv") + " --units mWb --out " + path("mwb.json"), dir);
+  const Result mwb_ok = Fluxcal(fit + path("mwb.csv") + " --units mWb --out " + path("mwb.json"));
   ASSERT_EQ(mwb_ok.code, 0) << mwb_ok.err;
   EXPECT_NEAR(nlohmann::json::parse(mwb_ok.out)["psi_pm_wb"].get<double>(), psi_pm, 1e-6 * psi_pm) << "psi_pm, Wb";
 
   // rms-valued currents.
-  const Result r = Fluxcal(fit + path("rms.csv") + " --current rms --out " + path("rms.json"), dir);
+  const Result r = Fluxcal(fit + path("rms.csv") + " --current rms --out " + path("rms.json"));
   ASSERT_EQ(r.code, 0) << r.err;
   const auto rj = nlohmann::json::parse(r.out);
   EXPECT_NEAR(rj["psi_pm_wb"].get<double>(), psi_pm, 1e-6 * psi_pm) << "psi_pm, Wb";
@@ -155,26 +137,26 @@ TEST(CliMaps, ForeignConventionsAreReadOrRefusedWithTheirCause) {
   EXPECT_EQ(rj["region"]["id_min_a"], -20.0) << "currents back at their peak values, A";
 
   // Bad flag values and flags without a map: usage errors.
-  EXPECT_EQ(Fluxcal(fit + path("native.csv") + " --convention syr --out " + path("x.json"), dir).code, 2);
-  EXPECT_EQ(Fluxcal(fit + path("native.csv") + " --units kWb --out " + path("x.json"), dir).code, 2);
-  const Result no_map = Fluxcal("fit " + path("native.json") + " --convention syre --out " + path("x.json"), dir);
+  EXPECT_EQ(Fluxcal(fit + path("native.csv") + " --convention syr --out " + path("x.json")).code, 2);
+  EXPECT_EQ(Fluxcal(fit + path("native.csv") + " --units kWb --out " + path("x.json")).code, 2);
+  const Result no_map = Fluxcal("fit " + path("native.json") + " --convention syre --out " + path("x.json"));
   EXPECT_EQ(no_map.code, 2);
   EXPECT_NE(no_map.err.find("need --map"), std::string::npos) << no_map.err;
 
   // compare reads a map the same way: the SyR-e file against the
   // calibration gives what the native file gives.
-  const Result c1 = Fluxcal("compare " + path("native.json") + " " + path("native.csv") + " --json", dir);
-  const Result c2 = Fluxcal("compare " + path("native.json") + " " + path("syre.csv") + " --json", dir);
+  const Result c1 = Fluxcal("compare " + path("native.json") + " " + path("native.csv") + " --json");
+  const Result c2 = Fluxcal("compare " + path("native.json") + " " + path("syre.csv") + " --json");
   ASSERT_EQ(c1.code, 0) << c1.err;
   ASSERT_EQ(c2.code, 0) << c2.err;
   const auto j1 = nlohmann::json::parse(c1.out), j2 = nlohmann::json::parse(c2.out);
   EXPECT_EQ(j2["convention"]["axes"], "syre");
   EXPECT_EQ(j1["nodes"], j2["nodes"]);
   EXPECT_EQ(j1["rms_relative"], j2["rms_relative"]);
-  EXPECT_EQ(Fluxcal("compare " + path("native.json") + " " + path("mwb.csv"), dir).code, 1);
+  EXPECT_EQ(Fluxcal("compare " + path("native.json") + " " + path("mwb.csv")).code, 1);
 
   // The report: the map fit's flux error, not an inductance residual.
-  const Result rep = Fluxcal("report " + path("native.json") + " --out " + path("native.html") + " --json", dir);
+  const Result rep = Fluxcal("report " + path("native.json") + " --out " + path("native.html") + " --json");
   ASSERT_EQ(rep.code, 0) << rep.err;
   EXPECT_EQ(nlohmann::json::parse(rep.out)["verdict"], "pass");
   std::ifstream page(path("native.html"));
@@ -183,8 +165,8 @@ TEST(CliMaps, ForeignConventionsAreReadOrRefusedWithTheirCause) {
   EXPECT_NE(html.find("over 567 nodes"), std::string::npos);
   EXPECT_EQ(html.find("RMS relative residual"), std::string::npos) << "a map fit has no identified inductances";
   // A model too stiff for the map: its flux error fails the verdict.
-  ASSERT_EQ(Fluxcal(fit + path("native.csv") + " --model poly2 --out " + path("stiff.json"), dir).code, 0);
-  const Result stiff = Fluxcal("report " + path("stiff.json") + " --out " + path("stiff.html") + " --json", dir);
+  ASSERT_EQ(Fluxcal(fit + path("native.csv") + " --model poly2 --out " + path("stiff.json")).code, 0);
+  const Result stiff = Fluxcal("report " + path("stiff.json") + " --out " + path("stiff.html") + " --json");
   ASSERT_EQ(stiff.code, 0) << stiff.err;
   const std::string verdict = nlohmann::json::parse(stiff.out)["verdict"];
   EXPECT_EQ(verdict.rfind("fail: flux error against the map", 0), 0u) << verdict;

@@ -30,12 +30,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-bool Has(const std::string& s, const std::string& what) { return s.find(what) != std::string::npos; }
-
-std::string Slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  return std::string(std::istreambuf_iterator<char>(in), {});
-}
 
 // The stdout of a shell command.
 std::string Shell(const std::string& cmd) {
@@ -54,12 +48,20 @@ std::string Refusal(const std::string& flag, const std::string& path) {
   return "flag --" + flag + ": '" + path + "' exists";
 }
 
+// The command was refused (exit 1) with `refusal` on stderr.
+::testing::AssertionResult RefusedWith(const RunResult& r, const std::string& refusal) {
+  const bool exit_1 = r.code == 1, said = Has(r.err, refusal);
+  if (exit_1 && said) return ::testing::AssertionSuccess();
+  auto failure = ::testing::AssertionFailure();
+  if (!exit_1) failure << "exit " << r.code << ", not 1; ";
+  if (!said) failure << "no '" << refusal << "' on stderr; ";
+  return failure << "stderr: " << r.err;
+}
+
 class Newcomer : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    dir_ = new fs::path(fs::temp_directory_path() / ("fluxcal_newcomer_" + std::to_string(::getpid())));
-    fs::remove_all(*dir_);
-    fs::create_directories(*dir_);
+    dir_ = new fs::path(fluxcal::e2e::FreshTempDir("fluxcal_newcomer_"));
     ASSERT_EQ(RunFluxcal("simulate --out " + Path("set") + " --seed 3 --serial IPM-NEW-1").code, 0);
     ASSERT_EQ(RunFluxcal("fit " + Path("set") + " --model analytic --out " + Path("cal.json")).code, 0);
   }
@@ -83,34 +85,30 @@ fs::path* Newcomer::dir_ = nullptr;
 TEST_F(Newcomer, FitRefusesAnExistingOutputBeforeAnyWork) {
   const std::string out = Existing("fit_out.json");
   const RunResult r = RunFluxcal("fit " + Path("set") + " --model analytic --out " + out);
-  EXPECT_EQ(r.code, 1) << r.err;
-  EXPECT_TRUE(Has(r.err, Refusal("out", out) + "; not overwritten (give --force to replace it)")) << r.err;
+  EXPECT_TRUE(RefusedWith(r, Refusal("out", out) + "; not overwritten (give --force to replace it)"));
   EXPECT_FALSE(Has(r.err, "identifying point")) << "refused before identifying: " << r.err;
-  EXPECT_EQ(Slurp(out), "kept\n");
+  EXPECT_EQ(ReadFile(out), "kept\n");
   const std::string svg = Existing("fit.svg");
   const RunResult s = RunFluxcal("fit " + Path("set") + " --model analytic --out " + Path("fit_new.json") + " --svg " + svg);
-  EXPECT_EQ(s.code, 1) << s.err;
-  EXPECT_TRUE(Has(s.err, Refusal("svg", svg))) << s.err;
+  EXPECT_TRUE(RefusedWith(s, Refusal("svg", svg)));
   EXPECT_FALSE(fs::exists(Path("fit_new.json"))) << "nothing written on a refusal";
   const RunResult f = RunFluxcal("fit " + Path("set") + " --model analytic --force --out " + out + " --svg " + svg);
   ASSERT_EQ(f.code, 0) << f.err;
-  EXPECT_EQ(nlohmann::json::parse(Slurp(out))["format"], "fluxcal.calibration.v1");
-  EXPECT_TRUE(Has(Slurp(svg), "<svg"));
+  EXPECT_EQ(nlohmann::json::parse(ReadFile(out))["format"], "fluxcal.calibration.v1");
+  EXPECT_TRUE(Has(ReadFile(svg), "<svg"));
 }
 
 TEST_F(Newcomer, ExportRefusesAnExistingTableOrSignature) {
   const std::string cal = Path("cal.json");
   const std::string out = Existing("mtpa.csv");
   const RunResult r = RunFluxcal("export " + cal + " --table mtpa --out " + out);
-  EXPECT_EQ(r.code, 1) << r.err;
-  EXPECT_TRUE(Has(r.err, Refusal("out", out))) << r.err;
-  EXPECT_EQ(Slurp(out), "kept\n");
+  EXPECT_TRUE(RefusedWith(r, Refusal("out", out)));
+  EXPECT_EQ(ReadFile(out), "kept\n");
   // A signature beside the file name counts: it would vouch for other bytes.
   const std::string fresh = Path("fresh.csv");
   const std::string sig = Existing("fresh.csv.sig");
   const RunResult g = RunFluxcal("export " + cal + " --table mtpa --out " + fresh);
-  EXPECT_EQ(g.code, 1) << g.err;
-  EXPECT_TRUE(Has(g.err, Refusal("out", sig))) << g.err;
+  EXPECT_TRUE(RefusedWith(g, Refusal("out", sig)));
   EXPECT_FALSE(fs::exists(fresh));
   // --force: the table replaced, the old signature of another table gone.
   const RunResult f = RunFluxcal("export " + cal + " --table mtpa --force --out " + fresh);
@@ -127,29 +125,25 @@ TEST_F(Newcomer, ReportMapExportSimulateDiagnoseAndKeygenShareTheRule) {
   {
     const std::string page = Existing("page.html");
     const RunResult r = RunFluxcal("report " + cal + " --out " + page);
-    EXPECT_EQ(r.code, 1) << r.err;
-    EXPECT_TRUE(Has(r.err, Refusal("out", page))) << r.err;
-    EXPECT_EQ(Slurp(page), "kept\n");
+    EXPECT_TRUE(RefusedWith(r, Refusal("out", page)));
+    EXPECT_EQ(ReadFile(page), "kept\n");
     EXPECT_EQ(RunFluxcal("report " + cal + " --force --out " + page).code, 0);
-    EXPECT_TRUE(Has(Slurp(page), "<html"));
+    EXPECT_TRUE(Has(ReadFile(page), "<html"));
   }
   {
     const std::string map = Existing("map.csv");
     const RunResult r = RunFluxcal("map export " + cal + " --out " + map);
-    EXPECT_EQ(r.code, 1) << r.err;
-    EXPECT_TRUE(Has(r.err, Refusal("out", map))) << r.err;
+    EXPECT_TRUE(RefusedWith(r, Refusal("out", map)));
     EXPECT_EQ(RunFluxcal("map export " + cal + " --force --out " + map).code, 0);
   }
   {
     // A set directory with files in it, or its truth file, is refused; an
     // empty directory is not existing output.
     const RunResult r = RunFluxcal("simulate --seed 4 --out " + Path("set"));
-    EXPECT_EQ(r.code, 1) << r.err;
-    EXPECT_TRUE(Has(r.err, Refusal("out", Path("set")) + " and is not empty")) << r.err;
+    EXPECT_TRUE(RefusedWith(r, Refusal("out", Path("set")) + " and is not empty"));
     const std::string truth = Existing("lonely.truth.json");
     const RunResult t = RunFluxcal("simulate --seed 4 --out " + Path("lonely"));
-    EXPECT_EQ(t.code, 1) << t.err;
-    EXPECT_TRUE(Has(t.err, Refusal("out", truth))) << t.err;
+    EXPECT_TRUE(RefusedWith(t, Refusal("out", truth)));
     EXPECT_FALSE(fs::exists(Path("lonely")));
     fs::create_directories(Path("empty"));
     EXPECT_EQ(RunFluxcal("simulate --seed 4 --out " + Path("empty")).code, 0);
@@ -158,23 +152,20 @@ TEST_F(Newcomer, ReportMapExportSimulateDiagnoseAndKeygenShareTheRule) {
   {
     const std::string out = Existing("diag_cal.json");
     const RunResult r = RunFluxcal("diagnose " + Path("set") + " --calibration-out " + out);
-    EXPECT_EQ(r.code, 1) << r.err;
-    EXPECT_TRUE(Has(r.err, Refusal("calibration-out", out))) << r.err;
+    EXPECT_TRUE(RefusedWith(r, Refusal("calibration-out", out)));
     EXPECT_FALSE(Has(r.err, "steady-state rows")) << "refused before reading the set: " << r.err;
     fs::create_directories(Path("plots"));
     const std::string svg = Existing("plots/residual_after.svg");
     const RunResult p = RunFluxcal("diagnose " + Path("set") + " --plots " + Path("plots"));
-    EXPECT_EQ(p.code, 1) << p.err;
-    EXPECT_TRUE(Has(p.err, Refusal("plots", svg))) << p.err;
+    EXPECT_TRUE(RefusedWith(p, Refusal("plots", svg)));
   }
   {
     const std::string pub = Existing("k.pub");
     const RunResult r = RunFluxcal("admin keygen --out " + Path("k"));
-    EXPECT_EQ(r.code, 1) << r.err;
-    EXPECT_TRUE(Has(r.err, Refusal("out", pub))) << r.err;
+    EXPECT_TRUE(RefusedWith(r, Refusal("out", pub)));
     EXPECT_FALSE(fs::exists(Path("k.key"))) << "no half key pair";
     EXPECT_EQ(RunFluxcal("admin keygen --force --out " + Path("k")).code, 0);
-    EXPECT_TRUE(Has(Slurp(pub), "PUBLIC KEY"));
+    EXPECT_TRUE(Has(ReadFile(pub), "PUBLIC KEY"));
   }
 }
 
@@ -198,9 +189,9 @@ TEST(OverwriteRule, CheckOverwrite) {
   EXPECT_EQ(cli::CheckOverwrite(*forced, {{"out", (dir / "file").string()}, {"out", (dir / "full").string()}}), "");
   const absl::Status w = cli::WriteNewOutput(*args, {"out", (dir / "file").string()}, "new");
   EXPECT_TRUE(absl::IsFailedPrecondition(w)) << w;
-  EXPECT_EQ(Slurp(dir / "file"), "x");
+  EXPECT_EQ(ReadFile(dir / "file"), "x");
   EXPECT_TRUE(cli::WriteNewOutput(*forced, {"out", (dir / "file").string()}, "new").ok());
-  EXPECT_EQ(Slurp(dir / "file"), "new");
+  EXPECT_EQ(ReadFile(dir / "file"), "new");
   fs::remove_all(dir);
 }
 
@@ -301,7 +292,7 @@ TEST(Version, UnknownOutsideAGitCheckout) {
                           "' -DOUT='" + header + "' -DBUILD_TYPE=Debug -P '" + FLUXCAL_SOURCE_DIR +
                           "/cmake/build_info.cmake'";
   ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
-  const std::string text = Slurp(header);
+  const std::string text = ReadFile(header);
   EXPECT_TRUE(Has(text, "#define FLUXCAL_GIT_DESCRIBE \"unknown\"")) << text;
   EXPECT_TRUE(Has(text, "#define FLUXCAL_BUILD_TYPE \"Debug\"")) << text;
   fs::remove_all(dir);

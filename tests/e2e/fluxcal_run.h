@@ -1,5 +1,6 @@
 // Runs the `fluxcal` binary of this build with stdout and stderr captured
-// (for end-to-end tests that check what a command says on stderr).
+// (for end-to-end tests that check what a command says on stderr), and the
+// small text helpers those tests share.
 #ifndef FLUXCAL_TESTS_E2E_FLUXCAL_RUN_H_
 #define FLUXCAL_TESTS_E2E_FLUXCAL_RUN_H_
 
@@ -14,6 +15,22 @@
 #include <string>
 
 namespace fluxcal::e2e {
+
+// The bytes of the file at path ("" when it cannot be read).
+inline std::string ReadFile(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(in), {});
+}
+
+inline bool Has(const std::string& text, const std::string& what) { return text.find(what) != std::string::npos; }
+
+// An empty directory <tmp>/<prefix><pid> (one left by an earlier run removed).
+inline std::filesystem::path FreshTempDir(const std::string& prefix) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / (prefix + std::to_string(::getpid()));
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  return dir;
+}
 
 struct RunResult {
   int code = 0;
@@ -32,8 +49,7 @@ inline RunResult RunFluxcal(const std::string& args) {
   while ((k = fread(buf.data(), 1, buf.size(), p)) > 0) r.out.append(buf.data(), k);
   const int st = pclose(p);
   r.code = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
-  std::ifstream in(err, std::ios::binary);
-  r.err.assign(std::istreambuf_iterator<char>(in), {});
+  r.err = ReadFile(err);
   std::filesystem::remove(err);
   return r;
 }

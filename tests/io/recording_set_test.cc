@@ -152,77 +152,79 @@ TEST_F(RecordingSetTest, RoundTrip) {
   EXPECT_FALSE(r->hf_results[1].ldq_h.has_value());
 }
 
-TEST_F(RecordingSetTest, NonNumericCell) {
-  ReplaceLine("points/p001.csv", 41, "0.0039,x,1,1,0,0,0,50");
-  ExpectError(absl::StatusCode::kInvalidArgument, {"p001.csv:41", "field 'ia_a'", "'x'"});
+// One line of a file replaced: refused, naming the file, the line and the
+// field (and what is wrong with it).
+TEST_F(RecordingSetTest, BadLineNamesFileLineAndField) {
+  struct Case {
+    const char* name;
+    const char* file;
+    size_t line;
+    const char* text;
+    std::vector<std::string> fragments;
+  };
+  const Case cases[] = {
+      {"non-numeric cell", "points/p001.csv", 41, "0.0039,x,1,1,0,0,0,50", {"p001.csv:41", "field 'ia_a'", "'x'"}},
+      {"nan cell", "points/p000.csv", 5, "0.0003,1,nan,1,0,0,0,50", {"p000.csv:5", "field 'ib_a'"}},
+      {"inf cell", "points/p000.csv", 6, "0.0004,1,1,inf,0,0,0,50", {"p000.csv:6", "field 'ic_a'"}},
+      {"overflow cell", "points/p000.csv", 6, "0.0004,1,1,1e999,0,0,0,50", {"p000.csv:6", "field 'ic_a'"}},
+      {"missing cell", "points/p000.csv", 7, "0.0005,1,1,1,0", {"p000.csv:7", "field 'ualpha_ref_v'"}},
+      {"non-monotonic time", "points/p000.csv", 11, "0.0008,1,1,1,0,0,0,50",
+       {"p000.csv:11", "field 't_s'", "not increasing"}},
+      {"uneven time", "points/p000.csv", 11, "0.00092,1,1,1,0,0,0,50", {"p000.csv:11", "field 't_s'", "unevenly"}},
+      {"steady-state bad cell", "steady_state.csv", 3, "0,40,fast,-12.5,22.25,,",
+       {"steady_state.csv:3", "field 'speed_rpm'"}},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    SetUp();
+    ReplaceLine(c.file, c.line, c.text);
+    ExpectError(absl::StatusCode::kInvalidArgument, c.fragments);
+  }
 }
 
-TEST_F(RecordingSetTest, NanCell) {
-  ReplaceLine("points/p000.csv", 5, "0.0003,1,nan,1,0,0,0,50");
-  ExpectError(absl::StatusCode::kInvalidArgument, {"p000.csv:5", "field 'ib_a'"});
-}
-
-TEST_F(RecordingSetTest, InfCell) {
-  ReplaceLine("points/p000.csv", 6, "0.0004,1,1,inf,0,0,0,50");
-  ExpectError(absl::StatusCode::kInvalidArgument, {"p000.csv:6", "field 'ic_a'"});
-}
-
-TEST_F(RecordingSetTest, OverflowCell) {
-  ReplaceLine("points/p000.csv", 6, "0.0004,1,1,1e999,0,0,0,50");
-  ExpectError(absl::StatusCode::kInvalidArgument, {"p000.csv:6", "field 'ic_a'"});
-}
-
-TEST_F(RecordingSetTest, MissingColumn) {
-  Replace("points/p000.csv", "theta_e_rad,", "");
-  ExpectError(absl::StatusCode::kInvalidArgument, {"p000.csv:1", "field 'theta_e_rad'"});
-}
-
-TEST_F(RecordingSetTest, UnknownColumn) {
-  Replace("points/p000.csv", "udc_v\n", "udc_v,extra_v\n");
-  ExpectError(absl::StatusCode::kInvalidArgument, {"p000.csv:1", "field 'extra_v'"});
-}
-
-TEST_F(RecordingSetTest, MissingCell) {
-  ReplaceLine("points/p000.csv", 7, "0.0005,1,1,1,0");
-  ExpectError(absl::StatusCode::kInvalidArgument, {"p000.csv:7", "field 'ualpha_ref_v'"});
-}
-
-TEST_F(RecordingSetTest, NonMonotonicTime) {
-  ReplaceLine("points/p000.csv", 11, "0.0008,1,1,1,0,0,0,50");
-  ExpectError(absl::StatusCode::kInvalidArgument, {"p000.csv:11", "field 't_s'", "not increasing"});
-}
-
-TEST_F(RecordingSetTest, UnevenTime) {
-  ReplaceLine("points/p000.csv", 11, "0.00092,1,1,1,0,0,0,50");
-  ExpectError(absl::StatusCode::kInvalidArgument, {"p000.csv:11", "field 't_s'", "unevenly"});
-}
-
-TEST_F(RecordingSetTest, SampleRateDisagreesWithManifest) {
-  Replace("manifest.json", "\"f_sample_hz\": 10000.0", "\"f_sample_hz\": 20000.0");
-  ExpectError(absl::StatusCode::kInvalidArgument,
-              {"p000.csv:3", "field 't_s'", "f_sample_hz"});
+// Text of a file replaced (a column, a manifest field): refused, naming
+// the file (and the line, where line_of names what is on it) and the field.
+TEST_F(RecordingSetTest, BadTextNamesFileAndField) {
+  struct Case {
+    const char* name;
+    const char* file;
+    const char* from;
+    const char* to;
+    const char* line_of;   // "": the fragments name the place themselves
+    std::vector<std::string> fragments;
+  };
+  const Case cases[] = {
+      {"missing column", "points/p000.csv", "theta_e_rad,", "", "", {"p000.csv:1", "field 'theta_e_rad'"}},
+      {"unknown column", "points/p000.csv", "udc_v\n", "udc_v,extra_v\n", "", {"p000.csv:1", "field 'extra_v'"}},
+      {"sample rate disagrees with the manifest", "manifest.json", "\"f_sample_hz\": 10000.0",
+       "\"f_sample_hz\": 20000.0", "", {"p000.csv:3", "field 't_s'", "f_sample_hz"}},
+      {"illegal serial", "manifest.json", "IPM-TEST-001", "IPM TEST/001", "\"serial\"", {"field 'serial'"}},
+      {"empty serial", "manifest.json", "IPM-TEST-001", "", "", {"manifest.json", "field 'serial'"}},
+      {"unknown format version", "manifest.json", "fluxcal.recording.v1", "fluxcal.recording.v9", "\"format\"",
+       {"field 'format'", "v9"}},
+      {"missing pole pairs", "manifest.json", "\"pole_pairs\": 4,", "", "",
+       {"manifest.json", "field 'motor.pole_pairs'"}},
+      {"wrong JSON type", "manifest.json", "\"amplitude_v\": 5.0", "\"amplitude_v\": \"five\"", "",
+       {"manifest.json", "field 'injection.amplitude_v'"}},
+      {"JSON syntax error", "manifest.json", "\"serial\":", "\"serial\"", "\"serial\"", {"syntax"}},
+      {"path escaping the set", "manifest.json", "\"points/p001.csv\"", "\"../p001.csv\"", "",
+       {"manifest.json", "field 'points[1].file'"}},
+      {"duplicate point id", "manifest.json", "\"id\": \"p001\"", "\"id\": \"p000\"", "",
+       {"manifest.json", "field 'points[1].id'", "duplicate"}},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    SetUp();
+    Replace(c.file, c.from, c.to);
+    std::vector<std::string> fragments = c.fragments;
+    if (*c.line_of != '\0') fragments.insert(fragments.begin(), LineOf(c.file, c.line_of));
+    ExpectError(absl::StatusCode::kInvalidArgument, fragments);
+  }
 }
 
 TEST_F(RecordingSetTest, TooFewInjectionPeriods) {
   ASSERT_TRUE(WriteRecordingSet(dir_.string(), MakeSet(190)).ok());
   ExpectError(absl::StatusCode::kInvalidArgument, {"p000.csv", "field 't_s'", "injection periods"});
-}
-
-TEST_F(RecordingSetTest, IllegalSerial) {
-  Replace("manifest.json", "IPM-TEST-001", "IPM TEST/001");
-  ExpectError(absl::StatusCode::kInvalidArgument,
-              {LineOf("manifest.json", "\"serial\""), "field 'serial'"});
-}
-
-TEST_F(RecordingSetTest, EmptySerial) {
-  Replace("manifest.json", "IPM-TEST-001", "");
-  ExpectError(absl::StatusCode::kInvalidArgument, {"manifest.json", "field 'serial'"});
-}
-
-TEST_F(RecordingSetTest, UnknownFormatVersion) {
-  Replace("manifest.json", "fluxcal.recording.v1", "fluxcal.recording.v9");
-  ExpectError(absl::StatusCode::kInvalidArgument,
-              {LineOf("manifest.json", "\"format\""), "field 'format'", "v9"});
 }
 
 TEST_F(RecordingSetTest, MissingReferencedWaveform) {
@@ -238,11 +240,6 @@ TEST_F(RecordingSetTest, MissingSteadyStateFile) {
 TEST_F(RecordingSetTest, MissingManifest) {
   fs::remove(dir_ / "manifest.json");
   ExpectError(absl::StatusCode::kNotFound, {"manifest.json"});
-}
-
-TEST_F(RecordingSetTest, MissingRequiredPolePairs) {
-  Replace("manifest.json", "\"pole_pairs\": 4,", "");
-  ExpectError(absl::StatusCode::kInvalidArgument, {"manifest.json", "field 'motor.pole_pairs'"});
 }
 
 // The compatible extension "Magnet temperature coefficient"
@@ -271,32 +268,6 @@ TEST_F(RecordingSetTest, BadMagnetTempCoeffNamesFileAndField) {
                 {LineOf("manifest.json", "psi_pm_temp_coeff_per_k"), "field 'motor.psi_pm_temp_coeff_per_k'",
                  bad[0] == '"' ? "expected a number" : "must be in [-0.005, 0.002]"});
   }
-}
-
-TEST_F(RecordingSetTest, WrongJsonType) {
-  Replace("manifest.json", "\"amplitude_v\": 5.0", "\"amplitude_v\": \"five\"");
-  ExpectError(absl::StatusCode::kInvalidArgument, {"manifest.json", "field 'injection.amplitude_v'"});
-}
-
-TEST_F(RecordingSetTest, JsonSyntaxError) {
-  Replace("manifest.json", "\"serial\":", "\"serial\"");
-  ExpectError(absl::StatusCode::kInvalidArgument,
-              {LineOf("manifest.json", "\"serial\""), "syntax"});
-}
-
-TEST_F(RecordingSetTest, PathEscapingTheSet) {
-  Replace("manifest.json", "\"points/p001.csv\"", "\"../p001.csv\"");
-  ExpectError(absl::StatusCode::kInvalidArgument, {"manifest.json", "field 'points[1].file'"});
-}
-
-TEST_F(RecordingSetTest, DuplicatePointId) {
-  Replace("manifest.json", "\"id\": \"p001\"", "\"id\": \"p000\"");
-  ExpectError(absl::StatusCode::kInvalidArgument, {"manifest.json", "field 'points[1].id'", "duplicate"});
-}
-
-TEST_F(RecordingSetTest, SteadyStateBadCell) {
-  ReplaceLine("steady_state.csv", 3, "0,40,fast,-12.5,22.25,,");
-  ExpectError(absl::StatusCode::kInvalidArgument, {"steady_state.csv:3", "field 'speed_rpm'"});
 }
 
 // The compatible extension "Rows a bench could not hold"

@@ -25,6 +25,7 @@
 #include "pipeline/store.h"
 #include "simulation/twin.h"
 #include "storage/sqlite.h"
+#include "tests/support/old_schema.h"
 #include "tests/support/pg_cluster.h"
 
 namespace fluxcal::pipeline {
@@ -236,13 +237,7 @@ TEST_P(MigrationTest, OldJsonRowsConvertAndStillVerify) {
   // The layout before v8: migrations 1..6 as they are (v7 links the
   // releases already stored when the store opens).
   const auto& migrations = pg ? storage::PostgresMigrations() : storage::SqliteMigrations();
-  ASSERT_TRUE(raw("CREATE TABLE schema_version (version INTEGER NOT NULL)"));
-  for (int v = 0; v < 6; ++v) {
-    ASSERT_TRUE(raw(migrations[v])) << "migration " << v + 1;
-    ASSERT_TRUE(raw("INSERT INTO schema_version (version) VALUES (" + std::to_string(v + 1) + ")"));
-  }
-  ASSERT_TRUE(raw("INSERT INTO motors (serial, pole_pairs, rs_ohm, psi_pm_wb, created_utc) "
-                  "VALUES ('IPM-OLD', 4, 0.011, 0.0114, '2024-01-01T00:00:00Z')"));
+  ASSERT_TRUE(fluxcal::testing::OldSchemaWithMotor(raw, migrations, 6));
   // Versions as FitSerial stored them: the JSON with the covariance in full
   // double digits (scaled off float precision, as a fit's covariance was).
   auto legacy_json = [](const fit::Calibration& cal) {
@@ -371,25 +366,22 @@ TEST_P(MigrationTest, OldJsonRowsConvertAndStillVerify) {
     }
   }
 
+  // The SQL that lets a row of table be edited: its trigger off (PostgreSQL)
+  // or dropped (SQLite).
+  auto allow_update = [&](const std::string& table, const std::string& trigger) {
+    return raw(pg ? "ALTER TABLE " + table + " DISABLE TRIGGER " + trigger : "DROP TRIGGER " + trigger);
+  };
   // A converted row edited behind the service is found.
-  if (pg) {
-    ASSERT_TRUE(raw("ALTER TABLE calibrations DISABLE TRIGGER calibrations_no_update"));
-    ASSERT_TRUE(raw("UPDATE calibrations SET model_pb = model_pb || '\\x00'::bytea WHERE version = 1"));
-  } else {
-    ASSERT_TRUE(raw("DROP TRIGGER calibrations_no_update"));
-    ASSERT_TRUE(raw("UPDATE calibrations SET model_pb = model_pb || x'00' WHERE version = 1"));
-  }
+  ASSERT_TRUE(allow_update("calibrations", "calibrations_no_update"));
+  ASSERT_TRUE(raw(pg ? "UPDATE calibrations SET model_pb = model_pb || '\\x00'::bytea WHERE version = 1"
+                     : "UPDATE calibrations SET model_pb = model_pb || x'00' WHERE version = 1"));
   report = storage::VerifyChains(**store);
   ASSERT_TRUE(report.ok());
   ASSERT_EQ(report->problems.size(), 1u);
   EXPECT_EQ(report->problems[0], "IPM-OLD v1: row changed after the v8 migration converted it to binary");
   EXPECT_EQ(storage::VerifyReleasedVersion(**store, "IPM-OLD", 1).code(), absl::StatusCode::kDataLoss);
   // So is an edited conversion record.
-  if (pg) {
-    ASSERT_TRUE(raw("ALTER TABLE calibration_conversions DISABLE TRIGGER conversions_no_update"));
-  } else {
-    ASSERT_TRUE(raw("DROP TRIGGER conversions_no_update"));
-  }
+  ASSERT_TRUE(allow_update("calibration_conversions", "conversions_no_update"));
   ASSERT_TRUE(raw("UPDATE calibration_conversions SET json_sha256 = 'x' WHERE version = 2"));
   report = storage::VerifyChains(**store);
   ASSERT_TRUE(report.ok());

@@ -62,6 +62,16 @@ std::vector<IdentifiedPoint> Grid(double scale) {
 
 const MotorNominal kMotor{4, 0.011, 0.0114};
 
+// A store in memory holding serial's run of Grid(1.0) (kMotor) and its
+// analytic fit, version 1.
+absl::StatusOr<std::unique_ptr<storage::Store>> StoreWithAnalyticFit(const std::string& serial) {
+  auto store = storage::Store::Open(":memory:");
+  if (!store.ok()) return store.status();
+  if (auto run = IngestHfRun(**store, serial, "st", kMotor, Grid(1.0)); !run.ok()) return run.status();
+  if (auto row = FitSerial(**store, serial, "analytic", {}); !row.ok()) return row.status();
+  return store;
+}
+
 TEST(Pipeline, IngestRules) {
   auto store = storage::Store::Open(":memory:");
   ASSERT_TRUE(store.ok());
@@ -169,10 +179,8 @@ TEST(Pipeline, FitJudgeQueryExport) {
 // clamped table is FAILED_PRECONDITION unless allow_clamped; a calibration
 // without a measured current circle needs i_max_a (before: 150 A).
 TEST(Pipeline, ExportTakesTheCalibrationsFactsOrTheRequests) {
-  auto store = storage::Store::Open(":memory:");
-  ASSERT_TRUE(store.ok());
-  ASSERT_TRUE(IngestHfRun(**store, "IPM-X", "st", kMotor, Grid(1.0)).ok());
-  ASSERT_TRUE(FitSerial(**store, "IPM-X", "analytic", {}).ok());
+  auto store = StoreWithAnalyticFit("IPM-X");
+  ASSERT_TRUE(store.ok()) << store.status();
   tables::ExportRequest rpc;
   rpc.names_flags = false;
   tables::TableSpec spec;
@@ -234,10 +242,8 @@ TEST(Pipeline, ExportTakesTheCalibrationsFactsOrTheRequests) {
 // under labels tagged with it, and the envelope goes through the stored
 // path as the local one.
 TEST(Pipeline, UdcAxisExportsAreTheSingleExportsPerUdc) {
-  auto store = storage::Store::Open(":memory:");
-  ASSERT_TRUE(store.ok());
-  ASSERT_TRUE(IngestHfRun(**store, "IPM-U", "st", kMotor, Grid(1.0)).ok());
-  ASSERT_TRUE(FitSerial(**store, "IPM-U", "analytic", {}).ok());
+  auto store = StoreWithAnalyticFit("IPM-U");
+  ASSERT_TRUE(store.ok()) << store.status();
   auto cal = LoadCalibration(**store, "IPM-U", 1);
   ASSERT_TRUE(cal.ok()) << cal.status();
   tables::TableSpec spec;
@@ -293,10 +299,8 @@ std::string WithoutCreatedUtc(const std::string& bytes) {
 // with the stored verdict and release state, and file names as the CLI
 // gives them; the generating envelope through the same path.
 TEST(Pipeline, StoredUdcAxisIsTheStoredSingleExportPerUdc) {
-  auto store = storage::Store::Open(":memory:");
-  ASSERT_TRUE(store.ok());
-  ASSERT_TRUE(IngestHfRun(**store, "IPM-V", "st", kMotor, Grid(1.0)).ok());
-  ASSERT_TRUE(FitSerial(**store, "IPM-V", "analytic", {}).ok());
+  auto store = StoreWithAnalyticFit("IPM-V");
+  ASSERT_TRUE(store.ok()) << store.status();
   tables::TableSpec spec;
   spec.points = 12;
   spec.speed_points = 8;
@@ -374,10 +378,8 @@ TEST(Pipeline, StoredUdcAxisIsTheStoredSingleExportPerUdc) {
 }
 
 TEST(Pipeline, LocalAndStoredExportsAreOnePath) {
-  auto store = storage::Store::Open(":memory:");
-  ASSERT_TRUE(store.ok());
-  ASSERT_TRUE(IngestHfRun(**store, "IPM-L", "st", kMotor, Grid(1.0)).ok());
-  ASSERT_TRUE(FitSerial(**store, "IPM-L", "analytic", {}).ok());
+  auto store = StoreWithAnalyticFit("IPM-L");
+  ASSERT_TRUE(store.ok()) << store.status();
   auto cal = LoadCalibration(**store, "IPM-L", 1);
   ASSERT_TRUE(cal.ok()) << cal.status();
   tables::TableSpec spec;
@@ -584,10 +586,8 @@ TEST(Pipeline, StoredReport) {
 // a stored verdict as stored, else the fit's own; the findings a diagnosed
 // calibration carries (another format is left out, not fatal).
 TEST(Pipeline, ReportInputsFromTheCalibrationJson) {
-  auto store = storage::Store::Open(":memory:");
-  ASSERT_TRUE(store.ok());
-  ASSERT_TRUE(IngestHfRun(**store, "IPM-J", "st", kMotor, Grid(1.0)).ok());
-  ASSERT_TRUE(FitSerial(**store, "IPM-J", "analytic", {}).ok());
+  auto store = StoreWithAnalyticFit("IPM-J");
+  ASSERT_TRUE(store.ok()) << store.status();
   auto cal = LoadCalibration(**store, "IPM-J", 0);
   ASSERT_TRUE(cal.ok());
   nlohmann::json j = cal->ToJson();

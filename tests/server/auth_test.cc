@@ -16,7 +16,6 @@
 
 #include <grpcpp/generic/generic_stub.h>
 #include <grpcpp/grpcpp.h>
-#include <grpcpp/support/client_interceptor.h>
 
 #include "grpc/reflection/v1/reflection.grpc.pb.h"
 #include "grpc/reflection/v1alpha/reflection.grpc.pb.h"
@@ -24,6 +23,9 @@
 #include "io/csv.h"
 #include "io/net.h"
 #include "server/auth.h"
+#include "server/bearer.h"
+#include "tests/server/authorized_server.h"
+#include "tests/server/test_support.h"
 #include "io/sha256.h"
 #include "pipeline/anchor.h"
 #include "server/service.h"
@@ -39,63 +41,21 @@ std::string TempPath(const std::string& name) {
   return (fs::temp_directory_path() / ("fluxcal_auth_" + std::to_string(::getpid()) + "_" + name)).string();
 }
 
-// Adds a bearer token to every call (what the CLI does with --token-file).
-class Bearer final : public grpc::experimental::Interceptor {
- public:
-  explicit Bearer(std::string t) : t_(std::move(t)) {}
-  void Intercept(grpc::experimental::InterceptorBatchMethods* m) override {
-    if (m->QueryInterceptionHookPoint(grpc::experimental::InterceptionHookPoints::PRE_SEND_INITIAL_METADATA)) {
-      m->GetSendInitialMetadata()->insert({"authorization", "Bearer " + t_});
-    }
-    m->Proceed();
-  }
-  std::string t_;
-};
-class BearerFactory final : public grpc::experimental::ClientInterceptorFactoryInterface {
- public:
-  explicit BearerFactory(std::string t) : t_(std::move(t)) {}
-  grpc::experimental::Interceptor* CreateClientInterceptor(grpc::experimental::ClientRpcInfo*) override {
-    return new Bearer(t_);
-  }
-  std::string t_;
-};
-
+// A channel sending token with every call (what the CLI does with --token-file); "" sends none.
 std::shared_ptr<grpc::Channel> Channel(const std::string& addr, std::shared_ptr<grpc::ChannelCredentials> creds,
                                        const std::string& token) {
-  std::vector<std::unique_ptr<grpc::experimental::ClientInterceptorFactoryInterface>> f;
-  if (!token.empty()) f.push_back(std::make_unique<BearerFactory>(token));
-  return grpc::experimental::CreateCustomChannelWithInterceptors(addr, creds, grpc::ChannelArguments(), std::move(f));
+  return BearerChannel(addr, creds, TokenOrNone(token));
 }
 
-// The smallest run the service takes: six distinct operating points.
-std::vector<v1::HfPoint> SmallGrid() {
-  std::vector<v1::HfPoint> out;
-  for (int k = 0; k < 6; ++k) {
-    v1::HfPoint p;
-    p.set_point_id("p" + std::to_string(k));
-    p.set_id_a(-20.0 * (k % 3)); p.set_iq_a(40.0 * (k / 3)); p.set_ld_h(1e-4); p.set_lq_h(2e-4);
-    p.set_temperature_c(25); p.set_reliable(true);
-    out.push_back(p);
-  }
-  return out;
-}
+using test_support::IngestSmallGrid;
 
 // Calls `rpc` with a small request; the status is all that matters here.
 grpc::Status Call(v1::CalibrationService::Stub* stub, Rpc rpc) {
   grpc::ClientContext ctx;
   ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(20));
   switch (rpc) {
-    case Rpc::kIngestHfResults: {
-      v1::IngestHfResultsResponse r;
-      auto w = stub->IngestHfResults(&ctx, &r);
-      v1::IngestHfResultsRequest m;
-      m.set_serial("IPM-AUTH-1");
-      m.mutable_motor()->set_pole_pairs(4);
-      for (const auto& p : SmallGrid()) *m.add_points() = p;
-      w->Write(m);
-      w->WritesDone();
-      return w->Finish();
-    }
+    case Rpc::kIngestHfResults:
+      return IngestSmallGrid(stub, &ctx, "IPM-AUTH-1");
     case Rpc::kIngestRecording: {
       v1::IngestRecordingResponse r;
       auto w = stub->IngestRecording(&ctx, &r);
@@ -156,37 +116,18 @@ grpc::StatusCode HealthCheck(const std::shared_ptr<grpc::Channel>& ch) {
   return st.error_code();
 }
 
-struct Fixture {
-  std::string db;
-  std::unique_ptr<storage::Store> store;
-  std::unique_ptr<CalibrationServiceImpl> service;
-  std::unique_ptr<Authorizer> auth;
-  std::unique_ptr<grpc::Server> server;
+// A token for one identity of every role but health (and the extra keys).
+struct Fixture : test_support::AuthorizedServer {
   std::map<Role, std::string> tokens;
-  int port = 0;
 
   explicit Fixture(const std::string& name, const ServerOptions& base = {}, Keys extra = {}) {
-    db = TempPath(name + ".db");
-    for (auto sfx : {"", "-wal", "-shm"}) fs::remove(db + sfx);
-    store = std::move(*storage::Store::Open(db));
-    service = std::make_unique<CalibrationServiceImpl>(store.get());
     Keys keys = std::move(extra);
     for (Role r : {Role::kStation, Role::kRelease, Role::kFlasher, Role::kEngineer, Role::kAdmin}) {
       tokens[r] = *NewToken();
       keys.entries.push_back({std::string(RoleName(r)) + "-1", r, io::Sha256Hex(tokens[r]), ""});
     }
-    auth = std::make_unique<Authorizer>(keys);
-    service->set_authorizer(auth.get());
-    ServerOptions opt = base;
-    opt.authorizer = auth.get();
-    server = StartServer(service.get(), "127.0.0.1:0", &port, opt);
+    Start(TempPath(name + ".db"), keys, base);
   }
-  ~Fixture() {
-    server->Shutdown();
-    store.reset();
-    for (auto sfx : {"", "-wal", "-shm"}) fs::remove(db + sfx);
-  }
-  std::string addr() const { return "127.0.0.1:" + std::to_string(port); }
 };
 
 TEST(Roles, MatrixOfEveryRoleAndRpc) {
@@ -313,16 +254,7 @@ TEST(Roles, AStationIngestsAsItselfAndCannotLoosenTheVerdict) {
       Channel(f.addr(), grpc::InsecureChannelCredentials(), f.tokens[Role::kStation]));
   {
     grpc::ClientContext ctx;
-    v1::IngestHfResultsResponse r;
-    auto w = stub->IngestHfResults(&ctx, &r);
-    v1::IngestHfResultsRequest m;
-    m.set_serial("IPM-AUTH-2");
-    m.set_station_id("someone-else");
-    m.mutable_motor()->set_pole_pairs(4);
-    for (const auto& p : SmallGrid()) *m.add_points() = p;
-    w->Write(m);
-    w->WritesDone();
-    const grpc::Status s = w->Finish();
+    const grpc::Status s = IngestSmallGrid(stub.get(), &ctx, "IPM-AUTH-2", "someone-else");
     EXPECT_EQ(s.error_code(), grpc::StatusCode::PERMISSION_DENIED) << s.error_message();
     EXPECT_NE(s.error_message().find("not the caller's identity 'station-1'"), std::string::npos) << s.error_message();
   }
@@ -347,6 +279,34 @@ TEST(Roles, AStationIngestsAsItselfAndCannotLoosenTheVerdict) {
   EXPECT_NE(s.error_message().find("may only tighten the server policy"), std::string::npos) << s.error_message();
 }
 
+// A run of the twin's analytic motor for `serial` (`scatter` alternates
+// Lqq by that fraction point to point: 0.15 fails the 2 % residual policy).
+void IngestTwinGrid(v1::CalibrationService::Stub* stub, const std::string& serial, double scatter) {
+  sim::MotorParams mp;
+  sim::AnalyticMotor m(mp);
+  grpc::ClientContext ctx;
+  v1::IngestHfResultsResponse r;
+  auto w = stub->IngestHfResults(&ctx, &r);
+  v1::IngestHfResultsRequest msg;
+  msg.set_serial(serial);
+  msg.mutable_motor()->set_pole_pairs(4);
+  msg.mutable_motor()->set_psi_pm_wb(mp.sat.psi_pm_wb);
+  for (int a = 0; a < 6; ++a) {
+    for (int b = 0; b < 6; ++b) {
+      auto* p = msg.add_points();
+      p->set_point_id("p" + std::to_string(6 * a + b));
+      p->set_id_a(-100 + 20 * a); p->set_iq_a(20 * b);
+      const auto L = m.Inductance(p->id_a(), p->iq_a());
+      p->set_ld_h(L.ldd_h); p->set_lq_h(L.lqq_h * (1 + ((a + b) % 2 ? scatter : -scatter)));
+      p->set_ldq_h(L.ldq_h);
+      p->set_temperature_c(25); p->set_reliable(true);
+    }
+  }
+  w->Write(msg);
+  w->WritesDone();
+  EXPECT_TRUE(w->Finish().ok());
+}
+
 // GetReport goes with GetCalibration: a flasher (no read right) is refused
 // naming the RPC, the readers get the page. Its fleet section names other
 // serials, so it is only on the pages of roles that may call
@@ -358,26 +318,8 @@ TEST(Roles, GetReportReadsLikeGetCalibrationAndTheFleetStaysWithEngineers) {
   };
   auto admin = as(Role::kAdmin);
   {
-    sim::AnalyticMotor m{sim::MotorParams{}};
-    grpc::ClientContext ctx;
-    v1::IngestHfResultsResponse r;
-    auto w = admin->IngestHfResults(&ctx, &r);
-    v1::IngestHfResultsRequest msg;
-    msg.set_serial("IPM-RPT-A");
-    msg.mutable_motor()->set_pole_pairs(4);
-    for (int a = 0; a < 6; ++a) {
-      for (int b = 0; b < 6; ++b) {
-        auto* p = msg.add_points();
-        p->set_point_id("p" + std::to_string(6 * a + b));
-        p->set_id_a(-100 + 20 * a); p->set_iq_a(20 * b);
-        const auto L = m.Inductance(p->id_a(), p->iq_a());
-        p->set_ld_h(L.ldd_h); p->set_lq_h(L.lqq_h); p->set_ldq_h(L.ldq_h);
-        p->set_temperature_c(25); p->set_reliable(true);
-      }
-    }
-    w->Write(msg);
-    w->WritesDone();
-    ASSERT_TRUE(w->Finish().ok());
+    IngestTwinGrid(admin.get(), "IPM-RPT-A", 0.0);
+    if (::testing::Test::HasFailure()) return;
     grpc::ClientContext fc;
     v1::FitRequest fq;
     fq.set_serial("IPM-RPT-A");
@@ -409,37 +351,6 @@ TEST(Roles, GetReportReadsLikeGetCalibrationAndTheFleetStaysWithEngineers) {
   }
 }
 
-// Release and flashing: a failed calibration cannot be released; flashers
-// see nothing before a release and then exactly the released version, even
-// after a newer (unreleased) fit; a station cannot release.
-// A run of the twin's analytic motor for `serial` (`scatter` alternates
-// Lqq by that fraction point to point: 0.15 fails the 2 % residual policy).
-void IngestTwinGrid(v1::CalibrationService::Stub* stub, const std::string& serial, double scatter) {
-  sim::MotorParams mp;
-  sim::AnalyticMotor m(mp);
-  grpc::ClientContext ctx;
-  v1::IngestHfResultsResponse r;
-  auto w = stub->IngestHfResults(&ctx, &r);
-  v1::IngestHfResultsRequest msg;
-  msg.set_serial(serial);
-  msg.mutable_motor()->set_pole_pairs(4);
-  msg.mutable_motor()->set_psi_pm_wb(mp.sat.psi_pm_wb);
-  for (int a = 0; a < 6; ++a) {
-    for (int b = 0; b < 6; ++b) {
-      auto* p = msg.add_points();
-      p->set_point_id("p" + std::to_string(6 * a + b));
-      p->set_id_a(-100 + 20 * a); p->set_iq_a(20 * b);
-      const auto L = m.Inductance(p->id_a(), p->iq_a());
-      p->set_ld_h(L.ldd_h); p->set_lq_h(L.lqq_h * (1 + ((a + b) % 2 ? scatter : -scatter)));
-      p->set_ldq_h(L.ldq_h);
-      p->set_temperature_c(25); p->set_reliable(true);
-    }
-  }
-  w->Write(msg);
-  w->WritesDone();
-  EXPECT_TRUE(w->Finish().ok());
-}
-
 v1::FitResponse FitAs(v1::CalibrationService::Stub* stub, const std::string& serial, double max_rms) {
   grpc::ClientContext c;
   v1::FitRequest q;
@@ -450,6 +361,9 @@ v1::FitResponse FitAs(v1::CalibrationService::Stub* stub, const std::string& ser
   return r;
 }
 
+// Release and flashing: a failed calibration cannot be released; flashers
+// see nothing before a release and then exactly the released version, even
+// after a newer (unreleased) fit; a station cannot release.
 TEST(Roles, OnlyAReleasedPassingCalibrationIsFlashed) {
   Fixture f("release");
   auto as = [&](Role r) {
@@ -627,15 +541,7 @@ TEST(Audit, RequestIdFromTheClientIsKept) {
       Channel(f.addr(), grpc::InsecureChannelCredentials(), f.tokens[Role::kStation]));
   grpc::ClientContext ctx;
   ctx.AddMetadata("x-request-id", "eol-7-run-0042");
-  v1::IngestHfResultsResponse r;
-  auto w = st->IngestHfResults(&ctx, &r);
-  v1::IngestHfResultsRequest m;
-  m.set_serial("IPM-AUD-1");
-  m.mutable_motor()->set_pole_pairs(4);
-  for (const auto& p : SmallGrid()) *m.add_points() = p;
-  w->Write(m);
-  w->WritesDone();
-  ASSERT_TRUE(w->Finish().ok());
+  ASSERT_TRUE(IngestSmallGrid(st.get(), &ctx, "IPM-AUD-1").ok());
   auto rows = f.store->AuditOf("IPM-AUD-1");
   ASSERT_TRUE(rows.ok());
   ASSERT_EQ(rows->size(), 1u);

@@ -18,6 +18,7 @@
 #include "server/validation.h"
 #include "simulation/twin.h"
 #include "storage/store.h"
+#include "tests/server/test_support.h"
 
 namespace fluxcal::server {
 namespace {
@@ -28,30 +29,26 @@ using Stub = v1::CalibrationService::Stub;
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
-std::vector<v1::HfPoint> Grid() {
-  sim::MotorParams mp;
-  sim::AnalyticMotor m(mp);
-  std::vector<v1::HfPoint> out;
-  for (int a = 0; a < 6; ++a) {
-    for (int b = 0; b < 6; ++b) {
-      v1::HfPoint p;
-      p.set_point_id("p" + std::to_string(6 * a + b));
-      p.set_id_a(-100 + 20 * a);
-      p.set_iq_a(20 * b);
-      const auto L = m.Inductance(p.id_a(), p.iq_a());
-      p.set_ld_h(L.ldd_h); p.set_lq_h(L.lqq_h); p.set_ldq_h(L.ldq_h);
-      p.set_ld_h_std(1e-7); p.set_lq_h_std(1e-7); p.set_ldq_h_std(1e-7);
-      p.set_temperature_c(25); p.set_reliable(true);
-      out.push_back(p);
-    }
-  }
-  return out;
-}
+std::vector<v1::HfPoint> Grid() { return test_support::TwinGridPoints(); }
 
 v1::MotorInfo Motor() {
   v1::MotorInfo m;
   m.set_pole_pairs(4); m.set_rs_ohm(0.011); m.set_psi_pm_wb(sim::MotorParams().sat.psi_pm_wb);
   return m;
+}
+
+// A call of rpc whose request names IPM-GOOD and is then changed by set.
+template <class Req, class Resp>
+std::function<grpc::Status(Stub*)> AboutGoodSerial(grpc::Status (Stub::*rpc)(grpc::ClientContext*, const Req&, Resp*),
+                                                   std::function<void(Req*)> set) {
+  return [rpc, set](Stub* st) {
+    grpc::ClientContext c;
+    Req q;
+    q.set_serial("IPM-GOOD");
+    set(&q);
+    Resp r;
+    return (st->*rpc)(&c, q, &r);
+  };
 }
 
 // One IngestHfResults stream of the given messages.
@@ -245,23 +242,8 @@ std::vector<Case> Cases() {
   auto chunks = [](std::vector<std::pair<std::string, std::string>> files, std::string serial,
                    std::string station) {
     return [files, serial, station](Stub* st) {
-      grpc::ClientContext ctx;
       v1::IngestRecordingResponse r;
-      auto w = st->IngestRecording(&ctx, &r);
-      bool first = true;
-      for (const auto& [name, data] : files) {
-        v1::RecordingChunk c;
-        if (first) {
-          c.set_serial(serial);
-          c.set_station_id(station);
-          first = false;
-        }
-        c.set_path(name);
-        c.set_data(data);
-        if (!w->Write(c)) break;
-      }
-      w->WritesDone();
-      return w->Finish();
+      return test_support::UploadRecording(st, serial, station, files, &r);
     };
   };
   for (const std::string& name : std::vector<std::string>{"/etc/passwd", "../x", "a//b", "./m", "a b", "x\n1\ny", "a/b/c/d/e", "\t",
@@ -361,14 +343,7 @@ std::vector<Case> Cases() {
 
   // --- ExportTable.
   auto exp = [](std::function<void(v1::ExportTableRequest*)> set) {
-    return [set](Stub* st) {
-      grpc::ClientContext c;
-      v1::ExportTableRequest q;
-      q.set_serial("IPM-GOOD");
-      set(&q);
-      v1::ExportTableResponse r;
-      return st->ExportTable(&c, q, &r);
-    };
+    return AboutGoodSerial(&Stub::ExportTable, std::move(set));
   };
   add("ExportTable points 1", exp([](auto* q) { q->set_points(1); }));
   add("ExportTable points 5000", exp([](auto* q) { q->set_points(5000); }));
@@ -424,14 +399,7 @@ std::vector<Case> Cases() {
 
   // --- GetReport.
   auto report = [](std::function<void(v1::GetReportRequest*)> set) {
-    return [set](Stub* st) {
-      grpc::ClientContext c;
-      v1::GetReportRequest q;
-      q.set_serial("IPM-GOOD");
-      set(&q);
-      v1::GetReportResponse r;
-      return st->GetReport(&c, q, &r);
-    };
+    return AboutGoodSerial(&Stub::GetReport, std::move(set));
   };
   for (const auto& s : bad_serials) {
     add("GetReport serial '" + io::Printable(s.substr(0, 20)) + "'", report([s](auto* q) { q->set_serial(s); }));

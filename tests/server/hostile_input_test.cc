@@ -17,6 +17,7 @@
 #include "simulation/twin.h"
 #include "storage/store.h"
 #include "io/sha256.h"
+#include "tests/server/test_support.h"
 #include "absl/strings/str_cat.h"
 
 namespace fluxcal::server {
@@ -35,24 +36,7 @@ std::string TempPath(const std::string& name) {
 
 // Every file of a small simulated set, by relative name.
 io::RecordingFiles SmallSetFiles(const std::string& serial) {
-  sim::TwinConfig cfg;
-  cfg.serial = serial;
-  sim::Plan plan = sim::DefaultPlan();
-  plan.record_s = 0.02;
-  auto r = sim::Simulate(cfg, plan);
-  EXPECT_TRUE(r.ok());
-  const std::string dir = TempPath("set_" + serial);
-  fs::remove_all(dir);
-  EXPECT_TRUE(io::WriteRecordingSet(dir, r->set).ok());
-  io::RecordingFiles files;
-  for (const auto& e : fs::recursive_directory_iterator(dir)) {
-    if (!e.is_regular_file()) continue;
-    std::ifstream f(e.path(), std::ios::binary);
-    files[fs::relative(e.path(), dir).generic_string()] =
-        std::string((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
-  }
-  fs::remove_all(dir);
-  return files;
+  return test_support::TwinSetFiles(serial, 0.02, TempPath("set_" + serial));
 }
 
 size_t CountTempDirs(const std::string& prefix) {
@@ -68,39 +52,19 @@ class HostileTest : public ::testing::Test {
   void SetUp() override {
     db_ = TempPath(::testing::UnitTest::GetInstance()->current_test_info()->name() + std::string(".db"));
     for (auto sfx : {"", "-wal", "-shm"}) fs::remove(db_ + sfx);
-    auto s = storage::Store::Open(db_);
-    ASSERT_TRUE(s.ok());
-    store_ = std::move(*s);
-    service_ = std::make_unique<CalibrationServiceImpl>(store_.get());
     int port = 0;
-    server_ = StartServer(service_.get(), "127.0.0.1:0", &port);
-    ASSERT_NE(server_, nullptr);
+    ASSERT_TRUE(test_support::ServeStore(db_, &store_, &service_, &server_, &port));
     stub_ = v1::CalibrationService::NewStub(
         grpc::CreateChannel("127.0.0.1:" + std::to_string(port), grpc::InsecureChannelCredentials()));
   }
   void TearDown() override {
-    server_->Shutdown();
+    if (server_) server_->Shutdown();
     store_.reset();
     for (auto sfx : {"", "-wal", "-shm"}) fs::remove(db_ + sfx);
   }
   grpc::Status Upload(const std::string& serial, const std::string& station, const io::RecordingFiles& files,
                       v1::IngestRecordingResponse* resp) {
-    grpc::ClientContext ctx;
-    auto w = stub_->IngestRecording(&ctx, resp);
-    bool first = true;
-    for (const auto& [name, data] : files) {
-      v1::RecordingChunk c;
-      if (first) {
-        c.set_serial(serial);
-        c.set_station_id(station);
-        first = false;
-      }
-      c.set_path(name);
-      c.set_data(data);
-      if (!w->Write(c)) break;
-    }
-    w->WritesDone();
-    return w->Finish();
+    return test_support::UploadRecording(stub_.get(), serial, station, files, resp);
   }
   grpc::Status DiagnoseSerial(const std::string& serial) {
     grpc::ClientContext ctx;

@@ -24,12 +24,14 @@
 #include <thread>
 
 #include <grpcpp/grpcpp.h>
-#include <grpcpp/support/client_interceptor.h>
 
 #include "gtest/gtest.h"
 #include "io/csv.h"
 #include "io/sha256.h"
 #include "server/auth.h"
+#include "server/bearer.h"
+#include "tests/server/authorized_server.h"
+#include "tests/server/test_support.h"
 #include "server/limits.h"
 #include "server/service.h"
 #include "storage/store.h"
@@ -44,72 +46,28 @@ std::string TempPath(const std::string& name) {
   return (fs::temp_directory_path() / ("fluxcal_ops_" + std::to_string(::getpid()) + "_" + name)).string();
 }
 
-class Bearer final : public grpc::experimental::Interceptor {
- public:
-  explicit Bearer(std::string t) : t_(std::move(t)) {}
-  void Intercept(grpc::experimental::InterceptorBatchMethods* m) override {
-    if (m->QueryInterceptionHookPoint(grpc::experimental::InterceptionHookPoints::PRE_SEND_INITIAL_METADATA)) {
-      m->GetSendInitialMetadata()->insert({"authorization", "Bearer " + t_});
-    }
-    m->Proceed();
-  }
-  std::string t_;
-};
-class BearerFactory final : public grpc::experimental::ClientInterceptorFactoryInterface {
- public:
-  explicit BearerFactory(std::string t) : t_(std::move(t)) {}
-  grpc::experimental::Interceptor* CreateClientInterceptor(grpc::experimental::ClientRpcInfo*) override {
-    return new Bearer(t_);
-  }
-  std::string t_;
-};
-
 std::unique_ptr<v1::CalibrationService::Stub> Stub(const std::string& addr, const std::string& token,
                                                    int max_send_bytes = -1) {
-  std::vector<std::unique_ptr<grpc::experimental::ClientInterceptorFactoryInterface>> f;
-  if (!token.empty()) f.push_back(std::make_unique<BearerFactory>(token));
   grpc::ChannelArguments args;
   args.SetMaxSendMessageSize(max_send_bytes);
   return v1::CalibrationService::NewStub(
-      grpc::experimental::CreateCustomChannelWithInterceptors(addr, grpc::InsecureChannelCredentials(), args,
-                                                              std::move(f)));
+      BearerChannel(addr, grpc::InsecureChannelCredentials(), TokenOrNone(token), args));
 }
 
 // A server with identities (two stations, an engineer, a health check) on
 // loopback, with the given limits.
-struct Fixture {
-  std::string db;
-  std::unique_ptr<storage::Store> store;
-  std::unique_ptr<CalibrationServiceImpl> service;
-  std::unique_ptr<Authorizer> auth;
-  std::unique_ptr<grpc::Server> server;
+struct Fixture : test_support::AuthorizedServer {
   std::map<std::string, std::string> tokens;   // by identity name
-  int port = 0;
 
   Fixture(const std::string& name, IdentityLimits limits) {
-    db = TempPath(name + ".db");
-    for (auto sfx : {"", "-wal", "-shm"}) fs::remove(db + sfx);
-    store = std::move(*storage::Store::Open(db));
-    service = std::make_unique<CalibrationServiceImpl>(store.get());
     Keys keys;
     for (auto [who, role] : {std::pair{"station-1", Role::kStation}, {"station-2", Role::kStation},
                              {"engineer-1", Role::kEngineer}, {"health-1", Role::kHealth}}) {
       tokens[who] = *NewToken();
       keys.entries.push_back({who, role, io::Sha256Hex(tokens[who]), ""});
     }
-    auth = std::make_unique<Authorizer>(keys);
-    service->set_authorizer(auth.get());
-    service->set_limits(limits);
-    ServerOptions opt;
-    opt.authorizer = auth.get();
-    server = StartServer(service.get(), "127.0.0.1:0", &port, opt);
+    Start(TempPath(name + ".db"), keys, ServerOptions{}, &limits);
   }
-  ~Fixture() {
-    server->Shutdown();
-    store.reset();
-    for (auto sfx : {"", "-wal", "-shm"}) fs::remove(db + sfx);
-  }
-  std::string addr() const { return "127.0.0.1:" + std::to_string(port); }
   // Waits (at most 20 s) until `who` has `streams` calls open on the server.
   bool WaitForStreams(const std::string& who, int streams) const {
     const auto until = Clock::now() + std::chrono::seconds(20);
@@ -346,12 +304,10 @@ TEST(PreAuth, AnUnauthenticatedLargeMessageIsRefusedUnread) {
   auto measure = [&](const std::string& token, grpc::StatusCode* code, std::string* message) {
     CountingProxy proxy(f.port);
     EXPECT_TRUE(proxy.ok());
-    std::vector<std::unique_ptr<grpc::experimental::ClientInterceptorFactoryInterface>> fs;
-    if (!token.empty()) fs.push_back(std::make_unique<BearerFactory>(token));
     grpc::ChannelArguments args;
     args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);   // a connection of its own
-    auto stub = v1::CalibrationService::NewStub(grpc::experimental::CreateCustomChannelWithInterceptors(
-        "127.0.0.1:" + std::to_string(proxy.port()), grpc::InsecureChannelCredentials(), args, std::move(fs)));
+    auto stub = v1::CalibrationService::NewStub(BearerChannel(
+        "127.0.0.1:" + std::to_string(proxy.port()), grpc::InsecureChannelCredentials(), TokenOrNone(token), args));
     grpc::ClientContext c;
     c.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(20));
     v1::QueryFluxResponse r;
@@ -545,19 +501,7 @@ TEST(Roles, AHealthIdentityProvesTheDatabaseAnswersAndSeesNoData) {
   {
     auto st = Stub(f.addr(), f.tokens["station-1"]);
     grpc::ClientContext c;
-    v1::IngestHfResultsResponse r;
-    auto w = st->IngestHfResults(&c, &r);
-    v1::IngestHfResultsRequest m;
-    m.set_serial("IPM-HEALTH-1");
-    m.mutable_motor()->set_pole_pairs(4);
-    for (int k = 0; k < 6; ++k) {
-      auto* p = m.add_points();
-      p->set_id_a(-20.0 * (k % 3)); p->set_iq_a(40.0 * (k / 3)); p->set_ld_h(1e-4); p->set_lq_h(2e-4);
-      p->set_temperature_c(25); p->set_reliable(true);
-    }
-    w->Write(m);
-    w->WritesDone();
-    ASSERT_TRUE(w->Finish().ok());
+    ASSERT_TRUE(test_support::IngestSmallGrid(st.get(), &c, "IPM-HEALTH-1").ok());
   }
   auto list = [&](const std::string& who, v1::ListMotorsResponse* r) {
     grpc::ClientContext c;

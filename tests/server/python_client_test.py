@@ -91,7 +91,15 @@ def reflection_classes():
     descriptor set: no generated module (its package would be `grpc`,
     shadowed by grpcio's)."""
     ds = os.path.join(WORK, "reflection.pb")
-    subprocess.run(["protoc", f"-I{PROTO_DIR}", f"--descriptor_set_out={ds}",
+    # v1alpha is v1 but for its package: written from it, as
+    # proto/CMakeLists.txt does for the server.
+    alpha_root = os.path.join(WORK, "reflection_v1alpha")
+    os.makedirs(os.path.join(alpha_root, "grpc", "reflection", "v1alpha"), exist_ok=True)
+    with open(os.path.join(PROTO_DIR, "grpc", "reflection", "v1", "reflection.proto")) as f:
+        v1 = f.read()
+    with open(os.path.join(alpha_root, "grpc", "reflection", "v1alpha", "reflection.proto"), "w") as f:
+        f.write(v1.replace("package grpc.reflection.v1;", "package grpc.reflection.v1alpha;"))
+    subprocess.run(["protoc", f"-I{PROTO_DIR}", f"-I{alpha_root}", f"--descriptor_set_out={ds}",
                     "grpc/reflection/v1/reflection.proto", "grpc/reflection/v1alpha/reflection.proto"], check=True)
     fds = descriptor_pb2.FileDescriptorSet()
     with open(ds, "rb") as f:

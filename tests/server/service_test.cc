@@ -36,6 +36,7 @@
 #include "simulation/twin.h"
 #include "storage/store.h"
 #include "tables/signature.h"
+#include "tests/server/test_support.h"
 #include "tests/support/pg_cluster.h"
 
 namespace fluxcal::server {
@@ -47,26 +48,9 @@ std::string TempPath(const std::string& name) {
   return (fs::temp_directory_path() / ("fluxcal_srv_" + std::to_string(::getpid()) + "_" + name)).string();
 }
 
+using test_support::TwinGridPoints;
 // 36 points of the paper's grid from the twin's analytic motor.
-std::vector<v1::HfPoint> GridPoints(double scale = 1.0) {
-  sim::MotorParams mp;
-  sim::AnalyticMotor m(mp);
-  std::vector<v1::HfPoint> out;
-  for (int a = 0; a < 6; ++a) {
-    for (int b = 0; b < 6; ++b) {
-      v1::HfPoint p;
-      p.set_point_id("p" + std::to_string(6 * a + b));
-      p.set_id_a(-100 + 20 * a);
-      p.set_iq_a(20 * b);
-      const auto L = m.Inductance(p.id_a(), p.iq_a());
-      p.set_ld_h(scale * L.ldd_h); p.set_lq_h(scale * L.lqq_h); p.set_ldq_h(L.ldq_h);
-      p.set_ld_h_std(1e-7); p.set_lq_h_std(1e-7); p.set_ldq_h_std(1e-7);
-      p.set_temperature_c(25); p.set_reliable(true);
-      out.push_back(p);
-    }
-  }
-  return out;
-}
+std::vector<v1::HfPoint> GridPoints(double scale = 1.0) { return TwinGridPoints(scale); }
 
 // Param: false SQLite file, true PostgreSQL.
 class ServiceTest : public ::testing::TestWithParam<bool> {
@@ -86,13 +70,8 @@ class ServiceTest : public ::testing::TestWithParam<bool> {
       ASSERT_TRUE(pg->CreateDatabase(name));
       url = pg->Url(name);
     }
-    auto s = storage::Store::Open(url);
-    ASSERT_TRUE(s.ok());
-    store_ = std::move(*s);
-    service_ = std::make_unique<CalibrationServiceImpl>(store_.get());
     int port = 0;
-    server_ = StartServer(service_.get(), "127.0.0.1:0", &port);
-    ASSERT_GT(port, 0);
+    ASSERT_TRUE(test_support::ServeStore(url, &store_, &service_, &server_, &port));
     channel_ = grpc::CreateChannel("127.0.0.1:" + std::to_string(port), grpc::InsecureChannelCredentials());
     stub_ = v1::CalibrationService::NewStub(channel_);
   }
@@ -705,31 +684,10 @@ TEST_P(ServiceTest, IngestRecordingThenDiagnose) {
   sim::TwinConfig cfg;
   cfg.serial = "IPM-REC-1";
   cfg.effects.dead_time_s = 2e-6;
-  sim::Plan plan = sim::DefaultPlan();
-  plan.record_s = 0.05;
-  auto r = sim::Simulate(cfg, plan);
-  ASSERT_TRUE(r.ok());
-  const std::string dir = TempPath("recset");
-  fs::remove_all(dir);
-  ASSERT_TRUE(io::WriteRecordingSet(dir, r->set).ok());
-  grpc::ClientContext ctx;
+  const io::RecordingFiles files = test_support::TwinSetFiles(cfg, 0.05, TempPath("recset"));
+  ASSERT_FALSE(files.empty());
   v1::IngestRecordingResponse resp;
-  auto w = stub_->IngestRecording(&ctx, &resp);
-  bool first = true;
-  for (const auto& e : fs::recursive_directory_iterator(dir)) {
-    if (!e.is_regular_file()) continue;
-    std::ifstream f(e.path(), std::ios::binary);
-    std::string data((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
-    for (size_t off = 0; off < data.size(); off += 64 * 1024) {
-      v1::RecordingChunk c;
-      if (first) { c.set_serial("IPM-REC-1"); first = false; }
-      c.set_path(fs::relative(e.path(), dir).string());
-      c.set_data(data.substr(off, 64 * 1024));
-      w->Write(c);
-    }
-  }
-  w->WritesDone();
-  ASSERT_TRUE(w->Finish().ok());
+  ASSERT_TRUE(test_support::UploadRecording(stub_.get(), "IPM-REC-1", "", files, &resp, 64 * 1024).ok());
   EXPECT_EQ(resp.points(), 40);
   EXPECT_EQ(resp.recording_sha256().size(), 64u);
   EXPECT_LT(resp.stored_bytes(), resp.recording_bytes());
@@ -779,7 +737,6 @@ TEST_P(ServiceTest, IngestRecordingThenDiagnose) {
     EXPECT_EQ(page.html().find("Mismatches against the baseline"), std::string::npos)
         << "the marks carry no mismatches; the page must not count zero";
   }
-  fs::remove_all(dir);
   // A set whose manifest names another serial is refused.
   grpc::ClientContext c2;
   v1::IngestRecordingResponse r2;
@@ -795,22 +752,7 @@ TEST_P(ServiceTest, IngestRecordingThenDiagnose) {
 // The files of a short twin recording set for `serial`, as IngestRecording
 // takes them (relative names, bytes as on disk).
 io::RecordingFiles TwinSetFiles(const std::string& serial) {
-  sim::TwinConfig cfg;
-  cfg.serial = serial;
-  sim::Plan plan = sim::DefaultPlan();
-  plan.record_s = 0.05;
-  auto r = sim::Simulate(cfg, plan);
-  EXPECT_TRUE(r.ok());
-  const std::string dir = TempPath("recfiles_" + serial);
-  fs::remove_all(dir);
-  EXPECT_TRUE(io::WriteRecordingSet(dir, r->set).ok());
-  io::RecordingFiles files;
-  for (const auto& e : fs::recursive_directory_iterator(dir)) {
-    if (!e.is_regular_file()) continue;
-    files[fs::relative(e.path(), dir).string()] = *io::ReadFileToString(e.path().string());
-  }
-  fs::remove_all(dir);
-  return files;
+  return test_support::TwinSetFiles(serial, 0.05, TempPath("recfiles_" + serial));
 }
 
 // An IngestRecording stream as bytes: one chunk per file (`send`), the first
@@ -890,34 +832,13 @@ TEST_P(ServiceTest, RecordingStreamRules) {
 // DEADLINE_EXCEEDED soon after it, and the abandoned Fit stores no version
 // and no audit row (a later Fit is version 1). Timings are loose (seconds).
 TEST_P(ServiceTest, ClientDeadlineStopsTheWorkAndStoresNothing) {
-  sim::TwinConfig cfg;
-  cfg.serial = "IPM-DL-1";
-  sim::Plan plan = sim::DefaultPlan();
-  // Long records: identifying the set takes far longer than the deadline.
-  plan.record_s = 0.6;
-  auto r = sim::Simulate(cfg, plan);
-  ASSERT_TRUE(r.ok());
-  const std::string dir = TempPath("dlset");
-  fs::remove_all(dir);
-  ASSERT_TRUE(io::WriteRecordingSet(dir, r->set).ok());
   {
-    grpc::ClientContext ctx;
+    // Long records: identifying the set takes far longer than the deadline.
+    const io::RecordingFiles files = test_support::TwinSetFiles("IPM-DL-1", 0.6, TempPath("dlset"));
+    ASSERT_FALSE(files.empty());
     v1::IngestRecordingResponse resp;
-    auto w = stub_->IngestRecording(&ctx, &resp);
-    bool first = true;
-    for (const auto& e : fs::recursive_directory_iterator(dir)) {
-      if (!e.is_regular_file()) continue;
-      std::ifstream f(e.path(), std::ios::binary);
-      v1::RecordingChunk c;
-      if (first) { c.set_serial("IPM-DL-1"); first = false; }
-      c.set_path(fs::relative(e.path(), dir).string());
-      c.set_data(std::string((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>()));
-      w->Write(c);
-    }
-    w->WritesDone();
-    ASSERT_TRUE(w->Finish().ok());
+    ASSERT_TRUE(test_support::UploadRecording(stub_.get(), "IPM-DL-1", "", files, &resp).ok());
   }
-  fs::remove_all(dir);
   using Clock = std::chrono::steady_clock;
   auto seconds = [](Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); };
   // The whole work, once, for scale.
@@ -1377,6 +1298,29 @@ std::string WithoutWriteTime(const std::string& html) {
 // `fluxcal report SERIAL --server` writes the page the service builds
 // (GetReport) byte for byte: its SHA-256 is the one the service sent, and
 // the page equals one fetched directly but for the time it was built.
+// GridPoints ingested for serial (4 pole pairs, Rs and psi_pm stated) and
+// fitted over stub.
+::testing::AssertionResult IngestGridAndFit(v1::CalibrationService::Stub* stub, const std::string& serial) {
+  grpc::ClientContext c;
+  v1::IngestHfResultsResponse r;
+  auto w = stub->IngestHfResults(&c, &r);
+  v1::IngestHfResultsRequest m;
+  m.set_serial(serial);
+  m.mutable_motor()->set_pole_pairs(4);
+  m.mutable_motor()->set_rs_ohm(0.011);
+  m.mutable_motor()->set_psi_pm_wb(0.0114);
+  for (const auto& p : GridPoints()) *m.add_points() = p;
+  w->Write(m);
+  w->WritesDone();
+  if (auto st = w->Finish(); !st.ok()) return ::testing::AssertionFailure() << serial << ": ingest: " << st.error_message();
+  grpc::ClientContext fc;
+  v1::FitRequest f;
+  f.set_serial(serial);
+  v1::FitResponse fr;
+  if (auto st = stub->Fit(&fc, f, &fr); !st.ok()) return ::testing::AssertionFailure() << serial << ": fit: " << st.error_message();
+  return ::testing::AssertionSuccess();
+}
+
 // With a local extra the page is built here from the same stored facts;
 // an unknown serial fails.
 TEST(ReportCli, WritesThePageTheServiceBuilt) {
@@ -1389,25 +1333,7 @@ TEST(ReportCli, WritesThePageTheServiceBuilt) {
   const std::string& addr = serve.addr;
   auto stub = v1::CalibrationService::NewStub(grpc::CreateChannel(addr, grpc::InsecureChannelCredentials()));
   ASSERT_TRUE(WaitUntilUp(stub.get())) << "fluxcal serve did not come up on " << addr;
-  {
-    grpc::ClientContext c;
-    v1::IngestHfResultsResponse r;
-    auto w = stub->IngestHfResults(&c, &r);
-    v1::IngestHfResultsRequest m;
-    m.set_serial("IPM-CLI-RPT");
-    m.mutable_motor()->set_pole_pairs(4);
-    m.mutable_motor()->set_rs_ohm(0.011);
-    m.mutable_motor()->set_psi_pm_wb(0.0114);
-    for (const auto& p : GridPoints()) *m.add_points() = p;
-    w->Write(m);
-    w->WritesDone();
-    ASSERT_TRUE(w->Finish().ok());
-    grpc::ClientContext fc;
-    v1::FitRequest f;
-    f.set_serial("IPM-CLI-RPT");
-    v1::FitResponse fr;
-    ASSERT_TRUE(stub->Fit(&fc, f, &fr).ok());
-  }
+  ASSERT_TRUE(IngestGridAndFit(stub.get(), "IPM-CLI-RPT"));
   v1::GetReportRequest req;
   req.set_serial("IPM-CLI-RPT");
   req.set_speed_rpm(3000);
@@ -1491,25 +1417,7 @@ TEST(ExportCli, UdcAxisAndTheGeneratingEnvelopeOverTheService) {
   const std::string& addr = serve.addr;
   auto stub = v1::CalibrationService::NewStub(grpc::CreateChannel(addr, grpc::InsecureChannelCredentials()));
   ASSERT_TRUE(WaitUntilUp(stub.get())) << "fluxcal serve did not come up on " << addr;
-  {
-    grpc::ClientContext c;
-    v1::IngestHfResultsResponse r;
-    auto w = stub->IngestHfResults(&c, &r);
-    v1::IngestHfResultsRequest m;
-    m.set_serial("IPM-CLI-AX");
-    m.mutable_motor()->set_pole_pairs(4);
-    m.mutable_motor()->set_rs_ohm(0.011);
-    m.mutable_motor()->set_psi_pm_wb(0.0114);
-    for (const auto& p : GridPoints()) *m.add_points() = p;
-    w->Write(m);
-    w->WritesDone();
-    ASSERT_TRUE(w->Finish().ok());
-    grpc::ClientContext fc;
-    v1::FitRequest f;
-    f.set_serial("IPM-CLI-AX");
-    v1::FitResponse fr;
-    ASSERT_TRUE(stub->Fit(&fc, f, &fr).ok());
-  }
+  ASSERT_TRUE(IngestGridAndFit(stub.get(), "IPM-CLI-AX"));
   const std::string common = "export IPM-CLI-AX --server " + addr + " --table envelope --generating --format dcm "
                              "--speed-points 8 --rs-ohm 0.011 --allow-clamped";
   auto j = JsonOf(Fluxcal(common + " --udc-axis-v 40,62.5 --out " + dir + "/env.dcm --json"));

@@ -25,6 +25,7 @@
 #ifdef FLUXCAL_WITH_POSTGRESQL
 #include "storage/postgres_source.h"
 #endif
+#include "tests/support/old_schema.h"
 #include "tests/support/pg_cluster.h"
 
 namespace fluxcal::storage {
@@ -512,14 +513,8 @@ TEST_P(StoreTest, MigrationToV7LinksTheReleasesAlreadyStored) {
   }
   const auto& migrations = pg ? PostgresMigrations() : SqliteMigrations();
   ASSERT_EQ(migrations.size(), static_cast<size_t>(kSchemaVersion));
-  ASSERT_TRUE(raw("CREATE TABLE schema_version (version INTEGER NOT NULL)"));
-  for (int v = 0; v < 6; ++v) {
-    ASSERT_TRUE(raw(migrations[v])) << "migration " << v + 1;
-    ASSERT_TRUE(raw("INSERT INTO schema_version (version) VALUES (" + std::to_string(v + 1) + ")"));
-  }
   // What a v6 store holds: a motor, two chained versions, two releases.
-  ASSERT_TRUE(raw("INSERT INTO motors (serial, pole_pairs, rs_ohm, psi_pm_wb, created_utc) "
-                  "VALUES ('IPM-OLD', 4, 0.011, 0.0114, '2024-01-01T00:00:00Z')"));
+  ASSERT_TRUE(fluxcal::testing::OldSchemaWithMotor(raw, migrations, 6));
   std::string prev;
   for (int v = 1; v <= 2; ++v) {
     CalibrationRow c = Version("IPM-OLD", "pass");
