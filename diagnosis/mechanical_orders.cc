@@ -141,35 +141,41 @@ std::vector<WaveformLine> MechanicalOrderVoltageLines(const io::Waveform& w, dou
   const Eigen::MatrixXcd MtM = M.adjoint() * M;
   const Eigen::MatrixXcd cov = MtM.ldlt().solve(Eigen::MatrixXcd::Identity(M.cols(), M.cols()));
   // |c|^2 / var of white noise is exponential with mean 1 (a complex
-  // coefficient: chi^2_2 / 2). The noise here is coloured, and not alike on
-  // both sides: in the rotor frame the positive low frequencies carry the
-  // current controller's reaction (on the second motor's plan, 1500 rpm,
-  // the probes at +1.5..+3.5 orders read 4-40 times the white estimate
-  // where those at -1.5..-3.5 read under 1), so each order is judged by the
-  // probes on its own side: their median over 5/6 (the mean of the middle
-  // of three exponentials) is the factor by which the noise there exceeds
-  // the white estimate. The median of all six mixed the quiet side in and
+  // coefficient: chi^2_2 / 2): the median of such ratios over ln 2 (over
+  // 5/6 for three of them, the mean of the middle of three exponentials) is
+  // the factor by which the noise there exceeds the white estimate. The
+  // noise is coloured, rising towards zero frequency (the controller's
+  // integrators), and not alike on both sides: in the rotor frame the
+  // positive frequencies carry the current controller's reaction (on the
+  // second motor's plan at 1500 rpm the probes at +1.5..+3.5 orders read
+  // 4-40 times the white estimate, those at -1.5..-3.5 under 1). Each order
+  // is judged by the larger of the factor of all six probes and that of
+  // the three on its own side: the six alone mixed the quiet side in and
   // read lines at +1 of 5.7 and 7.7 sigma on sets without any mechanical
-  // effect (scripts/diagnosis-probe.py, cs_12u_s22 and mt_1111_s21).
-  auto colour_on_side = [&](int sign) {
+  // effect (scripts/diagnosis-probe.py, cs_12u_s22 and mt_1111_s21); the
+  // own side alone missed the rise towards zero on the quiet side (lines at
+  // -1 of 5.3-5.8 sigma on clean matrix sets).
+  auto colour_of = [&](int sign) {
     std::vector<double> ratio;
     for (size_t j = first_probe; j < cols.size(); ++j) {
-      if ((probe_orders[j - first_probe] > 0) != (sign > 0)) continue;
+      if (sign != 0 && (probe_orders[j - first_probe] > 0) != (sign > 0)) continue;
       const Eigen::Index col = static_cast<Eigen::Index>(j);
       const double var = s2 * cov(col, col).real();
       if (var > 0) ratio.push_back(std::norm(c(col)) / var);
     }
     if (ratio.empty()) return 1.0;
     std::nth_element(ratio.begin(), ratio.begin() + ratio.size() / 2, ratio.end());
-    return std::max(1.0, ratio[ratio.size() / 2] / (5.0 / 6.0));
+    const double median_of_unit = ratio.size() == 3 ? 5.0 / 6.0 : std::log(2.0);
+    return std::max(1.0, ratio[ratio.size() / 2] / median_of_unit);
   };
+  const double colour_all = colour_of(0);
   for (size_t j = 0; j < orders.size(); ++j) {
     const Eigen::Index col = static_cast<Eigen::Index>(first_order + j);
     // Variance inflation n C_oo (1 for a regressor orthogonal to the rest,
     // each of unit modulus): above kMaxInflation the order is mostly the
     // other regressors' and its estimate says little.
     if (!(static_cast<double>(n) * cov(col, col).real() <= kMaxInflation)) continue;
-    const double var = colour_on_side(orders[j]) * s2 * cov(col, col).real();
+    const double var = std::max(colour_all, colour_of(orders[j])) * s2 * cov(col, col).real();
     if (!(var > 0)) continue;
     const double z2 = std::norm(c(col)) / var;
     if (!(z2 >= line_z2)) continue;   // NaN too: a line is only what the numbers show

@@ -582,48 +582,57 @@ TEST(Honesty, AngleSensorHarmonicOutsideTheCatalogue) {
   }
 }
 
+// One effect on a list of sets (alone, or beside the effect `other` sets
+// too): each `explained` with exactly the concealed names, every held-out
+// class passing; `check` judges the finding's parameters against the
+// case's effects (the truth).
+struct EffectCase {
+  bool second_motor;
+  uint64_t seed;
+  std::string other;                            // "" alone
+  std::function<void(sim::Effects*)> set;       // the effect and the other one
+};
+void ExpectNamedWithOthers(const std::string& effect, const std::vector<EffectCase>& cases,
+                           const std::function<void(const Finding&, const sim::Effects&, const std::string&)>& check) {
+  for (size_t k = 0; k < cases.size(); ++k) {
+    const EffectCase& c = cases[k];
+    auto [cfg, plan, bench_ok] = MotorOnPlan(c.second_motor, c.seed);
+    ASSERT_TRUE(bench_ok);
+    c.set(&cfg.effects);
+    auto r = SimulateThenDiagnose(cfg, plan);
+    ASSERT_TRUE(r.ok()) << r.status();
+    const std::string label = absl::StrCat("seed ", c.seed);
+    EXPECT_EQ(r->verdict, "explained") << label << Remaining(*r);
+    std::set<std::string> want = {effect};
+    if (!c.other.empty()) want.insert(c.other);
+    ASSERT_EQ(Named(*r), want) << label;
+    check(*Find(*r, effect), cfg.effects, label);
+    for (const auto& h : r->held_out) EXPECT_TRUE(h.passed) << label << ": " << h.signal;
+  }
+}
+
 // iron_loss: a resistance parallel to the magnetising branch, alone on both
 // motors (three seeds each) and beside the effects that share part of its
 // signature (an HF resistance in the HF, a magnet flux change in the
 // steady-state voltages and torque, a dead time, a delay); R_fe within 15 %,
 // down to 10 ohm (a loss current 10 % of the HF current).
 TEST(Matrix, IronLoss) {
-  struct Case {
-    bool second_motor;
-    uint64_t seed;
-    double r_fe_ohm;
-    std::string other;
-    std::function<void(sim::Effects*)> set;
+  const std::vector<EffectCase> cases = {
+      {false, 120, "", [](sim::Effects* e) { e->r_fe_ohm = 10; }},
+      {false, 121, "", [](sim::Effects* e) { e->r_fe_ohm = 20; }},
+      {false, 122, "", [](sim::Effects* e) { e->r_fe_ohm = 40; }},
+      {false, 123, "", [](sim::Effects* e) { e->r_fe_ohm = 60; }},
+      {true, 124, "", [](sim::Effects* e) { e->r_fe_ohm = 20; }},
+      {true, 125, "", [](sim::Effects* e) { e->r_fe_ohm = 30; }},
+      {true, 126, "", [](sim::Effects* e) { e->r_fe_ohm = 50; }},
+      {false, 127, "hf_resistance", [](sim::Effects* e) { e->r_fe_ohm = 25, e->r_hf_ohm = 0.03; }},
+      {true, 128, "magnet_temperature", [](sim::Effects* e) { e->r_fe_ohm = 25, e->psi_pm_wb = 0.0108; }},
+      {false, 129, "dead_time", [](sim::Effects* e) { e->r_fe_ohm = 25, e->dead_time_s = 1e-6; }},
+      {true, 130, "sampling_delay", [](sim::Effects* e) { e->r_fe_ohm = 30, e->delay_s = 20e-6; }},
   };
-  const auto none = [](sim::Effects*) {};
-  const std::vector<Case> cases = {
-      {false, 120, 10, "", none},
-      {false, 121, 20, "", none},
-      {false, 122, 40, "", none},
-      {false, 123, 60, "", none},
-      {true, 124, 20, "", none},
-      {true, 125, 30, "", none},
-      {true, 126, 50, "", none},
-      {false, 127, 25, "hf_resistance", [](sim::Effects* e) { e->r_hf_ohm = 0.03; }},
-      {true, 128, 25, "magnet_temperature", [](sim::Effects* e) { e->psi_pm_wb = 0.0108; }},
-      {false, 129, 25, "dead_time", [](sim::Effects* e) { e->dead_time_s = 1e-6; }},
-      {true, 130, 30, "sampling_delay", [](sim::Effects* e) { e->delay_s = 20e-6; }},
-  };
-  for (const auto& c : cases) {
-    auto [cfg, plan, bench_ok] = MotorOnPlan(c.second_motor, c.seed);
-    ASSERT_TRUE(bench_ok);
-    cfg.effects.r_fe_ohm = c.r_fe_ohm;
-    c.set(&cfg.effects);
-    auto r = SimulateThenDiagnose(cfg, plan);
-    ASSERT_TRUE(r.ok()) << r.status();
-    const std::string label = absl::StrCat("seed ", c.seed);
-    EXPECT_EQ(r->verdict, "explained") << label;
-    std::set<std::string> want = {"iron_loss"};
-    if (!c.other.empty()) want.insert(c.other);
-    ASSERT_EQ(Named(*r), want) << label;
-    EXPECT_NEAR(Find(*r, "iron_loss")->parameters.at("r_fe_ohm") / c.r_fe_ohm, 1.0, 0.15) << label;
-    for (const auto& h : r->held_out) EXPECT_TRUE(h.passed) << label << ": " << h.signal;
-  }
+  ExpectNamedWithOthers("iron_loss", cases, [](const Finding& f, const sim::Effects& truth, const std::string& label) {
+    EXPECT_NEAR(f.parameters.at("r_fe_ohm") / truth.r_fe_ohm, 1.0, 0.15) << label;
+  });
 }
 
 // Iron loss with its row removed: stand-ins (an HF resistance, a magnet
@@ -652,48 +661,32 @@ TEST(Honesty, IronLossOutsideTheCatalogue) {
 // the truth, each parameter within 3 of its standard deviations, the refit
 // lowering the residual and every held-out class passing.
 TEST(Matrix, TorqueLoss) {
-  struct Case {
-    bool second_motor;
-    uint64_t seed;
-    double friction_nm, viscous_nm_per_rad_s;
-    std::string other;
-    std::function<void(sim::Effects*)> set;
+  auto loss = [](double friction_nm, double viscous_nm_per_rad_s) {
+    return [=](sim::Effects* e) {
+      e->friction_nm = friction_nm;
+      e->viscous_nm_per_rad_s = viscous_nm_per_rad_s;
+    };
   };
-  const auto none = [](sim::Effects*) {};
-  const std::vector<Case> cases = {
-      {false, 140, 0.15, 0.0, "", none},
-      {false, 141, 0.08, 6e-4, "", none},
-      {true, 142, 0.2, 0.0, "", none},
-      {true, 143, 0.0, 1e-3, "", none},
-      {false, 144, 0.15, 0.0, "magnet_temperature", [](sim::Effects* e) { e->psi_pm_wb = 0.0108; }},
-      {false, 145, 0.15, 0.0, "iron_loss", [](sim::Effects* e) { e->r_fe_ohm = 25; }},
-      {true, 146, 0.15, 3e-4, "current_sensor_gain", [](sim::Effects* e) { e->gain_a = 1.02; }},
+  const std::vector<EffectCase> cases = {
+      {false, 140, "", loss(0.15, 0.0)},
+      {false, 141, "", loss(0.08, 6e-4)},
+      {true, 142, "", loss(0.2, 0.0)},
+      {true, 143, "", loss(0.0, 1e-3)},
+      {false, 144, "magnet_temperature", [&](sim::Effects* e) { loss(0.15, 0.0)(e), e->psi_pm_wb = 0.0108; }},
+      {false, 145, "iron_loss", [&](sim::Effects* e) { loss(0.15, 0.0)(e), e->r_fe_ohm = 25; }},
+      {true, 146, "current_sensor_gain", [&](sim::Effects* e) { loss(0.15, 3e-4)(e), e->gain_a = 1.02; }},
   };
-  for (const auto& c : cases) {
-    auto [cfg, plan, bench_ok] = MotorOnPlan(c.second_motor, c.seed);
-    ASSERT_TRUE(bench_ok);
-    cfg.effects.friction_nm = c.friction_nm;
-    cfg.effects.viscous_nm_per_rad_s = c.viscous_nm_per_rad_s;
-    c.set(&cfg.effects);
-    auto r = SimulateThenDiagnose(cfg, plan);
-    ASSERT_TRUE(r.ok()) << r.status();
-    const std::string label = absl::StrCat("seed ", c.seed);
-    EXPECT_EQ(r->verdict, "explained") << label << Remaining(*r);
-    std::set<std::string> want = {"torque_loss"};
-    if (!c.other.empty()) want.insert(c.other);
-    ASSERT_EQ(Named(*r), want) << label;
-    const Finding& f = *Find(*r, "torque_loss");
-    const double w = 1500 * 2 * std::numbers::pi / 60;
+  const double w = 1500 * 2 * std::numbers::pi / 60;
+  ExpectNamedWithOthers("torque_loss", cases, [&](const Finding& f, const sim::Effects& truth, const std::string& label) {
     EXPECT_NEAR(f.parameters.at("friction_nm") + w * f.parameters.at("viscous_nm_per_rad_s"),
-                c.friction_nm + w * c.viscous_nm_per_rad_s, 0.04)
+                truth.friction_nm + w * truth.viscous_nm_per_rad_s, 0.04)
         << label;
-    for (const auto& [name, truth] : {std::pair<std::string, double>{"friction_nm", c.friction_nm},
-                                      {"viscous_nm_per_rad_s", c.viscous_nm_per_rad_s}}) {
-      EXPECT_NEAR(f.parameters.at(name), truth, 3 * f.parameter_std.at(name)) << label << " " << name;
-    }
+    EXPECT_NEAR(f.parameters.at("friction_nm"), truth.friction_nm, 3 * f.parameter_std.at("friction_nm")) << label;
+    EXPECT_NEAR(f.parameters.at("viscous_nm_per_rad_s"), truth.viscous_nm_per_rad_s,
+                3 * f.parameter_std.at("viscous_nm_per_rad_s"))
+        << label;
     EXPECT_LT(f.residual_rms_after, f.residual_rms_before) << label;
-    for (const auto& h : r->held_out) EXPECT_TRUE(h.passed) << label << ": " << h.signal;
-  }
+  });
 }
 
 // A torque loss with its row removed: a magnet flux can lower the torque

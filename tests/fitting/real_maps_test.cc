@@ -332,14 +332,21 @@ sim::Plan BothHalvesPlan() {
 // both halves and is judged on both (BothHalves).
 bool Asymmetric(const sim::MotorTraits& t) { return t.psi_q_offset_wb != 0; }
 
-EndToEnd TwinEndToEnd(const sim::MotorTraits& t, int seed, bool gain_scheduled) {
-  EndToEnd e;
+// The twin's bench on trait motor `t`: its magnet flux and magnetics, the
+// controller tuned from them when `gain_scheduled`, noise drawn with `seed`.
+sim::TwinConfig TraitTwin(const sim::MotorTraits& t, int seed, bool gain_scheduled) {
   sim::TwinConfig cfg;
   cfg.seed = seed;
   cfg.serial = "TRAIT-" + t.name;
   cfg.motor.sat.psi_pm_wb = t.psi_pm_wb;
   cfg.magnetics = std::make_shared<sim::TraitMotor>(t);
   cfg.control.gain_scheduled = gain_scheduled;
+  return cfg;
+}
+
+EndToEnd TwinEndToEnd(const sim::MotorTraits& t, int seed, bool gain_scheduled) {
+  EndToEnd e;
+  const sim::TwinConfig cfg = TraitTwin(t, seed, gain_scheduled);
   auto r = sim::Simulate(cfg, Asymmetric(t) ? BothHalvesPlan() : sim::DefaultPlan());
   EXPECT_TRUE(r.ok()) << t.name << ": " << r.status();
   if (!r.ok()) return e;
@@ -479,13 +486,8 @@ TEST(RealMaps, LargeSignalHfIsWhatTheInjectionMeasures) {
   for (const auto& t : sim::OtherKindMotors(100.0, 0.15)) if (t.name == "syrm") motors.push_back(t);
   ASSERT_EQ(motors.size(), 2u);
   for (const auto& t : motors) {
-    sim::TwinConfig cfg;
-    cfg.seed = 31;
-    cfg.serial = "TRAIT-" + t.name;
-    cfg.motor.sat.psi_pm_wb = t.psi_pm_wb;
-    const auto machine = std::make_shared<sim::TraitMotor>(t);
-    cfg.magnetics = machine;
-    cfg.control.gain_scheduled = true;
+    const sim::TwinConfig cfg = TraitTwin(t, 31, true);
+    const auto machine = std::static_pointer_cast<const sim::TraitMotor>(cfg.magnetics);
     auto r = sim::Simulate(cfg, sim::DefaultPlan());
     ASSERT_TRUE(r.ok()) << r.status();
     auto ids = ident::IdentifySet(r->set, {});
@@ -529,7 +531,8 @@ TEST(RealMaps, LargeSignalHfIsWhatTheInjectionMeasures) {
     auto cal_small = Fit(data, small_signal);
     auto cal_large = Fit(data, {});
     ASSERT_TRUE(cal_small.ok() && cal_large.ok()) << t.name;
-    const double e_small = InductanceRmsOverPlan(*cal_small, *machine), e_large = InductanceRmsOverPlan(*cal_large, *machine);
+    const double e_small = InductanceRmsOverPlan(*cal_small, *machine);
+    const double e_large = InductanceRmsOverPlan(*cal_large, *machine);
     std::printf("%-10s chi2 per point: small-signal %.1f, describing %.2f; inductance RMS small-signal fit %.2f %%, "
                 "large-signal fit %.2f %%\n",
                 t.name.c_str(), chi2_small / n, chi2_large / n, 100 * e_small, 100 * e_large);
@@ -576,13 +579,9 @@ TEST(RealMaps, LargeSignalTable) {
   for (const auto& t : sim::OtherKindMotors(100.0, 0.15)) motors.push_back(t);
   for (const auto& t : motors) {
     if (Asymmetric(t) || t.name == "spm") continue;   // judged on both halves elsewhere; spm has no knee
-    sim::TwinConfig cfg;
-    cfg.seed = t.name == "syrm" || t.name == "deep-sat" || t.name == "strong-cross" ? 41 : 31;
-    cfg.serial = "TRAIT-" + t.name;
-    cfg.motor.sat.psi_pm_wb = t.psi_pm_wb;
-    const auto machine = std::make_shared<sim::TraitMotor>(t);
-    cfg.magnetics = machine;
-    cfg.control.gain_scheduled = true;
+    const sim::TwinConfig cfg =
+        TraitTwin(t, t.name == "syrm" || t.name == "deep-sat" || t.name == "strong-cross" ? 41 : 31, true);
+    const auto machine = std::static_pointer_cast<const sim::TraitMotor>(cfg.magnetics);
     auto r = sim::Simulate(cfg, sim::DefaultPlan());
     ASSERT_TRUE(r.ok()) << r.status();
     auto ids = ident::IdentifySet(r->set, {});
