@@ -17,6 +17,7 @@
 #include "absl/strings/str_format.h"
 #include "gtest/gtest.h"
 #include "nlohmann/json.hpp"
+#include "physics/torque.h"
 #include "identification/identify.h"
 #include "io/flux_map.h"
 #include "fitting/fit.h"
@@ -785,6 +786,43 @@ TEST(Calibration, DiagnosedDeadTimeGivesTheCleanMotorsTables) {
   EXPECT_LT(d_diag, 0.001) << "diagnosed calibration's MTPA table vs the clean motor's";
   EXPECT_GT(d_plain, 2 * d_diag) << "the plain fit carries the dead time's distortion";
   std::printf("MTPA table vs clean motor: diagnosed %.4f %%, plain fit %.4f %%\n", 100 * d_diag, 100 * d_plain);
+}
+
+// The same for a torque loss: a transducer reading 0.3 N m below the air
+// gap pulls the plain fit's surfaces (the fit weighs the rows' torque), the
+// diagnosed calibration adds the loss back and holds the machine's flux
+// and air-gap torque at the truth's steady-state points.
+TEST(Calibration, DiagnosedTorqueLossGivesTheAirGapSurfaces) {
+  sim::TwinConfig cfg;
+  cfg.seed = 71;
+  cfg.motor = sim::PerturbForProduction(cfg.motor, cfg.seed);
+  cfg.effects.friction_nm = 0.3;
+  auto simulated = sim::Simulate(cfg, sim::DefaultPlan());
+  ASSERT_TRUE(simulated.ok());
+  auto ids = ident::IdentifySet(simulated->set, {});
+  ASSERT_TRUE(ids.ok());
+  auto plain = fit::Fit(fit::FitDataFromRecording(simulated->set, *ids));
+  auto r = Diagnose(simulated->set);
+  ASSERT_TRUE(plain.ok() && r.ok());
+  ASSERT_EQ(Named(*r), std::set<std::string>{"torque_loss"});
+  auto diagnosed = DiagnosedCalibration(*r);
+  ASSERT_TRUE(diagnosed.ok()) << diagnosed.status();
+  auto torque_rms = [&](const fit::Calibration& c) {
+    double e = 0;
+    for (const auto& t : simulated->truth_steady_state) {
+      const auto f = c.Flux(t.id_true_a, t.iq_true_a);
+      e += std::pow(
+          physics::ElectromagneticTorque(cfg.motor.pole_pairs, f.psi_d_wb, f.psi_q_wb, t.id_true_a, t.iq_true_a) -
+              t.torque_nm,
+          2);
+    }
+    return std::sqrt(e / simulated->truth_steady_state.size());
+  };
+  const double t_diag = torque_rms(*diagnosed), t_plain = torque_rms(*plain);
+  EXPECT_LT(t_diag, 0.02) << "diagnosed calibration's air-gap torque at the rows, N m";
+  EXPECT_GT(t_plain, 5 * t_diag) << "the plain fit carries the transducer's loss";
+  std::printf("air-gap torque at the steady-state rows, RMS: diagnosed %.4f N m, plain fit %.4f N m\n", t_diag,
+              t_plain);
 }
 
 // The independent generator's sets: expected verdict and effects from the
