@@ -8,7 +8,6 @@
 #include <fstream>
 #include <map>
 #include <optional>
-#include <numbers>
 #include <functional>
 #include <random>
 #include <set>
@@ -689,7 +688,7 @@ TEST(Matrix, TorqueLoss) {
       {false, 145, "iron_loss", [&](sim::Effects* e) { loss(0.15, 0.0)(e), e->r_fe_ohm = 25; }},
       {true, 146, "current_sensor_gain", [&](sim::Effects* e) { loss(0.15, 3e-4)(e), e->gain_a = 1.02; }},
   };
-  const double w = 1500 * 2 * std::numbers::pi / 60;
+  const double w = physics::RpmToMechanicalRadS(1500.0);
   ExpectNamedWithOthers("torque_loss", cases, [&](const Finding& f, const sim::Effects& truth, const std::string& label) {
     EXPECT_NEAR(f.parameters.at("friction_nm") + w * f.parameters.at("viscous_nm_per_rad_s"),
                 truth.friction_nm + w * truth.viscous_nm_per_rad_s, 0.04)
