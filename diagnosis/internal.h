@@ -546,6 +546,12 @@ struct WaveformPoint {
   size_t index = 0;                 // recording order
   double id_a = 0, iq_a = 0, speed_rpm = 0, f_e_hz = 0, df_hz = 0;
   double noise_a = 0;               // per-sample noise of the residual (recording's own)
+  // The recorded currents' quantisation step (waveform.cc, CurrentStepA), A,
+  // and the power its mean error puts in each bin of the residual's
+  // spectra (alpha-beta, zero sequence; empty without a step): the
+  // sensors' resolution, a bin's noise beside the white floor.
+  double current_step_a = 0;
+  std::vector<double> quant2, quant2_zero;
   double sigma2_bin = 0, sigma2_bin_zero = 0, coherent_gain = 1;
   std::vector<double> freq_hz, nuisance_hz;
   std::vector<double> angle_nuisance_hz;          // the angle channel's: count-slip sawtooth harmonics
@@ -560,6 +566,20 @@ struct WaveformPoint {
 // spectra, noise and lines (waveform.cc's comment).
 std::vector<WaveformPoint> AnalyseWaveforms(const io::RecordingSet& set, const std::vector<sim::ReplayPoint>& replay,
                                             int pole_pairs);
+// ---- quantisation.cc ------------------------------------------------------------
+// The sensors' resolution (file comment): the recorded phase currents'
+// quantisation step, A (0: none found).
+double CurrentStepA(const io::Waveform& w);
+// Fills wp->current_step_a, quant2 and quant2_zero: the power the
+// quantiser's mean error puts in each bin of the residual's spectra of
+// length win.size() (samples 1..n, window `win`), from the simulated
+// currents of `r` and wp->noise_a. Empty when the noise dithers it.
+void QuantisationSpectra(const io::Waveform& w, const sim::ReplayPoint& r, const std::vector<double>& win,
+                         WaveformPoint* wp);
+// That power at bin b of a channel ("phase_current", "zero_sequence_current";
+// 0 for any other).
+double QuantisationPower(const WaveformPoint& wp, const std::string& channel, size_t b);
+
 // ---- mechanical_orders.cc -----------------------------------------------------
 // Mechanical-order lines at a rotating point, f_e (1 + o / p), o = +-1,
 // in the recorded voltage command (file comment): each at z^2 >= line_z2

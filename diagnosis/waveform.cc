@@ -290,6 +290,9 @@ std::vector<WaveformPoint> AnalyseWaveforms(const io::RecordingSet& set, const s
     double w2 = 0;
     for (double x : win) w2 += x * x;
     wp.noise_a = std::sqrt(wp.sigma2_bin / w2 / 2.0);
+    // The sensors' resolution: what the recorded currents' quantisation
+    // puts in each bin (quantisation.cc).
+    QuantisationSpectra(w, r, win, &wp);
     wp.spectrum.assign(xout.begin(), xout.end());
     wp.spectrum_zero.assign(zout.begin(), zout.end());
     wp.coherent_gain = wsum;
@@ -304,7 +307,8 @@ std::vector<WaveformPoint> AnalyseWaveforms(const io::RecordingSet& set, const s
                              : channel == "rotor_angle" && !wp.spectrum_angle_model.empty()
                                  ? kModelLineAccuracy * std::abs(wp.spectrum_angle_model[b])
                                  : 0.0;
-        const double z2 = std::norm(spec[b]) / (s2 + model * model);
+        const double quant = QuantisationPower(wp, channel, b);
+        const double z2 = std::norm(spec[b]) / (s2 + model * model + quant);
         if (z2 < kLineZ2) continue;
         const double left = std::norm(spec[(b + n - 1) % n]), right = std::norm(spec[(b + 1) % n]);
         if (std::norm(spec[b]) < left || std::norm(spec[b]) < right) continue;
@@ -570,7 +574,7 @@ std::vector<Mismatch> WaveformMismatches(const std::vector<WaveformPoint>& pts, 
                              : g.channel == "rotor_angle" && !wp.spectrum_angle_model.empty()
                                  ? kModelLineAccuracy * std::abs(wp.spectrum_angle_model[b])
                                  : 0.0;
-        const double z2 = std::norm(spec[b]) / (s2 + model * model);
+        const double z2 = std::norm(spec[b]) / (s2 + model * model + QuantisationPower(wp, g.channel, b));
         if (z2 > best) { best = z2; best_amp = std::abs(spec[b]); }
       }
       z2s.push_back(best);
