@@ -19,6 +19,7 @@
 #include "simulation/twin.h"
 #include "tables/export_rule.h"
 #include "tables/tables.h"
+#include "tests/tables/c_unit.h"
 #include "tests/tables/twin_limits.h"
 #include "tinyxml2.h"
 
@@ -291,13 +292,12 @@ TEST(UdcAxis, HeadersOfEveryUdcCompileIntoOneUnit) {
   const std::vector<double> udcs = {40, 62.5};
   auto axis = BuildExportTablesOverUdc(cal, spec, req, udcs);
   ASSERT_TRUE(axis.ok()) << axis.status();
-  const std::string dir = ::testing::TempDir() + "/fluxcal_udc_axis_h";
-  ASSERT_EQ(std::system(("mkdir -p " + dir).c_str()), 0);
+  std::vector<std::pair<std::string, std::string>> headers;
   std::string prog = "#include <stdio.h>\n";
   for (const auto& b : *axis) {
     auto h = Export(b.table, Format::kCHeader);
     ASSERT_TRUE(h.ok()) << h.status();
-    std::ofstream(dir + "/" + b.table.label_tag + ".h") << h->bytes;
+    headers.push_back({b.table.label_tag + ".h", h->bytes});
     prog += "#include \"" + b.table.label_tag + ".h\"\n";
   }
   prog += "int main(void) {\n  unsigned k;\n";
@@ -306,12 +306,10 @@ TEST(UdcAxis, HeadersOfEveryUdcCompileIntoOneUnit) {
     prog += "  for (k = 0; k < " + Label(b.table, "id_a") + "_LEN; ++k) printf(\"%.17g\\n\", " + id + "[k]);\n";
   }
   prog += "  return 0;\n}\n";
-  std::ofstream(dir + "/main.c") << prog;
-  const std::string cmd = "cd " + dir + " && cc -std=c99 -pedantic -Wall -Wextra -Werror main.c -o main && ./main > out.txt";
-  ASSERT_EQ(std::system(cmd.c_str()), 0) << "compiling both headers into one unit failed; see " << dir;
-  std::ifstream out(dir + "/out.txt");
-  std::vector<double> got;
-  for (double x; out >> x;) got.push_back(x);
+  std::string printed;
+  ASSERT_NO_FATAL_FAILURE(BuildAndRunC99("fluxcal_udc_axis_h", headers, prog, "",
+                                         "compiling both headers into one unit failed", &printed));
+  const std::vector<double> got = PrintedNumbers(printed);
   std::vector<double> want;
   for (const auto& b : *axis) {
     want.insert(want.end(), b.table.outputs[0].values.begin(), b.table.outputs[0].values.end());
@@ -400,23 +398,19 @@ TEST(Envelope, GeneratingIsTheNegativeLimitUnderLabelsOfItsOwn) {
   }
   // Side by side in one ECU build: both headers in one C unit.
   if (std::system("cc --version > /dev/null 2>&1") != 0) GTEST_SKIP() << "no C compiler (cc)";
-  const std::string dir = ::testing::TempDir() + "/fluxcal_generating_h";
-  ASSERT_EQ(std::system(("mkdir -p " + dir).c_str()), 0);
+  std::vector<std::pair<std::string, std::string>> headers;
   std::string prog = "#include <stdio.h>\n#include \"m.h\"\n#include \"g.h\"\nint main(void) {\n";
   for (const auto& [t, name] : {std::pair<const Table*, const char*>{&m, "m"}, {&g, "g"}}) {
     auto h = Export(*t, Format::kCHeader, ExportOptions{});
     ASSERT_TRUE(h.ok()) << h.status();
-    std::ofstream(dir + "/" + name + ".h") << h->bytes;
+    headers.push_back({std::string(name) + ".h", h->bytes});
     prog += "  printf(\"%.17g\\n\", " + CSymbol(*t, "torque_nm") + "[0]);\n";
   }
   prog += "  return 0;\n}\n";
-  std::ofstream(dir + "/main.c") << prog;
-  const std::string cmd = "cd " + dir + " && cc -std=c99 -pedantic -Wall -Wextra -Werror main.c -o main && ./main > out.txt";
-  ASSERT_EQ(std::system(cmd.c_str()), 0) << "the motoring and generating headers do not compile together; see " << dir;
-  std::ifstream out(dir + "/out.txt");
-  std::vector<double> got;
-  for (double x; out >> x;) got.push_back(x);
-  EXPECT_EQ(got, (std::vector<double>{tm[0], tg[0]}));
+  std::string printed;
+  ASSERT_NO_FATAL_FAILURE(BuildAndRunC99("fluxcal_generating_h", headers, prog, "",
+                                         "the motoring and generating headers do not compile together", &printed));
+  EXPECT_EQ(PrintedNumbers(printed), (std::vector<double>{tm[0], tg[0]}));
 }
 
 TEST(MagnetTemperature, RefusedWithoutTheCalibrationsCoefficient) {

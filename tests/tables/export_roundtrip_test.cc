@@ -17,6 +17,7 @@
 #include "io/sha256.h"
 #include "tables/tables.h"
 #include "tests/tables/export_readers.h"
+#include "tests/tables/c_unit.h"
 #include "tests/tables/twin_limits.h"
 
 namespace fluxcal::tables {
@@ -205,25 +206,20 @@ TEST(ExportRoundTrip, FloatCHeaderCompilesAndCarriesRoundedValues) {
   auto e = Export(t, Format::kCHeader, opt);
   ASSERT_TRUE(e.ok());
   EXPECT_EQ(e->bytes.find("double"), std::string::npos) << "a float header declares no double";
-  const std::string dir = ::testing::TempDir() + "/fluxcal_c_float";
-  ASSERT_EQ(std::system(("mkdir -p " + dir).c_str()), 0);
-  { std::ofstream(dir + "/table.h") << e->bytes; }
   std::string prog = "#include <stdio.h>\n#include \"table.h\"\nint main(void) {\n  int k;\n  float s = FLUXCAL_FW_I_MAX_A;\n";
   std::vector<double> want;
-  auto print = [&](const std::string& name, const std::vector<double>& v) {
+  ForEachArray(t, [&](const std::string& name, const std::vector<double>& v) {
     prog += "  for (k = 0; k < FLUXCAL_FW_" + absl::AsciiStrToUpper(name) + "_LEN; ++k) printf(\"%.9g\\n\", (double)fluxcal_fw_" +
             name + "[k]);\n";
     for (double x : v) want.push_back(static_cast<float>(x));
-  };
-  for (const auto& a : t.axes) print(a.name, a.values);
-  for (const auto& o : t.outputs) print(o.name, o.values);
+  });
   prog += "  printf(\"%.9g\\n\", (double)s);\n  return 0;\n}\n";
   want.push_back(static_cast<float>(t.limits.i_max_a));
-  { std::ofstream(dir + "/main.c") << prog; }
-  const std::string cmd = "cd " + dir + " && cc -std=c99 -pedantic -Wall -Wextra -Werror -Wconversion -Wdouble-promotion "
-                          "main.c -o main > build.log 2>&1 && ./main > out.txt";
-  ASSERT_EQ(std::system(cmd.c_str()), 0) << "compiling the float header failed; see " << dir << "/build.log";
-  std::ifstream in(dir + "/out.txt");
+  std::string printed;
+  ASSERT_NO_FATAL_FAILURE(BuildAndRunC99("fluxcal_c_float", {{"table.h", e->bytes}}, prog,
+                                         "-Wconversion -Wdouble-promotion", "compiling the float header failed",
+                                         &printed));
+  std::istringstream in(printed);
   for (double x : want) {
     double got;
     ASSERT_TRUE(in >> got);

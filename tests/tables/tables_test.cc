@@ -19,6 +19,7 @@
 #include "plot/plot.h"
 #include "tables/signature.h"
 #include "tables/tables.h"
+#include "tests/tables/c_unit.h"
 #include "tests/tables/twin_limits.h"
 #include "tinyxml2.h"
 
@@ -300,25 +301,18 @@ TEST(Export, CHeaderCompilesAsC99AndCarriesTheValues) {
   const Table t = SmallTable("fw");
   auto e = Export(t, Format::kCHeader);
   ASSERT_TRUE(e.ok());
-  const std::string dir = ::testing::TempDir() + "/fluxcal_c_header";
-  ASSERT_EQ(std::system(("mkdir -p " + dir).c_str()), 0);
-  { std::ofstream(dir + "/table.h") << e->bytes; }
   std::string prog = "#include <stdio.h>\n#include \"table.h\"\nint main(void) {\n  int k;\n";
   std::vector<std::vector<double>> want;
-  auto print = [&](const std::string& name, const std::vector<double>& v) {
+  ForEachArray(t, [&](const std::string& name, const std::vector<double>& v) {
     const std::string lower = "fluxcal_fw_" + name, upper = "FLUXCAL_FW_" + absl::AsciiStrToUpper(name);
     prog += "  for (k = 0; k < " + upper + "_LEN; ++k) printf(\"%.17g\\n\", " + lower + "[k]);\n";
     want.push_back(v);
-  };
-  for (const auto& a : t.axes) print(a.name, a.values);
-  for (const auto& o : t.outputs) print(o.name, o.values);
+  });
   prog += "  printf(\"%08lx %s\\n\", (unsigned long)fluxcal_fw_payload_crc32, fluxcal_fw_payload_sha256);\n  return 0;\n}\n";
-  { std::ofstream(dir + "/main.c") << prog; }
-  const std::string cmd = "cd " + dir + " && cc -std=c99 -pedantic -Wall -Wextra -Werror main.c -o main "
-                          "> build.log 2>&1 && ./main > out.txt";
-  ASSERT_EQ(std::system(cmd.c_str()), 0) << "compiling the exported header failed; see " << dir
-                                         << "/build.log\n" << prog;
-  std::ifstream in(dir + "/out.txt");
+  std::string printed;
+  ASSERT_NO_FATAL_FAILURE(BuildAndRunC99("fluxcal_c_header", {{"table.h", e->bytes}}, prog, "",
+                                         "compiling the exported header failed", &printed));
+  std::istringstream in(printed);
   for (const auto& v : want) {
     for (double x : v) {
       double got;
