@@ -263,13 +263,7 @@ TEST(A2lExport, CrossChecksWithCHeaderCdfxAndDcm) {
 // over Udc").
 TEST(A2lExport, UdcAxisTablesCrossCheckUnderTheirTaggedLabels) {
   for (const char* kind : {"fw", "envelope"}) {
-    TableSpec spec;
-    spec.kind = kind;
-    spec.points = 9;
-    spec.speed_points = 7;
-    ExportRequest req;
-    req.allow_clamped = true;
-    auto axis = BuildExportTablesOverUdc(Twin(), spec, req, {40, 62.5});
+    auto axis = BuildExportTablesOverUdc(Twin(), GridSpec(kind, 9, 7), ClampedAllowed(), {40, 62.5});
     ASSERT_TRUE(axis.ok()) << axis.status();
     for (const auto& b : *axis) {
       EXPECT_FALSE(b.table.label_tag.empty());

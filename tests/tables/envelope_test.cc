@@ -152,9 +152,7 @@ TEST(Envelope, LinearMachineMatchesTheClosedForm) {
 // Torque never rises with speed, and a higher Udc never gives less torque
 // at any speed: on the saturated twin (cross saturation) and its fit.
 TEST(Envelope, TorqueFallsWithSpeedAndRisesWithUdc) {
-  sim::MotorParams p;
-  p.sat.g_cross_h = 3e-5;
-  const sim::AnalyticMotor motor(p);
+  const sim::AnalyticMotor& motor = SaturatedTwin();
   const fit::Calibration cal = TwinCalibration(50.0, sim::MotorParams().rs_ohm);
   for (const sim::MagneticModel* m : {static_cast<const sim::MagneticModel*>(&motor),
                                       static_cast<const sim::MagneticModel*>(&cal)}) {
@@ -211,23 +209,13 @@ TEST(UdcAxis, ParsesListsAndRangesAndRefusesTheRest) {
 // Every table of a Udc axis holds the values of the single export at its
 // voltage, bit for bit (axes, outputs, flags, payload checksums), under
 // its own labels.
-ExportRequest req_for_axis() {
-  ExportRequest r;
-  r.allow_clamped = true;
-  return r;
-}
-
 TEST(UdcAxis, TablesEqualTheSingleUdcExportsBitForBit) {
   const fit::Calibration cal = TwinCalibration(50.0, sim::MotorParams().rs_ohm);
   const std::vector<double> udcs = {40, 50, 60};
   for (const char* kind : {"fw", "mtpv", "mtpa", "envelope"}) {
     SCOPED_TRACE(kind);
-    TableSpec spec;
-    spec.kind = kind;
-    spec.points = 16;
-    spec.speed_points = 12;
-    ExportRequest req;
-    req.allow_clamped = true;
+    const TableSpec spec = GridSpec(kind, 16, 12);
+    const ExportRequest req = ClampedAllowed();
     auto axis = BuildExportTablesOverUdc(cal, spec, req, udcs);
     ASSERT_TRUE(axis.ok()) << axis.status();
     ASSERT_EQ(axis->size(), udcs.size());
@@ -268,7 +256,7 @@ TEST(UdcAxis, TablesEqualTheSingleUdcExportsBitForBit) {
   // An axis built by hand is held to ParseUdcAxis' rules: no two tables
   // under one label.
   for (const std::vector<double>& bad : std::vector<std::vector<double>>{{50, 40}, {50, 50.0000001}, {0, 50}}) {
-    auto r = BuildExportTablesOverUdc(cal, TableSpec{}, req_for_axis(), bad);
+    auto r = BuildExportTablesOverUdc(cal, TableSpec{}, ClampedAllowed(), bad);
     EXPECT_FALSE(r.ok()) << bad[0] << ", " << bad[1];
   }
   ExportRequest both;

@@ -31,59 +31,52 @@ using readers::ParseCsv;
 using readers::ParseDcm;
 using readers::ParseJson;
 
-// A field-weakening map with clamped cells, a measured limit, and a known
-// verdict and release state (as the service writes them).
-Table Fw() {
-  static const sim::AnalyticMotor m{[] { sim::MotorParams p; p.sat.g_cross_h = 3e-5; return p; }()};
-  TableSpec spec;
-  spec.kind = "fw";
-  spec.points = 5;
-  spec.speed_points = 4;
-  spec.speed_max_rpm = 6000;
-  spec.serial = "IPM-T-1";
-  spec.calibration_version = 3;
-  spec.model = "analytic";
-  spec.verdict = "pass";
-  spec.release_state = kReleased;
-  spec.measured_current_limit_a = 150;
-  auto t = BuildTable(m, TwinLimits(), spec);
+// The saturated twin's table (a test failure when it cannot be built).
+Table Built(const TableSpec& spec, double i_max_a = 150) {
+  auto t = BuildTable(SaturatedTwin(), TwinLimits(i_max_a), spec);
   EXPECT_TRUE(t.ok()) << t.status();
   return *t;
 }
 
-// An MTPV curve beyond the measured region, on request: extrapolated cells.
-Table MtpvExtrapolated() {
-  static const sim::AnalyticMotor m{[] { sim::MotorParams p; p.sat.g_cross_h = 3e-5; return p; }()};
+// A table of the analytic model measured up to 150 A, computed beyond that
+// on request (extrapolated cells).
+TableSpec ExtrapolatedSpec(const std::string& kind, const std::string& serial) {
   TableSpec spec;
-  spec.kind = "mtpv";
-  spec.points = 7;
-  spec.serial = "IPM-T-2";
+  spec.kind = kind;
+  spec.serial = serial;
   spec.model = "analytic";
   spec.measured_current_limit_a = 150;
   spec.allow_extrapolation = true;
-  auto t = BuildTable(m, TwinLimits(), spec);
-  EXPECT_TRUE(t.ok()) << t.status();
-  return *t;
+  return spec;
+}
+
+// A field-weakening map with clamped cells, a measured limit, and a known
+// verdict and release state (as the service writes them).
+Table Fw() {
+  TableSpec spec = SmallLabelledSpec("fw", 6000);
+  spec.verdict = "pass";
+  spec.release_state = kReleased;
+  spec.measured_current_limit_a = 150;
+  return Built(spec);
+}
+
+// An MTPV curve beyond the measured region, on request: extrapolated cells.
+Table MtpvExtrapolated() {
+  TableSpec spec = ExtrapolatedSpec("mtpv", "IPM-T-2");
+  spec.points = 7;
+  return Built(spec);
 }
 
 // The envelope of one Udc of an axis (labels tagged with it), at a magnet
 // temperature, beyond the measured current limit on request: every
 // format's readers meet the tag, the magnet scalars and extrapolated cells.
 Table EnvelopeTagged() {
-  static const sim::AnalyticMotor m{[] { sim::MotorParams p; p.sat.g_cross_h = 3e-5; return p; }()};
-  TableSpec spec;
-  spec.kind = "envelope";
+  TableSpec spec = ExtrapolatedSpec("envelope", "IPM-T-3");
   spec.speed_points = 9;
   spec.speed_max_rpm = 8000;
-  spec.serial = "IPM-T-3";
-  spec.model = "analytic";
-  spec.measured_current_limit_a = 150;
-  spec.allow_extrapolation = true;
   spec.label_tag = UdcTag(50);
   spec.magnet_temperature = MagnetTemperature{-0.0011, 25, 80};
-  auto t = BuildTable(m, TwinLimits(180), spec);
-  EXPECT_TRUE(t.ok()) << t.status();
-  return *t;
+  return Built(spec, 180);
 }
 
 void ExpectSame(const Parsed& want, const Parsed& got, const std::string& what) {
@@ -233,7 +226,7 @@ TEST(ExportRoundTrip, FloatCHeaderCompilesAndCarriesRoundedValues) {
 // whose MTPV point lies inside the current limit; --allow-extrapolation
 // computes beyond, with the cells flagged.
 TEST(Extrapolation, RefusedByDefaultFlaggedOnRequest) {
-  const sim::AnalyticMotor m{[] { sim::MotorParams p; p.sat.g_cross_h = 3e-5; return p; }()};
+  const sim::AnalyticMotor& m = SaturatedTwin();
   TableSpec spec;
   spec.kind = "mtpv";
   spec.points = 9;

@@ -28,13 +28,6 @@ namespace {
 
 constexpr double kPi = std::numbers::pi;
 
-// A saturated motor with cross saturation (the twin's analytic family).
-sim::AnalyticMotor Motor() {
-  sim::MotorParams p;
-  p.sat.g_cross_h = 3e-5;
-  return sim::AnalyticMotor(p);
-}
-
 // The wrong model: psi = psi_pm + L_diff(i) i, the differential inductance at
 // each operating point used as if it were apparent.
 class DifferentialAsApparent : public sim::MagneticModel {
@@ -59,7 +52,7 @@ TEST(Sha256, NistVectors) {
 }
 
 TEST(Mtpa, WithinPointOnePercentOfBruteForce) {
-  const auto m = Motor();
+  const auto& m = SaturatedTwin();
   MachineLimits lim = TwinLimits();
   TableSpec spec;
   spec.points = 17;
@@ -85,7 +78,7 @@ TEST(Mtpa, WithinPointOnePercentOfBruteForce) {
 }
 
 TEST(FieldWeakening, RespectsLimitsAndDeliversTorque) {
-  const auto m = Motor();
+  const auto& m = SaturatedTwin();
   MachineLimits lim = TwinLimits();
   TableSpec spec;
   spec.kind = "fw";
@@ -114,7 +107,7 @@ TEST(FieldWeakening, RespectsLimitsAndDeliversTorque) {
 // delivers at least the largest torque of any grid point inside the limits.
 // Both within 0.1 % (the tolerance).
 TEST(FieldWeakening, WithinPointOnePercentOfBruteForce) {
-  const auto m = Motor();
+  const auto& m = SaturatedTwin();
   MachineLimits lim = TwinLimits();
   TableSpec spec;
   spec.kind = "fw";
@@ -177,7 +170,7 @@ TEST(FieldWeakening, WithinPointOnePercentOfBruteForce) {
 // MTPV: on each flux circle |psi| = psi_k the table's point delivers the
 // largest torque (brute force over id on the circle).
 TEST(Mtpv, MaximumTorquePerFluxByBruteForce) {
-  const auto m = Motor();
+  const auto& m = SaturatedTwin();
   MachineLimits lim = TwinLimits();
   TableSpec spec;
   spec.kind = "mtpv";
@@ -206,7 +199,7 @@ TEST(Mtpv, MaximumTorquePerFluxByBruteForce) {
 // Using the differential inductance as apparent gives a measurably worse
 // MTPA table on a saturated motor: the torque it delivers is wrong.
 TEST(Mtpa, DifferentialAsApparentIsWorse) {
-  const auto m = Motor();
+  const auto& m = SaturatedTwin();
   DifferentialAsApparent wrong(m);
   MachineLimits lim = TwinLimits();
   TableSpec spec;
@@ -225,16 +218,7 @@ TEST(Mtpa, DifferentialAsApparentIsWorse) {
 }
 
 Table SmallTable(const std::string& kind) {
-  static const auto m = Motor();
-  TableSpec spec;
-  spec.kind = kind;
-  spec.points = 5;
-  spec.speed_points = 4;
-  spec.speed_max_rpm = 3000;
-  spec.serial = "IPM-T-1";
-  spec.calibration_version = 3;
-  spec.model = "analytic";
-  return *BuildTable(m, TwinLimits(), spec);
+  return *BuildTable(SaturatedTwin(), TwinLimits(), SmallLabelledSpec(kind, 3000));
 }
 
 std::vector<double> Numbers(const std::string& s) {
@@ -389,7 +373,7 @@ std::vector<std::pair<double, double>> PathPoints(const char* d) {
 // bar (whose labels are round ticks from end to end) shows its value, and
 // one cross per clamped cell.
 TEST(Plots, SvgParsesAndDrawsTheTables) {
-  const auto m = Motor();
+  const auto& m = SaturatedTwin();
   MachineLimits lim = TwinLimits();
   TableSpec spec;
   spec.points = 9;
