@@ -25,13 +25,17 @@ Finding Describe(const Candidate& c, const Model& m, const FitOut& f) {
   const sim::EffectRow* row = sim::FindEffect(c.effect);
   if (row != nullptr) out.explanation = std::string(row->explanation);
   auto sd = [&](Block b, int i) { return f.stdev.count(b) ? f.stdev.at(b)[i] : 0.0; };
+  // A parameter and its standard deviation, under one name.
+  auto set = [&](const std::string& name, double value, double stdev) {
+    out.parameters[name] = value;
+    out.parameter_std[name] = stdev;
+  };
   const auto ptr = f.p.Ptrs();
   const double* const* p = ptr.data();
   switch (c.block) {
     case kDead:
       // Effective dead time acting (declared uncompensated part included).
-      out.parameters["dead_time_s"] = m.DeadTime(p);
-      out.parameter_std["dead_time_s"] = kScaleDead * sd(kDead, 0);
+      set("dead_time_s", m.DeadTime(p), kScaleDead * sd(kDead, 0));
       if (m.ith_estimated) {
         // An extension of docs/diagnosis-report.md's vocabulary: the soft
         // sign's current, profiled (diagnose.cc).
@@ -51,8 +55,7 @@ Finding Describe(const Candidate& c, const Model& m, const FitOut& f) {
       }
       break;
     case kRs:
-      out.parameters["rs_ohm"] = m.Rs(p);
-      out.parameter_std["rs_ohm"] = kScaleRs * sd(kRs, 0);
+      set("rs_ohm", m.Rs(p), kScaleRs * sd(kRs, 0));
       if (m.Rs(p) > m.rs_nom) {
         // v_x = (Rs + r_on) i_x + ... in the DC, HF and steady-state
         // responses alike: one device of each leg always carries the phase
@@ -67,34 +70,28 @@ Finding Describe(const Candidate& c, const Model& m, const FitOut& f) {
     case kAngleHarm: {
       const Complex c = m.AngleHarm(p);
       const double sa = kScaleAngleHarm * std::max(sd(kAngleHarm, 0), sd(kAngleHarm, 1));
-      out.parameters["harmonic_amplitude_rad"] = std::abs(c);
-      out.parameter_std["harmonic_amplitude_rad"] = sa;
-      out.parameters["harmonic_phase_rad"] = std::arg(c);
-      out.parameter_std["harmonic_phase_rad"] = std::abs(c) > 0 ? sa / std::abs(c) : kPi;
+      set("harmonic_amplitude_rad", std::abs(c), sa);
+      set("harmonic_phase_rad", std::arg(c), std::abs(c) > 0 ? sa / std::abs(c) : kPi);
       break;
     }
     case kIronLoss: {
       // Reported as the resistance; its deviation by the delta method.
       const double g = m.Gfe(p), sg = kScaleGfe * sd(kIronLoss, 0);
-      out.parameters["r_fe_ohm"] = g != 0.0 ? 1.0 / g : 0.0;
-      out.parameter_std["r_fe_ohm"] = g != 0.0 ? sg / (g * g) : 0.0;
+      set("r_fe_ohm", g != 0.0 ? 1.0 / g : 0.0, g != 0.0 ? sg / (g * g) : 0.0);
       break;
     }
     case kVth:
-      out.parameters["threshold_v"] = m.Vth(p);
-      out.parameter_std["threshold_v"] = kScaleVth * sd(kVth, 0);
+      set("threshold_v", m.Vth(p), kScaleVth * sd(kVth, 0));
       if (m.ith_estimated) {   // the same soft sign as the dead time's
         out.parameters["i_th_a"] = m.ith_a;
         if (m.ith_std_a > 0) out.parameter_std["i_th_a"] = m.ith_std_a;
       }
       break;
     case kRhf:
-      out.parameters["r_hf_ohm"] = m.RHf(p);
-      out.parameter_std["r_hf_ohm"] = kScaleRhf * sd(kRhf, 0);
+      set("r_hf_ohm", m.RHf(p), kScaleRhf * sd(kRhf, 0));
       break;
     case kOffset:
-      out.parameters["offset_rad"] = m.Offset(p);
-      out.parameter_std["offset_rad"] = kScaleOffset * sd(kOffset, 0);
+      set("offset_rad", m.Offset(p), kScaleOffset * sd(kOffset, 0));
       break;
     case kGain: {
       const char* names[3] = {"gain_a", "gain_b", "gain_c"};
@@ -109,8 +106,7 @@ Finding Describe(const Candidate& c, const Model& m, const FitOut& f) {
     case kPsiDrift:
       // The mean over the steady-state rows; a drift (docs/diagnosis-report.md)
       // also as psi_pm at the first and the last row in recording order.
-      out.parameters["psi_pm_wb"] = m.PsiPm(p);
-      out.parameter_std["psi_pm_wb"] = m.psi_nom * kScalePsi * sd(kPsi, 0);
+      set("psi_pm_wb", m.PsiPm(p), m.psi_nom * kScalePsi * sd(kPsi, 0));
       if (c.block == kPsiDrift) {
         out.parameters["psi_pm_start_wb"] = m.PsiPm(p, 0.0);
         out.parameters["psi_pm_end_wb"] = m.PsiPm(p, 1.0);
@@ -120,13 +116,11 @@ Finding Describe(const Candidate& c, const Model& m, const FitOut& f) {
       }
       break;
     case kDelay:
-      out.parameters["delay_s"] = m.Delay(p);
-      out.parameter_std["delay_s"] = kScaleDelay * sd(kDelay, 0);
+      set("delay_s", m.Delay(p), kScaleDelay * sd(kDelay, 0));
       break;
     case kHarm:
       out.parameters["order"] = c.order;
-      out.parameters["amplitude_h"] = m.Harm(p);
-      out.parameter_std["amplitude_h"] = kScaleHarm * sd(kHarm, 0);
+      set("amplitude_h", m.Harm(p), kScaleHarm * sd(kHarm, 0));
       out.explanation = absl::StrFormat("the identified inductance at standstill varies with rotor angle as "
                                         "cos(%d theta_e), beyond the saliency's 2 theta_e", c.order);
       break;
@@ -142,10 +136,8 @@ Finding Describe(const Candidate& c, const Model& m, const FitOut& f) {
     case kUdcGain:
       // udc_gain is the contract's name (docs/diagnosis-report.md);
       // udc_sense_gain, the catalogue's, stays beside it (same value).
-      out.parameters["udc_gain"] = m.UdcGain(p);
-      out.parameter_std["udc_gain"] = kScaleUdcGain * sd(kUdcGain, 0);
-      out.parameters["udc_sense_gain"] = m.UdcGain(p);
-      out.parameter_std["udc_sense_gain"] = kScaleUdcGain * sd(kUdcGain, 0);
+      set("udc_gain", m.UdcGain(p), kScaleUdcGain * sd(kUdcGain, 0));
+      set("udc_sense_gain", m.UdcGain(p), kScaleUdcGain * sd(kUdcGain, 0));
       break;
     case kRImb: {
       // dr_x = 2 Re(r2 e^{-j 2 phi_x}), the zero-sum set (the common part is Rs).
@@ -169,17 +161,14 @@ Finding Describe(const Candidate& c, const Model& m, const FitOut& f) {
       // deviation is that of T_ref - b w_ref (covariance neglected: the
       // centring makes the two nearly independent).
       const double sb = kScaleViscous * sd(kTorqueLoss, 1);
-      out.parameters["friction_nm"] = m.Friction(p);
-      out.parameter_std["friction_nm"] = std::hypot(kScaleFriction * sd(kTorqueLoss, 0), sb * m.torque_ref_rad_s);
-      out.parameters["viscous_nm_per_rad_s"] = m.Viscous(p);
-      out.parameter_std["viscous_nm_per_rad_s"] = sb;
+      set("friction_nm", m.Friction(p), std::hypot(kScaleFriction * sd(kTorqueLoss, 0), sb * m.torque_ref_rad_s));
+      set("viscous_nm_per_rad_s", m.Viscous(p), sb);
       break;
     }
     case kDrift: {
       // A drift is reported as one (docs/diagnosis-report.md): Rs at the
       // first and the last point of the recording, and the rise.
-      out.parameters["winding_temp_rise_k"] = kScaleDrift * p[kDrift][0];
-      out.parameter_std["winding_temp_rise_k"] = kScaleDrift * sd(kDrift, 0);
+      set("winding_temp_rise_k", kScaleDrift * p[kDrift][0], kScaleDrift * sd(kDrift, 0));
       out.parameters["rs_start_ohm"] = m.RsAt(p, 0.0);
       out.parameters["rs_end_ohm"] = m.RsAt(p, 1.0);
       const double drs = m.Rs(p) * sim::kCopperAlphaPerK * kScaleDrift * sd(kDrift, 0);

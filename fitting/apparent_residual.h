@@ -5,10 +5,8 @@
 
 #include <cmath>
 
-#include "ceres/ceres.h"
-#include "fitting/dynamic_cost.h"
-#include "fitting/flux_family.h"
 #include "fitting/inductance_residual.h"
+#include "fitting/point_residual.h"
 
 namespace fluxcal::fit::internal {
 
@@ -17,41 +15,28 @@ namespace fluxcal::fit::internal {
 //   Ldd: r = ((psi_d - psi_pm) / id - L_obs) / sigma   (|id| > 1e-6 A),
 //   Lqq: r = (psi_q / iq - L_obs) / sigma              (|iq| > 1e-6 A),
 // and 0 otherwise (Ldq, or a current of zero). psi_pm is parameter 0.
-class ApparentResidual {
+class ApparentResidual : public FluxPointResidual<ApparentResidual> {
  public:
   ApparentResidual(const Family& family, double id_a, double iq_a, InductanceComponent component,
                    double inductance_h, double sigma_h)
-      : family_(family), id_a_(id_a), iq_a_(iq_a), component_(component), inductance_h_(inductance_h),
-        sigma_h_(sigma_h) {}
+      : FluxPointResidual(family, id_a, iq_a, inductance_h, sigma_h), component_(component) {}
 
-  // num_params: family.NumParams(), the size of the one parameter block.
-  static ceres::CostFunction* Create(const Family& family, double id_a, double iq_a, InductanceComponent component,
-                                     double inductance_h, double sigma_h, int num_params) {
-    return DynamicCost(new ApparentResidual(family, id_a, iq_a, component, inductance_h, sigma_h), num_params);
-  }
-
+  // observed_: the inductance, H.
   template <typename T>
-  bool operator()(const T* const* parameters, T* residual) const {
-    const T* p = parameters[0];
-    T psi_d, psi_q;
-    FamilyFlux(family_, T(id_a_), T(iq_a_), p, &psi_d, &psi_q);
+  T Model(const T* p, const T& psi_d, const T& psi_q) const {
     T model;
     if (component_ == InductanceComponent::kLdd) {
-      model = std::abs(id_a_) > 1e-6 ? (psi_d - p[0]) / T(id_a_) : T(inductance_h_);
+      model = std::abs(id_a_) > 1e-6 ? (psi_d - p[0]) / T(id_a_) : T(observed_);
     } else if (component_ == InductanceComponent::kLqq) {
-      model = std::abs(iq_a_) > 1e-6 ? psi_q / T(iq_a_) : T(inductance_h_);
+      model = std::abs(iq_a_) > 1e-6 ? psi_q / T(iq_a_) : T(observed_);
     } else {
-      model = T(inductance_h_);
+      model = T(observed_);
     }
-    residual[0] = (model - inductance_h_) / sigma_h_;
-    return true;
+    return model;
   }
 
  private:
-  const Family family_;
-  const double id_a_, iq_a_;
   const InductanceComponent component_;
-  const double inductance_h_, sigma_h_;
 };
 
 }  // namespace fluxcal::fit::internal

@@ -1,5 +1,5 @@
-// The Ceres cost function of one fit residual (internal to fitting/): each
-// residual's static Create() calls this. The number of parameters depends
+// The Ceres cost function of one fit residual (internal to fitting/): the
+// problem's residual sink wraps every residual functor with this. The number of parameters depends
 // on the family (7 analytic, up to ~150 spline coefficients), so the
 // functors are wrapped in a DynamicAutoDiffCostFunction with one parameter
 // block of that size and one residual.

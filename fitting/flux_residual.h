@@ -4,9 +4,7 @@
 #ifndef FLUXCAL_FITTING_FLUX_RESIDUAL_H_
 #define FLUXCAL_FITTING_FLUX_RESIDUAL_H_
 
-#include "ceres/ceres.h"
-#include "fitting/dynamic_cost.h"
-#include "fitting/flux_family.h"
+#include "fitting/point_residual.h"
 
 namespace fluxcal::fit::internal {
 
@@ -14,32 +12,19 @@ enum class FluxComponent { kPsiD, kPsiQ };
 
 // r = (psi_model - psi_obs) / sigma, psi_model = dW'/di of the family's
 // co-energy at the observation's (id, iq) (flux_family.h).
-class FluxResidual {
+class FluxResidual : public FluxPointResidual<FluxResidual> {
  public:
   FluxResidual(const Family& family, double id_a, double iq_a, FluxComponent component, double psi_wb,
                double sigma_wb)
-      : family_(family), id_a_(id_a), iq_a_(iq_a), component_(component), psi_wb_(psi_wb), sigma_wb_(sigma_wb) {}
-
-  // num_params: family.NumParams(), the size of the one parameter block.
-  static ceres::CostFunction* Create(const Family& family, double id_a, double iq_a, FluxComponent component,
-                                     double psi_wb, double sigma_wb, int num_params) {
-    return DynamicCost(new FluxResidual(family, id_a, iq_a, component, psi_wb, sigma_wb), num_params);
-  }
+      : FluxPointResidual(family, id_a, iq_a, psi_wb, sigma_wb), component_(component) {}
 
   template <typename T>
-  bool operator()(const T* const* parameters, T* residual) const {
-    const T* p = parameters[0];
-    T psi_d, psi_q;
-    FamilyFlux(family_, T(id_a_), T(iq_a_), p, &psi_d, &psi_q);
-    residual[0] = ((component_ == FluxComponent::kPsiD ? psi_d : psi_q) - psi_wb_) / sigma_wb_;
-    return true;
+  T Model(const T* /*p*/, const T& psi_d, const T& psi_q) const {
+    return component_ == FluxComponent::kPsiD ? psi_d : psi_q;
   }
 
  private:
-  const Family family_;
-  const double id_a_, iq_a_;
   const FluxComponent component_;
-  const double psi_wb_, sigma_wb_;
 };
 
 }  // namespace fluxcal::fit::internal

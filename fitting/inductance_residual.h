@@ -7,10 +7,9 @@
 #include <memory>
 #include <vector>
 
-#include "ceres/ceres.h"
-#include "fitting/dynamic_cost.h"
 #include "fitting/fit.h"
 #include "fitting/flux_family.h"
+#include "fitting/point_residual.h"
 
 namespace fluxcal::fit {
 
@@ -37,20 +36,11 @@ enum class InductanceComponent { kLdd, kLqq, kLdq };
 // surfaces: the describing function over the orbit,
 //   L_model[c] = sum_k W_k[c] . psi(i_k)   (physics/hf_orbit.h),
 // still linear in the family's coefficients.
-class InductanceResidual {
+class InductanceResidual : public PointObservation {
  public:
   InductanceResidual(const Family& family, double id_a, double iq_a, InductanceComponent component,
                      double inductance_h, double sigma_h, std::shared_ptr<const HfOrbitWeights> orbit = nullptr)
-      : family_(family), id_a_(id_a), iq_a_(iq_a), component_(component), inductance_h_(inductance_h),
-        sigma_h_(sigma_h), orbit_(std::move(orbit)) {}
-
-  // num_params: family.NumParams(), the size of the one parameter block.
-  static ceres::CostFunction* Create(const Family& family, double id_a, double iq_a, InductanceComponent component,
-                                     double inductance_h, double sigma_h, std::shared_ptr<const HfOrbitWeights> orbit,
-                                     int num_params) {
-    return DynamicCost(new InductanceResidual(family, id_a, iq_a, component, inductance_h, sigma_h, std::move(orbit)),
-                       num_params);
-  }
+      : PointObservation(family, id_a, iq_a, inductance_h, sigma_h), component_(component), orbit_(std::move(orbit)) {}
 
   template <typename T>
   bool operator()(const T* const* parameters, T* residual) const {
@@ -63,22 +53,19 @@ class InductanceResidual {
         FamilyFlux(family_, T(orbit_->currents_a[k][0]), T(orbit_->currents_a[k][1]), p, &psi_d, &psi_q);
         model += psi_d * w[k][0] + psi_q * w[k][1];
       }
-      residual[0] = (model - inductance_h_) / sigma_h_;
+      residual[0] = Normalized(model);
       return true;
     }
     T ldd, lqq, ldq;
     FamilyInductance(family_, T(id_a_), T(iq_a_), p, &ldd, &lqq, &ldq);
     const T model =
         component_ == InductanceComponent::kLdd ? ldd : (component_ == InductanceComponent::kLqq ? lqq : ldq);
-    residual[0] = (model - inductance_h_) / sigma_h_;
+    residual[0] = Normalized(model);
     return true;
   }
 
  private:
-  const Family family_;
-  const double id_a_, iq_a_;
   const InductanceComponent component_;
-  const double inductance_h_, sigma_h_;
   const std::shared_ptr<const HfOrbitWeights> orbit_;
 };
 

@@ -3,9 +3,6 @@
 #ifndef FLUXCAL_FITTING_PRIOR_RESIDUAL_H_
 #define FLUXCAL_FITTING_PRIOR_RESIDUAL_H_
 
-#include "ceres/ceres.h"
-#include "fitting/dynamic_cost.h"
-
 namespace fluxcal::fit::internal {
 
 // r = (psi_pm - psi_pm_prior) / sigma, psi_pm parameter 0 of every family
@@ -13,11 +10,6 @@ namespace fluxcal::fit::internal {
 class PriorResidual {
  public:
   PriorResidual(double psi_pm_wb, double sigma_wb) : psi_pm_wb_(psi_pm_wb), sigma_wb_(sigma_wb) {}
-
-  // num_params: the family's NumParams(), the size of the one parameter block.
-  static ceres::CostFunction* Create(double psi_pm_wb, double sigma_wb, int num_params) {
-    return DynamicCost(new PriorResidual(psi_pm_wb, sigma_wb), num_params);
-  }
 
   template <typename T>
   bool operator()(const T* const* parameters, T* residual) const {

@@ -5,6 +5,7 @@
 #include <utility>
 
 #include "fitting/apparent_residual.h"
+#include "fitting/dynamic_cost.h"
 #include "fitting/flux_residual.h"
 #include "fitting/inductance_residual.h"
 #include "fitting/prior_residual.h"
@@ -73,7 +74,7 @@ class ResidualSink {
       built_->linear_rows.push_back(std::move(r));
       built_->robust.push_back(robust);
     } else {
-      built_->problem->AddResidualBlock(F::Create(args..., num_params_),
+      built_->problem->AddResidualBlock(DynamicCost(new F(args...), num_params_),
                                         robust ? new ceres::HuberLoss(robust_scale_) : nullptr,
                                         built_->params.data());
     }

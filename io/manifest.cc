@@ -122,13 +122,19 @@ absl::Status ParseIdentity(const ManifestCtx& ctx, const json& j, Manifest* m) {
   return absl::OkStatus();
 }
 
-absl::Status ParseMotor(const ManifestCtx& ctx, const json& j, Manifest* m) {
-  bool present = false;
-  auto section = GetSection(ctx, j, "motor", "motor.pole_pairs");
+// Runs parse(section, line) on the required section j[key] (GetSection
+// refuses a missing one, naming first_field), `line` that of its key.
+template <typename Parse>
+absl::Status InSection(const ManifestCtx& ctx, const json& j, const std::string& key,
+                       const std::string& first_field, Parse parse) {
+  auto section = GetSection(ctx, j, key, first_field);
   if (!section.ok()) return section.status();
-  {
-    const json& mo = **section;
-    const size_t hint = LineOfKey(ctx.text, "motor");
+  return parse(**section, LineOfKey(ctx.text, key));
+}
+
+absl::Status ParseMotor(const ManifestCtx& ctx, const json& j, Manifest* m) {
+  return InSection(ctx, j, "motor", "motor.pole_pairs", [&](const json& mo, size_t hint) -> absl::Status {
+    bool present = false;
     auto it = mo.find("pole_pairs");
     if (it == mo.end()) return ctx.Error("motor.pole_pairs", "required field is missing", hint);
     if (!it->is_number_integer() && !(it->is_number() && std::floor(it->get<double>()) == it->get<double>())) {
@@ -154,17 +160,13 @@ absl::Status ParseMotor(const ManifestCtx& ctx, const json& j, Manifest* m) {
       }
       m->motor.psi_pm_temp_coeff_per_k = *tc;
     }
-  }
-  return absl::OkStatus();
+    return absl::OkStatus();
+  });
 }
 
 absl::Status ParseDrive(const ManifestCtx& ctx, const json& j, Manifest* m) {
-  bool present = false;
-  auto section = GetSection(ctx, j, "drive", "drive.f_sample_hz");
-  if (!section.ok()) return section.status();
-  {
-    const json& d = **section;
-    const size_t hint = LineOfKey(ctx.text, "drive");
+  return InSection(ctx, j, "drive", "drive.f_sample_hz", [&](const json& d, size_t hint) -> absl::Status {
+    bool present = false;
     auto fs_hz = GetNumber(ctx, d, "f_sample_hz", "drive.f_sample_hz", true, 0, &present, hint);
     if (!fs_hz.ok()) return fs_hz.status();
     if (*fs_hz <= 0) return ctx.Error("drive.f_sample_hz", "must be positive");
@@ -183,8 +185,8 @@ absl::Status ParseDrive(const ManifestCtx& ctx, const json& j, Manifest* m) {
       }
       m->drive.dead_time_compensated = it->get<bool>();
     }
-  }
-  return absl::OkStatus();
+    return absl::OkStatus();
+  });
 }
 
 absl::Status ParseInjection(const ManifestCtx& ctx, const json& j, Manifest* m) {
@@ -250,15 +252,14 @@ absl::Status ParsePoints(const ManifestCtx& ctx, const json& j, Manifest* m) {
                          absl::StrCat("path '", Printable(*file), "' must be relative and inside the set"), line);
       }
       ps.file = *file;
-      auto idr = GetNumber(ctx, p, "id_ref_a", base + ".id_ref_a", true, 0, &present, line);
-      if (!idr.ok()) return idr.status();
-      ps.id_ref_a = *idr;
-      auto iqr = GetNumber(ctx, p, "iq_ref_a", base + ".iq_ref_a", true, 0, &present, line);
-      if (!iqr.ok()) return iqr.status();
-      ps.iq_ref_a = *iqr;
-      auto spd = GetNumber(ctx, p, "speed_rpm", base + ".speed_rpm", false, 0.0, &present, line);
-      if (!spd.ok()) return spd.status();
-      ps.speed_rpm = *spd;
+      // The references are required; a missing speed is standstill (0).
+      for (auto [key, required, out] : {std::tuple{"id_ref_a", true, &ps.id_ref_a},
+                                        std::tuple{"iq_ref_a", true, &ps.iq_ref_a},
+                                        std::tuple{"speed_rpm", false, &ps.speed_rpm}}) {
+        auto v = GetNumber(ctx, p, key, base + "." + key, required, 0.0, &present, line);
+        if (!v.ok()) return v.status();
+        *out = *v;
+      }
       auto temp = GetNumber(ctx, p, "temperature_c", base + ".temperature_c", false, 0, &present, line);
       if (!temp.ok()) return temp.status();
       if (present) ps.temperature_c = *temp;

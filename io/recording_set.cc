@@ -7,6 +7,9 @@
 
 #include <cmath>
 #include <filesystem>
+#include <initializer_list>
+#include <optional>
+#include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -21,39 +24,48 @@ using internal::LineOfKey;
 using internal::ManifestCtx;
 using internal::ParseManifest;
 
-const std::vector<CsvColumnSpec>& WaveformSpec() {
-  static const std::vector<CsvColumnSpec> spec = {
-      {"t_s"}, {"ia_a"}, {"ib_a"}, {"ic_a"}, {"theta_e_rad"},
-      {"ualpha_ref_v"}, {"ubeta_ref_v"}, {"udc_v", true}};
-  return spec;
-}
-const std::vector<CsvColumnSpec>& SteadyStateSpec() {
-  static const std::vector<CsvColumnSpec> spec = {
-      {"id_a"}, {"iq_a"}, {"speed_rpm"}, {"ud_ref_v"}, {"uq_ref_v"},
-      {"torque_nm", true}, {"temperature_c", true}};
-  return spec;
-}
-// The compatible extension of steady_state.csv (docs/recording-format.md,
-// "Rows a bench could not hold"): after the standard columns, in any order.
-const std::vector<CsvColumnSpec>& SteadyStateExtension() {
-  static const std::vector<CsvColumnSpec> spec = {
-      {"current_ripple_a", true}, {"voltage_limited_share", true}, {"controller_saturated_share", true}};
-  return spec;
-}
-const std::vector<CsvColumnSpec>& HfResultsSpec() {
-  static const std::vector<CsvColumnSpec> spec = {
-      {"id_a"}, {"iq_a"}, {"speed_rpm"}, {"ld_h"}, {"lq_h"},
-      {"ldq_h", true}, {"temperature_c", true}};
-  return spec;
+// The columns of each CSV of a set (docs/recording-format.md), built once.
+struct CsvSpecs {
+  std::vector<CsvColumnSpec> waveform, steady_state, hf_results;
+  // The compatible extension of steady_state.csv ("Rows a bench could not
+  // hold"): after the standard columns, in any order.
+  std::vector<CsvColumnSpec> steady_state_extension;
+};
+const CsvSpecs& Specs() {
+  static const CsvSpecs specs = {
+      /*waveform=*/{{"t_s"}, {"ia_a"}, {"ib_a"}, {"ic_a"}, {"theta_e_rad"},
+                    {"ualpha_ref_v"}, {"ubeta_ref_v"}, {"udc_v", true}},
+      /*steady_state=*/{{"id_a"}, {"iq_a"}, {"speed_rpm"}, {"ud_ref_v"}, {"uq_ref_v"},
+                        {"torque_nm", true}, {"temperature_c", true}},
+      /*hf_results=*/{{"id_a"}, {"iq_a"}, {"speed_rpm"}, {"ld_h"}, {"lq_h"},
+                      {"ldq_h", true}, {"temperature_c", true}},
+      /*steady_state_extension=*/{{"current_ripple_a", true}, {"voltage_limited_share", true},
+                                  {"controller_saturated_share", true}}};
+  return specs;
 }
 
 std::optional<double> Opt(double v) {
   return std::isnan(v) ? std::nullopt : std::optional<double>(v);
 }
 
+// The rows of a parsed per-point CSV: its spec's required columns, in
+// order, into the `required` fields and the optional columns after them
+// into the `optional` ones (an empty cell: no value).
+template <typename Row>
+std::vector<Row> ToRows(const CsvTable& t, std::initializer_list<double Row::*> required,
+                        std::initializer_list<std::optional<double> Row::*> optional) {
+  std::vector<Row> rows(t.rows);
+  for (size_t r = 0; r < t.rows; ++r) {
+    size_t c = 0;
+    for (double Row::*field : required) rows[r].*field = t.columns[c++][r];
+    for (std::optional<double> Row::*field : optional) rows[r].*field = Opt(t.columns[c++][r]);
+  }
+  return rows;
+}
+
 absl::StatusOr<Waveform> ReadWaveform(std::string_view text, const std::string& display,
                                       const Manifest& m) {
-  auto table = ParseNumericCsv(text, display, WaveformSpec());
+  auto table = ParseNumericCsv(text, display, Specs().waveform);
   if (!table.ok()) return table.status();
   Waveform w;
   w.t_s = std::move(table->columns[0]);
@@ -164,21 +176,15 @@ class MemorySource final : public SetSource {
 };
 
 absl::StatusOr<std::vector<SteadyStateRow>> ParseSteadyState(std::string_view text, const std::string& path) {
-  auto t = ParseNumericCsv(text, path, SteadyStateSpec(), SteadyStateExtension());
+  auto t = ParseNumericCsv(text, path, Specs().steady_state, Specs().steady_state_extension);
   if (!t.ok()) return t.status();
-  std::vector<SteadyStateRow> rows(t->rows);
-  for (size_t r = 0; r < t->rows; ++r) {
-    auto& o = rows[r];
-    o.id_a = t->columns[0][r];
-    o.iq_a = t->columns[1][r];
-    o.speed_rpm = t->columns[2][r];
-    o.ud_ref_v = t->columns[3][r];
-    o.uq_ref_v = t->columns[4][r];
-    o.torque_nm = Opt(t->columns[5][r]);
-    o.temperature_c = Opt(t->columns[6][r]);
-    o.current_ripple_a = Opt(t->columns[7][r]);
-    o.voltage_limited_share = Opt(t->columns[8][r]);
-    o.controller_saturated_share = Opt(t->columns[9][r]);
+  using S = SteadyStateRow;
+  std::vector<SteadyStateRow> rows =
+      ToRows<S>(*t, {&S::id_a, &S::iq_a, &S::speed_rpm, &S::ud_ref_v, &S::uq_ref_v},
+                {&S::torque_nm, &S::temperature_c, &S::current_ripple_a, &S::voltage_limited_share,
+                 &S::controller_saturated_share});
+  for (size_t r = 0; r < rows.size(); ++r) {
+    const SteadyStateRow& o = rows[r];
     // Rows are numbered from the header (line 1); the parser allows no
     // blank line between rows.
     const size_t line = r + 2;
@@ -199,23 +205,13 @@ absl::StatusOr<std::vector<SteadyStateRow>> ParseSteadyState(std::string_view te
 }
 
 absl::StatusOr<std::vector<HfResultRow>> ParseHfResults(std::string_view text, const std::string& path) {
-  auto t = ParseNumericCsv(text, path, HfResultsSpec());
+  auto t = ParseNumericCsv(text, path, Specs().hf_results);
   if (!t.ok()) return t.status();
-  std::vector<HfResultRow> rows(t->rows);
-  for (size_t r = 0; r < t->rows; ++r) {
-    auto& o = rows[r];
-    o.id_a = t->columns[0][r];
-    o.iq_a = t->columns[1][r];
-    o.speed_rpm = t->columns[2][r];
-    o.ld_h = t->columns[3][r];
-    o.lq_h = t->columns[4][r];
-    o.ldq_h = Opt(t->columns[5][r]);
-    o.temperature_c = Opt(t->columns[6][r]);
-    // A non-positive inductance is well-formed data (a real map can fall in
-    // id near zero current): the fit excludes it and says so
-    // (fit::FitSummary::excluded), instead of the whole file failing here.
-  }
-  return rows;
+  // A non-positive inductance is well-formed data (a real map can fall in
+  // id near zero current): the fit excludes it and says so
+  // (fit::FitSummary::excluded), instead of the whole file failing here.
+  using H = HfResultRow;
+  return ToRows<H>(*t, {&H::id_a, &H::iq_a, &H::speed_rpm, &H::ld_h, &H::lq_h}, {&H::ldq_h, &H::temperature_c});
 }
 
 absl::StatusOr<RecordingSet> ReadSet(SetSource& src, const std::string& root_dir) {
@@ -245,19 +241,21 @@ absl::StatusOr<RecordingSet> ReadSet(SetSource& src, const std::string& root_dir
     if (!w.ok()) return w.status();
     set.waveforms.push_back(std::move(*w));
   }
-  if (mf.steady_state) {
-    const std::string* text = src.Read(*mf.steady_state);
-    if (text == nullptr) return missing("steady_state", "steady_state", *mf.steady_state);
-    auto rows = ParseSteadyState(*text, src.Display(*mf.steady_state));
+  // The table the manifest names under `key` (a field of its own name),
+  // read and parsed into *out.
+  auto read_table = [&](const char* key, const std::string& file, auto parse, auto* out) -> absl::Status {
+    const std::string* text = src.Read(file);
+    if (text == nullptr) return missing(key, key, file);
+    auto rows = parse(*text, src.Display(file));
     if (!rows.ok()) return rows.status();
-    set.steady_state = std::move(*rows);
+    *out = std::move(*rows);
+    return absl::OkStatus();
+  };
+  if (mf.steady_state) {
+    if (auto s = read_table("steady_state", *mf.steady_state, ParseSteadyState, &set.steady_state); !s.ok()) return s;
   }
   if (mf.hf_results) {
-    const std::string* text = src.Read(*mf.hf_results);
-    if (text == nullptr) return missing("hf_results", "hf_results", *mf.hf_results);
-    auto rows = ParseHfResults(*text, src.Display(*mf.hf_results));
-    if (!rows.ok()) return rows.status();
-    set.hf_results = std::move(*rows);
+    if (auto s = read_table("hf_results", *mf.hf_results, ParseHfResults, &set.hf_results); !s.ok()) return s;
   }
   if (mf.points.empty() && !mf.hf_results && !mf.steady_state) {
     return absl::InvalidArgumentError(absl::StrCat(

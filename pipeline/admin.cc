@@ -10,6 +10,33 @@
 #include "io/sha256.h"
 
 namespace fluxcal::pipeline {
+namespace {
+
+// The lines of one store listing in the dump: `line` writes a row's
+// fields, a newline ends each; a listing that failed is the hash's error.
+template <typename Rows, typename Line>
+absl::Status AppendLines(const absl::StatusOr<Rows>& rows, std::string* dump, Line line) {
+  if (!rows.ok()) return rows.status();
+  for (const auto& row : *rows) {
+    line(row);
+    *dump += "\n";
+  }
+  return absl::OkStatus();
+}
+
+// Copies every row of a listing of the source store with `import`, one by
+// one, counting them into *count; the first error stops the copy.
+template <typename Rows, typename Import>
+absl::Status ImportEach(const absl::StatusOr<Rows>& rows, Import import, int* count) {
+  if (!rows.ok()) return rows.status();
+  for (const auto& row : *rows) {
+    if (auto s = import(row); !s.ok()) return s;
+    ++*count;
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
 
 absl::StatusOr<std::string> ContentHash(storage::Store& store) {
   std::string dump;
@@ -61,34 +88,31 @@ absl::StatusOr<std::string> ContentHash(storage::Store& store) {
   }
   // Text fields are length-prefixed: free text (audit detail) may hold tabs.
   auto t = [&](const std::string& v) { absl::StrAppend(&dump, v.size(), ":", v, "\t"); };
-  auto releases = store.AllReleases();
-  if (!releases.ok()) return releases.status();
-  for (const auto& r : *releases) {
+  // A row's serial and version, as every chained table keys them.
+  auto sv = [&](const std::string& serial, int version) {
+    t(serial);
+    absl::StrAppend(&dump, version, "\t");
+  };
+  absl::Status st = AppendLines(store.AllReleases(), &dump, [&](const auto& r) {
     dump += "release\t";
-    t(r.serial); absl::StrAppend(&dump, r.version, "\t"); t(r.released_by); t(r.released_utc);
-    dump += "\n";
-  }
-  auto audit = store.AllAudit();
-  if (!audit.ok()) return audit.status();
-  for (const auto& a : *audit) {
+    sv(r.serial, r.version); t(r.released_by); t(r.released_utc);
+  });
+  if (!st.ok()) return st;
+  st = AppendLines(store.AllAudit(), &dump, [&](const auto& a) {
     absl::StrAppend(&dump, "audit\t", a.id, "\t");
     for (const auto* v : {&a.utc, &a.identity, &a.role, &a.peer, &a.request_id, &a.rpc, &a.serial, &a.detail}) t(*v);
-    dump += "\n";
-  }
-  auto chain = store.AllChainRows();
-  if (!chain.ok()) return chain.status();
-  for (const auto& l : *chain) {
+  });
+  if (!st.ok()) return st;
+  st = AppendLines(store.AllChainRows(), &dump, [&](const auto& l) {
     dump += "link\t";
-    t(l.serial); absl::StrAppend(&dump, l.version, "\t"); t(l.prev_sha256); t(l.row_sha256);
-    dump += "\n";
-  }
-  auto release_chain = store.AllReleaseLinks();
-  if (!release_chain.ok()) return release_chain.status();
-  for (const auto& l : *release_chain) {
+    sv(l.serial, l.version); t(l.prev_sha256); t(l.row_sha256);
+  });
+  if (!st.ok()) return st;
+  st = AppendLines(store.AllReleaseLinks(), &dump, [&](const auto& l) {
     absl::StrAppend(&dump, "release_link\t", l.seq, "\t");
-    t(l.serial); absl::StrAppend(&dump, l.version, "\t"); t(l.calibration_sha256); t(l.prev_sha256); t(l.row_sha256);
-    dump += "\n";
-  }
+    sv(l.serial, l.version); t(l.calibration_sha256); t(l.prev_sha256); t(l.row_sha256);
+  });
+  if (!st.ok()) return st;
   return io::Sha256Hex(dump);
 }
 
@@ -99,11 +123,8 @@ absl::StatusOr<MigrateResult> Migrate(storage::Store& from, storage::Store& to) 
     return absl::FailedPreconditionError("migrate: the target store is not empty");
   }
   MigrateResult out;
-  auto motors = from.AllMotors();
-  if (!motors.ok()) return motors.status();
-  for (const auto& m : *motors) {
-    if (auto s = to.ImportMotor(m); !s.ok()) return s;
-    ++out.motors;
+  if (auto s = ImportEach(from.AllMotors(), [&](const auto& m) { return to.ImportMotor(m); }, &out.motors); !s.ok()) {
+    return s;
   }
   auto runs = from.AllRuns();
   if (!runs.ok()) return runs.status();
@@ -122,11 +143,10 @@ absl::StatusOr<MigrateResult> Migrate(storage::Store& from, storage::Store& to) 
     ++out.runs;
     out.points += static_cast<int>(pts->size());
   }
-  auto cals = from.AllCalibrations();
-  if (!cals.ok()) return cals.status();
-  for (const auto& c : *cals) {
-    if (auto s = to.ImportCalibration(c); !s.ok()) return s;
-    ++out.calibrations;
+  if (auto s = ImportEach(from.AllCalibrations(), [&](const auto& c) { return to.ImportCalibration(c); },
+                          &out.calibrations);
+      !s.ok()) {
+    return s;
   }
   // Releases, the audit trail and the chain links as stored (ids, times and
   // hashes kept): the copy verifies as the source did.

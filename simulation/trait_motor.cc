@@ -59,28 +59,37 @@ MotorTraits Scaled(MotorTraits t, double i_ref, double m, double flux_scale) {
   return t;
 }
 
+// Every stated motor and the current it is stated for: the real-like
+// machines (parameters stated for a 200-400 A machine) first, then the
+// other kinds. Both lists scale the same way, so they are one table.
+struct StatedMotor {
+  MotorTraits traits;
+  double i_ref_a;
+  bool real_like;
+};
+
+std::vector<MotorTraits> ScaledMotors(bool real_like, double m, double flux_scale) {
+  const StatedMotor stated[] = {
+      {{"pm-syrm", 0.04, 0.6e-3, 0.35e-3, 80, 4.0e-3, 0.8e-3, 40, 3e-5, 0, 0, 1}, 200, true},
+      {{"ipm-bridge", 0.09, 0.25e-3, 0.15e-3, 250, 1.5e-3, 0.15e-3, 60, 2e-5, 0, 0, 1}, 400, true},
+      {{"psi-q-offset", 0.08, 0.3e-3, 0.18e-3, 200, 0.8e-3, 0.3e-3, 150, 1e-4, 0.015, 0, 1}, 300, true},
+      {{"negative-slope", 0.08, 0.3e-3, 0.18e-3, 200, 0.8e-3, 0.3e-3, 150, 1e-4, 0, 0.6, 60}, 300, true},
+      {{"syrm", 0.0, 0.5e-3, 0.3e-3, 80, 5e-3, 0.6e-3, 30, 5e-5, 0, 0, 1}, 200, false},
+      {{"spm", 0.1, 0.2e-3, 0.15e-3, 400, 0.21e-3, 0.15e-3, 300, 5e-6, 0, 0, 1}, 300, false},
+      {{"strong-cross", 0.08, 0.3e-3, 0.18e-3, 200, 0.8e-3, 0.3e-3, 150, 1.5e-4, 0, 0, 1}, 300, false},
+      {{"deep-sat", 0.06, 0.4e-3, 0.08e-3, 60, 1.2e-3, 0.15e-3, 50, 1e-5, 0, 0, 1}, 300, false},
+  };
+  std::vector<MotorTraits> out;
+  for (const StatedMotor& s : stated) {
+    if (s.real_like == real_like) out.push_back(Scaled(s.traits, s.i_ref_a, m, flux_scale));
+  }
+  return out;
+}
+
 }  // namespace
 
-std::vector<MotorTraits> RealLikeMotors(double m, double flux_scale) {
-  // Parameters stated for a 200-400 A machine and scaled with the current
-  // range.
-  auto scaled = [m, flux_scale](MotorTraits t, double i_ref) { return Scaled(t, i_ref, m, flux_scale); };
-  return {
-      scaled({"pm-syrm", 0.04, 0.6e-3, 0.35e-3, 80, 4.0e-3, 0.8e-3, 40, 3e-5, 0, 0, 1}, 200),
-      scaled({"ipm-bridge", 0.09, 0.25e-3, 0.15e-3, 250, 1.5e-3, 0.15e-3, 60, 2e-5, 0, 0, 1}, 400),
-      scaled({"psi-q-offset", 0.08, 0.3e-3, 0.18e-3, 200, 0.8e-3, 0.3e-3, 150, 1e-4, 0.015, 0, 1}, 300),
-      scaled({"negative-slope", 0.08, 0.3e-3, 0.18e-3, 200, 0.8e-3, 0.3e-3, 150, 1e-4, 0, 0.6, 60}, 300),
-  };
-}
+std::vector<MotorTraits> RealLikeMotors(double m, double flux_scale) { return ScaledMotors(true, m, flux_scale); }
 
-std::vector<MotorTraits> OtherKindMotors(double m, double flux_scale) {
-  auto scaled = [m, flux_scale](MotorTraits t, double i_ref) { return Scaled(t, i_ref, m, flux_scale); };
-  return {
-      scaled({"syrm", 0.0, 0.5e-3, 0.3e-3, 80, 5e-3, 0.6e-3, 30, 5e-5, 0, 0, 1}, 200),
-      scaled({"spm", 0.1, 0.2e-3, 0.15e-3, 400, 0.21e-3, 0.15e-3, 300, 5e-6, 0, 0, 1}, 300),
-      scaled({"strong-cross", 0.08, 0.3e-3, 0.18e-3, 200, 0.8e-3, 0.3e-3, 150, 1.5e-4, 0, 0, 1}, 300),
-      scaled({"deep-sat", 0.06, 0.4e-3, 0.08e-3, 60, 1.2e-3, 0.15e-3, 50, 1e-5, 0, 0, 1}, 300),
-  };
-}
+std::vector<MotorTraits> OtherKindMotors(double m, double flux_scale) { return ScaledMotors(false, m, flux_scale); }
 
 }  // namespace fluxcal::sim

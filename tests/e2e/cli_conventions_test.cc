@@ -167,18 +167,17 @@ TEST(CliConventions, ServeRefusesWithoutDb) {
 
 TEST(CliConventions, ServerTargetDefaultsToPort50051) {
   using fluxcal::cli::ServerTarget;
-  EXPECT_EQ(ServerTarget("localhost"), "localhost:50051");
-  EXPECT_EQ(ServerTarget("cal.plant.example"), "cal.plant.example:50051");
-  EXPECT_EQ(ServerTarget("10.0.0.7"), "10.0.0.7:50051");
-  EXPECT_EQ(ServerTarget("localhost:7000"), "localhost:7000");
-  EXPECT_EQ(ServerTarget("127.0.0.1:443"), "127.0.0.1:443");
-  EXPECT_EQ(ServerTarget("[::1]:7000"), "[::1]:7000");
-  EXPECT_EQ(ServerTarget("[::1]"), "[::1]:50051");
-  EXPECT_EQ(ServerTarget("::1"), "[::1]:50051");
-  EXPECT_EQ(ServerTarget("fe80::1:2"), "[fe80::1:2]:50051");
-  EXPECT_EQ(ServerTarget("unix:/run/fluxcal.sock"), "unix:/run/fluxcal.sock");
-  EXPECT_EQ(ServerTarget("dns:///cal.plant.example:50051"), "dns:///cal.plant.example:50051");
-  EXPECT_EQ(ServerTarget("ipv4:127.0.0.1:9"), "ipv4:127.0.0.1:9");
+  // A host name, an IPv4 address or a bracketed IPv6 one without a port.
+  for (const std::string host : {"localhost", "cal.plant.example", "10.0.0.7", "[::1]"}) {
+    EXPECT_EQ(ServerTarget(host), host + ":50051");
+  }
+  // A bare IPv6 address: bracketed before the port.
+  for (const std::string host : {"::1", "fe80::1:2"}) EXPECT_EQ(ServerTarget(host), "[" + host + "]:50051");
+  // A port or a gRPC scheme given: kept as it is.
+  for (const std::string target : {"localhost:7000", "127.0.0.1:443", "[::1]:7000", "unix:/run/fluxcal.sock",
+                                   "dns:///cal.plant.example:50051", "ipv4:127.0.0.1:9"}) {
+    EXPECT_EQ(ServerTarget(target), target);
+  }
 }
 
 TEST(CliConventions, RefusedConnectionGetsAHint) {

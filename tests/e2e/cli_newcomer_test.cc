@@ -76,6 +76,15 @@ class Newcomer : public ::testing::Test {
     std::ofstream(p) << "kept\n";
     return p;
   }
+  // `command --<flag> FILE`, FILE the existing file `name`: refused, naming
+  // the flag and the file, and the file kept as it was. Returns FILE.
+  static std::string ExpectKept(const std::string& command, const std::string& flag, const std::string& name) {
+    const std::string file = Existing(name);
+    const RunResult r = RunFluxcal(command + " --" + flag + " " + file);
+    EXPECT_TRUE(RefusedWith(r, Refusal(flag, file)));
+    EXPECT_EQ(ReadFile(file), "kept\n");
+    return file;
+  }
   static fs::path* dir_;
 };
 fs::path* Newcomer::dir_ = nullptr;
@@ -100,10 +109,7 @@ TEST_F(Newcomer, FitRefusesAnExistingOutputBeforeAnyWork) {
 
 TEST_F(Newcomer, ExportRefusesAnExistingTableOrSignature) {
   const std::string cal = Path("cal.json");
-  const std::string out = Existing("mtpa.csv");
-  const RunResult r = RunFluxcal("export " + cal + " --table mtpa --out " + out);
-  EXPECT_TRUE(RefusedWith(r, Refusal("out", out)));
-  EXPECT_EQ(ReadFile(out), "kept\n");
+  ExpectKept("export " + cal + " --table mtpa", "out", "mtpa.csv");
   // A signature beside the file name counts: it would vouch for other bytes.
   const std::string fresh = Path("fresh.csv");
   const std::string sig = Existing("fresh.csv.sig");
@@ -123,10 +129,7 @@ TEST_F(Newcomer, ExportRefusesAnExistingTableOrSignature) {
 TEST_F(Newcomer, ReportMapExportSimulateDiagnoseAndKeygenShareTheRule) {
   const std::string cal = Path("cal.json");
   {
-    const std::string page = Existing("page.html");
-    const RunResult r = RunFluxcal("report " + cal + " --out " + page);
-    EXPECT_TRUE(RefusedWith(r, Refusal("out", page)));
-    EXPECT_EQ(ReadFile(page), "kept\n");
+    const std::string page = ExpectKept("report " + cal, "out", "page.html");
     EXPECT_EQ(RunFluxcal("report " + cal + " --force --out " + page).code, 0);
     EXPECT_TRUE(Has(ReadFile(page), "<html"));
   }

@@ -17,6 +17,7 @@
 #include "nlohmann/json.hpp"
 #include "simulation/flux_map.h"
 #include "simulation/twin.h"
+#include "tests/fitting/spline_families.h"
 #include "tests/fitting/truth_error.h"
 
 namespace fluxcal::fit {
@@ -100,25 +101,32 @@ void ExpectEvenOddAndJacobian(const Family& f, const std::vector<double>& p, dou
   EXPECT_NEAR(lqq, (b - e) / (2 * h), tol) << id << ", " << iq;
 }
 
+// The id values the random-coefficient tests probe: inside and beyond the
+// knots, on both sides of id = 0.
+constexpr double kAxisIds[] = {-150.0, -100.0, -37.0, 0.0, 6.0, 20.0};
+
+// psi_d(0, 0) = psi_pm (parameter 0), and psi_q(id, 0) = 0 within `tol_q`
+// at every id of kAxisIds.
+void ExpectPsiPmAndNoPsiQOnTheIdAxis(const Family& f, const std::vector<double>& p, double tol_q) {
+  double d0, q0;
+  FamilyFlux(f, 0.0, 0.0, p.data(), &d0, &q0);
+  EXPECT_NEAR(d0, p[0], 1e-15) << "psi_d(0, 0) = psi_pm";
+  for (double id : kAxisIds) {
+    double d, q;
+    FamilyFlux(f, id, 0.0, p.data(), &d, &q);
+    EXPECT_NEAR(q, 0.0, tol_q) << "psi_q(id, 0) = 0 at id " << id;
+  }
+}
+
 // Random coefficients: whatever the fit finds, the surfaces are physical
 // where the family guarantees it.
 TEST(SplineFamily, ConservativeAndSymmetricByConstruction) {
   Family f;
   f.kind = Family::kSpline;
   f.spline = {3, -110, 8, 110};
-  std::mt19937_64 rng(5);
-  std::normal_distribution<double> nd(0, 1);
-  std::vector<double> p(f.NumParams());
-  p[0] = 0.0114;
-  for (size_t k = 1; k < p.size(); ++k) p[k] = nd(rng);
-  auto psi = [&](double id, double iq, double* d, double* q) { FamilyFlux(f, id, iq, p.data(), d, q); };
-  double d0, q0;
-  psi(0, 0, &d0, &q0);
-  EXPECT_NEAR(d0, p[0], 1e-15) << "psi_d(0, 0) = psi_pm";
-  for (double id : {-150.0, -100.0, -37.0, 0.0, 6.0, 20.0}) {
-    double d, q;
-    psi(id, 0, &d, &q);
-    EXPECT_NEAR(q, 0.0, 1e-15) << "psi_q(id, 0) = 0 at id " << id;
+  const std::vector<double> p = RandomCoefficients(f, 5);
+  ExpectPsiPmAndNoPsiQOnTheIdAxis(f, p, 1e-15);
+  for (double id : kAxisIds) {
     // L = d psi / d i (central differences), inside and beyond the knots.
     for (double iq : {-140.0, -60.0, 13.0, 55.0, 109.0, 130.0}) ExpectEvenOddAndJacobian(f, p, id, iq, 1e-3, 1e-8);
   }
@@ -131,33 +139,14 @@ TEST(SplineFamily, ConservativeAndSymmetricByConstruction) {
 // and inductance continuous across iq = 0 (W' is C2 there; only Lqq's
 // slope may turn).
 TEST(SplineFamily, MirroredLayoutIsConservativeEvenAndContinuous) {
-  Family f;
-  f.kind = Family::kSpline;
-  f.spline.spans = 4;
-  f.spline.id_lo_a = -110;
-  f.spline.id_hi_a = 8;
-  f.spline.smoothing = true;
-  f.spline.symmetric = true;
-  f.spline.mirrored = true;
-  f.spline.spans_q = 6;
-  f.spline.iq_lo_a = -6;
-  f.spline.iq_hi_a = 110;
+  const Family f = SymmetricSmoothSpline(4, -110, 8, 6, -6, 110, /*mirrored=*/true);
   ASSERT_TRUE(f.SymmetricInIq());
   ASSERT_EQ(f.Name(), "smooth");
-  std::mt19937_64 rng(7);
-  std::normal_distribution<double> nd(0, 1);
-  std::vector<double> p(f.NumParams());
-  p[0] = 0.0114;
-  for (size_t k = 1; k < p.size(); ++k) p[k] = nd(rng);
+  const std::vector<double> p = RandomCoefficients(f, 7);
   auto psi = [&](double id, double iq, double* d, double* q) { FamilyFlux(f, id, iq, p.data(), d, q); };
   auto ind = [&](double id, double iq, double* a, double* b, double* c) { FamilyInductance(f, id, iq, p.data(), a, b, c); };
-  double d0, q0;
-  psi(0, 0, &d0, &q0);
-  EXPECT_NEAR(d0, p[0], 1e-15) << "psi_d(0, 0) = psi_pm";
-  for (double id : {-150.0, -100.0, -37.0, 0.0, 6.0, 20.0}) {
-    double d, q;
-    psi(id, 0, &d, &q);
-    EXPECT_NEAR(q, 0.0, 1e-14) << "psi_q(id, 0) = 0 at id " << id;
+  ExpectPsiPmAndNoPsiQOnTheIdAxis(f, p, 1e-14);
+  for (double id : kAxisIds) {
     // Across iq = 0: flux and inductance continuous (one-sided limits).
     double dp, qp, dm, qm, lp[3], lm[3];
     psi(id, 1e-7, &dp, &qp);

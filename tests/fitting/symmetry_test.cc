@@ -18,6 +18,7 @@
 #include "io/recording_set.h"
 #include "nlohmann/json.hpp"
 #include "simulation/twin.h"
+#include "tests/fitting/spline_families.h"
 
 namespace fluxcal::fit {
 namespace {
@@ -270,16 +271,7 @@ TEST(Symmetry, CalibrationJsonCarriesTheHalvesCompatibly) {
 // A calibration written with the folded symmetric layout (before the
 // mirrored one) still loads and evaluates as it did.
 TEST(Symmetry, FoldedSmoothCalibrationStillLoads) {
-  Family f;
-  f.kind = Family::kSpline;
-  f.spline.spans = 8;
-  f.spline.id_lo_a = -19;
-  f.spline.id_hi_a = 1;
-  f.spline.smoothing = true;
-  f.spline.symmetric = true;
-  f.spline.spans_q = 16;
-  f.spline.iq_lo_a = -25;
-  f.spline.iq_hi_a = 25;
+  const Family f = SymmetricSmoothSpline(8, -19, 1, 16, -25, 25, /*mirrored=*/false);
   std::vector<double> p(f.NumParams(), 0.0);
   p[0] = 0.44;
   for (size_t k = 1; k < p.size(); ++k) p[k] = 0.01 * std::sin(0.7 * k);

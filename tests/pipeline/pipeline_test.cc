@@ -72,6 +72,51 @@ absl::StatusOr<std::unique_ptr<storage::Store>> StoreWithAnalyticFit(const std::
   return store;
 }
 
+// StoreWithAnalyticFit's store and its version 1, loaded.
+struct FittedStore {
+  std::unique_ptr<storage::Store> store;
+  fit::Calibration cal;
+};
+
+// Fills *out for `serial`; fatal failures when either step fails (callers
+// wrap the call in ASSERT_NO_FATAL_FAILURE).
+void FitAndLoad(const std::string& serial, FittedStore* out) {
+  auto store = StoreWithAnalyticFit(serial);
+  ASSERT_TRUE(store.ok()) << store.status();
+  auto cal = LoadCalibration(**store, serial, 1);
+  ASSERT_TRUE(cal.ok()) << cal.status();
+  out->store = std::move(*store);
+  out->cal = std::move(*cal);
+}
+
+// `cal` with a measured region that holds no current circle (measured id
+// only >= 0): no current limit to take from it.
+fit::Calibration WithoutCurrentCircle(const fit::Calibration& cal) {
+  return fit::Calibration(cal.serial(), cal.family(), cal.params(), cal.covariance(), cal.pole_pairs(), cal.rs_ohm(),
+                          0.0, 20.0, 0.0, 100.0);
+}
+
+// Stores `cal` as a new version of `serial` (run 1) with a failed verdict;
+// the version, as AddCalibration returns it.
+absl::StatusOr<int> AddFailedCalibration(storage::Store& store, const std::string& serial,
+                                         const fit::Calibration& cal) {
+  storage::CalibrationRow row;
+  row.serial = serial;
+  row.run_id = 1;
+  row.model = cal.family().Name();
+  row.verdict = "fail: test";
+  row.calibration_json = cal.ToJson().dump();
+  return store.AddCalibration(row);
+}
+
+// A table of `points` rows over `speed_points` speeds.
+tables::TableSpec GridSpec(int points, int speed_points) {
+  tables::TableSpec spec;
+  spec.points = points;
+  spec.speed_points = speed_points;
+  return spec;
+}
+
 TEST(Pipeline, IngestRules) {
   auto store = storage::Store::Open(":memory:");
   ASSERT_TRUE(store.ok());
@@ -213,15 +258,8 @@ TEST(Pipeline, ExportTakesTheCalibrationsFactsOrTheRequests) {
   // A stored calibration whose measured region holds no current circle.
   auto cal = LoadCalibration(**store, "IPM-X", 1);
   ASSERT_TRUE(cal.ok());
-  const fit::Calibration no_circle(cal->serial(), cal->family(), cal->params(), cal->covariance(), cal->pole_pairs(),
-                                   cal->rs_ohm(), 0.0, 20.0, 0.0, 100.0);
-  storage::CalibrationRow row;
-  row.serial = "IPM-X";
-  row.run_id = 1;
-  row.model = no_circle.family().Name();
-  row.verdict = "fail: test";
-  row.calibration_json = no_circle.ToJson().dump();
-  ASSERT_TRUE((*store)->AddCalibration(row).ok());
+  const fit::Calibration no_circle = WithoutCurrentCircle(*cal);
+  ASSERT_TRUE(AddFailedCalibration(**store, "IPM-X", no_circle).ok());
   spec.kind = "mtpa";
   rpc = tables::ExportRequest{};
   rpc.names_flags = false;
@@ -242,25 +280,21 @@ TEST(Pipeline, ExportTakesTheCalibrationsFactsOrTheRequests) {
 // under labels tagged with it, and the envelope goes through the stored
 // path as the local one.
 TEST(Pipeline, UdcAxisExportsAreTheSingleExportsPerUdc) {
-  auto store = StoreWithAnalyticFit("IPM-U");
-  ASSERT_TRUE(store.ok()) << store.status();
-  auto cal = LoadCalibration(**store, "IPM-U", 1);
-  ASSERT_TRUE(cal.ok()) << cal.status();
-  tables::TableSpec spec;
-  spec.points = 12;
-  spec.speed_points = 8;
+  FittedStore fitted;
+  ASSERT_NO_FATAL_FAILURE(FitAndLoad("IPM-U", &fitted));
+  tables::TableSpec spec = GridSpec(12, 8);
   tables::ExportRequest req;
   req.rs_ohm = 0.011;
   req.allow_clamped = true;
   for (const char* kind : {"fw", "envelope"}) {
     spec.kind = kind;
-    auto axis = ExportCalibrationOverUdc(*cal, spec, req, {40, 60}, "dcm");
+    auto axis = ExportCalibrationOverUdc(fitted.cal, spec, req, {40, 60}, "dcm");
     ASSERT_TRUE(axis.ok()) << kind << ": " << axis.status();
     ASSERT_EQ(axis->size(), 2u);
     for (const auto& a : *axis) {
       tables::ExportRequest one = req;
       one.udc_v = a.udc_v;
-      auto single = ExportCalibration(*cal, spec, one, "dcm");
+      auto single = ExportCalibration(fitted.cal, spec, one, "dcm");
       ASSERT_TRUE(single.ok()) << single.status();
       EXPECT_EQ(a.result.exported.payload_sha256, single->exported.payload_sha256) << kind << " at " << a.udc_v;
       EXPECT_EQ(a.result.table.outputs[0].values, single->table.outputs[0].values);
@@ -270,7 +304,7 @@ TEST(Pipeline, UdcAxisExportsAreTheSingleExportsPerUdc) {
     tables::ExportRequest rpc = req;
     rpc.names_flags = false;
     rpc.udc_v = 60;
-    auto stored = ExportTable(**store, "IPM-U", 1, spec, rpc, "csv");
+    auto stored = ExportTable(*fitted.store, "IPM-U", 1, spec, rpc, "csv");
     ASSERT_TRUE(stored.ok()) << stored.status();
     EXPECT_EQ(stored->exported.payload_sha256, (*axis)[1].result.exported.payload_sha256) << kind;
   }
@@ -378,21 +412,17 @@ TEST(Pipeline, StoredUdcAxisIsTheStoredSingleExportPerUdc) {
 }
 
 TEST(Pipeline, LocalAndStoredExportsAreOnePath) {
-  auto store = StoreWithAnalyticFit("IPM-L");
-  ASSERT_TRUE(store.ok()) << store.status();
-  auto cal = LoadCalibration(**store, "IPM-L", 1);
-  ASSERT_TRUE(cal.ok()) << cal.status();
-  tables::TableSpec spec;
-  spec.points = 12;
-  spec.speed_points = 6;
+  FittedStore fitted;
+  ASSERT_NO_FATAL_FAILURE(FitAndLoad("IPM-L", &fitted));
+  tables::TableSpec spec = GridSpec(12, 6);
   for (const char* kind : {"mtpa", "mtpv", "fw"}) {
     spec.kind = kind;
     tables::ExportRequest flags;   // as `fluxcal export` states it
     flags.udc_v = 60;
     tables::ExportRequest rpc = flags;   // as the RPC states it
     rpc.names_flags = false;
-    auto local = ExportCalibration(*cal, spec, flags, "csv");
-    auto stored = ExportTable(**store, "IPM-L", 1, spec, rpc, "csv");
+    auto local = ExportCalibration(fitted.cal, spec, flags, "csv");
+    auto stored = ExportTable(*fitted.store, "IPM-L", 1, spec, rpc, "csv");
     ASSERT_TRUE(local.ok()) << kind << ": " << local.status();
     ASSERT_TRUE(stored.ok()) << kind << ": " << stored.status();
     EXPECT_EQ(local->exported.payload_sha256, stored->exported.payload_sha256) << kind;
@@ -408,27 +438,20 @@ TEST(Pipeline, LocalAndStoredExportsAreOnePath) {
     EXPECT_NE(stored->exported.bytes.find("# release_state: not released\n"), std::string::npos);
     EXPECT_NE(stored->exported.bytes.find("# verdict: " + stored->verdict + "\n"), std::string::npos);
     // The figure of `fluxcal export --svg` comes from the same result.
-    EXPECT_NE(ExportFigureSvg(*cal, spec, *local).find("<svg"), std::string::npos) << kind;
+    EXPECT_NE(ExportFigureSvg(fitted.cal, spec, *local).find("<svg"), std::string::npos) << kind;
   }
   // No measured current circle (measured id only >= 0): no table from an
   // invented current limit, on either path.
-  const fit::Calibration no_circle(cal->serial(), cal->family(), cal->params(), cal->covariance(), cal->pole_pairs(),
-                                   cal->rs_ohm(), 0.0, 20.0, 0.0, 100.0);
+  const fit::Calibration no_circle = WithoutCurrentCircle(fitted.cal);
   ASSERT_EQ(no_circle.MeasuredCurrentLimitA(), 0.0);
   spec.kind = "mtpa";
   auto local = ExportCalibration(no_circle, spec, tables::ExportRequest{}, "csv");
   ASSERT_EQ(local.status().code(), absl::StatusCode::kInvalidArgument) << local.status();
   EXPECT_EQ(local.status().message().rfind("flag --i-max-a: ", 0), 0u) << local.status();
-  storage::CalibrationRow row;
-  row.serial = "IPM-L";
-  row.run_id = 1;
-  row.model = no_circle.family().Name();
-  row.verdict = "fail: test";
-  row.calibration_json = no_circle.ToJson().dump();
-  ASSERT_TRUE((*store)->AddCalibration(row).ok());
+  ASSERT_TRUE(AddFailedCalibration(*fitted.store, "IPM-L", no_circle).ok());
   tables::ExportRequest rpc;
   rpc.names_flags = false;
-  auto stored = ExportTable(**store, "IPM-L", 2, spec, rpc, "csv");
+  auto stored = ExportTable(*fitted.store, "IPM-L", 2, spec, rpc, "csv");
   ASSERT_EQ(stored.status().code(), absl::StatusCode::kInvalidArgument) << stored.status();
   EXPECT_EQ(stored.status().message().rfind("i_max_a: ", 0), 0u) << stored.status();
   // Given, the limit is taken on both paths alike.
@@ -437,14 +460,14 @@ TEST(Pipeline, LocalAndStoredExportsAreOnePath) {
   given.names_flags = false;
   spec.allow_extrapolation = true;   // 80 A lies beyond the (empty) measured region
   local = ExportCalibration(no_circle, spec, given, "csv");
-  stored = ExportTable(**store, "IPM-L", 2, spec, given, "csv");
+  stored = ExportTable(*fitted.store, "IPM-L", 2, spec, given, "csv");
   ASSERT_TRUE(local.ok()) << local.status();
   ASSERT_TRUE(stored.ok()) << stored.status();
   EXPECT_EQ(local->limits.limits.i_max_a, 80);
   EXPECT_EQ(local->exported.payload_sha256, stored->exported.payload_sha256);
   // A format name is checked before any table is computed, on both paths.
-  EXPECT_EQ(ExportCalibration(*cal, spec, given, "xlsx").status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(ExportTable(**store, "IPM-L", 1, spec, given, "xlsx").status().code(),
+  EXPECT_EQ(ExportCalibration(fitted.cal, spec, given, "xlsx").status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(ExportTable(*fitted.store, "IPM-L", 1, spec, given, "xlsx").status().code(),
             absl::StatusCode::kInvalidArgument);
 }
 

@@ -11,6 +11,7 @@
 
 #include <gtest/gtest.h>
 
+#include <initializer_list>
 #include <regex>
 
 #include "absl/strings/str_format.h"
@@ -23,6 +24,11 @@
 
 namespace fluxcal::report {
 namespace {
+
+// Each of `parts` stands in the page (one expectation each).
+void ExpectInPage(const std::string& html, std::initializer_list<const char*> parts) {
+  for (const char* part : parts) EXPECT_NE(html.find(part), std::string::npos) << part;
+}
 
 size_t Count(const std::string& s, const std::string& what) {
   size_t n = 0;
@@ -173,9 +179,7 @@ TEST_F(ReportTest, UdcBelowResistiveDropIsWarned) {
   in.udc_source = "test: 50 V";
   auto rep = BuildReport(in);
   ASSERT_TRUE(rep.ok()) << rep.status();
-  EXPECT_NE(rep->html.find("class=\"warn\""), std::string::npos);
-  EXPECT_NE(rep->html.find("below the resistive drop"), std::string::npos);
-  EXPECT_NE(rep->html.find("test: 50 V"), std::string::npos);
+  ExpectInPage(rep->html, {"class=\"warn\"", "below the resistive drop", "test: 50 V"});
 }
 
 // Without --udc-v or a set, Udc is the calibration's (the Baldor set's
@@ -369,9 +373,7 @@ TEST_F(ReportTest, DiagnosisFiguresAreEmbeddedWithTheirSource) {
   auto rep = BuildReport(in);
   ASSERT_TRUE(rep.ok()) << rep.status();
   EXPECT_EQ(rep->figures, 7) << "five surfaces, the plane and the embedded one";
-  EXPECT_NE(rep->html.find("id=\"residual-test\""), std::string::npos);
-  EXPECT_NE(rep->html.find("a residual map &lt;of a test&gt;"), std::string::npos);
-  EXPECT_NE(rep->html.find("Residual maps: from a test."), std::string::npos);
+  ExpectInPage(rep->html, {"id=\"residual-test\"", "a residual map &lt;of a test&gt;", "Residual maps: from a test."});
 }
 
 TEST_F(ReportTest, DiagnosisOfTheWrongFormatNamesFileAndField) {
@@ -396,8 +398,7 @@ TEST_F(ReportTest, DiagnosisTextIsEscaped) {
   auto rep = BuildReport(in);
   ASSERT_TRUE(rep.ok()) << rep.status();
   EXPECT_EQ(rep->html.find("<script"), std::string::npos);
-  EXPECT_NE(rep->html.find("&lt;script&gt;"), std::string::npos);
-  EXPECT_NE(rep->html.find("dead_time_s = 1.80 us ± 0.10 us"), std::string::npos);
+  ExpectInPage(rep->html, {"&lt;script&gt;", "dead_time_s = 1.80 us ± 0.10 us"});
 }
 
 }  // namespace

@@ -512,6 +512,21 @@ TEST(FluxMap, RoundTripIdentificationOnMapMotor) {
 namespace fluxcal::sim {
 namespace {
 
+// `replay` (open or closed loop over one recording) through the true motor
+// `p` into *good and through the same motor with Lq 10 % high into *bad.
+template <typename ReplayFn>
+void ReplayTrueAndWrongLq(const MotorParams& p, ReplayFn replay, std::vector<ReplayPoint>* good,
+                          std::vector<ReplayPoint>* bad) {
+  auto g = replay(AnalyticMotor(p));
+  ASSERT_TRUE(g.ok()) << g.status();
+  MotorParams wrong_p = p;
+  wrong_p.sat.lq0_h *= 1.1;
+  auto b = replay(AnalyticMotor(wrong_p));
+  ASSERT_TRUE(b.ok());
+  *good = *std::move(g);
+  *bad = *std::move(b);
+}
+
 // Open-loop replay of recorded commands through the model plant reproduces
 // the recorded currents with the true motor, and departs from them with a
 // wrong one.
@@ -521,21 +536,16 @@ TEST(Replay, ReproducesRecordingWithTrueModelOnly) {
   Plan plan = SmallPlan({Pt("p0", -40, 60, 0, 1.1), Pt("p1", -20, 40, 500, 0.3)});
   auto r = Simulate(cfg, plan);
   ASSERT_TRUE(r.ok());
-  AnalyticMotor truth(cfg.motor);
   ReplayOptions opt;
   opt.rs_ohm = cfg.motor.rs_ohm;
-  auto good = ReplayOpenLoop(r->set, truth, opt);
-  ASSERT_TRUE(good.ok()) << good.status();
-  MotorParams wrong_p = cfg.motor;
-  wrong_p.sat.lq0_h *= 1.1;
-  AnalyticMotor wrong(wrong_p);
-  auto bad = ReplayOpenLoop(r->set, wrong, opt);
-  ASSERT_TRUE(bad.ok());
-  for (size_t k = 0; k < good->size(); ++k) {
+  std::vector<ReplayPoint> good, bad;
+  ASSERT_NO_FATAL_FAILURE(ReplayTrueAndWrongLq(
+      cfg.motor, [&](const MagneticModel& m) { return ReplayOpenLoop(r->set, m, opt); }, &good, &bad));
+  for (size_t k = 0; k < good.size(); ++k) {
     // Sensor noise 0.05 A and ADC steps 0.12 A bound what replay can match.
-    EXPECT_LT((*good)[k].residual_rms_a, 0.15) << (*good)[k].point;
-    EXPECT_GT((*bad)[k].residual_rms_a, 3 * (*good)[k].residual_rms_a) << (*bad)[k].point;
-    ASSERT_EQ((*good)[k].ia_a.size(), r->set.waveforms[k].size());
+    EXPECT_LT(good[k].residual_rms_a, 0.15) << good[k].point;
+    EXPECT_GT(bad[k].residual_rms_a, 3 * good[k].residual_rms_a) << bad[k].point;
+    ASSERT_EQ(good[k].ia_a.size(), r->set.waveforms[k].size());
   }
 }
 
@@ -559,26 +569,21 @@ TEST(Replay, ClosedLoopReproducesRecordingWithTrueModelOnly) {
     Plan plan = SmallPlan({Pt("p0", -40, 60, 0, 1.1), Pt("p1", -20, 40, 500, 0.3), Pt("p2", -60, 80, 0, 4.0)});
     auto r = Simulate(cfg, plan);
     ASSERT_TRUE(r.ok());
-    AnalyticMotor truth(cfg.motor);
     ClosedLoopReplayOptions opt;
     opt.rs_ohm = cfg.motor.rs_ohm;
     opt.control = cfg.control;
     opt.settle_s = plan.settle_s;
-    auto good = ReplayClosedLoop(r->set, truth, opt);
-    ASSERT_TRUE(good.ok()) << good.status();
-    MotorParams wrong_p = cfg.motor;
-    wrong_p.sat.lq0_h *= 1.1;
-    AnalyticMotor wrong(wrong_p);
-    auto bad = ReplayClosedLoop(r->set, wrong, opt);
-    ASSERT_TRUE(bad.ok());
-    ASSERT_EQ(good->size(), 3u);
-    for (size_t k = 0; k < good->size(); ++k) {
-      ASSERT_EQ((*good)[k].ia_a.size(), r->set.waveforms[k].size());
+    std::vector<ReplayPoint> good, bad;
+    ASSERT_NO_FATAL_FAILURE(ReplayTrueAndWrongLq(
+        cfg.motor, [&](const MagneticModel& m) { return ReplayClosedLoop(r->set, m, opt); }, &good, &bad));
+    ASSERT_EQ(good.size(), 3u);
+    for (size_t k = 0; k < good.size(); ++k) {
+      ASSERT_EQ(good[k].ia_a.size(), r->set.waveforms[k].size());
       // Noise 0.02 A and ADC steps 0.12 A (0.035 A RMS) bound the match.
-      EXPECT_LT((*good)[k].residual_rms_a, noisy ? 0.06 : 1e-6) << (*good)[k].point;
-      EXPECT_GT((*bad)[k].residual_rms_a, 3 * std::max((*good)[k].residual_rms_a, 0.05)) << (*bad)[k].point;
-      std::printf("closed-loop replay %s%s: true model %.3g A, Lq +10 %% %.3f A\n", (*good)[k].point.c_str(),
-                  noisy ? " (noisy)" : "", (*good)[k].residual_rms_a, (*bad)[k].residual_rms_a);
+      EXPECT_LT(good[k].residual_rms_a, noisy ? 0.06 : 1e-6) << good[k].point;
+      EXPECT_GT(bad[k].residual_rms_a, 3 * std::max(good[k].residual_rms_a, 0.05)) << bad[k].point;
+      std::printf("closed-loop replay %s%s: true model %.3g A, Lq +10 %% %.3f A\n", good[k].point.c_str(),
+                  noisy ? " (noisy)" : "", good[k].residual_rms_a, bad[k].residual_rms_a);
     }
   }
 }

@@ -20,6 +20,7 @@
 #include "tables/export_rule.h"
 #include "tables/tables.h"
 #include "tests/tables/a2l_reader.h"
+#include "tests/tables/c_unit.h"
 #include "tests/tables/export_readers.h"
 #include "tests/tables/twin_limits.h"
 
@@ -262,13 +263,7 @@ TEST(A2lExport, CrossChecksWithCHeaderCdfxAndDcm) {
 // over Udc").
 TEST(A2lExport, UdcAxisTablesCrossCheckUnderTheirTaggedLabels) {
   for (const char* kind : {"fw", "envelope"}) {
-    TableSpec spec;
-    spec.kind = kind;
-    spec.points = 9;
-    spec.speed_points = 7;
-    ExportRequest req;
-    req.allow_clamped = true;
-    auto axis = BuildExportTablesOverUdc(Twin(), spec, req, {40, 62.5});
+    auto axis = BuildExportTablesOverUdc(Twin(), GridSpec(kind, 9, 7), ClampedAllowed(), {40, 62.5});
     ASSERT_TRUE(axis.ok()) << axis.status();
     for (const auto& b : *axis) {
       EXPECT_FALSE(b.table.label_tag.empty());
@@ -556,26 +551,20 @@ TEST(FixedPoint, HeaderCompilesAndCarriesTheValuesWithinHalfAnLsb) {
     ASSERT_TRUE(e.ok()) << e.status();
     EXPECT_EQ(e->bytes.find("double"), std::string::npos) << "no double array in a fixed-point header";
     EXPECT_EQ(e->fixed_point.size(), 3u) << "torque, speed, current";
-    const std::string dir = ::testing::TempDir() + "/fluxcal_c_" + CTypeName(ct);
-    ASSERT_EQ(std::system(("mkdir -p " + dir).c_str()), 0);
-    { std::ofstream(dir + "/table.h") << e->bytes; }
     std::string prog = "#include <stdio.h>\n#include \"table.h\"\nint main(void) {\n  int k;\n";
     std::vector<std::pair<double, double>> want;   // value, LSB
-    auto print = [&](const std::string& name, const std::vector<double>& v) {
+    ForEachArray(t, [&](const std::string& name, const std::vector<double>& v) {
       const std::string up = absl::AsciiStrToUpper(name);
       prog += "  for (k = 0; k < FLUXCAL_FW_" + up + "_LEN; ++k) printf(\"%.17g\\n\", (double)fluxcal_fw_" + name +
               "[k] * FLUXCAL_FW_" + up + "_LSB);\n";
       for (double x : v) want.push_back({x, ScaleOf(e->fixed_point, name)->lsb});
-    };
-    for (const auto& a : t.axes) print(a.name, a.values);
-    for (const auto& o : t.outputs) print(o.name, o.values);
+    });
     prog += "  return 0;\n}\n";
-    { std::ofstream(dir + "/main.c") << prog; }
-    const std::string cmd = "cd " + dir + " && cc -std=c99 -pedantic -Wall -Wextra -Werror -Wconversion "
-                            "main.c -o main > build.log 2>&1 && ./main > out.txt";
-    ASSERT_EQ(std::system(cmd.c_str()), 0) << "compiling the " << CTypeName(ct) << " header failed; see " << dir
-                                           << "/build.log";
-    std::ifstream in(dir + "/out.txt");
+    std::string printed;
+    ASSERT_NO_FATAL_FAILURE(BuildAndRunC99(std::string("fluxcal_c_") + CTypeName(ct), {{"table.h", e->bytes}}, prog,
+                                           "-Wconversion",
+                                           absl::StrCat("compiling the ", CTypeName(ct), " header failed"), &printed));
+    std::istringstream in(printed);
     for (const auto& [x, lsb] : want) {
       double got;
       ASSERT_TRUE(in >> got);

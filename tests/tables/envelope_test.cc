@@ -19,6 +19,7 @@
 #include "simulation/twin.h"
 #include "tables/export_rule.h"
 #include "tables/tables.h"
+#include "tests/tables/c_unit.h"
 #include "tests/tables/twin_limits.h"
 #include "tinyxml2.h"
 
@@ -151,9 +152,7 @@ TEST(Envelope, LinearMachineMatchesTheClosedForm) {
 // Torque never rises with speed, and a higher Udc never gives less torque
 // at any speed: on the saturated twin (cross saturation) and its fit.
 TEST(Envelope, TorqueFallsWithSpeedAndRisesWithUdc) {
-  sim::MotorParams p;
-  p.sat.g_cross_h = 3e-5;
-  const sim::AnalyticMotor motor(p);
+  const sim::AnalyticMotor& motor = SaturatedTwin();
   const fit::Calibration cal = TwinCalibration(50.0, sim::MotorParams().rs_ohm);
   for (const sim::MagneticModel* m : {static_cast<const sim::MagneticModel*>(&motor),
                                       static_cast<const sim::MagneticModel*>(&cal)}) {
@@ -210,23 +209,13 @@ TEST(UdcAxis, ParsesListsAndRangesAndRefusesTheRest) {
 // Every table of a Udc axis holds the values of the single export at its
 // voltage, bit for bit (axes, outputs, flags, payload checksums), under
 // its own labels.
-ExportRequest req_for_axis() {
-  ExportRequest r;
-  r.allow_clamped = true;
-  return r;
-}
-
 TEST(UdcAxis, TablesEqualTheSingleUdcExportsBitForBit) {
   const fit::Calibration cal = TwinCalibration(50.0, sim::MotorParams().rs_ohm);
   const std::vector<double> udcs = {40, 50, 60};
   for (const char* kind : {"fw", "mtpv", "mtpa", "envelope"}) {
     SCOPED_TRACE(kind);
-    TableSpec spec;
-    spec.kind = kind;
-    spec.points = 16;
-    spec.speed_points = 12;
-    ExportRequest req;
-    req.allow_clamped = true;
+    const TableSpec spec = GridSpec(kind, 16, 12);
+    const ExportRequest req = ClampedAllowed();
     auto axis = BuildExportTablesOverUdc(cal, spec, req, udcs);
     ASSERT_TRUE(axis.ok()) << axis.status();
     ASSERT_EQ(axis->size(), udcs.size());
@@ -267,7 +256,7 @@ TEST(UdcAxis, TablesEqualTheSingleUdcExportsBitForBit) {
   // An axis built by hand is held to ParseUdcAxis' rules: no two tables
   // under one label.
   for (const std::vector<double>& bad : std::vector<std::vector<double>>{{50, 40}, {50, 50.0000001}, {0, 50}}) {
-    auto r = BuildExportTablesOverUdc(cal, TableSpec{}, req_for_axis(), bad);
+    auto r = BuildExportTablesOverUdc(cal, TableSpec{}, ClampedAllowed(), bad);
     EXPECT_FALSE(r.ok()) << bad[0] << ", " << bad[1];
   }
   ExportRequest both;
@@ -291,13 +280,12 @@ TEST(UdcAxis, HeadersOfEveryUdcCompileIntoOneUnit) {
   const std::vector<double> udcs = {40, 62.5};
   auto axis = BuildExportTablesOverUdc(cal, spec, req, udcs);
   ASSERT_TRUE(axis.ok()) << axis.status();
-  const std::string dir = ::testing::TempDir() + "/fluxcal_udc_axis_h";
-  ASSERT_EQ(std::system(("mkdir -p " + dir).c_str()), 0);
+  std::vector<std::pair<std::string, std::string>> headers;
   std::string prog = "#include <stdio.h>\n";
   for (const auto& b : *axis) {
     auto h = Export(b.table, Format::kCHeader);
     ASSERT_TRUE(h.ok()) << h.status();
-    std::ofstream(dir + "/" + b.table.label_tag + ".h") << h->bytes;
+    headers.push_back({b.table.label_tag + ".h", h->bytes});
     prog += "#include \"" + b.table.label_tag + ".h\"\n";
   }
   prog += "int main(void) {\n  unsigned k;\n";
@@ -306,12 +294,10 @@ TEST(UdcAxis, HeadersOfEveryUdcCompileIntoOneUnit) {
     prog += "  for (k = 0; k < " + Label(b.table, "id_a") + "_LEN; ++k) printf(\"%.17g\\n\", " + id + "[k]);\n";
   }
   prog += "  return 0;\n}\n";
-  std::ofstream(dir + "/main.c") << prog;
-  const std::string cmd = "cd " + dir + " && cc -std=c99 -pedantic -Wall -Wextra -Werror main.c -o main && ./main > out.txt";
-  ASSERT_EQ(std::system(cmd.c_str()), 0) << "compiling both headers into one unit failed; see " << dir;
-  std::ifstream out(dir + "/out.txt");
-  std::vector<double> got;
-  for (double x; out >> x;) got.push_back(x);
+  std::string printed;
+  ASSERT_NO_FATAL_FAILURE(BuildAndRunC99("fluxcal_udc_axis_h", headers, prog, "",
+                                         "compiling both headers into one unit failed", &printed));
+  const std::vector<double> got = PrintedNumbers(printed);
   std::vector<double> want;
   for (const auto& b : *axis) {
     want.insert(want.end(), b.table.outputs[0].values.begin(), b.table.outputs[0].values.end());
@@ -400,23 +386,19 @@ TEST(Envelope, GeneratingIsTheNegativeLimitUnderLabelsOfItsOwn) {
   }
   // Side by side in one ECU build: both headers in one C unit.
   if (std::system("cc --version > /dev/null 2>&1") != 0) GTEST_SKIP() << "no C compiler (cc)";
-  const std::string dir = ::testing::TempDir() + "/fluxcal_generating_h";
-  ASSERT_EQ(std::system(("mkdir -p " + dir).c_str()), 0);
+  std::vector<std::pair<std::string, std::string>> headers;
   std::string prog = "#include <stdio.h>\n#include \"m.h\"\n#include \"g.h\"\nint main(void) {\n";
   for (const auto& [t, name] : {std::pair<const Table*, const char*>{&m, "m"}, {&g, "g"}}) {
     auto h = Export(*t, Format::kCHeader, ExportOptions{});
     ASSERT_TRUE(h.ok()) << h.status();
-    std::ofstream(dir + "/" + name + ".h") << h->bytes;
+    headers.push_back({std::string(name) + ".h", h->bytes});
     prog += "  printf(\"%.17g\\n\", " + CSymbol(*t, "torque_nm") + "[0]);\n";
   }
   prog += "  return 0;\n}\n";
-  std::ofstream(dir + "/main.c") << prog;
-  const std::string cmd = "cd " + dir + " && cc -std=c99 -pedantic -Wall -Wextra -Werror main.c -o main && ./main > out.txt";
-  ASSERT_EQ(std::system(cmd.c_str()), 0) << "the motoring and generating headers do not compile together; see " << dir;
-  std::ifstream out(dir + "/out.txt");
-  std::vector<double> got;
-  for (double x; out >> x;) got.push_back(x);
-  EXPECT_EQ(got, (std::vector<double>{tm[0], tg[0]}));
+  std::string printed;
+  ASSERT_NO_FATAL_FAILURE(BuildAndRunC99("fluxcal_generating_h", headers, prog, "",
+                                         "the motoring and generating headers do not compile together", &printed));
+  EXPECT_EQ(PrintedNumbers(printed), (std::vector<double>{tm[0], tg[0]}));
 }
 
 TEST(MagnetTemperature, RefusedWithoutTheCalibrationsCoefficient) {

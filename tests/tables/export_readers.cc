@@ -46,6 +46,20 @@ std::vector<std::string> AxisNames(const std::string& order) {
   return out;
 }
 
+// Whether `line` is a comment of the export (`lead`: CSV "# ", DCM "* ").
+// For one with a "key: value", *key and *rest are set and a provenance key
+// (kTextKeys) is recorded in p->text; *key is empty for one without.
+bool IsComment(const std::string& line, const char* lead, Parsed* p, std::string* key, std::string* rest) {
+  if (!absl::StartsWith(line, lead)) return false;
+  key->clear();
+  const size_t c = line.find(": ");
+  if (c == std::string::npos) return true;
+  *key = line.substr(2, c - 2);
+  *rest = line.substr(c + 2);
+  if (kTextKeys.count(*key)) p->text[*key] = *rest;
+  return true;
+}
+
 }  // namespace
 
 // "FLUXCAL_FW_ID_A" -> "id_a" ("FLUXCAL_FW_UDC300V_ID_A" of a Udc axis' table).
@@ -74,13 +88,11 @@ Parsed ParseCsv(const std::string& bytes) {
   std::string line;
   std::vector<std::string> cols;
   std::vector<std::vector<double>> rows;
+  std::string key, rest;
   while (std::getline(in, line)) {
-    if (absl::StartsWith(line, "# ")) {
-      const size_t c = line.find(": ");
-      if (c == std::string::npos) continue;
-      const std::string key = line.substr(2, c - 2), rest = line.substr(c + 2);
-      if (kTextKeys.count(key)) p.text[key] = rest;
-      else if (key == "axis_order") p.axis_names = AxisNames(rest);
+    if (IsComment(line, "# ", &p, &key, &rest)) {
+      if (key.empty() || kTextKeys.count(key)) continue;
+      if (key == "axis_order") p.axis_names = AxisNames(rest);
       else if (key == "payload_crc32") p.payload_crc32 = rest.substr(0, rest.find(' '));
       else if (key == "payload_sha256") p.payload_sha256 = rest.substr(0, rest.find(' '));
       else p.scalars[key] = ToD(rest.substr(0, rest.find(' ')));
@@ -132,13 +144,10 @@ Parsed ParseDcm(const Table& t, const std::string& bytes) {
   std::vector<double> stx, sty;
   std::vector<std::vector<double>> wert;   // one entry per WERT run (per ST/Y for a map)
   bool first_table = true;
+  std::string field, rest;
   while (std::getline(in, line)) {
-    if (absl::StartsWith(line, "* ")) {
-      const size_t c = line.find(": ");
-      if (c == std::string::npos) continue;
-      const std::string key = line.substr(2, c - 2), rest = line.substr(c + 2);
-      if (kTextKeys.count(key)) p.text[key] = rest;
-      if (key == "payload_crc32") {
+    if (IsComment(line, "* ", &p, &field, &rest)) {
+      if (field == "payload_crc32") {
         p.payload_crc32 = rest.substr(0, rest.find(','));
         const size_t s = rest.find("payload_sha256: ");
         p.payload_sha256 = rest.substr(s + 16, 64);

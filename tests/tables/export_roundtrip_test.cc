@@ -17,6 +17,7 @@
 #include "io/sha256.h"
 #include "tables/tables.h"
 #include "tests/tables/export_readers.h"
+#include "tests/tables/c_unit.h"
 #include "tests/tables/twin_limits.h"
 
 namespace fluxcal::tables {
@@ -30,59 +31,52 @@ using readers::ParseCsv;
 using readers::ParseDcm;
 using readers::ParseJson;
 
-// A field-weakening map with clamped cells, a measured limit, and a known
-// verdict and release state (as the service writes them).
-Table Fw() {
-  static const sim::AnalyticMotor m{[] { sim::MotorParams p; p.sat.g_cross_h = 3e-5; return p; }()};
-  TableSpec spec;
-  spec.kind = "fw";
-  spec.points = 5;
-  spec.speed_points = 4;
-  spec.speed_max_rpm = 6000;
-  spec.serial = "IPM-T-1";
-  spec.calibration_version = 3;
-  spec.model = "analytic";
-  spec.verdict = "pass";
-  spec.release_state = kReleased;
-  spec.measured_current_limit_a = 150;
-  auto t = BuildTable(m, TwinLimits(), spec);
+// The saturated twin's table (a test failure when it cannot be built).
+Table Built(const TableSpec& spec, double i_max_a = 150) {
+  auto t = BuildTable(SaturatedTwin(), TwinLimits(i_max_a), spec);
   EXPECT_TRUE(t.ok()) << t.status();
   return *t;
 }
 
-// An MTPV curve beyond the measured region, on request: extrapolated cells.
-Table MtpvExtrapolated() {
-  static const sim::AnalyticMotor m{[] { sim::MotorParams p; p.sat.g_cross_h = 3e-5; return p; }()};
+// A table of the analytic model measured up to 150 A, computed beyond that
+// on request (extrapolated cells).
+TableSpec ExtrapolatedSpec(const std::string& kind, const std::string& serial) {
   TableSpec spec;
-  spec.kind = "mtpv";
-  spec.points = 7;
-  spec.serial = "IPM-T-2";
+  spec.kind = kind;
+  spec.serial = serial;
   spec.model = "analytic";
   spec.measured_current_limit_a = 150;
   spec.allow_extrapolation = true;
-  auto t = BuildTable(m, TwinLimits(), spec);
-  EXPECT_TRUE(t.ok()) << t.status();
-  return *t;
+  return spec;
+}
+
+// A field-weakening map with clamped cells, a measured limit, and a known
+// verdict and release state (as the service writes them).
+Table Fw() {
+  TableSpec spec = SmallLabelledSpec("fw", 6000);
+  spec.verdict = "pass";
+  spec.release_state = kReleased;
+  spec.measured_current_limit_a = 150;
+  return Built(spec);
+}
+
+// An MTPV curve beyond the measured region, on request: extrapolated cells.
+Table MtpvExtrapolated() {
+  TableSpec spec = ExtrapolatedSpec("mtpv", "IPM-T-2");
+  spec.points = 7;
+  return Built(spec);
 }
 
 // The envelope of one Udc of an axis (labels tagged with it), at a magnet
 // temperature, beyond the measured current limit on request: every
 // format's readers meet the tag, the magnet scalars and extrapolated cells.
 Table EnvelopeTagged() {
-  static const sim::AnalyticMotor m{[] { sim::MotorParams p; p.sat.g_cross_h = 3e-5; return p; }()};
-  TableSpec spec;
-  spec.kind = "envelope";
+  TableSpec spec = ExtrapolatedSpec("envelope", "IPM-T-3");
   spec.speed_points = 9;
   spec.speed_max_rpm = 8000;
-  spec.serial = "IPM-T-3";
-  spec.model = "analytic";
-  spec.measured_current_limit_a = 150;
-  spec.allow_extrapolation = true;
   spec.label_tag = UdcTag(50);
   spec.magnet_temperature = MagnetTemperature{-0.0011, 25, 80};
-  auto t = BuildTable(m, TwinLimits(180), spec);
-  EXPECT_TRUE(t.ok()) << t.status();
-  return *t;
+  return Built(spec, 180);
 }
 
 void ExpectSame(const Parsed& want, const Parsed& got, const std::string& what) {
@@ -205,25 +199,20 @@ TEST(ExportRoundTrip, FloatCHeaderCompilesAndCarriesRoundedValues) {
   auto e = Export(t, Format::kCHeader, opt);
   ASSERT_TRUE(e.ok());
   EXPECT_EQ(e->bytes.find("double"), std::string::npos) << "a float header declares no double";
-  const std::string dir = ::testing::TempDir() + "/fluxcal_c_float";
-  ASSERT_EQ(std::system(("mkdir -p " + dir).c_str()), 0);
-  { std::ofstream(dir + "/table.h") << e->bytes; }
   std::string prog = "#include <stdio.h>\n#include \"table.h\"\nint main(void) {\n  int k;\n  float s = FLUXCAL_FW_I_MAX_A;\n";
   std::vector<double> want;
-  auto print = [&](const std::string& name, const std::vector<double>& v) {
+  ForEachArray(t, [&](const std::string& name, const std::vector<double>& v) {
     prog += "  for (k = 0; k < FLUXCAL_FW_" + absl::AsciiStrToUpper(name) + "_LEN; ++k) printf(\"%.9g\\n\", (double)fluxcal_fw_" +
             name + "[k]);\n";
     for (double x : v) want.push_back(static_cast<float>(x));
-  };
-  for (const auto& a : t.axes) print(a.name, a.values);
-  for (const auto& o : t.outputs) print(o.name, o.values);
+  });
   prog += "  printf(\"%.9g\\n\", (double)s);\n  return 0;\n}\n";
   want.push_back(static_cast<float>(t.limits.i_max_a));
-  { std::ofstream(dir + "/main.c") << prog; }
-  const std::string cmd = "cd " + dir + " && cc -std=c99 -pedantic -Wall -Wextra -Werror -Wconversion -Wdouble-promotion "
-                          "main.c -o main > build.log 2>&1 && ./main > out.txt";
-  ASSERT_EQ(std::system(cmd.c_str()), 0) << "compiling the float header failed; see " << dir << "/build.log";
-  std::ifstream in(dir + "/out.txt");
+  std::string printed;
+  ASSERT_NO_FATAL_FAILURE(BuildAndRunC99("fluxcal_c_float", {{"table.h", e->bytes}}, prog,
+                                         "-Wconversion -Wdouble-promotion", "compiling the float header failed",
+                                         &printed));
+  std::istringstream in(printed);
   for (double x : want) {
     double got;
     ASSERT_TRUE(in >> got);
@@ -237,7 +226,7 @@ TEST(ExportRoundTrip, FloatCHeaderCompilesAndCarriesRoundedValues) {
 // whose MTPV point lies inside the current limit; --allow-extrapolation
 // computes beyond, with the cells flagged.
 TEST(Extrapolation, RefusedByDefaultFlaggedOnRequest) {
-  const sim::AnalyticMotor m{[] { sim::MotorParams p; p.sat.g_cross_h = 3e-5; return p; }()};
+  const sim::AnalyticMotor& m = SaturatedTwin();
   TableSpec spec;
   spec.kind = "mtpv";
   spec.points = 9;

@@ -12,15 +12,10 @@
 #include "simulation/trait_motor.h"
 #include "simulation/twin.h"
 #include "tables/flux_map_export.h"
+#include "tests/tables/twin_limits.h"
 
 namespace fluxcal::tables {
 namespace {
-
-sim::AnalyticMotor Motor() {
-  sim::MotorParams p;
-  p.sat.g_cross_h = 3e-5;
-  return sim::AnalyticMotor(p);
-}
 
 // The motor's map over the motoring quadrant an EOL bench covers, 17 x 17
 // nodes (10 A steps), and the calibration `fit --map` makes of it (model
@@ -33,7 +28,7 @@ struct MapCase {
 const MapCase& Case() {
   static const MapCase* c = [] {
     auto* c = new MapCase;
-    const auto motor = Motor();
+    const auto& motor = SaturatedTwin();
     auto map = SampleFluxMap(motor, {-160, 0, 17}, {0, 160, 17});
     EXPECT_TRUE(map.ok()) << map.status();
     c->map = *map;
@@ -54,7 +49,7 @@ const MapCase& Case() {
 
 TEST(FluxMapExport, FitFromMapReproducesTheMotor) {
   const auto& c = Case();
-  const auto motor = Motor();
+  const auto& motor = SaturatedTwin();
   fit::FitData d = fit::FitDataFromFluxMap(c.map, 4);
   ASSERT_EQ(d.fluxes.size(), 289u);
   ASSERT_TRUE(d.psi_pm_prior_wb.has_value());
@@ -301,7 +296,7 @@ TEST(FluxMapExport, InverseOfAMapThatFallsNearZeroCurrent) {
 
 TEST(FluxMapExport, GridsAreChecked) {
   const auto& cal = Case().cal;
-  const auto motor = Motor();
+  const auto& motor = SaturatedTwin();
   auto e = SampleFluxMap(motor, {0, -10, 5}, {0, 10, 5});
   ASSERT_FALSE(e.ok());
   EXPECT_NE(std::string(e.status().message()).find("field 'grid id': max must exceed min"), std::string::npos)

@@ -43,9 +43,11 @@ fit::Calibration BenchCalibration() {
 // MaxTorqueNm gives (the direct maximisation with its checks, no Newton),
 // from the MTPA point TrySolve finds (scan and golden section). The flags
 // must be the same and the currents agree within 1e-6 of their size (the
-// golden section resolves a flat minimum to ~1e-7). Counts the cells on
-// the voltage limit and the clamped ones.
-void ExpectCellsAsTheRobustSolve(const sim::MagneticModel& m, const Table& t, int* voltage_limited, int* clamped) {
+// golden section resolves a flat minimum to ~1e-7). Both kinds of fast
+// cell must have been compared: more than `min_each` on the voltage limit
+// (FwNewton) and more than `min_each` clamped.
+void ExpectCellsAsTheRobustSolve(const sim::MagneticModel& m, const Table& t, int min_each) {
+  int voltage_limited = 0, clamped = 0;
   const MachineLimits& lim = t.limits;
   const auto& tq = t.axes[0].values;
   const auto& rpm = t.axes[1].values;
@@ -62,10 +64,12 @@ void ExpectCellsAsTheRobustSolve(const sim::MagneticModel& m, const Table& t, in
       ASSERT_EQ(static_cast<bool>(t.clamped[cell]), ref.clamped) << tq[i] << " N m at " << rpm[j] << " rpm";
       EXPECT_NEAR(id, ref.id_a, 1e-6 * std::max(1.0, std::abs(ref.id_a))) << tq[i] << " N m at " << rpm[j] << " rpm";
       EXPECT_NEAR(iq, ref.iq_a, 1e-6 * std::max(1.0, std::abs(ref.iq_a))) << tq[i] << " N m at " << rpm[j] << " rpm";
-      *clamped += ref.clamped;
-      *voltage_limited += !ref.clamped && VoltageV(m, lim, id, iq, we) > lim.UMaxV() * (1 - 1e-6);
+      clamped += ref.clamped;
+      voltage_limited += !ref.clamped && VoltageV(m, lim, id, iq, we) > lim.UMaxV() * (1 - 1e-6);
     }
   }
+  EXPECT_GT(voltage_limited, min_each);
+  EXPECT_GT(clamped, min_each);
 }
 
 // The bench calibration's table as `fluxcal export --table fw` builds it:
@@ -76,31 +80,19 @@ TEST(FastFieldWeakening, EveryCellOfTheBenchTableAsTheRobustSolve) {
   spec.kind = "fw";
   auto built = BuildExportTable(cal, spec, {});
   ASSERT_TRUE(built.ok()) << built.status();
-  int voltage_limited = 0, clamped = 0;
-  ExpectCellsAsTheRobustSolve(cal, built->table, &voltage_limited, &clamped);
-  // Both kinds of fast cell were compared: on the voltage limit (FwNewton)
-  // and clamped (at corners of the limits on this bench).
-  EXPECT_GT(voltage_limited, 200);
-  EXPECT_GT(clamped, 200);
+  // Clamped cells at corners of the limits on this bench.
+  ExpectCellsAsTheRobustSolve(cal, built->table, 200);
 }
 
 // The twin's saturated motor well past its MTPV onset: limit torques at
 // the MTPV point (MtpvLimit), clamped points there (the robust solve).
 TEST(FastFieldWeakening, EveryCellPastTheMtpvOnsetAsTheRobustSolve) {
-  sim::MotorParams p;
-  p.sat.g_cross_h = 3e-5;
-  const sim::AnalyticMotor m(p);
-  TableSpec spec;
-  spec.kind = "fw";
-  spec.points = 41;
-  spec.speed_points = 37;
+  const sim::AnalyticMotor& m = SaturatedTwin();
+  TableSpec spec = GridSpec("fw", 41, 37);
   spec.speed_max_rpm = 9000;
   auto t = BuildTable(m, TwinLimits(), spec);
   ASSERT_TRUE(t.ok()) << t.status();
-  int voltage_limited = 0, clamped = 0;
-  ExpectCellsAsTheRobustSolve(m, *t, &voltage_limited, &clamped);
-  EXPECT_GT(voltage_limited, 100);
-  EXPECT_GT(clamped, 100);
+  ExpectCellsAsTheRobustSolve(m, *t, 100);
 }
 
 // The guard: along a constant-torque locus whose end at -i_max violates the
@@ -109,9 +101,7 @@ TEST(FastFieldWeakening, EveryCellPastTheMtpvOnsetAsTheRobustSolve) {
 // other root, the Newton converges there, and the checks must refuse it;
 // wherever a start is accepted, the answer is the robust solve's.
 TEST(FastFieldWeakening, RefusesTheRootBeyondTheMtpvPoint) {
-  sim::MotorParams p;
-  p.sat.g_cross_h = 3e-5;
-  const sim::AnalyticMotor m(p);
+  const sim::AnalyticMotor& m = SaturatedTwin();
   const MachineLimits lim = TwinLimits();
   // A request and speed with two crossings inside the current limit.
   bool found = false;
@@ -169,9 +159,7 @@ TEST(FastFieldWeakening, LimitTorquesAsMaxTorqueNm) {
   const fit::Calibration cal = BenchCalibration();
   auto rule = BuildExportTable(cal, TableSpec{}, {});
   ASSERT_TRUE(rule.ok()) << rule.status();
-  sim::MotorParams p;
-  p.sat.g_cross_h = 3e-5;
-  const sim::AnalyticMotor twin(p);
+  const sim::AnalyticMotor& twin = SaturatedTwin();
   const std::vector<std::pair<const sim::MagneticModel*, MachineLimits>> cases = {{&cal, rule->table.limits},
                                                                                    {&twin, TwinLimits()}};
   for (const auto& [m, lim] : cases) {
@@ -197,9 +185,7 @@ TEST(FastFieldWeakening, LimitTorquesAsMaxTorqueNm) {
 // the flux it returns is m.Flux at the root, and the locus' slope is the
 // one the inductances give there (d iq / d id = -T_d / T_q).
 TEST(FastFieldWeakening, LocusSolveOptionsChangeNoRoot) {
-  sim::MotorParams p;
-  p.sat.g_cross_h = 3e-5;
-  const sim::AnalyticMotor twin(p);
+  const sim::AnalyticMotor& twin = SaturatedTwin();
   const MachineLimits lim = TwinLimits();
   int compared = 0;
   for (double s : {1.0, -1.0}) {

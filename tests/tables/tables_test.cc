@@ -19,6 +19,7 @@
 #include "plot/plot.h"
 #include "tables/signature.h"
 #include "tables/tables.h"
+#include "tests/tables/c_unit.h"
 #include "tests/tables/twin_limits.h"
 #include "tinyxml2.h"
 
@@ -26,13 +27,6 @@ namespace fluxcal::tables {
 namespace {
 
 constexpr double kPi = std::numbers::pi;
-
-// A saturated motor with cross saturation (the twin's analytic family).
-sim::AnalyticMotor Motor() {
-  sim::MotorParams p;
-  p.sat.g_cross_h = 3e-5;
-  return sim::AnalyticMotor(p);
-}
 
 // The wrong model: psi = psi_pm + L_diff(i) i, the differential inductance at
 // each operating point used as if it were apparent.
@@ -58,7 +52,7 @@ TEST(Sha256, NistVectors) {
 }
 
 TEST(Mtpa, WithinPointOnePercentOfBruteForce) {
-  const auto m = Motor();
+  const auto& m = SaturatedTwin();
   MachineLimits lim = TwinLimits();
   TableSpec spec;
   spec.points = 17;
@@ -84,7 +78,7 @@ TEST(Mtpa, WithinPointOnePercentOfBruteForce) {
 }
 
 TEST(FieldWeakening, RespectsLimitsAndDeliversTorque) {
-  const auto m = Motor();
+  const auto& m = SaturatedTwin();
   MachineLimits lim = TwinLimits();
   TableSpec spec;
   spec.kind = "fw";
@@ -113,7 +107,7 @@ TEST(FieldWeakening, RespectsLimitsAndDeliversTorque) {
 // delivers at least the largest torque of any grid point inside the limits.
 // Both within 0.1 % (the tolerance).
 TEST(FieldWeakening, WithinPointOnePercentOfBruteForce) {
-  const auto m = Motor();
+  const auto& m = SaturatedTwin();
   MachineLimits lim = TwinLimits();
   TableSpec spec;
   spec.kind = "fw";
@@ -176,7 +170,7 @@ TEST(FieldWeakening, WithinPointOnePercentOfBruteForce) {
 // MTPV: on each flux circle |psi| = psi_k the table's point delivers the
 // largest torque (brute force over id on the circle).
 TEST(Mtpv, MaximumTorquePerFluxByBruteForce) {
-  const auto m = Motor();
+  const auto& m = SaturatedTwin();
   MachineLimits lim = TwinLimits();
   TableSpec spec;
   spec.kind = "mtpv";
@@ -205,7 +199,7 @@ TEST(Mtpv, MaximumTorquePerFluxByBruteForce) {
 // Using the differential inductance as apparent gives a measurably worse
 // MTPA table on a saturated motor: the torque it delivers is wrong.
 TEST(Mtpa, DifferentialAsApparentIsWorse) {
-  const auto m = Motor();
+  const auto& m = SaturatedTwin();
   DifferentialAsApparent wrong(m);
   MachineLimits lim = TwinLimits();
   TableSpec spec;
@@ -224,16 +218,7 @@ TEST(Mtpa, DifferentialAsApparentIsWorse) {
 }
 
 Table SmallTable(const std::string& kind) {
-  static const auto m = Motor();
-  TableSpec spec;
-  spec.kind = kind;
-  spec.points = 5;
-  spec.speed_points = 4;
-  spec.speed_max_rpm = 3000;
-  spec.serial = "IPM-T-1";
-  spec.calibration_version = 3;
-  spec.model = "analytic";
-  return *BuildTable(m, TwinLimits(), spec);
+  return *BuildTable(SaturatedTwin(), TwinLimits(), SmallLabelledSpec(kind, 3000));
 }
 
 std::vector<double> Numbers(const std::string& s) {
@@ -300,25 +285,18 @@ TEST(Export, CHeaderCompilesAsC99AndCarriesTheValues) {
   const Table t = SmallTable("fw");
   auto e = Export(t, Format::kCHeader);
   ASSERT_TRUE(e.ok());
-  const std::string dir = ::testing::TempDir() + "/fluxcal_c_header";
-  ASSERT_EQ(std::system(("mkdir -p " + dir).c_str()), 0);
-  { std::ofstream(dir + "/table.h") << e->bytes; }
   std::string prog = "#include <stdio.h>\n#include \"table.h\"\nint main(void) {\n  int k;\n";
   std::vector<std::vector<double>> want;
-  auto print = [&](const std::string& name, const std::vector<double>& v) {
+  ForEachArray(t, [&](const std::string& name, const std::vector<double>& v) {
     const std::string lower = "fluxcal_fw_" + name, upper = "FLUXCAL_FW_" + absl::AsciiStrToUpper(name);
     prog += "  for (k = 0; k < " + upper + "_LEN; ++k) printf(\"%.17g\\n\", " + lower + "[k]);\n";
     want.push_back(v);
-  };
-  for (const auto& a : t.axes) print(a.name, a.values);
-  for (const auto& o : t.outputs) print(o.name, o.values);
+  });
   prog += "  printf(\"%08lx %s\\n\", (unsigned long)fluxcal_fw_payload_crc32, fluxcal_fw_payload_sha256);\n  return 0;\n}\n";
-  { std::ofstream(dir + "/main.c") << prog; }
-  const std::string cmd = "cd " + dir + " && cc -std=c99 -pedantic -Wall -Wextra -Werror main.c -o main "
-                          "> build.log 2>&1 && ./main > out.txt";
-  ASSERT_EQ(std::system(cmd.c_str()), 0) << "compiling the exported header failed; see " << dir
-                                         << "/build.log\n" << prog;
-  std::ifstream in(dir + "/out.txt");
+  std::string printed;
+  ASSERT_NO_FATAL_FAILURE(BuildAndRunC99("fluxcal_c_header", {{"table.h", e->bytes}}, prog, "",
+                                         "compiling the exported header failed", &printed));
+  std::istringstream in(printed);
   for (const auto& v : want) {
     for (double x : v) {
       double got;
@@ -395,7 +373,7 @@ std::vector<std::pair<double, double>> PathPoints(const char* d) {
 // bar (whose labels are round ticks from end to end) shows its value, and
 // one cross per clamped cell.
 TEST(Plots, SvgParsesAndDrawsTheTables) {
-  const auto m = Motor();
+  const auto& m = SaturatedTwin();
   MachineLimits lim = TwinLimits();
   TableSpec spec;
   spec.points = 9;

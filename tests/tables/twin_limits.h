@@ -13,6 +13,7 @@
 #include "fitting/fit.h"
 #include "gtest/gtest.h"
 #include "simulation/twin.h"
+#include "tables/export_rule.h"
 #include "tables/tables.h"
 
 namespace fluxcal::tables {
@@ -24,6 +25,48 @@ inline MachineLimits TwinLimits(double i_max_a = 150.0) {
   lim.udc_v = sim::DriveParams().udc_v;
   lim.i_max_a = i_max_a;
   return lim;
+}
+
+// The twin motor with cross saturation (g_cross 3e-5 H): past its MTPV
+// onset within the tests' speeds. One instance for every test.
+inline const sim::AnalyticMotor& SaturatedTwin() {
+  static const sim::AnalyticMotor m{[] {
+    sim::MotorParams p;
+    p.sat.g_cross_h = 3e-5;
+    return p;
+  }()};
+  return m;
+}
+
+// A small table as the export tests read it back: 5 rows, 4 speeds up to
+// `speed_max_rpm`, labelled with a serial, version and model.
+inline TableSpec SmallLabelledSpec(const std::string& kind, double speed_max_rpm) {
+  TableSpec spec;
+  spec.kind = kind;
+  spec.points = 5;
+  spec.speed_points = 4;
+  spec.speed_max_rpm = speed_max_rpm;
+  spec.serial = "IPM-T-1";
+  spec.calibration_version = 3;
+  spec.model = "analytic";
+  return spec;
+}
+
+// A table of `kind` with `points` rows and `speed_points` speeds.
+inline TableSpec GridSpec(const std::string& kind, int points, int speed_points) {
+  TableSpec spec;
+  spec.kind = kind;
+  spec.points = points;
+  spec.speed_points = speed_points;
+  return spec;
+}
+
+// An export request that takes clamped cells (the twin's tables over a Udc
+// axis clamp at the low voltages).
+inline ExportRequest ClampedAllowed() {
+  ExportRequest r;
+  r.allow_clamped = true;
+  return r;
 }
 
 // The twin motor fitted from its own flux linkage on a grid (id -150..0 A,
