@@ -61,16 +61,36 @@ T IntPow(const T& x, int n) {
   return r;
 }
 
-// Polynomial family. p[0] = psi_pm, p[1..] = c_ab in PolyTerms(n) order.
+// The largest degree a polynomial family has (the decoders refuse more:
+// fitting/calibration.cc, pipeline/calibration_codec.cc).
+inline constexpr int kPolyMaxDegree = 12;
+
+// x^0..x^n by repeated multiplication, as IntPow computes each (the same
+// products in the same order: bit-identical), into `pw` (n <= kPolyMaxDegree).
+template <typename T>
+void PolyPowers(const T& x, int n, T* pw) {
+  pw[0] = T(1.0);
+  for (int k = 1; k <= n; ++k) pw[k] = pw[k - 1] * x;
+}
+
+// Polynomial family. p[0] = psi_pm, p[1..] = c_ab in PolyTerms(n) order
+// (deg = 2..n, b = 0, 2, .., deg, a = deg - b), walked here without
+// building the list: these run at every sub-step of a replay (measured:
+// the list's allocation and the repeated powers were two thirds of a
+// diagnosis on a polynomial calibration).
 template <typename T, typename P>
 void PolyFlux(int n, const T& id, const T& iq, const P* p, T* psi_d, T* psi_q) {
-  const auto terms = PolyTerms(n);
-  const T x = id / kPolyI0A, y = iq / kPolyI0A;
+  T xp[kPolyMaxDegree + 1], yp[kPolyMaxDegree + 1];
+  PolyPowers(T(id / kPolyI0A), n, xp);
+  PolyPowers(T(iq / kPolyI0A), n, yp);
   T sd(0.0), sq(0.0);
-  for (size_t k = 0; k < terms.size(); ++k) {
-    const int a = terms[k].first, b = terms[k].second;
-    if (a > 0) sd = sd + p[1 + k] * double(a) * IntPow(x, a - 1) * IntPow(y, b);
-    if (b > 0) sq = sq + p[1 + k] * double(b) * IntPow(x, a) * IntPow(y, b - 1);
+  int k = 1;
+  for (int deg = 2; deg <= n; ++deg) {
+    for (int b = 0; b <= deg; b += 2, ++k) {
+      const int a = deg - b;
+      if (a > 0) sd = sd + p[k] * double(a) * xp[a - 1] * yp[b];
+      if (b > 0) sq = sq + p[k] * double(b) * xp[a] * yp[b - 1];
+    }
   }
   *psi_d = p[0] + kPolyL0H * kPolyI0A * sd;
   *psi_q = kPolyL0H * kPolyI0A * sq;
@@ -78,14 +98,18 @@ void PolyFlux(int n, const T& id, const T& iq, const P* p, T* psi_d, T* psi_q) {
 
 template <typename T, typename P>
 void PolyInductance(int n, const T& id, const T& iq, const P* p, T* ldd, T* lqq, T* ldq) {
-  const auto terms = PolyTerms(n);
-  const T x = id / kPolyI0A, y = iq / kPolyI0A;
+  T xp[kPolyMaxDegree + 1], yp[kPolyMaxDegree + 1];
+  PolyPowers(T(id / kPolyI0A), n, xp);
+  PolyPowers(T(iq / kPolyI0A), n, yp);
   T dd(0.0), qq(0.0), dq(0.0);
-  for (size_t k = 0; k < terms.size(); ++k) {
-    const int a = terms[k].first, b = terms[k].second;
-    if (a > 1) dd = dd + p[1 + k] * double(a * (a - 1)) * IntPow(x, a - 2) * IntPow(y, b);
-    if (b > 1) qq = qq + p[1 + k] * double(b * (b - 1)) * IntPow(x, a) * IntPow(y, b - 2);
-    if (a > 0 && b > 0) dq = dq + p[1 + k] * double(a * b) * IntPow(x, a - 1) * IntPow(y, b - 1);
+  int k = 1;
+  for (int deg = 2; deg <= n; ++deg) {
+    for (int b = 0; b <= deg; b += 2, ++k) {
+      const int a = deg - b;
+      if (a > 1) dd = dd + p[k] * double(a * (a - 1)) * xp[a - 2] * yp[b];
+      if (b > 1) qq = qq + p[k] * double(b * (b - 1)) * xp[a] * yp[b - 2];
+      if (a > 0 && b > 0) dq = dq + p[k] * double(a * b) * xp[a - 1] * yp[b - 1];
+    }
   }
   *ldd = kPolyL0H * dd;
   *lqq = kPolyL0H * qq;
