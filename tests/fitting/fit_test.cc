@@ -99,7 +99,9 @@ TEST(Fit, RecoversTruthWithinHalfPercent) {
     // model was tried, the scores tie and the small-signal fit stays
     // (docs/fitting.md, "Large-signal HF").
     for (const auto& line : cal->summary.candidates) {
-      if (line.rfind("hf model:", 0) == 0) EXPECT_NE(line.find("small-signal kept"), std::string::npos) << line;
+      if (line.rfind("hf model:", 0) == 0) {
+        EXPECT_NE(line.find("small-signal kept"), std::string::npos) << line;
+      }
     }
   }
 }

@@ -595,7 +595,7 @@ TEST(RealMaps, LargeSignalTable) {
     const GateRow g = GateOf(*cl);
     const MachineMap mm = TraitMachine(t, 100.0);
     std::printf("twin %-14s seed %d | cv small %.4g large %.4g | %s kept | flux %.3f / %.3f %% | L %.2f / %.2f %%\n",
-                t.name.c_str(), cfg.seed, g.cv_small, g.cv_large, g.large_kept ? "large" : "small",
+                t.name.c_str(), static_cast<int>(cfg.seed), g.cv_small, g.cv_large, g.large_kept ? "large" : "small",
                 100 * FluxRms(*cs, mm), 100 * FluxRms(*cl, mm), 100 * InductanceRmsOverPlan(*cs, *machine),
                 100 * InductanceRmsOverPlan(*cl, *machine));
     EXPECT_TRUE(g.large_kept) << t.name;

@@ -268,7 +268,7 @@ TEST(FluxMapExport, InverseOfAMapThatFallsNearZeroCurrent) {
   for (double id : {-300.0, -225.0, -165.0, -135.0, -60.0, 0.0}) {
     for (double iq : {0.0, 51.0, 126.0, 174.0, 249.0, 300.0}) {
       const auto L = motor.Inductance(id, iq);
-      d.inductances.push_back({id, iq, L.ldd_h, L.lqq_h, L.ldq_h, 0, 0, 0});
+      d.inductances.push_back({id, iq, L.ldd_h, L.lqq_h, L.ldq_h, 0, 0, 0, {}, {}});
     }
   }
   for (double id : {-300.0, -165.0, -60.0}) {
