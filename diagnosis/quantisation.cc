@@ -57,6 +57,9 @@ double CurrentStepA(const io::Waveform& w) {
   double step = 0;
   for (const std::vector<double>* v : {&w.ia_a, &w.ib_a, &w.ic_a}) {
     if (v->size() < 64) continue;
+    // A non-finite sample (the readers refuse them; this is a second line)
+    // would break the sort's ordering: no grid is read from such a phase.
+    if (!std::all_of(v->begin(), v->end(), [](double x) { return std::isfinite(x); })) continue;
     std::vector<double> s(*v);
     std::sort(s.begin(), s.end());
     s.erase(std::unique(s.begin(), s.end()), s.end());
