@@ -80,6 +80,12 @@ void PolyPowers(const T& x, int n, T* pw) {
 // diagnosis on a polynomial calibration).
 template <typename T, typename P>
 void PolyFlux(int n, const T& id, const T& iq, const P* p, T* psi_d, T* psi_q) {
+  // A degree the powers' buffer cannot hold (the decoders and the fit's
+  // model names never make one): no value, not a write past the buffer.
+  if (n < 0 || n > kPolyMaxDegree) {
+    *psi_d = *psi_q = T(std::numeric_limits<double>::quiet_NaN());
+    return;
+  }
   T xp[kPolyMaxDegree + 1], yp[kPolyMaxDegree + 1];
   PolyPowers(T(id / kPolyI0A), n, xp);
   PolyPowers(T(iq / kPolyI0A), n, yp);
@@ -98,6 +104,12 @@ void PolyFlux(int n, const T& id, const T& iq, const P* p, T* psi_d, T* psi_q) {
 
 template <typename T, typename P>
 void PolyInductance(int n, const T& id, const T& iq, const P* p, T* ldd, T* lqq, T* ldq) {
+  // A degree the powers' buffer cannot hold (the decoders and the fit's
+  // model names never make one): no value, not a write past the buffer.
+  if (n < 0 || n > kPolyMaxDegree) {
+    *ldd = *lqq = *ldq = T(std::numeric_limits<double>::quiet_NaN());
+    return;
+  }
   T xp[kPolyMaxDegree + 1], yp[kPolyMaxDegree + 1];
   PolyPowers(T(id / kPolyI0A), n, xp);
   PolyPowers(T(iq / kPolyI0A), n, yp);

@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "fitting/fit.h"
+#include "fitting/flux_family.h"
 #include "fitting/surface.h"
 #include "gtest/gtest.h"
 #include "identification/identify.h"
@@ -104,6 +105,46 @@ TEST(Fit, RecoversTruthWithinHalfPercent) {
       }
     }
   }
+}
+
+// The polynomial family evaluates its powers in a fixed buffer
+// (flux_family.h): the largest degree a calibration may carry (12) gives
+// finite values equal to the term-by-term sum; a degree beyond the buffer,
+// which no decoder or model name makes, gives no value (NaN) instead of a
+// write past it.
+TEST(Fit, PolynomialDegreeBounds) {
+  for (int degree : {2, 7, 12}) {
+    Family f;
+    f.kind = Family::kPoly;
+    f.degree = degree;
+    std::vector<double> p(f.NumParams());
+    for (size_t k = 0; k < p.size(); ++k) p[k] = 0.01 * std::cos(1.7 * static_cast<double>(k));
+    double pd, pq, ldd, lqq, ldq;
+    FamilyFlux(f, -40.0, 70.0, p.data(), &pd, &pq);
+    FamilyInductance(f, -40.0, 70.0, p.data(), &ldd, &lqq, &ldq);
+    // The same sums from the exponent list, power by power.
+    const double x = -40.0 / kPolyI0A, y = 70.0 / kPolyI0A;
+    double sd = 0, sq = 0, dq = 0;
+    const auto terms = PolyTerms(degree);
+    for (size_t k = 0; k < terms.size(); ++k) {
+      const auto [a, b] = terms[k];
+      if (a > 0) sd += p[1 + k] * a * std::pow(x, a - 1) * std::pow(y, b);
+      if (b > 0) sq += p[1 + k] * b * std::pow(x, a) * std::pow(y, b - 1);
+      if (a > 0 && b > 0) dq += p[1 + k] * a * b * std::pow(x, a - 1) * std::pow(y, b - 1);
+    }
+    EXPECT_NEAR(pd, p[0] + kPolyL0H * kPolyI0A * sd, 1e-12) << degree;
+    EXPECT_NEAR(pq, kPolyL0H * kPolyI0A * sq, 1e-12) << degree;
+    EXPECT_NEAR(ldq, kPolyL0H * dq, 1e-15) << degree;
+    EXPECT_TRUE(std::isfinite(ldd) && std::isfinite(lqq)) << degree;
+  }
+  Family f;
+  f.kind = Family::kPoly;
+  f.degree = kPolyMaxDegree + 1;
+  std::vector<double> p(f.NumParams(), 0.01);
+  double pd = 0, pq = 0, ldd = 0, lqq = 0, ldq = 0;
+  FamilyFlux(f, -40.0, 70.0, p.data(), &pd, &pq);
+  FamilyInductance(f, -40.0, 70.0, p.data(), &ldd, &lqq, &ldq);
+  EXPECT_TRUE(std::isnan(pd) && std::isnan(pq) && std::isnan(ldd) && std::isnan(lqq) && std::isnan(ldq));
 }
 
 TEST(Fit, LeaveOneOutWithinOnePercent) {
