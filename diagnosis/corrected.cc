@@ -1,3 +1,4 @@
+#include "diagnosis/effects/effect_term.h"
 #include "diagnosis/internal.h"
 
 #include <algorithm>
@@ -28,9 +29,8 @@ fit::FitData CorrectedFitData(const io::RecordingSet& set, const Model& m, const
   mc.dead_nom_s = 0.0;   // no dead time acts in the clean model
   Params clean = final_p;
   // The test's drifts go too: the calibration holds the mean.
-  for (Block b : {kDead, kRhf, kOffset, kGain, kDelay, kHarm, kSensorOffset, kUdcGain, kRImb, kDrift, kVth, kAngleHarm,
-                  kIronLoss, kPsiDrift, kTorqueLoss}) {
-    std::fill(clean.b[b].begin(), clean.b[b].end(), 0.0);
+  for (const auto& term : EffectTerms()) {
+    for (Block b : term.artefact_blocks) std::fill(clean.b[b].begin(), clean.b[b].end(), 0.0);
   }
   const auto pf = final_p.Ptrs(), pc = clean.Ptrs();
   d.rs_ohm = m.Rs(pf.data());

@@ -25,6 +25,7 @@
 #include "simulation/frames.h"
 #include "simulation/magnetic_model.h"
 #include "simulation/twin.h"
+#include "diagnosis/effects/effect_term.h"
 #include "diagnosis/internal.h"
 
 namespace fluxcal::diag {
@@ -73,30 +74,15 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
   const auto z_before = Residuals(m, base.p);
   rep.mismatches = Locate(z_before, opt.mismatch_sigma);
 
-  // torque_loss needs the torque of a few rows (its two parameters, and one
-  // more row to see them).
-  const long torque_rows = std::count_if(m.ss.begin(), m.ss.end(), [](const SsObs& o) { return o.has_torque; });
-  std::vector<Candidate> cands = {
-      {"dead_time", kDead}, {"stator_resistance", kRs},
-      {"hf_resistance", kRhf}, {"position_offset", kOffset}, {"current_sensor_gain", kGain},
-      {"magnet_temperature", kPsi}, {"magnet_temperature", kPsiDrift, 0, kPsi}, {"sampling_delay", kDelay},
-      {"spatial_harmonics", kHarm, 4}, {"spatial_harmonics", kHarm, 6}, {"spatial_harmonics", kHarm, 8},
-      {"spatial_harmonics", kHarm, 12}, {"current_sensor_offset", kSensorOffset},
-      {"dc_link_sense_gain", kUdcGain}, {"phase_resistance_imbalance", kRImb},
-      {"stator_temperature_drift", kDrift}, {"inverter_voltage_drop", kVth},
-      {"position_sensor_harmonic", kAngleHarm}, {"iron_loss", kIronLoss}, {"torque_loss", kTorqueLoss}};
-  // A switch threshold is a candidate only where the held points span two
-  // DC-link voltages; at one it is the dead time's signature exactly, and
-  // the dead_time finding names it as the alternative (verdict.cc).
-  cands.erase(std::remove_if(cands.begin(), cands.end(),
-                             [&](const Candidate& c) {
-                               return opt.excluded_effects.count(c.effect) > 0 ||
-                                      (m.ss.empty() && c.effect == "magnet_temperature") ||
-                                      (c.block == kPsiDrift && m.ss.size() < 3) ||
-                                      (c.block == kTorqueLoss && torque_rows < 3) ||
-                                      (c.block == kVth && m.udc_ratio <= kTwoUdcRatio);
-                             }),
-              cands.end());
+  // Every effect's candidates the set can test (diagnosis/effects/), in
+  // the report's order.
+  std::vector<Candidate> cands;
+  for (const auto& term : EffectTerms()) {
+    if (opt.excluded_effects.count(std::string(term.effect)) > 0) continue;
+    for (const auto& c : term.candidates) {
+      if (term.testable == nullptr || term.testable(c, m)) cands.push_back(c);
+    }
+  }
   // The blocks a candidate frees (its own, and for a drift the mean beside it).
   auto blocks_of = [](const Candidate& c) {
     std::vector<Block> v = {c.block};

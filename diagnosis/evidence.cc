@@ -1,3 +1,4 @@
+#include "diagnosis/effects/effect_term.h"
 #include "diagnosis/internal.h"
 
 #include <algorithm>
@@ -50,29 +51,10 @@ absl::StatusOr<std::vector<sim::ReplayPoint>> ReplayModel(const io::RecordingSet
   const auto ptr = p.Ptrs();
   sim::ReplayOptions opt;
   opt.substeps = 5;   // RK4 at 20 us: w_i h = 0.06, far inside its accuracy
-  opt.rs_ohm = m.Rs(ptr.data());
-  opt.effects.dead_time_s = m.DeadTime(ptr.data());
-  opt.effects.dead_time_i_th_a = m.ith_a;
-  opt.effects.offset_rad = m.Offset(ptr.data());
-  opt.effects.delay_s = m.Delay(ptr.data());
-  opt.effects.r_hf_ohm = m.RHf(ptr.data());
-  opt.effects.order = ptr[kHarm][0] != 0.0 ? harm_order : 0;
-  opt.effects.amplitude_h = m.Harm(ptr.data());
-  opt.effects.udc_sense_gain = m.UdcGain(ptr.data());
-  opt.effects.threshold_v = m.Vth(ptr.data());
-  opt.effects.r_fe_ohm = m.Gfe(ptr.data()) > 0 ? 1.0 / m.Gfe(ptr.data()) : 0.0;
-  opt.effects.harmonic_amplitude_rad = std::abs(m.AngleHarm(ptr.data()));
-  opt.effects.harmonic_phase_rad = std::arg(m.AngleHarm(ptr.data()));
-  for (int x = 0; x < 3; ++x) {
-    double* dr[3] = {&opt.effects.dr_a_ohm, &opt.effects.dr_b_ohm, &opt.effects.dr_c_ohm};
-    *dr[x] = 2 * std::real(m.RImb(ptr.data()) * std::polar(1.0, -2 * kPhasePhi[x]));
+  // Each effect's share at the model's parameters (diagnosis/effects/).
+  for (const auto& term : EffectTerms()) {
+    if (term.replay != nullptr) term.replay(m, ptr.data(), harm_order, &opt);
   }
-  const Complex so = m.SensorOffset(ptr.data());
-  opt.effects.offset_a_a = PhaseOffset(so, 0);
-  opt.effects.offset_b_a = PhaseOffset(so, 1);
-  opt.effects.offset_c_a = PhaseOffset(so, 2);
-  double* g[3] = {&opt.effects.gain_a, &opt.effects.gain_b, &opt.effects.gain_c};
-  for (int x = 0; x < 3; ++x) *g[x] = PhaseGain(m.M1(ptr.data()), m.M2(ptr.data()), x);
   return sim::ReplayOpenLoop(set, model, opt);
 }
 

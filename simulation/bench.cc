@@ -8,6 +8,7 @@
 #include "absl/strings/str_format.h"
 #include "physics/delay.h"
 #include "physics/torque.h"
+#include "simulation/catalogue/catalogue_effect.h"
 
 namespace fluxcal::sim {
 
@@ -117,14 +118,14 @@ PointRun RunPoint(const TwinConfig& cfg, const PlantModel& m, double id_ref, dou
     // crosstalk) before their gains, offsets, noise and quantisation.
     for (const auto& e : cfg.effects.unmodelled) e->Sense(t, &ia, &ib, &ic);
     const double lsb = cfg.sensors.adc_lsb_a;
-    auto sense = [&](double i, double g, double offset) {
-      double v = g * i + offset + noise(*rng);
+    // The catalogue's sensor effects (gains, offsets; simulation/catalogue/).
+    SenseCurrents(cfg.effects, &ia, &ib, &ic);
+    auto sense = [&](double i) {
+      double v = i + noise(*rng);
       if (lsb > 0) v = std::round(v / lsb) * lsb;
       return v;
     };
-    const double ma = sense(ia, cfg.effects.gain_a, cfg.effects.offset_a_a),
-                 mb = sense(ib, cfg.effects.gain_b, cfg.effects.offset_b_a),
-                 mc = sense(ic, cfg.effects.gain_c, cfg.effects.offset_c_a);
+    const double ma = sense(ia), mb = sense(ib), mc = sense(ic);
     double th_meas = th + AngleSensorError(cfg.effects, th);
     for (const auto& e : cfg.effects.unmodelled) th_meas += e->AngleError(th, m.MechanicalAngle(th));
     // Encoder counts, read to the nearest count (an encoder whose zero is
@@ -287,21 +288,10 @@ PlantModel MakePlant(const TwinConfig& cfg, double temperature_c) {
     m.map_psi_shift_wb = cfg.effects.psi_pm_wb ? *cfg.effects.psi_pm_wb - map_pm : 0.0;
     m.p[0] = map_pm + m.map_psi_shift_wb;   // reported psi_pm
   }
-  m.r_hf_ohm = cfg.effects.r_hf_ohm;
-  m.order = cfg.effects.order;
-  m.amplitude_h = cfg.effects.amplitude_h;
-  m.dead_time_s = cfg.effects.dead_time_s;
-  m.dead_time_i_th_a = cfg.effects.dead_time_i_th_a;
   m.udc_v = cfg.drive.udc_v;
   m.ts_s = 1.0 / cfg.drive.f_pwm_hz;
   m.u_max_v = cfg.drive.udc_v / kSqrt3;
-  m.voltage_gain = 1.0 / cfg.effects.udc_sense_gain;
-  m.dr_a_ohm = cfg.effects.dr_a_ohm;
-  m.dr_b_ohm = cfg.effects.dr_b_ohm;
-  m.dr_c_ohm = cfg.effects.dr_c_ohm;
-  m.threshold_v = cfg.effects.threshold_v;
-  m.slope_ohm = cfg.effects.slope_ohm;
-  m.g_fe_s = cfg.effects.r_fe_ohm > 0 ? 1.0 / cfg.effects.r_fe_ohm : 0.0;
+  ApplyEffectsToPlant(cfg.effects, &m);   // simulation/catalogue/
   m.pole_pairs = cfg.motor.pole_pairs;
   m.unmodelled = &cfg.effects.unmodelled;
   return m;
@@ -472,8 +462,7 @@ absl::StatusOr<SimulationResult> Simulate(const TwinConfig& cfg, const Plan& pla
       // The transducer reads the air-gap torque less the mechanical loss
       // between them (torque_loss).
       row.torque_nm = run.mean_torque_nm -
-                      physics::MechanicalLossTorque(cfg.effects.friction_nm, cfg.effects.viscous_nm_per_rad_s,
-                                                    ss.speed_rpm) +
+                      TorqueReadingLoss(cfg.effects, ss.speed_rpm) +
                       tnoise(rng);
       row.temperature_c = ss.temperature_c;
       // What the bench held over the window (PointRun says how each is taken).

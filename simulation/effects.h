@@ -2,10 +2,12 @@
 // docs/diagnosis-report.md. Each row gives the effect's report name, its
 // parameters (report name, unit, neutral value, the scale diagnosis fits it
 // on, the materiality floor below which no calibration decision changes),
-// what it means, and how diagnosis explains it. The twin (this file's
-// Effects and ParseEffects), diagnosis (its candidates, scales, floors and
-// explanations), the report and the docs read it; adding an effect is one
-// row here plus its physics term on each side.
+// what it means, and how diagnosis explains it. The rows are a registry,
+// one file per effect (simulation/catalogue/, which also binds the
+// effect's --effects keys to the fields of Effects below and states its
+// truth); the twin (Effects, ParseEffects), diagnosis (its candidates,
+// scales, floors and explanations; one file per effect under
+// diagnosis/effects/), the report and the docs read it.
 #ifndef FLUXCAL_SIMULATION_EFFECTS_H_
 #define FLUXCAL_SIMULATION_EFFECTS_H_
 

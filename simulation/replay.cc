@@ -8,6 +8,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "simulation/bench.h"
+#include "simulation/catalogue/catalogue_effect.h"
 #include "simulation/twin.h"
 
 namespace fluxcal::sim {
@@ -23,21 +24,10 @@ PlantModel ReplayPlant(const MagneticModel& model, double temperature_c, double 
   m.map = &model;
   m.map_temperature_c = temperature_c;
   m.rs_ohm = rs_ohm;
-  m.r_hf_ohm = e.r_hf_ohm;
-  m.order = e.order;
-  m.amplitude_h = e.amplitude_h;
-  m.dead_time_s = e.dead_time_s;
-  m.dead_time_i_th_a = e.dead_time_i_th_a;
   m.udc_v = udc_v;
   m.ts_s = ts_s;
   m.u_max_v = u_max_v;
-  m.voltage_gain = 1.0 / e.udc_sense_gain;
-  m.dr_a_ohm = e.dr_a_ohm;
-  m.dr_b_ohm = e.dr_b_ohm;
-  m.dr_c_ohm = e.dr_c_ohm;
-  m.threshold_v = e.threshold_v;
-  m.g_fe_s = e.r_fe_ohm > 0 ? 1.0 / e.r_fe_ohm : 0.0;
-  m.slope_ohm = e.slope_ohm;
+  ApplyEffectsToPlant(e, &m);   // simulation/catalogue/
   return m;
 }
 

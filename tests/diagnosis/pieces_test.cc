@@ -1,10 +1,15 @@
 // Diagnosis' pieces against analytic truth (diagnosis/internal.h): the
 // effect model's predictions, the staircase delay, the phasor solve, the
 // dead-time soft sign, locating, and the phase parameters of the verdict.
+#include <algorithm>
 #include <cmath>
 #include <complex>
+#include <fstream>
+#include <set>
+#include <sstream>
 
 #include "diagnosis/diagnose.h"
+#include "diagnosis/effects/effect_term.h"
 #include "diagnosis/internal.h"
 #include "gtest/gtest.h"
 #include "identification/inductance.h"
@@ -207,6 +212,84 @@ TEST(Verdict, PhaseGainsAndOffsets) {
   EXPECT_NEAR(PhaseOffset(o, 0), oa, 1e-12);
   EXPECT_NEAR(PhaseOffset(o, 1), ob, 1e-12);
   EXPECT_NEAR(PhaseOffset(o, 2), oc, 1e-12);
+}
+
+// The effect registry (diagnosis/effects/): every block of the model
+// belongs to exactly one catalogue effect, every effect with parameters in
+// the catalogue has its term, and every parameter a finding can carry is
+// in the report's contract (docs/diagnosis-report.md), so a new effect
+// cannot land with a block nobody fits, a finding nobody documented, or a
+// catalogue row diagnosis never tries.
+TEST(EffectRegistry, BlocksEffectsAndParametersAreOneToOneAndDocumented) {
+  std::ifstream f(std::string(FLUXCAL_SOURCE_DIR) + "/docs/diagnosis-report.md");
+  std::stringstream ss;
+  ss << f.rdbuf();
+  const std::string doc = ss.str();
+  ASSERT_FALSE(doc.empty());
+  std::map<int, std::string> owner;
+  std::set<std::string> reported;   // by some finding or alternative
+  for (const auto& term : EffectTerms()) {
+    const std::string name(term.effect);
+    const sim::EffectRow* row = sim::FindEffect(term.effect);
+    ASSERT_NE(row, nullptr) << name << " is not in the catalogue";
+    EXPECT_EQ(FindTerm(term.effect), &term);
+    ASSERT_FALSE(term.candidates.empty()) << name;
+    ASSERT_NE(term.describe, nullptr) << name;
+    for (const auto& c : term.candidates) {
+      EXPECT_EQ(c.effect, name);
+      for (Block b : {c.block, c.also}) {
+        if (b == kNumBlocks) continue;
+        EXPECT_NE(b, kBase) << name << ": the surfaces are the baseline's";
+        const auto [it, fresh] = owner.emplace(b, name);
+        if (!fresh) {
+          EXPECT_EQ(it->second, name) << "block " << b << " of two effects";
+        }
+      }
+      // Describe at a fit with every block at 1 and a deviation on each.
+      Model m = TestModel();
+      m.ith_estimated = true;
+      m.ith_std_a = 0.1;
+      m.udc_nom_v = 48;
+      m.ss.resize(4);
+      FitOut fit;
+      fit.p = Params(m);
+      for (int k = 1; k < kNumBlocks; ++k) {
+        std::fill(fit.p.b[k].begin(), fit.p.b[k].end(), 1.0);
+        fit.stdev[static_cast<Block>(k)] = std::vector<double>(kBlockSize[k], 0.1);
+      }
+      const Finding d = Describe(c, m, fit);
+      EXPECT_EQ(d.effect, name);
+      EXPECT_FALSE(d.explanation.empty()) << name;
+      EXPECT_FALSE(d.parameters.empty()) << name;
+      for (const auto& [param, value] : d.parameters) {
+        EXPECT_TRUE(std::isfinite(value)) << name << "." << param;
+        EXPECT_NE(doc.find("`" + param + "`"), std::string::npos)
+            << name << " reports '" << param << "', which docs/diagnosis-report.md does not name";
+      }
+      for (const auto& [param, value] : d.parameters) reported.insert(param);
+      for (const auto& alt : d.alternatives) {
+        for (const auto& [param, value] : alt.parameters) reported.insert(param);
+      }
+    }
+    // What the diagnosed calibration is freed of is the effect's own.
+    for (Block b : term.artefact_blocks) {
+      bool own = false;
+      for (const auto& c : term.candidates) own = own || c.block == b || c.also == b;
+      EXPECT_TRUE(own) << name << " frees block " << b << " it does not fit";
+    }
+  }
+  for (int k = 1; k < kNumBlocks; ++k) EXPECT_EQ(owner.count(k), 1u) << "block " << k << " has no effect";
+  // Every catalogue row with parameters is tried by diagnosis, and each of
+  // its parameters reported by a finding (inverter_voltage_drop's slope as
+  // stator_resistance's alternative, a drift's ends by the drift).
+  for (const auto& row : sim::EffectCatalogue()) {
+    if (!row.parameters.empty()) {
+      EXPECT_NE(FindTerm(row.name), nullptr) << row.name << " has no diagnosis term";
+    }
+    for (const auto& p : row.parameters) {
+      EXPECT_EQ(reported.count(std::string(p.name)), 1u) << row.name << "." << p.name << " is never reported";
+    }
+  }
 }
 
 }  // namespace

@@ -1,6 +1,7 @@
 // The twin's pieces against analytic truth: frames (Clarke/Park, rpm ->
 // w_e, ZOH gain), the plant (RL step response, dead-time error, the
 // DC-link sense gain's voltage scaling), and the effect catalogue.
+#include <algorithm>
 #include <cmath>
 #include <complex>
 #include <fstream>
@@ -9,6 +10,7 @@
 
 #include "gtest/gtest.h"
 #include "simulation/bench_effect.h"
+#include "simulation/catalogue/catalogue_effect.h"
 #include "simulation/effects.h"
 #include "simulation/frames.h"
 #include "simulation/plant.h"
@@ -203,7 +205,57 @@ TEST(Catalogue, RowsAreUniqueAndDocumented) {
     }
   }
   EXPECT_EQ(&EffectParam("dead_time", "dead_time_s"), &FindEffect("dead_time")->parameters[0]);
+  // The registry (simulation/catalogue/): one entry per row, in the rows'
+  // order; each --effects key owned once (bench effects included) and
+  // switching its effect on away from the neutral value.
+  ASSERT_EQ(CatalogueEffects().size(), EffectCatalogue().size());
+  std::set<std::string> keys;
+  for (const auto& x : BenchEffectParameterNames()) keys.insert(x);
+  for (size_t k = 0; k < CatalogueEffects().size(); ++k) {
+    const auto& c = CatalogueEffects()[k];
+    EXPECT_EQ(c.row.name, EffectCatalogue()[k].name);
+    ASSERT_NE(c.truth, nullptr) << c.row.name;
+    for (const auto& key : c.keys) {
+      EXPECT_TRUE(keys.insert(std::string(key.name)).second) << key.name << " owned twice";
+      EXPECT_EQ((key.value != nullptr) + (key.optional != nullptr) + (key.integer != nullptr), 1) << key.name;
+    }
+    if (c.keys.empty()) continue;
+    // Every key of the effect at 2 (a real order, gains of 2, ...) turns it on.
+    std::string spec;
+    for (const auto& key : c.keys) spec += std::string(spec.empty() ? "" : ",") + std::string(key.name) + "=2";
+    Effects e;
+    ASSERT_TRUE(ParseEffects(spec, &e, nullptr).ok()) << spec;
+    const auto on = ActiveEffectNames(e);
+    EXPECT_NE(std::find(on.begin(), on.end(), std::string(c.row.name)), on.end()) << spec;
+    EXPECT_FALSE(c.truth(e).empty()) << c.row.name;
+  }
   EXPECT_EQ(FindEffect("no_such_effect"), nullptr);
+}
+
+// The registry's sensor hooks compose as the bench reads: gain, then
+// offset, per phase; the angle error sums offset and harmonic; the torque
+// transducer loses friction and drag.
+TEST(Catalogue, SensorHooksComposeAsTheBenchReads) {
+  Effects e;
+  ASSERT_TRUE(ParseEffects("gain_a=1.02,gain_c=0.99,offset_b_a=0.3,offset_c_a=-0.1,offset_rad=0.02,"
+                           "harmonic_amplitude_rad=0.01,harmonic_phase_rad=0.5,friction_nm=0.2,"
+                           "viscous_nm_per_rad_s=0.001",
+                           &e, nullptr)
+                  .ok());
+  double ia = 10, ib = -4, ic = -6;
+  SenseCurrents(e, &ia, &ib, &ic);
+  EXPECT_DOUBLE_EQ(ia, 10.2);
+  EXPECT_DOUBLE_EQ(ib, -3.7);
+  EXPECT_DOUBLE_EQ(ic, 0.99 * -6 - 0.1);
+  EXPECT_DOUBLE_EQ(AngleSensorError(e, 0.7), 0.02 + 0.01 * std::sin(1.4 + 0.5));
+  const double w_m = 1500 * 2 * kPi / 60;
+  EXPECT_NEAR(TorqueReadingLoss(e, 1500), 0.2 + 0.001 * w_m, 1e-12);
+  EXPECT_NEAR(TorqueReadingLoss(e, -1500), -(0.2 + 0.001 * w_m), 1e-12);
+  PlantModel m;
+  ApplyEffectsToPlant(Effects{}, &m);
+  EXPECT_EQ(m.voltage_gain, 1.0);
+  EXPECT_EQ(m.g_fe_s, 0.0);
+  EXPECT_EQ(m.r_hf_ohm, 0.0);
 }
 
 // The twin-only effects (simulation/bench_effect.h): each named with its
