@@ -16,10 +16,35 @@ namespace fluxcal::diag::detail {
 // evaluator for the parameters (fitting/surface.h), and the last point's
 // flux and inductance kept, since the plant's Newton steps ask for both at
 // each point.
+//
+// Beyond the currents the set measured the surfaces are continued with the
+// inductance at the box's edge (ContinuedSurface, internal.h).
+MeasuredBox MeasuredBoxOf(const Model& m) {
+  MeasuredBox box;
+  auto widen = [&](double id, double iq) {
+    box.id_lo_a = std::min(box.id_lo_a, id);
+    box.id_hi_a = std::max(box.id_hi_a, id);
+    box.iq_hi_a = std::max(box.iq_hi_a, std::abs(iq));
+  };
+  for (const auto& o : m.hf) widen(o.id_a, o.iq_a);
+  for (const auto& o : m.dc) widen(o.id_a, o.iq_a);
+  for (const auto& o : m.ss) widen(o.id_a, o.iq_a);
+  return box;
+}
+
+void ContinuedSurface(const fit::SurfaceEvaluator& eval, const MeasuredBox& box, double id, double iq, double* pd,
+                      double* pq, double* ldd, double* lqq, double* ldq) {
+  const double id0 = std::clamp(id, box.id_lo_a, box.id_hi_a), iq0 = std::clamp(iq, -box.iq_hi_a, box.iq_hi_a);
+  eval.Eval(id0, iq0, pd, pq, ldd, lqq, ldq);
+  const double dd = id - id0, dq = iq - iq0;
+  *pd += *ldd * dd + *ldq * dq;
+  *pq += *ldq * dd + *lqq * dq;
+}
+
 class SurfaceModel : public sim::MagneticModel {
  public:
   SurfaceModel(const Model& m, const Params& p)
-      : eval_(m.surf, p.b[kBase]), psi_pm_(m.PsiPm(p.Ptrs().data())) {}
+      : eval_(m.surf, p.b[kBase]), psi_pm_(m.PsiPm(p.Ptrs().data())), box_(MeasuredBoxOf(m)) {}
   sim::FluxLinkage Flux(double id, double iq, double) const override {
     Update(id, iq);
     return {last_.psi_d, last_.psi_q};
@@ -37,11 +62,12 @@ class SurfaceModel : public sim::MagneticModel {
     if (id == last_.id && iq == last_.iq) return;
     last_.id = id;
     last_.iq = iq;
-    eval_.Eval(id, iq, &last_.psi_d, &last_.psi_q, &last_.ldd, &last_.lqq, &last_.ldq);
+    ContinuedSurface(eval_, box_, id, iq, &last_.psi_d, &last_.psi_q, &last_.ldd, &last_.lqq, &last_.ldq);
     last_.psi_d += psi_pm_;   // the family's psi_pm slot is 0 in the model's parameters
   }
   fit::SurfaceEvaluator eval_;
   double psi_pm_;
+  MeasuredBox box_;
   mutable Point last_;
 };
 

@@ -508,6 +508,26 @@ bool Plausible(const Candidate& c, const FitOut& f, const Model& m);
 double Significance(const Candidate& c, const FitOut& f, const Model& m);
 
 // ---- evidence.cc ------------------------------------------------------------
+// The currents a set measured: zero and every held point's and
+// steady-state row's (A; |iq| up to iq_hi_a).
+struct MeasuredBox {
+  double id_lo_a = 0, id_hi_a = 0, iq_hi_a = 0;
+};
+MeasuredBox MeasuredBoxOf(const Model& m);
+// The surfaces at (id, iq) for the replays (the family's psi_pm slot
+// excluded, as eval's parameters have it): inside the box as fitted, beyond
+// it continued at the nearest measured current x0 with its inductance,
+// psi(x) = psi(x0) + L(x0) (x - x0) -- the co-energy's second-order Taylor
+// polynomial there, the spline family's own continuation
+// (fitting/flux_family.h, EvalBasis), continuous in flux and inductance at
+// the edge. The injection's current ellipse (+-16 A on the trait machines)
+// reaches past the edge points, and a polynomial family fitted inside
+// continues to fold there: Ldd negative 20 A beyond the largest measured
+// |id| of a surface-magnet machine, where the replay's Newton step jumped to
+// the map's other branch (150 A within three samples) and the replay of
+// every edge point said nothing of the recording.
+void ContinuedSurface(const fit::SurfaceEvaluator& eval, const MeasuredBox& box, double id, double iq, double* pd,
+                      double* pq, double* ldd, double* lqq, double* ldq);
 // Every waveform point replayed open loop through the twin with the
 // model's surfaces and the effects of `p` (sim::ReplayOpenLoop).
 absl::StatusOr<std::vector<sim::ReplayPoint>> ReplayModel(const io::RecordingSet& set, const Model& m,

@@ -214,6 +214,54 @@ TEST(Verdict, PhaseGainsAndOffsets) {
   EXPECT_NEAR(PhaseOffset(o, 2), oc, 1e-12);
 }
 
+// The replay's surfaces beyond the measured box: the fitted family inside,
+// beyond it the flux continued with the edge's inductance (continuous at
+// the edge, its inductance constant); a constant-inductance family (the
+// quadratic co-energy) is its own continuation.
+TEST(Replay, SurfacesContinueWithTheEdgesInductance) {
+  Model m = TestModel();
+  m.hf.resize(2);
+  m.hf[0].id_a = -80;
+  m.hf[0].iq_a = 60;
+  m.hf[1].id_a = -10;
+  m.hf[1].iq_a = 5;
+  const MeasuredBox box = MeasuredBoxOf(m);
+  EXPECT_EQ(box.id_lo_a, -80);
+  EXPECT_EQ(box.id_hi_a, 0);   // zero is always measured (psi(0, 0) = psi_pm)
+  EXPECT_EQ(box.iq_hi_a, 60);
+  const fit::SurfaceEvaluator quadratic(m.surf, m.surf_init);
+  double a[5], b[5];
+  for (double id : {-120.0, -80.0, -30.0, 0.0, 25.0}) {
+    for (double iq : {-90.0, 0.0, 40.0, 75.0}) {
+      ContinuedSurface(quadratic, box, id, iq, &a[0], &a[1], &a[2], &a[3], &a[4]);
+      quadratic.Eval(id, iq, &b[0], &b[1], &b[2], &b[3], &b[4]);
+      for (int k = 0; k < 5; ++k) EXPECT_NEAR(a[k], b[k], 1e-12 * (1 + std::abs(b[k]))) << id << ", " << iq;
+    }
+  }
+  // A quartic co-energy: its inductance bends, so beyond the box the
+  // continuation departs from the family, by the Taylor polynomial.
+  fit::Family quartic = m.surf;
+  quartic.degree = 4;
+  std::vector<double> c(quartic.NumParams(), 0.0);
+  for (size_t k = 1; k < c.size(); ++k) c[k] = 0.9 / static_cast<double>(k * k) * (k % 2 ? 1.0 : -0.5);
+  const fit::SurfaceEvaluator bent(quartic, c);
+  double e[5], x0[5];
+  bent.Eval(-80, 60, &x0[0], &x0[1], &x0[2], &x0[3], &x0[4]);
+  ContinuedSurface(bent, box, -80 - 1e-9, 60 + 1e-9, &e[0], &e[1], &e[2], &e[3], &e[4]);
+  for (int k = 0; k < 5; ++k) EXPECT_NEAR(e[k], x0[k], 1e-9 * (1 + std::abs(x0[k]))) << "continuous at the corner";
+  ContinuedSurface(bent, box, -100, 75, &e[0], &e[1], &e[2], &e[3], &e[4]);
+  EXPECT_NEAR(e[0], x0[0] + x0[2] * -20 + x0[4] * 15, 1e-12);
+  EXPECT_NEAR(e[1], x0[1] + x0[4] * -20 + x0[3] * 15, 1e-12);
+  EXPECT_EQ(e[2], x0[2]);
+  EXPECT_EQ(e[3], x0[3]);
+  bent.Eval(-100, 75, &b[0], &b[1], &b[2], &b[3], &b[4]);
+  EXPECT_GT(std::abs(b[2] - x0[2]), 1e-3 * std::abs(x0[2])) << "the family itself bends beyond the box";
+  // Inside the box: the family itself.
+  ContinuedSurface(bent, box, -40, -30, &e[0], &e[1], &e[2], &e[3], &e[4]);
+  bent.Eval(-40, -30, &b[0], &b[1], &b[2], &b[3], &b[4]);
+  for (int k = 0; k < 5; ++k) EXPECT_EQ(e[k], b[k]);
+}
+
 // The effect registry (diagnosis/effects/): every block of the model
 // belongs to exactly one catalogue effect, every effect with parameters in
 // the catalogue has its term, and every parameter a finding can carry is
