@@ -126,5 +126,50 @@ TEST(OtherMachines, CleanNamesNothingDeadTimeAloneAndCloser) {
   }
 }
 
+// The same machines with one catalogue effect each (seed 11, default plan):
+// never a wrong effect named, never `explained` without the concealed one,
+// and the concealed effect named in all but two of the 42 sets -- a 5 %
+// magnet flux on the deep-saturation machine (its flexible surfaces take
+// it within the data's noise) and on the negative-slope machine (whose own
+// non-positive point leaves its sets unexplained). Prints the table of
+// docs/diagnosis.md, "Beyond the measured currents".
+TEST(OtherMachines, CatalogueEffectsNamedNeverAnother) {
+  const auto kinds = Kinds();
+  const std::vector<std::pair<std::string, std::string>> effects = {
+      {"offset_rad=0.03", "position_offset"},     {"gain_a=1.02", "current_sensor_gain"},
+      {"rs_ohm=0.0135", "stator_resistance"},     {"psi_pm -5 %", "magnet_temperature"},
+      {"offset_b_a=0.6", "current_sensor_offset"}, {"delay_s=10e-6", "sampling_delay"},
+      {"r_hf_ohm=0.006", "hf_resistance"}};
+  int named_right = 0, explained = 0, sets = 0;
+  for (const auto& t : kinds) {
+    for (const auto& [spec, effect] : effects) {
+      sim::TwinConfig cfg;
+      cfg.seed = 11;
+      cfg.motor.sat.psi_pm_wb = t.psi_pm_wb;
+      cfg.magnetics = std::make_shared<sim::TraitMotor>(t);
+      cfg.control.gain_scheduled = true;
+      const std::string key = effect == "magnet_temperature" ? absl::StrCat("psi_pm_wb=", 0.95 * t.psi_pm_wb) : spec;
+      ASSERT_TRUE(sim::ParseEffects(key, &cfg.effects, nullptr).ok()) << key;
+      auto simulated = sim::Simulate(cfg, sim::DefaultPlan());
+      ASSERT_TRUE(simulated.ok()) << t.name << ": " << simulated.status();
+      auto r = Diagnose(simulated->set);
+      ASSERT_TRUE(r.ok()) << t.name << ": " << r.status();
+      const std::string label = absl::StrCat(t.name, ", ", spec);
+      std::set<std::string> named;
+      for (const auto& f : r->findings) named.insert(f.effect);
+      std::printf("%-32s %-17s", label.c_str(), r->verdict.c_str());
+      for (const auto& f : r->findings) std::printf(" %s", f.effect.c_str());
+      std::printf(" (replay residual %.3f A -> %.3f A)\n", r->waveform_rms_before_a, r->waveform_rms_after_a);
+      ++sets;
+      for (const auto& n : named) EXPECT_EQ(n, effect) << label << ": named an effect that is not there";
+      if (named.count(effect)) ++named_right;
+      else EXPECT_NE(r->verdict, "explained") << label;
+      if (r->verdict == "explained") ++explained;
+    }
+  }
+  std::printf("%d sets: the concealed effect named in %d, explained %d\n", sets, named_right, explained);
+  EXPECT_GE(named_right, sets - 2);
+}
+
 }  // namespace
 }  // namespace fluxcal::diag
