@@ -86,19 +86,24 @@ const EffectParameter& EffectParam(std::string_view effect, std::string_view par
 
 namespace {
 
-// The catalogue effect's key `key` set to v; false when no catalogue
-// effect owns it.
-bool SetCatalogueKey(std::string_view key, double v, Effects* e) {
+// The catalogue effect's key `key` set to v: NotFound when no catalogue
+// effect owns it, InvalidArgument when the twin cannot apply v.
+absl::Status SetCatalogueKey(std::string_view key, double v, Effects* e) {
   for (const auto& c : CatalogueEffects()) {
     for (const auto& k : c.keys) {
       if (k.name != key) continue;
+      if (k.above ? !(v > k.min) : !(v >= k.min)) {
+        return absl::InvalidArgumentError(absl::StrCat("flag --effects: field '", std::string(key), "': ", v,
+                                                       " is not ", k.above ? "above " : "at least ", k.min, " (",
+                                                       std::string(c.row.name), ")"));
+      }
       if (k.value != nullptr) e->*k.value = v;
       else if (k.optional != nullptr) e->*k.optional = v;
       else if (k.integer != nullptr) e->*k.integer = static_cast<int>(v);
-      return true;
+      return absl::OkStatus();
     }
   }
-  return false;
+  return absl::NotFoundError(std::string(key));
 }
 
 }  // namespace
@@ -116,7 +121,11 @@ absl::Status ParseEffects(const std::string& spec, Effects* e, double* noise_a) 
           absl::StrCat("flag --effects: field '", kv[0], "': expected a number, got '", kv[1], "'"));
     }
     const std::string& k = kv[0];
-    if (SetCatalogueKey(k, v, e)) continue;
+    if (const absl::Status set = SetCatalogueKey(k, v, e); set.ok()) {
+      continue;
+    } else if (!absl::IsNotFound(set)) {
+      return set;
+    }
     if (k == "noise_a" && noise_a != nullptr) {
       *noise_a = v;
       continue;

@@ -11,6 +11,7 @@
 #ifndef FLUXCAL_SIMULATION_CATALOGUE_CATALOGUE_EFFECT_H_
 #define FLUXCAL_SIMULATION_CATALOGUE_CATALOGUE_EFFECT_H_
 
+#include <limits>
 #include <map>
 #include <optional>
 #include <string>
@@ -23,12 +24,16 @@
 namespace fluxcal::sim {
 
 // One --effects key and the field of Effects it sets (exactly one of the
-// three members is set).
+// three members is set), and the values the twin can apply: at least
+// `min` (above it when `above`), e.g. no negative delay (the bench would
+// read commands not yet computed) and no zero DC-link gain (it divides).
 struct EffectKey {
   std::string_view name;
   double Effects::*value = nullptr;
   std::optional<double> Effects::*optional = nullptr;   // a true value the manifest keeps nominal
   int Effects::*integer = nullptr;
+  double min = -std::numeric_limits<double>::infinity();
+  bool above = false;
 };
 
 struct CatalogueEffect {

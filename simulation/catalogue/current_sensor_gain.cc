@@ -12,7 +12,9 @@ CatalogueEffect CurrentSensorGainEffect() {
            {{"gain_a", "1", 1.0, 1e-2, 0.0025},
             {"gain_b", "1", 1.0, 1e-2, 0.0025},
             {"gain_c", "1", 1.0, 1e-2, 0.0025}}};
-  c.keys = {{"gain_a", &Effects::gain_a}, {"gain_b", &Effects::gain_b}, {"gain_c", &Effects::gain_c}};
+  c.keys = {{"gain_a", &Effects::gain_a, nullptr, nullptr, 0.0, true},
+            {"gain_b", &Effects::gain_b, nullptr, nullptr, 0.0, true},
+            {"gain_c", &Effects::gain_c, nullptr, nullptr, 0.0, true}};
   c.truth = [](const Effects& e) -> std::map<std::string, double> {
     return {{"gain_a", e.gain_a}, {"gain_b", e.gain_b}, {"gain_c", e.gain_c}};
   };

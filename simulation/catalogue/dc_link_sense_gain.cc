@@ -16,7 +16,7 @@ CatalogueEffect DcLinkSenseGainEffect() {
            "modulator applies command / gain",
            {{"udc_sense_gain", "1", 1.0, 1e-2, 0.01}},
            false};
-  c.keys = {{"udc_sense_gain", &Effects::udc_sense_gain}};
+  c.keys = {{"udc_sense_gain", &Effects::udc_sense_gain, nullptr, nullptr, 0.0, true}};
   c.truth = [](const Effects& e) -> std::map<std::string, double> { return {{"udc_sense_gain", e.udc_sense_gain}}; };
   // The modulator divides the command by the measured Udc.
   c.plant = [](const Effects& e, PlantModel* m) { m->voltage_gain = 1.0 / e.udc_sense_gain; };

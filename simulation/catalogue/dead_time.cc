@@ -18,7 +18,8 @@ CatalogueEffect DeadTimeEffect() {
            "(uncompensated inverter dead time or device drop)",
            {{"dead_time_s", "s", 0.0, 1e-6, 0.1e-6}}};
   // The soft sign's current scale, tanh(i / i_th) (physics/inverter.h).
-  c.keys = {{"dead_time_s", &Effects::dead_time_s}, {"dead_time_i_th_a", &Effects::dead_time_i_th_a}};
+  c.keys = {{"dead_time_s", &Effects::dead_time_s},
+            {"dead_time_i_th_a", &Effects::dead_time_i_th_a, nullptr, nullptr, 0.0, true}};
   c.truth = [](const Effects& e) -> std::map<std::string, double> {
     return {{"dead_time_s", e.dead_time_s}, {"i_th_a", e.dead_time_i_th_a}};
   };

@@ -9,7 +9,7 @@ CatalogueEffect HfResistanceEffect() {
            "the positive-sequence HF current leads the injected voltage by more than the winding resistance "
            "explains: extra series resistance at the injection frequency (eddy currents)",
            {{"r_hf_ohm", "ohm", 0.0, 1e-3, 0.002, FloorKind::kAbsolute, 0.0}}};
-  c.keys = {{"r_hf_ohm", &Effects::r_hf_ohm}};
+  c.keys = {{"r_hf_ohm", &Effects::r_hf_ohm, nullptr, nullptr, 0.0}};
   c.truth = [](const Effects& e) -> std::map<std::string, double> { return {{"r_hf_ohm", e.r_hf_ohm}}; };
   c.plant = [](const Effects& e, PlantModel* m) { m->r_hf_ohm = e.r_hf_ohm; };
   return c;

@@ -23,7 +23,7 @@ CatalogueEffect IronLossEffect() {
            // fit_scale: of the conductance, in S.
            {{"r_fe_ohm", "ohm", 0.0, 0.01, 500.0, FloorKind::kBelow, 0.0}},
            false};
-  c.keys = {{"r_fe_ohm", &Effects::r_fe_ohm}};
+  c.keys = {{"r_fe_ohm", &Effects::r_fe_ohm, nullptr, nullptr, 0.0}};
   c.truth = [](const Effects& e) -> std::map<std::string, double> { return {{"r_fe_ohm", e.r_fe_ohm}}; };
   c.plant = [](const Effects& e, PlantModel* m) { m->g_fe_s = e.r_fe_ohm > 0 ? 1.0 / e.r_fe_ohm : 0.0; };
   return c;

@@ -16,7 +16,8 @@ CatalogueEffect MagnetTemperatureEffect() {
             // steady-state row in recording order.
             {"psi_pm_start_wb", "Wb", 0.0, 1e-2, 0.005, FloorKind::kRelativeNominal},
             {"psi_pm_end_wb", "Wb", 0.0, 1e-2, 0.005, FloorKind::kRelativeNominal}}};
-  c.keys = {{"psi_pm_wb", nullptr, &Effects::psi_pm_wb}, {"magnet_temp_rise_k", &Effects::magnet_temp_rise_k}};
+  c.keys = {{"psi_pm_wb", nullptr, &Effects::psi_pm_wb, nullptr, 0.0},
+            {"magnet_temp_rise_k", &Effects::magnet_temp_rise_k}};
   c.truth = [](const Effects& e) -> std::map<std::string, double> {
     return {{"psi_pm_wb", e.psi_pm_wb.value_or(0.0)}};
   };

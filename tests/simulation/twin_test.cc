@@ -318,6 +318,17 @@ TEST(Effects, ParseRejectsUnknownKey) {
   const auto st = ParseEffects("dead_time=2e-6", &e, &noise);
   EXPECT_FALSE(st.ok());
   EXPECT_NE(std::string(st.message()).find("dead_time"), std::string::npos);
+  // Values the twin cannot apply: a negative delay (commands not yet
+  // computed), a DC-link gain of zero (the modulator divides by it), a
+  // zero soft-sign current; named with the field.
+  for (const char* bad : {"delay_s=-1e-6", "udc_sense_gain=0", "dead_time_i_th_a=0", "gain_b=-1", "r_fe_ohm=-5"}) {
+    Effects x;
+    const auto b = ParseEffects(bad, &x, &noise);
+    EXPECT_TRUE(absl::IsInvalidArgument(b)) << bad;
+    const std::string field(bad, std::string(bad).find('='));
+    EXPECT_NE(std::string(b.message()).find("'" + field + "'"), std::string::npos) << b.message();
+  }
+  EXPECT_TRUE(ParseEffects("delay_s=0,r_fe_ohm=0,dead_time_s=-0.5e-6", &e, &noise).ok());
 }
 
 // The second-Udc plan repeats every third locked point right after itself
