@@ -9,9 +9,7 @@
 namespace fluxcal::diag::detail {
 
 EffectTerm CurrentSensorGainTerm() {
-  EffectTerm t;
-  t.effect = "current_sensor_gain";
-  t.candidates = {{"current_sensor_gain", kGain}};
+  EffectTerm t = OneBlockTerm("current_sensor_gain", kGain);
   t.describe = [](const Candidate&, const Model& m, const FitOut& f, const double* const* p,
                   Finding* out) {
     const char* names[3] = {"gain_a", "gain_b", "gain_c"};
@@ -25,7 +23,6 @@ EffectTerm CurrentSensorGainTerm() {
     double* g[3] = {&opt->effects.gain_a, &opt->effects.gain_b, &opt->effects.gain_c};
     for (int x = 0; x < 3; ++x) *g[x] = PhaseGain(m.M1(p), m.M2(p), x);
   };
-  t.artefact_blocks = {kGain};
   return t;
 }
 

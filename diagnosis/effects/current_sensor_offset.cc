@@ -9,9 +9,7 @@
 namespace fluxcal::diag::detail {
 
 EffectTerm CurrentSensorOffsetTerm() {
-  EffectTerm t;
-  t.effect = "current_sensor_offset";
-  t.candidates = {{"current_sensor_offset", kSensorOffset}};
+  EffectTerm t = OneBlockTerm("current_sensor_offset", kSensorOffset);
   t.describe = [](const Candidate&, const Model& m, const FitOut& f, const double* const* p,
                   Finding* out) {
     const char* names[3] = {"offset_a_a", "offset_b_a", "offset_c_a"};
@@ -27,7 +25,6 @@ EffectTerm CurrentSensorOffsetTerm() {
     opt->effects.offset_b_a = PhaseOffset(so, 1);
     opt->effects.offset_c_a = PhaseOffset(so, 2);
   };
-  t.artefact_blocks = {kSensorOffset};
   return t;
 }
 

@@ -5,9 +5,7 @@
 namespace fluxcal::diag::detail {
 
 EffectTerm DcLinkSenseGainTerm() {
-  EffectTerm t;
-  t.effect = "dc_link_sense_gain";
-  t.candidates = {{"dc_link_sense_gain", kUdcGain}};
+  EffectTerm t = OneBlockTerm("dc_link_sense_gain", kUdcGain);
   t.describe = [](const Candidate&, const Model& m, const FitOut& f, const double* const* p,
                   Finding* out) {
     // udc_gain is the contract's name (docs/diagnosis-report.md);
@@ -18,7 +16,6 @@ EffectTerm DcLinkSenseGainTerm() {
   t.replay = [](const Model& m, const double* const* p, int, sim::ReplayOptions* opt) {
     opt->effects.udc_sense_gain = m.UdcGain(p);
   };
-  t.artefact_blocks = {kUdcGain};
   return t;
 }
 

@@ -6,9 +6,7 @@
 namespace fluxcal::diag::detail {
 
 EffectTerm DeadTimeTerm() {
-  EffectTerm t;
-  t.effect = "dead_time";
-  t.candidates = {{"dead_time", kDead}};
+  EffectTerm t = OneBlockTerm("dead_time", kDead);
   t.describe = [](const Candidate&, const Model& m, const FitOut& f, const double* const* p,
                   Finding* out) {
     // Effective dead time acting (declared uncompensated part included).
@@ -35,7 +33,6 @@ EffectTerm DeadTimeTerm() {
     opt->effects.dead_time_s = m.DeadTime(p);
     opt->effects.dead_time_i_th_a = m.ith_a;
   };
-  t.artefact_blocks = {kDead};
   return t;
 }
 

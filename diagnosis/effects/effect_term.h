@@ -41,6 +41,17 @@ struct EffectTerm {
   std::vector<Block> artefact_blocks;
 };
 
+// A term whose one candidate frees its one block (most effects); its data
+// freed of it in the diagnosed calibration unless it is a motor property
+// (`artefact` false: stator_resistance).
+inline EffectTerm OneBlockTerm(std::string_view effect, Block block, bool artefact = true) {
+  EffectTerm t;
+  t.effect = effect;
+  t.candidates = {{std::string(effect), block}};
+  if (artefact) t.artefact_blocks = {block};
+  return t;
+}
+
 // Every effect diagnosis can name, in the report's order.
 const std::vector<EffectTerm>& EffectTerms();
 // The term of `effect`, or nullptr.

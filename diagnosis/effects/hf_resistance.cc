@@ -5,9 +5,7 @@
 namespace fluxcal::diag::detail {
 
 EffectTerm HfResistanceTerm() {
-  EffectTerm t;
-  t.effect = "hf_resistance";
-  t.candidates = {{"hf_resistance", kRhf}};
+  EffectTerm t = OneBlockTerm("hf_resistance", kRhf);
   t.describe = [](const Candidate&, const Model& m, const FitOut& f, const double* const* p,
                   Finding* out) {
     SetParam(out, "r_hf_ohm", m.RHf(p), kScaleRhf * Sd(f, kRhf, 0));
@@ -15,7 +13,6 @@ EffectTerm HfResistanceTerm() {
   t.replay = [](const Model& m, const double* const* p, int, sim::ReplayOptions* opt) {
     opt->effects.r_hf_ohm = m.RHf(p);
   };
-  t.artefact_blocks = {kRhf};
   return t;
 }
 

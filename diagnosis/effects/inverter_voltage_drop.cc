@@ -9,9 +9,7 @@
 namespace fluxcal::diag::detail {
 
 EffectTerm InverterVoltageDropTerm() {
-  EffectTerm t;
-  t.effect = "inverter_voltage_drop";
-  t.candidates = {{"inverter_voltage_drop", kVth}};
+  EffectTerm t = OneBlockTerm("inverter_voltage_drop", kVth);
   t.testable = [](const Candidate&, const Model& m) { return m.udc_ratio > kTwoUdcRatio; };
   t.describe = [](const Candidate&, const Model& m, const FitOut& f, const double* const* p,
                   Finding* out) {
@@ -24,7 +22,6 @@ EffectTerm InverterVoltageDropTerm() {
   t.replay = [](const Model& m, const double* const* p, int, sim::ReplayOptions* opt) {
     opt->effects.threshold_v = m.Vth(p);
   };
-  t.artefact_blocks = {kVth};
   return t;
 }
 

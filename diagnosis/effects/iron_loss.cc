@@ -6,9 +6,7 @@
 namespace fluxcal::diag::detail {
 
 EffectTerm IronLossTerm() {
-  EffectTerm t;
-  t.effect = "iron_loss";
-  t.candidates = {{"iron_loss", kIronLoss}};
+  EffectTerm t = OneBlockTerm("iron_loss", kIronLoss);
   t.describe = [](const Candidate&, const Model& m, const FitOut& f, const double* const* p,
                   Finding* out) {
     // Its deviation by the delta method.
@@ -18,7 +16,6 @@ EffectTerm IronLossTerm() {
   t.replay = [](const Model& m, const double* const* p, int, sim::ReplayOptions* opt) {
     opt->effects.r_fe_ohm = m.Gfe(p) > 0 ? 1.0 / m.Gfe(p) : 0.0;
   };
-  t.artefact_blocks = {kIronLoss};
   return t;
 }
 

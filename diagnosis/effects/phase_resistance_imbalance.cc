@@ -16,9 +16,7 @@ double PhaseDr(Complex r2, int x) { return 2 * std::real(r2 * std::polar(1.0, -2
 }  // namespace
 
 EffectTerm PhaseResistanceImbalanceTerm() {
-  EffectTerm t;
-  t.effect = "phase_resistance_imbalance";
-  t.candidates = {{"phase_resistance_imbalance", kRImb}};
+  EffectTerm t = OneBlockTerm("phase_resistance_imbalance", kRImb);
   t.describe = [](const Candidate&, const Model& m, const FitOut& f, const double* const* p,
                   Finding* out) {
     const char* names[3] = {"dr_a_ohm", "dr_b_ohm", "dr_c_ohm"};
@@ -38,7 +36,6 @@ EffectTerm PhaseResistanceImbalanceTerm() {
     double* dr[3] = {&opt->effects.dr_a_ohm, &opt->effects.dr_b_ohm, &opt->effects.dr_c_ohm};
     for (int x = 0; x < 3; ++x) *dr[x] = PhaseDr(m.RImb(p), x);
   };
-  t.artefact_blocks = {kRImb};
   return t;
 }
 

@@ -5,9 +5,7 @@
 namespace fluxcal::diag::detail {
 
 EffectTerm PositionOffsetTerm() {
-  EffectTerm t;
-  t.effect = "position_offset";
-  t.candidates = {{"position_offset", kOffset}};
+  EffectTerm t = OneBlockTerm("position_offset", kOffset);
   t.describe = [](const Candidate&, const Model& m, const FitOut& f, const double* const* p,
                   Finding* out) {
     SetParam(out, "offset_rad", m.Offset(p), kScaleOffset * Sd(f, kOffset, 0));
@@ -15,7 +13,6 @@ EffectTerm PositionOffsetTerm() {
   t.replay = [](const Model& m, const double* const* p, int, sim::ReplayOptions* opt) {
     opt->effects.offset_rad = m.Offset(p);
   };
-  t.artefact_blocks = {kOffset};
   return t;
 }
 

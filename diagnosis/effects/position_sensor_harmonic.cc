@@ -9,9 +9,7 @@
 namespace fluxcal::diag::detail {
 
 EffectTerm PositionSensorHarmonicTerm() {
-  EffectTerm t;
-  t.effect = "position_sensor_harmonic";
-  t.candidates = {{"position_sensor_harmonic", kAngleHarm}};
+  EffectTerm t = OneBlockTerm("position_sensor_harmonic", kAngleHarm);
   t.describe = [](const Candidate&, const Model& m, const FitOut& f, const double* const* p,
                   Finding* out) {
     const Complex c = m.AngleHarm(p);
@@ -23,7 +21,6 @@ EffectTerm PositionSensorHarmonicTerm() {
     opt->effects.harmonic_amplitude_rad = std::abs(m.AngleHarm(p));
     opt->effects.harmonic_phase_rad = std::arg(m.AngleHarm(p));
   };
-  t.artefact_blocks = {kAngleHarm};
   return t;
 }
 

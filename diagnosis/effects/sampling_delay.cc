@@ -5,9 +5,7 @@
 namespace fluxcal::diag::detail {
 
 EffectTerm SamplingDelayTerm() {
-  EffectTerm t;
-  t.effect = "sampling_delay";
-  t.candidates = {{"sampling_delay", kDelay}};
+  EffectTerm t = OneBlockTerm("sampling_delay", kDelay);
   t.describe = [](const Candidate&, const Model& m, const FitOut& f, const double* const* p,
                   Finding* out) {
     SetParam(out, "delay_s", m.Delay(p), kScaleDelay * Sd(f, kDelay, 0));
@@ -15,7 +13,6 @@ EffectTerm SamplingDelayTerm() {
   t.replay = [](const Model& m, const double* const* p, int, sim::ReplayOptions* opt) {
     opt->effects.delay_s = m.Delay(p);
   };
-  t.artefact_blocks = {kDelay};
   return t;
 }
 

@@ -5,9 +5,7 @@
 namespace fluxcal::diag::detail {
 
 EffectTerm StatorResistanceTerm() {
-  EffectTerm t;
-  t.effect = "stator_resistance";
-  t.candidates = {{"stator_resistance", kRs}};
+  EffectTerm t = OneBlockTerm("stator_resistance", kRs, /*artefact=*/false);   // a motor property
   t.describe = [](const Candidate&, const Model& m, const FitOut& f, const double* const* p,
                   Finding* out) {
     SetParam(out, "rs_ohm", m.Rs(p), kScaleRs * Sd(f, kRs, 0));

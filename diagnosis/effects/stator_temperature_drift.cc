@@ -8,9 +8,7 @@
 namespace fluxcal::diag::detail {
 
 EffectTerm StatorTemperatureDriftTerm() {
-  EffectTerm t;
-  t.effect = "stator_temperature_drift";
-  t.candidates = {{"stator_temperature_drift", kDrift}};
+  EffectTerm t = OneBlockTerm("stator_temperature_drift", kDrift);
   t.describe = [](const Candidate&, const Model& m, const FitOut& f, const double* const* p,
                   Finding* out) {
     // A drift is reported as one (docs/diagnosis-report.md): Rs at the
@@ -22,7 +20,6 @@ EffectTerm StatorTemperatureDriftTerm() {
     out->parameter_std["rs_end_ohm"] = std::hypot(drs, kScaleRs * Sd(f, kRs, 0));
     out->parameter_std["rs_start_ohm"] = kScaleRs * Sd(f, kRs, 0);
   };
-  t.artefact_blocks = {kDrift};
   return t;
 }
 

@@ -10,9 +10,7 @@
 namespace fluxcal::diag::detail {
 
 EffectTerm TorqueLossTerm() {
-  EffectTerm t;
-  t.effect = "torque_loss";
-  t.candidates = {{"torque_loss", kTorqueLoss}};
+  EffectTerm t = OneBlockTerm("torque_loss", kTorqueLoss);
   // Its two parameters, and one more row to see them.
   t.testable = [](const Candidate&, const Model& m) {
     return std::count_if(m.ss.begin(), m.ss.end(), [](const SsObs& o) { return o.has_torque; }) >= 3;
@@ -28,7 +26,6 @@ EffectTerm TorqueLossTerm() {
     SetParam(out, "friction_nm", m.Friction(p), std::hypot(s_ref, sb * m.torque_ref_rad_s));
     SetParam(out, "viscous_nm_per_rad_s", m.Viscous(p), sb);
   };
-  t.artefact_blocks = {kTorqueLoss};
   return t;
 }
 
