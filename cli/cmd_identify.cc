@@ -72,6 +72,9 @@ int RunIdentify(const std::vector<std::string>& argv) {
       // injection in the manifest.
       const auto radius = pipeline::InjectionFluxRadiusWb(set->manifest, r);
       p["hf_flux_radius_wb"] = radius ? nlohmann::json(*radius) : nlohmann::json(nullptr);
+      // The command's negative sequence, V (docs/identification.md, Sec. 8):
+      // what the bench's loop put at 2 w_e - w_i, solved for in (E2).
+      p["v_neg_v"] = std::isfinite(r.ld_h) ? nlohmann::json(std::abs(r.v_neg_eff_v)) : nlohmann::json(nullptr);
       if (r.has_ldq) {
         p["ldq_h"] = r.ldq_h; p["ldq_h_std"] = r.ldq_h_std;
         p["r_hf_ohm"] = r.r_hf_ohm; p["r_hf_ohm_std"] = r.r_hf_ohm_std;

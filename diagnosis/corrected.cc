@@ -54,8 +54,8 @@ fit::FitData CorrectedFitData(const io::RecordingSet& set, const Model& m, const
     oc.iq_a = it.imag();
     oc.theta = o->theta - m.AngleError(pf.data(), o->locked, o->theta);
     mc.PredictHf(pc.data(), oc, &i0c, &i1c);
-    auto le = ident::InductanceFromPhasors(i0e, i1e, o->v_eff, m.w_i, o->w_e);
-    auto lc = ident::InductanceFromPhasors(i0c, i1c, o->v_eff, m.w_i, o->w_e);
+    auto le = ident::InductanceFromPhasors(i0e, i1e, o->v_eff, o->v_neg_eff, m.w_i, o->w_e);
+    auto lc = ident::InductanceFromPhasors(i0c, i1c, o->v_eff, o->v_neg_eff, m.w_i, o->w_e);
     if (!le.ok() || !lc.ok()) continue;
     obs.id_a = oc.id_a;
     obs.iq_a = oc.iq_a;

@@ -88,6 +88,7 @@ struct HfObs {
   std::string point;
   double id_a, iq_a, w_e, theta, speed_rpm;
   Complex i0, i1, v_eff, dead_hf, dead_neg;
+  Complex v_neg_eff;   // the command's negative sequence (ident::HfPointResult::v_neg_eff_v)
   Complex dead_hf_v, dead_neg_v;   // the same per volt of switch threshold (no Udc / Ts factor)
   size_t wave = 0, samples = 0;   // waveform index, samples the demodulator used
   Complex mean_e2;   // window mean of e^{-j 2 theta}: what a stationary-frame
@@ -305,7 +306,8 @@ struct Model {
     // subtracts its HF component (computed from the recorded currents).
     // A DC-link sense gain scales the applied injection by 1 / gain.
     Complex v = o.v_eff * StaircaseDelay(w_i, Delay(p)) / UdcGain(p) - DeadTime(p) * o.dead_hf - Vth(p) * o.dead_hf_v;
-    Complex vn = -DeadTime(p) * o.dead_neg - Vth(p) * o.dead_neg_v;
+    Complex vn = o.v_neg_eff * StaircaseDelay(2 * o.w_e - w_i, Delay(p)) / UdcGain(p) - DeadTime(p) * o.dead_neg -
+                 Vth(p) * o.dead_neg_v;
     const int hk = HarmIndex(harm_order);
     if (!o.locked && p[kHarm][0] != 0.0 && hk >= 0) {
       // At speed the angle-dependent flux h cos(n theta) i of the fundamental

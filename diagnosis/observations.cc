@@ -136,7 +136,7 @@ absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident:
     o.theta = w.theta_e_rad[0];
     // The manifest lists points in recording order.
     o.progress = ids->size() > 1 ? static_cast<double>(k) / static_cast<double>(ids->size() - 1) : 0.0;
-    o.i0 = id.i0_a; o.i1 = id.i1_a; o.v_eff = id.v_eff_v;
+    o.i0 = id.i0_a; o.i1 = id.i1_a; o.v_eff = id.v_eff_v; o.v_neg_eff = id.v_neg_eff_v;
     o.mean_e2 = 0.0;
     // Noise from the data (LSQ standard error) plus a model floor of 0.25 %
     // of |I0|: the identification's own systematic accuracy on clean twin

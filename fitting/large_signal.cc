@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <memory>
+#include <vector>
 
 #include "fitting/inductance_residual.h"
 #include "fitting/problem.h"
@@ -44,7 +45,7 @@ sim::DifferentialInductance PredictedInductance(const Calibration& cal, const In
   return {large[0], large[1], large[2]};
 }
 
-int AttachHfOrbits(const Calibration& first, double sigma_floor, FitData* d) {
+int AttachHfOrbits(const Calibration& first, double sigma_floor, FitData* d, double* median_sigmas) {
   auto map = [&](double id, double iq, double* psi, double* l) { MapAt(first, id, iq, psi, l); };
   // An orbit wider than the whole region the points span is no
   // small excursion about its point (a radius a station sent wrong, or an
@@ -54,6 +55,7 @@ int AttachHfOrbits(const Calibration& first, double sigma_floor, FitData* d) {
   // excursion rho / lambda_min(L) is judged before any orbit is solved.
   const double current_scale = std::max(DataCurrentScaleA(*d), 1.0);
   int attached = 0;
+  std::vector<double> sigmas;   // per solved orbit, its largest change in sigmas
   for (auto& obs : d->inductances) {
     if (!obs.hf_flux_radius_wb || !(*obs.hf_flux_radius_wb > 0)) continue;
     obs.hf_orbit.reset();
@@ -78,11 +80,19 @@ int AttachHfOrbits(const Calibration& first, double sigma_floor, FitData* d) {
                              std::max(obs.lqq_h_std, sigma_floor * std::abs(obs.lqq_h)),
                              std::max(obs.ldq_h_std, sigma_floor * mean)};
     if (!std::all_of(large, large + 3, [](double v) { return std::isfinite(v); })) continue;
-    bool material = false;
-    for (int c = 0; c < 3; ++c) material |= std::abs(large[c] - small[c]) > kLargeSignalMaterialSigma * sigma[c];
-    if (!material) continue;
+    double change = 0;
+    for (int c = 0; c < 3; ++c) change = std::max(change, std::abs(large[c] - small[c]) / sigma[c]);
+    sigmas.push_back(change);
+    if (!(change > kLargeSignalMaterialSigma)) continue;
     obs.hf_orbit = std::move(w);
     ++attached;
+  }
+  if (median_sigmas != nullptr) {
+    *median_sigmas = 0;
+    if (!sigmas.empty()) {
+      std::nth_element(sigmas.begin(), sigmas.begin() + static_cast<long>(sigmas.size() / 2), sigmas.end());
+      *median_sigmas = sigmas[sigmas.size() / 2];
+    }
   }
   return attached;
 }

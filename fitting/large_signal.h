@@ -16,16 +16,21 @@ namespace fluxcal::fit::internal {
 // not move the fit.
 inline constexpr double kLargeSignalMaterialSigma = 0.1;
 // Fit keeps the large-signal fit when its cross-validation score is lower
-// than the small-signal fit's by more than this share (fit.cc says why).
+// than the small-signal fit's by more than this share (fit.cc says why),
+// or when the orbits change the first pass's predictions by more than
+// this many standard deviations at most points (the median).
 inline constexpr double kLargeSignalScoreMargin = 0.05;
+inline constexpr double kLargeSignalEvidentSigma = 1.0;
 
 // Sets hf_orbit on every inductance observation of `d` with a flux radius
 // whose orbit on `first` exists (the surfaces invertible along it), stays
 // within the size of the data's region (first order: rho over the smaller
 // eigenvalue of L, at most the largest |i| of the points) and matters
 // (kLargeSignalMaterialSigma); returns how many. `sigma_floor`: the
-// fit's relative floor on inductance sigmas (FitOptions).
-int AttachHfOrbits(const Calibration& first, double sigma_floor, FitData* d);
+// fit's relative floor on inductance sigmas (FitOptions). `median_sigmas`
+// (optional): over every orbit solved, the median of its largest change
+// (describing function less Jacobian, per component over its sigma).
+int AttachHfOrbits(const Calibration& first, double sigma_floor, FitData* d, double* median_sigmas = nullptr);
 
 // What `cal` predicts for the observation: the describing function over its
 // orbit where it has one, else the Jacobian at its mean current (the

@@ -170,19 +170,25 @@ absl::StatusOr<VoltageEstimate> FitCommandVoltage(const double* ualpha_v, const 
   const double ts = 1.0 / f_sample_hz;
   const double w = kTwoPi * f_injection_hz;
   const double t_mid = 0.5 * static_cast<double>(n - 1) * ts;
-  // Regressors: e^{jwt}, e^{-jwt}, e^{jtheta}, tau e^{jtheta}.
+  // Regressors: e^{jwt}, e^{j(2theta - wt)}, e^{jtheta}, tau e^{jtheta} (the
+  // current's (D1)). At standstill the second is e^{-jwt} times a constant.
   Eigen::Matrix4cd G = Eigen::Matrix4cd::Zero();
   Eigen::Vector4cd h = Eigen::Vector4cd::Zero();
   for (size_t k = 0; k < n; ++k) {
     const double t = static_cast<double>(k) * ts;
     const Complex et = std::polar(1.0, theta_e_rad[k]);
-    const Eigen::Vector4cd b(std::polar(1.0, w * t), std::polar(1.0, -w * t), et,
+    const Eigen::Vector4cd b(std::polar(1.0, w * t), std::polar(1.0, 2.0 * theta_e_rad[k] - w * t), et,
                              (t - t_mid) * et);
     G.noalias() += b.conjugate() * b.transpose();
     h.noalias() += b.conjugate() * Complex(ualpha_v[k], ubeta_v[k]);
   }
-  const Eigen::Vector4cd x = G.ldlt().solve(h);
-  return VoltageEstimate{x(0), x(2)};
+  Eigen::LDLT<Eigen::Matrix4cd> ldlt(G);
+  if (ldlt.info() != Eigen::Success || !ldlt.isPositive()) {
+    return absl::InvalidArgumentError("field 'theta_e_rad': command regressors are degenerate "
+                                      "(2 w_e too close to w_i?)");
+  }
+  const Eigen::Vector4cd x = ldlt.solve(h);
+  return VoltageEstimate{x(0), x(1), x(2)};
 }
 
 Complex EffectiveVoltage(Complex v_cmd_v, double w_rad_s, double f_pwm_hz) {

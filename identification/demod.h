@@ -66,11 +66,17 @@ absl::StatusOr<PhasorEstimate> LsqDemodulate(const PhaseSamples& s);
 // means (batch means).
 absl::StatusOr<PhasorEstimate> PaperDemodulate(const PhaseSamples& s, bool compensate = true);
 
-// Fits the commanded injection voltage phasor V (u_alpha + j u_beta
-// = V e^{j w_i t} + fundamental) from the recorded command over the same
-// window as the current demodulators.
+// Fits the recorded command over the same window, with the regressors of
+// the current's model (D1):
+//   u_alpha + j u_beta = V e^{j w_i t} + Vn e^{j(2 theta_e - w_i t)}
+//                        + (f0 + f1 (t - t_mid)) e^{j theta_e}.
+// V is the injection; Vn the command at the negative sequence's frequency
+// w_2 = 2 w_e - w_i: a bench current loop that answers the HF current
+// there puts it on the command (docs/identification.md, Sec. 8), and (E2)
+// needs it on its left-hand side.
 struct VoltageEstimate {
-  Complex v_cmd_v;                       // commanded phasor at t = 0
+  Complex v_cmd_v;                       // commanded injection phasor at t = 0
+  Complex v_neg_cmd_v;                   // commanded negative-sequence phasor Vn
   Complex fundamental_dq_v;              // mean fundamental command in dq
 };
 absl::StatusOr<VoltageEstimate> FitCommandVoltage(const double* ualpha_v, const double* ubeta_v,
@@ -80,7 +86,8 @@ absl::StatusOr<VoltageEstimate> FitCommandVoltage(const double* ualpha_v, const 
 // Effective voltage phasor seen by the machine at sample instants for a
 // command applied one PWM period late as a zero-order hold
 // (docs/identification.md eq. (V1)): V_eff = V_cmd e^{-j 1.5 w T} x / sin x,
-// x = w T / 2, T = 1 / f_pwm_hz.
+// x = w T / 2, T = 1 / f_pwm_hz. w is the component's own frequency in
+// the stationary frame (w_i for V, w_2 = 2 w_e - w_i for Vn).
 Complex EffectiveVoltage(Complex v_cmd_v, double w_rad_s, double f_pwm_hz);
 
 }  // namespace fluxcal::ident

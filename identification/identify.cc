@@ -87,6 +87,8 @@ absl::StatusOr<HfPointResult> IdentifyPoint(const io::RecordingSet& set, size_t 
                                 w.size(), fs, fi);
   if (!volt.ok()) return prefix(volt.status());
   const Complex v_eff = EffectiveVoltage(volt->v_cmd_v, wi, f_pwm);
+  // The negative sequence's frequency in the stationary frame: w_2 = 2 w_e - w_i.
+  const Complex v_neg_eff = EffectiveVoltage(volt->v_neg_cmd_v, 2.0 * lsq->w_e_rad_s - wi, f_pwm);
   // Nothing to invert without an injection and a response above the noise.
   if (std::abs(volt->v_cmd_v) < 1e-3 * m.injection->amplitude_v ||
       std::norm(lsq->i0_a) <= 4.0 * lsq->var_i0_a2 || std::abs(lsq->i0_a) < 1e-9) {
@@ -101,6 +103,7 @@ absl::StatusOr<HfPointResult> IdentifyPoint(const io::RecordingSet& set, size_t 
   r.speed_rpm = physics::ElectricalRadSToRpm(lsq->w_e_rad_s, m.motor.pole_pairs);
   r.temperature_c = spec.temperature_c.value_or(25.0);
   r.v_eff_v = v_eff;
+  r.v_neg_eff_v = v_neg_eff;
   r.periods_used = lsq->periods_used;
   r.residual_rms_a = lsq->residual_rms_a;
 
@@ -123,7 +126,7 @@ absl::StatusOr<HfPointResult> IdentifyPoint(const io::RecordingSet& set, size_t 
     // where that bias exceeds kLdqNeglectedShare of the smaller inductance
     // the point says so (machines with cross saturation: 15-43 % on the
     // measured-magnetics benches of issue 27, a property of the method).
-    auto full = InductanceFromPhasors(lsq->i0_a, lsq->i1_a, v_eff, wi, lsq->w_e_rad_s,
+    auto full = InductanceFromPhasors(lsq->i0_a, lsq->i1_a, v_eff, v_neg_eff, wi, lsq->w_e_rad_s,
                                       {lsq->var_i0_a2, lsq->var_i1_a2, lsq->cov_i0_i1_a2});
     if (full.ok()) {
       const double half_diff = 0.5 * (full->ldd_h - full->lqq_h);
@@ -134,7 +137,7 @@ absl::StatusOr<HfPointResult> IdentifyPoint(const io::RecordingSet& set, size_t 
       }
     }
   } else {
-    auto L = InductanceFromPhasors(est.i0_a, est.i1_a, v_eff, wi, lsq->w_e_rad_s,
+    auto L = InductanceFromPhasors(est.i0_a, est.i1_a, v_eff, v_neg_eff, wi, lsq->w_e_rad_s,
                                    {est.var_i0_a2, est.var_i1_a2, est.cov_i0_i1_a2});
     if (!L.ok()) return prefix(L.status());
     r.ld_h = L->ldd_h; r.lq_h = L->lqq_h; r.ldq_h = L->ldq_h; r.r_hf_ohm = L->r_hf_ohm;

@@ -31,6 +31,9 @@ struct HfPointResult {
   bool has_ldq = false;                 // false for the paper's method (eq. (8))
   std::complex<double> i0_a, i1_a;      // HF phasors (t = first sample)
   std::complex<double> v_eff_v;         // effective injection voltage phasor
+  // Effective negative-sequence voltage phasor (the command at w_2 =
+  // 2 w_e - w_i, demod.h FitCommandVoltage), on (E2)'s left-hand side.
+  std::complex<double> v_neg_eff_v;
   // Quality.
   double residual_rms_a = 0;            // LSQ model residual (complex RMS)
   double snr_db = 0;                    // 10 log10(|I0|^2 / residual power)

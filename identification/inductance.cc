@@ -13,7 +13,7 @@ namespace {
 using Complex = std::complex<double>;
 
 // Unknowns x = (S, Re D, Im D, R); rows = Re/Im of (E1), Re/Im of (E2).
-bool SolveE(Complex i0, Complex i1, Complex v, double w, double w2, Eigen::Vector4d* x) {
+bool SolveE(Complex i0, Complex i1, Complex v, Complex vn, double w, double w2, Eigen::Vector4d* x) {
   const Complex j(0.0, 1.0);
   const Complex cS1 = j * w * i0, cD1 = j * w * std::conj(i1), cL1 = -w * std::conj(i1);
   const Complex cS2 = j * w2 * i1, cD2 = j * w2 * std::conj(i0), cL2 = -w2 * std::conj(i0);
@@ -22,7 +22,7 @@ bool SolveE(Complex i0, Complex i1, Complex v, double w, double w2, Eigen::Vecto
        cS1.imag(), cD1.imag(), cL1.imag(), i0.imag(),
        cS2.real(), cD2.real(), cL2.real(), i1.real(),
        cS2.imag(), cD2.imag(), cL2.imag(), i1.imag();
-  const Eigen::Vector4d b(v.real(), v.imag(), 0.0, 0.0);
+  const Eigen::Vector4d b(v.real(), v.imag(), vn.real(), vn.imag());
   Eigen::FullPivLU<Eigen::Matrix4d> lu(A);
   if (!lu.isInvertible()) return false;
   *x = lu.solve(b);
@@ -44,7 +44,7 @@ Eigen::Matrix4d RealCovariance(const PhasorCovariance& c) {
 
 }  // namespace
 
-absl::StatusOr<HfInductance> InductanceFromPhasors(Complex i0, Complex i1, Complex v, double w,
+absl::StatusOr<HfInductance> InductanceFromPhasors(Complex i0, Complex i1, Complex v, Complex vn, double w,
                                                    double w_e, const PhasorCovariance& cov) {
   const double w2 = 2.0 * w_e - w;
   if (std::abs(w2) < 1e-3 * std::abs(w)) {
@@ -52,7 +52,7 @@ absl::StatusOr<HfInductance> InductanceFromPhasors(Complex i0, Complex i1, Compl
         "field 'speed_rpm': 2 w_e equals the injection frequency; the negative sequence is DC");
   }
   Eigen::Vector4d x;
-  if (!SolveE(i0, i1, v, w, w2, &x)) {
+  if (!SolveE(i0, i1, v, vn, w, w2, &x)) {
     return absl::FailedPreconditionError("field 'i0_a': no HF response to solve for inductance");
   }
   HfInductance out;
@@ -68,7 +68,7 @@ absl::StatusOr<HfInductance> InductanceFromPhasors(Complex i0, Complex i1, Compl
     const Complex step = (c % 2 == 0) ? Complex(h, 0) : Complex(0, h);
     if (c < 2) { d0 += step; e0 -= step; } else { d1 += step; e1 -= step; }
     Eigen::Vector4d xp, xm;
-    if (!SolveE(d0, d1, v, w, w2, &xp) || !SolveE(e0, e1, v, w, w2, &xm)) {
+    if (!SolveE(d0, d1, v, vn, w, w2, &xp) || !SolveE(e0, e1, v, vn, w, w2, &xm)) {
       return absl::FailedPreconditionError("field 'i0_a': ill-conditioned HF response");
     }
     J.col(c) = (xp - xm) / (2.0 * h);
@@ -103,10 +103,10 @@ absl::StatusOr<HfInductance> PaperInductance(Complex i0, Complex i1, double v, d
   return out;
 }
 
-void PredictPhasors(double ldd, double lqq, double ldq, double r, Complex v, double w,
+void PredictPhasors(double ldd, double lqq, double ldq, double r, Complex v, Complex vn, double w,
                     double w_e, Complex* i0, Complex* i1) {
-  // (E1)-(E2) without iron loss and without a negative-sequence voltage.
-  physics::SolveHfPhasors(ldd, lqq, ldq, r, v, 0.0, w, w_e, 0.0, i0, i1);
+  // (E1)-(E2) without iron loss.
+  physics::SolveHfPhasors(ldd, lqq, ldq, r, v, vn, w, w_e, 0.0, i0, i1);
 }
 
 }  // namespace fluxcal::ident

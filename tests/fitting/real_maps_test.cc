@@ -373,14 +373,10 @@ TEST(RealMaps, TwinTraitMotorsEndToEnd) {
       ASSERT_TRUE(e.ok) << t.name;
       std::printf("twin seed %d %-14s %-12s flux RMS %.3f %% max %.3f %%\n", seed, t.name.c_str(), e.family.c_str(),
                   100 * e.rms, 100 * e.max);
-      // ipm-bridge: 0.30 % with the small-signal HF model, 0.52-0.57 %
-      // with the large-signal one (its inductances 3.9 -> 1.0 % RMS,
-      // LargeSignalHfIsWhatTheInjectionMeasures): the knee at 15 A lies
-      // between the plan's iq = 0 and 20 A rows, where no point sees the
-      // surface, and psi_q there is the integral of an Lqq that falls 3x;
-      // the small-signal fit's wiggles (Lqq +-14 %) happened to integrate
-      // closer. docs/fitting.md, "Large-signal HF".
-      EXPECT_LT(e.rms, t.name == "ipm-bridge" ? 0.006 : 0.005) << t.name << " seed " << seed;
+      // ipm-bridge: 0.52-0.57 % (allowed 0.6 %) until the identification
+      // read the bench's negative-sequence command (docs/identification.md,
+      // Sec. 8); 0.25-0.35 % since.
+      EXPECT_LT(e.rms, 0.005) << t.name << " seed " << seed;
     }
   }
 }
@@ -474,12 +470,14 @@ double InductanceRmsOverPlan(const Calibration& cal, const sim::TraitMotor& mach
 // that orbit, not the Jacobian at the point's mean current: on the bridge
 // knee and on the reluctance machine's d-axis knee the identified values
 // sit 10-16 standard deviations off the machine's small-signal ones (chi^2
-// 244 and 101 per point) and at the noise of its describing function (1.5,
-// 1.9). The fit that predicts the points so (FitOptions::large_signal_hf,
-// the default) gets the machine's inductances over the box closer: 3.9 ->
-// 1.0 % and 1.4 -> 0.8 % RMS. The other machines, where it is not always
-// better, are in LargeSignalTable; the flux error in TwinTraitMotorsEndToEnd
-// and OtherKindsEndToEnd.
+// 240 and 100 per point) and at the noise of its describing function (1.1,
+// 1.2). The fit that predicts the points so (FitOptions::large_signal_hf,
+// the default) gets the machine's inductances over the box closer: 2.8 ->
+// 1.5 % and 1.35 -> 1.06 % RMS (3.9 -> 1.0 % and 1.4 -> 0.8 % while the
+// identification took the bench's negative-sequence command as zero, which
+// biased the rotating points: docs/identification.md, Sec. 8). The other
+// machines, where it is not always better, are in LargeSignalTable; the
+// flux error in TwinTraitMotorsEndToEnd and OtherKindsEndToEnd.
 TEST(RealMaps, LargeSignalHfIsWhatTheInjectionMeasures) {
   std::vector<sim::MotorTraits> motors;
   for (const auto& t : sim::RealLikeMotors(100.0, 0.15)) if (t.name == "ipm-bridge") motors.push_back(t);
@@ -542,7 +540,7 @@ TEST(RealMaps, LargeSignalHfIsWhatTheInjectionMeasures) {
         << cal_large->summary.candidates.back();
     EXPECT_GT(chi2_small / n, 50.0) << t.name;
     EXPECT_LT(chi2_large / n, 3.0) << t.name;
-    EXPECT_LT(e_large, 0.7 * e_small) << t.name;
+    EXPECT_LT(e_large, 0.85 * e_small) << t.name;
   }
 }
 

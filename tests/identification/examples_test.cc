@@ -98,7 +98,7 @@ io::RecordingSet AnalyticSet(double ldd, double lqq, double ldq, double speed_rp
   const double w = 2 * std::numbers::pi * fi, we = speed_rpm * pole_pairs * 2 * std::numbers::pi / 60;
   const std::complex<double> v_cmd = std::polar(5.0, 0.3);
   std::complex<double> i0, i1;
-  PredictPhasors(ldd, lqq, ldq, r_ohm, EffectiveVoltage(v_cmd, w, fs), w, we, &i0, &i1);
+  PredictPhasors(ldd, lqq, ldq, r_ohm, EffectiveVoltage(v_cmd, w, fs), 0.0, w, we, &i0, &i1);
   io::RecordingSet set;
   set.root_dir = "mem";
   set.manifest.serial = "IPM-T";
