@@ -65,6 +65,9 @@ int RunIdentify(const std::vector<std::string>& argv) {
                           {"periods", r.periods_used}, {"residual_rms_a", r.residual_rms_a},
                           {"snr_db", r.snr_db}, {"harmonic_ratio", r.harmonic_ratio},
                           {"near_zero_fraction", r.near_zero_fraction},
+                          {"dead_time_sideband_ratio", std::isfinite(r.dead_time_sideband_ratio)
+                                                           ? nlohmann::json(r.dead_time_sideband_ratio)
+                                                           : nlohmann::json(nullptr)},
                           {"reliable", r.reliable}, {"flags", r.flags}};
       // The injection's flux radius, Wb (docs/fitting.md, "Large-signal
       // HF"): what a station sends with the point so that a stored fit

@@ -147,7 +147,7 @@ absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident:
     if (!lsq.ok()) return lsq.status();
     // Points where a phase current lingers near zero (the paper's Sec. 3.3)
     // carry HF distortion beyond any linear model: 2 % floor there.
-    const bool near_zero = std::find(id.flags.begin(), id.flags.end(), "phase_current_near_zero") != id.flags.end();
+    const bool near_zero = id.near_zero_fraction > ident::kNearZeroFraction;
     const double floor = (near_zero ? 0.02 : 0.0025) * std::abs(o.i0);
     o.sigma0 = std::sqrt(lsq->var_i0_a2 + floor * floor);
     o.sigma1 = std::sqrt(lsq->var_i1_a2 + floor * floor);

@@ -38,8 +38,18 @@ struct PhasorEstimate {
   Complex fundamental_dq_a;              // c0: mean dq current of the window
   Complex fundamental_drift_a_per_s;     // c1
   double residual_rms_a = 0;             // RMS of the complex residual
-  double harmonic_ratio = 0;             // residual power at +-3..7 w_i / |I0|^2
+  // Residual power at other harmonics of the injection (-w_i, +-3 w_i,
+  // +-5 w_i) relative to |I0|^2: distortion such as dead time or sensor
+  // gain errors (LsqDemodulate only).
+  double harmonic_ratio = 0;
   double w_e_rad_s = 0;                  // electrical speed from theta slope
+  // An uncompensated dead time at speed: each phase current's zero
+  // crossings (six per electrical period) gate the HF voltage error, which
+  // puts sidebands at orders +-6, +-12 of theta_e about both phasors; the
+  // gate's mean, of the same size, lies on the phasors themselves. The
+  // largest sideband's amplitude over |I0| (LsqDemodulate only; NaN at
+  // standstill or where 6 w_e is under two Fourier bins of the window).
+  double dead_time_sideband_ratio = 0;
   size_t samples_used = 0;
   double periods_used = 0;
 };

@@ -22,30 +22,14 @@ constexpr double kLowPrecisionRelStd = 0.005;
 // The share of the smaller inductance beyond which the paper method's
 // neglect of Ldq is flagged (ldq_neglected).
 constexpr double kLdqNeglectedShare = 0.01;
-
-// Residual power at other harmonics of the injection (-w_i, +-3 w_i, +-5 w_i)
-// relative to |I0|^2: distortion such as dead time or sensor gain errors.
-double HarmonicRatio(const io::Waveform& w, size_t n, double fs, double fi, const PhasorEstimate& e) {
-  const double ts = 1.0 / fs, wi = kTwoPi * fi;
-  const int orders[] = {-1, 3, -3, 5, -5};
-  Complex acc[5] = {};
-  const double t_mid = 0.5 * static_cast<double>(n - 1) * ts;
-  for (size_t k = 0; k < n; ++k) {
-    const double t = static_cast<double>(k) * ts;
-    const Complex y((2 * w.ia_a[k] - w.ib_a[k] - w.ic_a[k]) / 3.0,
-                    (w.ib_a[k] - w.ic_a[k]) / std::sqrt(3.0));
-    const Complex eth = std::polar(1.0, w.theta_e_rad[k]);
-    const Complex model = e.i0_a * std::polar(1.0, wi * t) +
-                          e.i1_a * std::polar(1.0, 2 * w.theta_e_rad[k] - wi * t) +
-                          (e.fundamental_dq_a + e.fundamental_drift_a_per_s * (t - t_mid)) * eth;
-    const Complex r = y - model;
-    for (int h = 0; h < 5; ++h) acc[h] += r * std::polar(1.0, -orders[h] * wi * t);
-  }
-  double p = 0;
-  for (auto& a : acc) p += std::norm(a / static_cast<double>(n));
-  const double i0 = std::norm(e.i0_a);
-  return i0 > 0 ? p / i0 : 0.0;
-}
+// The dead-time sidebands' share of |I0| beyond which a rotating point is
+// flagged dead_time_sidebands (PhasorEstimate::dead_time_sideband_ratio):
+// the gate's mean, of about the sidebands' size, lies on I0 and I1 and
+// biases the inductances by about as much or more (I1 is a fraction of
+// I0). Measured (docs/identification.md, Sec. 6): rotating points of the
+// clean public sets and of the twin's six trait machines 0.01-0.94 %, with
+// a 1 us dead time on the twin 1.2-9 %, the public dead-time sets 0.8-9 %.
+constexpr double kDeadTimeSidebandShare = 0.01;
 
 }  // namespace
 
@@ -152,7 +136,7 @@ absl::StatusOr<HfPointResult> IdentifyPoint(const io::RecordingSet& set, size_t 
   const double i0_mag = std::abs(lsq->i0_a);
   const double noise_power = lsq->residual_rms_a * lsq->residual_rms_a;
   r.snr_db = noise_power > 0 ? 10.0 * std::log10(i0_mag * i0_mag / noise_power) : 300.0;
-  r.harmonic_ratio = HarmonicRatio(w, lsq->samples_used, fs, fi, *lsq);
+  r.harmonic_ratio = lsq->harmonic_ratio;
   // Phase currents lingering near zero (the paper's Sec. 3.3): a phase whose
   // fundamental is smaller than the HF ripple crosses zero every injection
   // period, where dead time distorts the applied voltage.
@@ -189,9 +173,15 @@ absl::StatusOr<HfPointResult> IdentifyPoint(const io::RecordingSet& set, size_t 
 
   if (r.periods_used < 10) r.flags.push_back("too_few_periods");
   if (r.clipped) r.flags.push_back("clipping");
-  // Threshold: 5% of the samples is where the dead-time distortion of the
-  // HF voltage becomes visible in the identified inductance (Sec. 3.3).
-  if (r.near_zero_fraction > 0.05) r.flags.push_back("phase_current_near_zero");
+  // At speed, where the sidebands are resolved, they measure what the
+  // zero crossings do to this point; the fraction near zero is only the
+  // risk (every rotating point crosses zero, and it flagged all of them).
+  r.dead_time_sideband_ratio = lsq->dead_time_sideband_ratio;
+  if (std::isfinite(r.dead_time_sideband_ratio)) {
+    if (r.dead_time_sideband_ratio > kDeadTimeSidebandShare) r.flags.push_back("dead_time_sidebands");
+  } else if (r.near_zero_fraction > kNearZeroFraction) {
+    r.flags.push_back("phase_current_near_zero");
+  }
   // low_snr: the estimate's precision, not the per-sample ratio. The
   // standard error of Ldd or Lqq above kLowPrecisionRelStd of its value
   // (a 2-sigma band wider than 1 %). A per-sample SNR below 20 dB used to

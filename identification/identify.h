@@ -6,6 +6,7 @@
 
 #include <complex>
 #include <functional>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -40,6 +41,9 @@ struct HfPointResult {
   double harmonic_ratio = 0;            // residual power at other HF harmonics / |I0|^2
   double periods_used = 0;
   double near_zero_fraction = 0;        // samples with a phase current within the HF ripple of 0
+  // Rotating points: the dead-time sidebands over |I0| (demod.h); NaN
+  // where not resolved (standstill, 6 w_e under two bins of the window).
+  double dead_time_sideband_ratio = std::numeric_limits<double>::quiet_NaN();
   bool clipped = false;
   bool reliable = true;
   std::vector<std::string> flags;       // why a point is unreliable
@@ -56,6 +60,13 @@ struct IdentifyOptions {
   // server's client deadline passed; plain callback, no RPC types here).
   std::function<bool()> cancelled;
 };
+
+// The share of samples with a phase current within half the HF ripple of
+// zero beyond which a point is flagged phase_current_near_zero (where the
+// dead-time sidebands are not resolved): 5 %, where the dead-time
+// distortion of the HF voltage becomes visible in the identified
+// inductance (the paper's Sec. 3.3).
+inline constexpr double kNearZeroFraction = 0.05;
 
 absl::StatusOr<HfPointResult> IdentifyPoint(const io::RecordingSet& set, size_t point,
                                             const IdentifyOptions& options);

@@ -469,15 +469,17 @@ double InductanceRmsOverPlan(const Calibration& cal, const sim::TraitMotor& mach
 // knees. What the identification reports is the describing function over
 // that orbit, not the Jacobian at the point's mean current: on the bridge
 // knee and on the reluctance machine's d-axis knee the identified values
-// sit 10-16 standard deviations off the machine's small-signal ones (chi^2
-// 240 and 100 per point) and at the noise of its describing function (1.1,
-// 1.2). The fit that predicts the points so (FitOptions::large_signal_hf,
-// the default) gets the machine's inductances over the box closer: 2.8 ->
-// 1.5 % and 1.35 -> 1.06 % RMS (3.9 -> 1.0 % and 1.4 -> 0.8 % while the
-// identification took the bench's negative-sequence command as zero, which
-// biased the rotating points: docs/identification.md, Sec. 8). The other
-// machines, where it is not always better, are in LargeSignalTable; the
-// flux error in TwinTraitMotorsEndToEnd and OtherKindsEndToEnd.
+// sit 5-15 of the fit's sigmas off the machine's small-signal ones (chi^2
+// 215 and 21 per point) and at about the sigma of its describing function
+// (1.6, 1.6). The fit that predicts the points so (FitOptions::large_signal_hf,
+// the default) gets the bridge machine's inductances over the box closer,
+// 3.5 -> 1.5 % RMS, and the reluctance machine's no worse, 1.20 -> 1.20 %
+// (its flux 0.49 -> 0.30 %, LargeSignalTable). (3.9 -> 1.0 % and 1.4 ->
+// 0.8 % while the identification took the bench's negative-sequence
+// command as zero, docs/identification.md, Sec. 8, and its standard errors
+// from the residual's mean power, Sec. 5.) The other machines, where it is
+// not always better, are in LargeSignalTable; the flux error in
+// TwinTraitMotorsEndToEnd and OtherKindsEndToEnd.
 TEST(RealMaps, LargeSignalHfIsWhatTheInjectionMeasures) {
   std::vector<sim::MotorTraits> motors;
   for (const auto& t : sim::RealLikeMotors(100.0, 0.15)) if (t.name == "ipm-bridge") motors.push_back(t);
@@ -516,10 +518,12 @@ TEST(RealMaps, LargeSignalHfIsWhatTheInjectionMeasures) {
         for (int c = 0; c < 2; ++c) large[c] += w[c][k][0] * psi[0] + w[c][k][1] * psi[1];
       }
       const auto small = machine->Inductance(o.id_a, o.iq_a);
-      chi2_small += std::max(std::pow((o.ldd_h - small.ldd_h) / o.ldd_h_std, 2),
-                             std::pow((o.lqq_h - small.lqq_h) / o.lqq_h_std, 2));
-      chi2_large += std::max(std::pow((o.ldd_h - large[0]) / o.ldd_h_std, 2),
-                             std::pow((o.lqq_h - large[1]) / o.lqq_h_std, 2));
+      // The sigmas the fit weighs the points with: the standard error, at
+      // least the identification's systematic 0.2 % (FitOptions).
+      const double sd = std::max(o.ldd_h_std, FitOptions{}.relative_sigma_floor * o.ldd_h);
+      const double sq = std::max(o.lqq_h_std, FitOptions{}.relative_sigma_floor * o.lqq_h);
+      chi2_small += std::max(std::pow((o.ldd_h - small.ldd_h) / sd, 2), std::pow((o.lqq_h - small.lqq_h) / sq, 2));
+      chi2_large += std::max(std::pow((o.ldd_h - large[0]) / sd, 2), std::pow((o.lqq_h - large[1]) / sq, 2));
       ++n;
     }
     ASSERT_GE(n, 30) << t.name;
@@ -538,9 +542,10 @@ TEST(RealMaps, LargeSignalHfIsWhatTheInjectionMeasures) {
     ASSERT_FALSE(cal_large->summary.candidates.empty());
     EXPECT_NE(cal_large->summary.candidates.back().find("large-signal kept"), std::string::npos)
         << cal_large->summary.candidates.back();
-    EXPECT_GT(chi2_small / n, 50.0) << t.name;
+    EXPECT_GT(chi2_small / n, 10.0) << t.name;
     EXPECT_LT(chi2_large / n, 3.0) << t.name;
-    EXPECT_LT(e_large, 0.85 * e_small) << t.name;
+    EXPECT_LT(e_large, 1.05 * e_small) << t.name;
+    if (t.name == "ipm-bridge") EXPECT_LT(e_large, 0.7 * e_small);
   }
 }
 
@@ -556,17 +561,19 @@ TEST(RealMaps, LargeSignalHfIsWhatTheInjectionMeasures) {
 // The example sets live beside the repository; without them only the twin
 // rows run.
 struct GateRow {
-  double cv_small = 0, cv_large = 0;
+  double cv_small = 0, cv_large = 0, median_sigmas = 0;
   bool large_kept = false;
 };
-// Scores from the calibration's candidate line ("hf model: ... cv=A,
-// small-signal cv=B: X kept"); no line: no orbit mattered (small kept).
+// Scores from the calibration's candidate line ("hf model: ..., median
+// change M sigma) cv=A, small-signal cv=B: X kept"); no line: no orbit
+// mattered (small kept).
 GateRow GateOf(const Calibration& cal) {
   GateRow g;
   for (const auto& line : cal.summary.candidates) {
     if (line.rfind("hf model:", 0) != 0) continue;
     std::sscanf(line.c_str() + line.find(") cv=") + 5, "%lf", &g.cv_large);
     std::sscanf(line.c_str() + line.find("small-signal cv=") + 16, "%lf", &g.cv_small);
+    std::sscanf(line.c_str() + line.find("median change ") + 14, "%lf", &g.median_sigmas);
     g.large_kept = line.find("large-signal kept") != std::string::npos;
   }
   return g;
@@ -592,8 +599,10 @@ TEST(RealMaps, LargeSignalTable) {
     ASSERT_TRUE(cs.ok() && cl.ok()) << t.name;
     const GateRow g = GateOf(*cl);
     const MachineMap mm = TraitMachine(t, 100.0);
-    std::printf("twin %-14s seed %d | cv small %.4g large %.4g | %s kept | flux %.3f / %.3f %% | L %.2f / %.2f %%\n",
-                t.name.c_str(), static_cast<int>(cfg.seed), g.cv_small, g.cv_large, g.large_kept ? "large" : "small",
+    std::printf("twin %-14s seed %d | median %.2g sigma | cv small %.4g large %.4g | %s kept | flux %.3f / %.3f %% | "
+                "L %.2f / %.2f %%\n",
+                t.name.c_str(), static_cast<int>(cfg.seed), g.median_sigmas, g.cv_small, g.cv_large,
+                g.large_kept ? "large" : "small",
                 100 * FluxRms(*cs, mm), 100 * FluxRms(*cl, mm), 100 * InductanceRmsOverPlan(*cs, *machine),
                 100 * InductanceRmsOverPlan(*cl, *machine));
     EXPECT_TRUE(g.large_kept) << t.name;
@@ -653,8 +662,9 @@ TEST(RealMaps, LargeSignalTable) {
     double fs, ls;
     errors(*cs, &fs, &ls);
     const GateRow g = GateOf(*cl);
-    std::printf("example %-24s | cv small %.4g large %.4g | %s kept | flux %.3f %% | L %.3f %% (kept fit)\n", name,
-                g.cv_small, g.cv_large, g.large_kept ? "large" : "small", 100 * fs, 100 * ls);
+    std::printf("example %-24s | median %.2g sigma | cv small %.4g large %.4g | %s kept | flux %.3f %% | L %.3f %% "
+                "(kept fit)\n",
+                name, g.median_sigmas, g.cv_small, g.cv_large, g.large_kept ? "large" : "small", 100 * fs, 100 * ls);
     EXPECT_FALSE(g.large_kept) << name;
   }
 }

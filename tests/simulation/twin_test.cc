@@ -204,6 +204,37 @@ TEST(Twin, CleanIdentificationSpeedIndependent) {
   }
 }
 
+// At speed an uncompensated dead time gates the HF voltage error at each
+// phase current's zero crossings; the gate's sidebands (orders +-6, +-12
+// of theta_e about each phasor) measure what its mean does to the point
+// (docs/identification.md, Sec. 6). Rotating points of a clean bench carry
+// no flag (every rotating point crosses zero, and phase_current_near_zero
+// flagged all of them); with a 1 us dead time each is flagged
+// dead_time_sidebands, and the flag is true to the values: those points
+// are off the clean ones by more than the clean points' own scatter.
+TEST(Twin, DeadTimeSidebandsFlagTheRotatingPointsADeadTimeBiases) {
+  std::vector<PlanPoint> pts;
+  for (double rpm : {200.0, 500.0, 1000.0}) pts.push_back(Pt("p" + std::to_string(int(rpm)), -20, 40, rpm));
+  TwinConfig clean_cfg;
+  auto clean = Simulate(clean_cfg, SmallPlan(pts, 0.1));
+  TwinConfig dt_cfg;
+  dt_cfg.effects.dead_time_s = 1e-6;
+  auto dead = Simulate(dt_cfg, SmallPlan(pts, 0.1));
+  ASSERT_TRUE(clean.ok() && dead.ok());
+  auto a = ident::IdentifySet(clean->set, {});
+  auto b = ident::IdentifySet(dead->set, {});
+  ASSERT_TRUE(a.ok() && b.ok());
+  for (size_t k = 0; k < pts.size(); ++k) {
+    const auto& c = (*a)[k];
+    const auto& d = (*b)[k];
+    EXPECT_TRUE(c.flags.empty()) << c.point << ": " << (c.flags.empty() ? "" : c.flags[0]);
+    EXPECT_LT(c.dead_time_sideband_ratio, 0.01) << c.point;
+    EXPECT_NE(std::find(d.flags.begin(), d.flags.end(), "dead_time_sidebands"), d.flags.end()) << d.point;
+    const double off = std::max(std::abs(d.ld_h / c.ld_h - 1), std::abs(d.lq_h / c.lq_h - 1));
+    EXPECT_GT(off, 3 * std::max(c.ld_h_std / c.ld_h, c.lq_h_std / c.lq_h)) << d.point;
+  }
+}
+
 // --- One focused test per effect --------------------------------------
 
 ident::HfPointResult IdentifyOne(const TwinConfig& cfg, const PlanPoint& p) {
