@@ -29,8 +29,8 @@ absl::Status CheckRates(const PhaseSamples& s) {
   return absl::OkStatus();
 }
 
-// Bins on each side of a regressor's frequency over which the residual's
-// spectral density is averaged (ResidualAnalysis): 2 x 10 bins, a
+// Fourier bins on each side of a phasor's frequency over which the
+// residual's periodogram is averaged (ResidualAnalysis): 2 x 10 bins, a
 // variance estimate to +-16 % (40 real degrees of freedom).
 constexpr int kNoiseBinsEachSide = 10;
 
@@ -38,83 +38,107 @@ constexpr int kNoiseBinsEachSide = 10;
 // E|noise|^2 per sample (s0, s1; white noise: both equal the residual's
 // mean power), its dead-time sidebands and its power at other harmonics of
 // the injection (e's dead_time_sideband_ratio and harmonic_ratio, demod.h).
-// The variance of a regressor's amplitude is its diagonal of G^-1
-// times the density at its own frequency (a stationary noise's
-// periodogram, Kay, Fundamentals of Statistical Signal Processing:
-// Estimation Theory, 1993, Sec. 15.7); the residual's mean power stands
-// for it only when the noise is white. It is not: at standstill the
-// orbit's harmonics (saturation, the describing function of
-// docs/fitting.md), at speed the fundamental's, lie at +-3 w_i, +-5 w_i,
-// multiples of w_e -- deterministic, orthogonal to the regressors over
-// whole periods, and up to 50 times the power of the noise around w_i on
-// the twin's knee machines. The density is the periodogram's mean over
-// the Fourier bins (spacing 2 pi / (n Ts)) beside each frequency,
-// +-1..kNoiseBinsEachSide bins, of the residual shifted to baseband.
+// The variance of a regressor's amplitude is its diagonal of G^-1 times
+// the density at its own frequency (a stationary noise's periodogram; Kay,
+// Fundamentals of Statistical Signal Processing: Estimation Theory, 1993,
+// Sec. 15.7); the residual's mean power stands for it only when the noise
+// is white. It is not: at standstill the orbit's harmonics (saturation,
+// the describing function of docs/fitting.md), at speed the fundamental's,
+// lie at +-3 w_i, +-5 w_i, multiples of w_e -- deterministic, orthogonal
+// to the regressors over whole periods, and up to 50 times the power of
+// the noise around w_i on the twin's knee machines. The density is the
+// periodogram's mean over the Fourier bins (spacing 2 pi / (n Ts)) beside
+// each frequency, +-1..kNoiseBinsEachSide bins, of the residual shifted to
+// baseband: exact bins, so a component of whole cycles in the window adds
+// nothing (block means, tried, leak it through their sinc sidelobes). One
+// pass, one sine/cosine of the measured angle per sample, the rest by
+// recurrence; the bins' accumulators as plain arrays the compiler
+// vectorises.
 void ResidualAnalysis(const PhaseSamples& s, size_t n, double w_rad_s, double w_e_rad_s, PhasorEstimate* e,
                       double* s0, double* s1) {
   const double ts = 1.0 / s.f_sample_hz;
   const double t_mid = 0.5 * static_cast<double>(n - 1) * ts;
-  constexpr int m = kNoiseBinsEachSide;
-  std::vector<Complex> z0(2 * m), z1(2 * m);   // bins -m..-1, 1..m
-  std::vector<Complex> tw(2 * m), step(2 * m);
-  for (int b = 0; b < 2 * m; ++b) {
-    const int k = b < m ? b - m : b - m + 1;
-    step[b] = std::polar(1.0, -kTwoPi * k / static_cast<double>(n));
-    tw[b] = 1.0;
+  constexpr int kB = 2 * kNoiseBinsEachSide;   // bins -m..-1, 1..m
+  // Twiddles e^{-j 2 pi q k / n} of each bin q, and the accumulators of
+  // z0 = r e^{-j w t} and z1 = r conj(b1) times them (real and imaginary
+  // parts apart).
+  double tr[kB], ti[kB], sr[kB], si[kB];
+  double a0r[kB] = {}, a0i[kB] = {}, a1r[kB] = {}, a1i[kB] = {};
+  for (int b = 0; b < kB; ++b) {
+    const int q = b < kNoiseBinsEachSide ? b - kNoiseBinsEachSide : b - kNoiseBinsEachSide + 1;
+    const Complex st = std::polar(1.0, -kTwoPi * q / static_cast<double>(n));
+    sr[b] = st.real(); si[b] = st.imag();
+    tr[b] = 1.0; ti[b] = 0.0;
   }
+  // Sidebands resolved: 6 w_e at least two Fourier bins from the phasor.
+  const double window_s = static_cast<double>(n) * ts;
+  const bool sidebands = 6.0 * std::abs(w_e_rad_s) * window_s >= 2.0 * kTwoPi;
   // Dead-time sidebands: orders -12, -6, 6, 12 of theta_e about each phasor.
   Complex side0[4] = {}, side1[4] = {};
   // Other harmonics of the injection: -w_i, 3 w_i, -3 w_i, 5 w_i, -5 w_i.
   Complex harm[5] = {};
   const double inv3 = 1.0 / 3.0, inv_sqrt3 = 1.0 / std::sqrt(3.0);
+  const Complex step = std::polar(1.0, w_rad_s * ts);
+  Complex b0 = 1.0;   // e^{j w t}, by recurrence
+  const Complex c0 = e->fundamental_dq_a, c1 = e->fundamental_drift_a_per_s;
   for (size_t k = 0; k < n; ++k) {
-    const double t = static_cast<double>(k) * ts;
+    const double tau = static_cast<double>(k) * ts - t_mid;
     const Complex y((2 * s.ia_a[k] - s.ib_a[k] - s.ic_a[k]) * inv3, (s.ib_a[k] - s.ic_a[k]) * inv_sqrt3);
-    const Complex b0 = std::polar(1.0, w_rad_s * t);
-    const Complex b1 = std::polar(1.0, 2.0 * s.theta_e_rad[k] - w_rad_s * t);
     const Complex et = std::polar(1.0, s.theta_e_rad[k]);
-    const Complex r = y - e->i0_a * b0 - e->i1_a * b1 -
-                      (e->fundamental_dq_a + e->fundamental_drift_a_per_s * (t - t_mid)) * et;
+    const Complex et2 = et * et;
+    const Complex b1 = et2 * std::conj(b0);
+    const Complex r = y - e->i0_a * b0 - e->i1_a * b1 - (c0 + c1 * tau) * et;
     const Complex r0 = r * std::conj(b0), r1 = r * std::conj(b1);
-    for (int b = 0; b < 2 * m; ++b) {
-      z0[b] += r0 * tw[b];
-      z1[b] += r1 * tw[b];
-      tw[b] *= step[b];
+    const double r0r = r0.real(), r0i = r0.imag(), r1r = r1.real(), r1i = r1.imag();
+    for (int b = 0; b < kB; ++b) {
+      a0r[b] += r0r * tr[b] - r0i * ti[b];
+      a0i[b] += r0r * ti[b] + r0i * tr[b];
+      a1r[b] += r1r * tr[b] - r1i * ti[b];
+      a1i[b] += r1r * ti[b] + r1i * tr[b];
+      const double nr = tr[b] * sr[b] - ti[b] * si[b];
+      ti[b] = tr[b] * si[b] + ti[b] * sr[b];
+      tr[b] = nr;
     }
-    if ((k & 1023) == 1023) {   // renormalise the twiddles against drift
-      for (auto& x : tw) x /= std::abs(x);
-    }
-    const Complex e6 = std::polar(1.0, -6.0 * s.theta_e_rad[k]), e12 = e6 * e6;
-    const Complex o[4] = {std::conj(e12), std::conj(e6), e6, e12};
-    for (int j = 0; j < 4; ++j) {
-      side0[j] += r0 * o[j];
-      side1[j] += r1 * o[j];
+    if (sidebands) {
+      const Complex e6 = std::conj(et2 * et2 * et2), e12 = e6 * e6;   // e^{-j6theta}, e^{-j12theta}
+      const Complex o[4] = {std::conj(e12), std::conj(e6), e6, e12};
+      for (int j = 0; j < 4; ++j) {
+        side0[j] += r0 * o[j];
+        side1[j] += r1 * o[j];
+      }
     }
     // r e^{-j h w t} = r0 e^{-j (h - 1) w t}.
-    const Complex b2 = b0 * b0, c2 = std::conj(b2);
+    const Complex b2 = b0 * b0, b4 = b2 * b2;
     harm[0] += r0 * b2;
-    harm[1] += r0 * c2;
-    harm[2] += r0 * b2 * b2;
-    harm[3] += r0 * c2 * c2;
-    harm[4] += r0 * b2 * b2 * b2;
+    harm[1] += r0 * std::conj(b2);
+    harm[2] += r0 * b4;
+    harm[3] += r0 * std::conj(b4);
+    harm[4] += r0 * b4 * b2;
+    b0 *= step;
+    if ((k & 1023) == 1023) {   // against rounding drift of the recurrences
+      b0 /= std::abs(b0);
+      for (int b = 0; b < kB; ++b) {
+        const double m = 1.0 / std::hypot(tr[b], ti[b]);
+        tr[b] *= m;
+        ti[b] *= m;
+      }
+    }
   }
+  double p0 = 0, p1 = 0;
+  for (int b = 0; b < kB; ++b) {
+    p0 += a0r[b] * a0r[b] + a0i[b] * a0i[b];
+    p1 += a1r[b] * a1r[b] + a1i[b] * a1i[b];
+  }
+  const double scale = 1.0 / (kB * static_cast<double>(n));
+  *s0 = p0 * scale;
+  *s1 = p1 * scale;
   double hp = 0;
   for (const Complex& h : harm) hp += std::norm(h / static_cast<double>(n));
   const double i0_power = std::norm(e->i0_a);
   e->harmonic_ratio = i0_power > 0 ? hp / i0_power : 0.0;
-  double p0 = 0, p1 = 0;
-  for (int b = 0; b < 2 * m; ++b) {
-    p0 += std::norm(z0[b]);
-    p1 += std::norm(z1[b]);
-  }
-  const double scale = 1.0 / (2.0 * m * static_cast<double>(n));
-  *s0 = p0 * scale;
-  *s1 = p1 * scale;
-  // Sidebands resolved: 6 w_e at least two Fourier bins from the phasor.
-  const double window_s = static_cast<double>(n) * ts;
   e->dead_time_sideband_ratio = std::numeric_limits<double>::quiet_NaN();
   const double i0 = std::abs(e->i0_a);
-  if (6.0 * std::abs(w_e_rad_s) * window_s >= 2.0 * kTwoPi && i0 > 0) {
+  if (sidebands && i0 > 0) {
     double worst = 0;
     for (int j = 0; j < 4; ++j) worst = std::max({worst, std::abs(side0[j]), std::abs(side1[j])});
     e->dead_time_sideband_ratio = worst / static_cast<double>(n) / i0;
