@@ -26,9 +26,10 @@ constexpr double kLdqNeglectedShare = 0.01;
 // flagged dead_time_sidebands (PhasorEstimate::dead_time_sideband_ratio):
 // the gate's mean, of about the sidebands' size, lies on I0 and I1 and
 // biases the inductances by about as much or more (I1 is a fraction of
-// I0). Measured (docs/identification.md, Sec. 6): rotating points of the
-// clean public sets and of the twin's six trait machines 0.01-0.94 %, with
-// a 1 us dead time on the twin 1.2-9 %, the public dead-time sets 0.8-9 %.
+// I0). Measured (docs/identification.md, Sec. 6), the largest sideband per
+// rotating point: the clean public sets 0.05-0.8 %, four other-kind twin
+// machines 0.02-0.94 % and with a 1 us dead time 1.6-9.1 %, the public
+// dead-time sets 0.96-8.9 %.
 constexpr double kDeadTimeSidebandShare = 0.01;
 
 }  // namespace
