@@ -29,11 +29,6 @@ absl::Status CheckRates(const PhaseSamples& s) {
   return absl::OkStatus();
 }
 
-// Fourier bins on each side of a phasor's frequency over which the
-// residual's periodogram is averaged (ResidualAnalysis): 2 x 10 bins, a
-// variance estimate to +-16 % (40 real degrees of freedom).
-constexpr int kNoiseBinsEachSide = 10;
-
 // The residual's spectral density near the frequencies of I0 and I1, as
 // E|noise|^2 per sample (s0, s1; white noise: both equal the residual's
 // mean power), its dead-time sidebands and its power at other harmonics of
@@ -48,111 +43,41 @@ constexpr int kNoiseBinsEachSide = 10;
 // to the regressors over whole periods, and up to 50 times the power of
 // the noise around w_i on the twin's knee machines. The density is the
 // periodogram's mean over the Fourier bins (spacing 2 pi / (n Ts)) beside
-// each frequency, +-1..kNoiseBinsEachSide bins, of the residual shifted to
-// baseband: exact bins, so a component of whole cycles in the window adds
-// nothing (block means, tried, leak it through their sinc sidelobes). One
-// pass, one sine/cosine of the measured angle per sample, the rest by
-// recurrence; the bins' accumulators as plain arrays the compiler
-// vectorises, in a clone for x86-64-v3 (AVX2, FMA) picked at load time.
-// Complex product without the C99 Annex G NaN/infinity recovery that
-// std::complex's operator* calls out of line (__muldc3) unless the build
-// says -fcx-limited-range: the residual pass multiplies some 25 phasors per
-// sample, all finite and of magnitude about 1.
-inline Complex Mul(Complex a, Complex b) {
-  return {a.real() * b.real() - a.imag() * b.imag(), a.real() * b.imag() + a.imag() * b.real()};
-}
-
-#if defined(__GNUC__) && defined(__x86_64__)
-__attribute__((target_clones("arch=x86-64-v3", "default")))
-#endif
+// each frequency, +-1..kernels::kResidualBins bins (10: the density to
+// +-16 %, 40 real degrees of freedom), of the residual shifted to baseband: exact bins, so a component of whole cycles in the window adds
+// nothing (block means, tried, leak it through their sinc sidelobes). The
+// sums are one vectorised pass (demod_kernels.h, ResidualSumsOf).
 void ResidualAnalysis(const PhaseSamples& s, size_t n, double w_rad_s, double w_e_rad_s, PhasorEstimate* e,
                       double* s0, double* s1) {
   const double ts = 1.0 / s.f_sample_hz;
   const double t_mid = 0.5 * static_cast<double>(n - 1) * ts;
-  constexpr int kB = 2 * kNoiseBinsEachSide;   // bins -m..-1, 1..m
-  // Twiddles e^{-j 2 pi q k / n} of each bin q, and the accumulators of
-  // z0 = r e^{-j w t} and z1 = r conj(b1) times them (real and imaginary
-  // parts apart).
-  double tr[kB], ti[kB], sr[kB], si[kB];
-  double a0r[kB] = {}, a0i[kB] = {}, a1r[kB] = {}, a1i[kB] = {};
-  for (int b = 0; b < kB; ++b) {
-    const int q = b < kNoiseBinsEachSide ? b - kNoiseBinsEachSide : b - kNoiseBinsEachSide + 1;
-    const Complex st = std::polar(1.0, -kTwoPi * q / static_cast<double>(n));
-    sr[b] = st.real(); si[b] = st.imag();
-    tr[b] = 1.0; ti[b] = 0.0;
-  }
   // Sidebands resolved: 6 w_e at least two Fourier bins from the phasor.
   const double window_s = static_cast<double>(n) * ts;
   const bool sidebands = 6.0 * std::abs(w_e_rad_s) * window_s >= 2.0 * kTwoPi;
-  // Dead-time sidebands: orders -12, -6, 6, 12 of theta_e about each phasor.
-  Complex side0[4] = {}, side1[4] = {};
-  // Other harmonics of the injection: -w_i, 3 w_i, -3 w_i, 5 w_i, -5 w_i.
-  Complex harm[5] = {};
-  const double inv3 = 1.0 / 3.0, inv_sqrt3 = 1.0 / std::sqrt(3.0);
-  const Complex step = std::polar(1.0, w_rad_s * ts);
-  Complex b0 = 1.0;   // e^{j w t}, by recurrence
-  const Complex c0 = e->fundamental_dq_a, c1 = e->fundamental_drift_a_per_s;
-  for (size_t k = 0; k < n; ++k) {
-    const double tau = static_cast<double>(k) * ts - t_mid;
-    const Complex y((2 * s.ia_a[k] - s.ib_a[k] - s.ic_a[k]) * inv3, (s.ib_a[k] - s.ic_a[k]) * inv_sqrt3);
-    const Complex et = std::polar(1.0, s.theta_e_rad[k]);
-    const Complex et2 = Mul(et, et);
-    const Complex b1 = Mul(et2, std::conj(b0));
-    const Complex r = y - Mul(e->i0_a, b0) - Mul(e->i1_a, b1) - Mul(c0 + c1 * tau, et);
-    const Complex r0 = Mul(r, std::conj(b0)), r1 = Mul(r, std::conj(b1));
-    const double r0r = r0.real(), r0i = r0.imag(), r1r = r1.real(), r1i = r1.imag();
-#pragma GCC ivdep
-    for (int b = 0; b < kB; ++b) {
-      a0r[b] += r0r * tr[b] - r0i * ti[b];
-      a0i[b] += r0r * ti[b] + r0i * tr[b];
-      a1r[b] += r1r * tr[b] - r1i * ti[b];
-      a1i[b] += r1r * ti[b] + r1i * tr[b];
-      const double nr = tr[b] * sr[b] - ti[b] * si[b];
-      ti[b] = tr[b] * si[b] + ti[b] * sr[b];
-      tr[b] = nr;
-    }
-    if (sidebands) {
-      const Complex e6 = std::conj(Mul(Mul(et2, et2), et2)), e12 = Mul(e6, e6);   // e^{-j6theta}, e^{-j12theta}
-      const Complex o[4] = {std::conj(e12), std::conj(e6), e6, e12};
-      for (int j = 0; j < 4; ++j) {
-        side0[j] += Mul(r0, o[j]);
-        side1[j] += Mul(r1, o[j]);
-      }
-    }
-    // r e^{-j h w t} = r0 e^{-j (h - 1) w t}.
-    const Complex b2 = Mul(b0, b0), b4 = Mul(b2, b2);
-    harm[0] += Mul(r0, b2);
-    harm[1] += Mul(r0, std::conj(b2));
-    harm[2] += Mul(r0, b4);
-    harm[3] += Mul(r0, std::conj(b4));
-    harm[4] += Mul(Mul(r0, b4), b2);
-    b0 = Mul(b0, step);
-    if ((k & 1023) == 1023) {   // against rounding drift of the recurrences
-      b0 /= std::abs(b0);
-      for (int b = 0; b < kB; ++b) {
-        const double m = 1.0 / std::hypot(tr[b], ti[b]);
-        tr[b] *= m;
-        ti[b] *= m;
-      }
-    }
-  }
+  const double model[8] = {e->i0_a.real(), e->i0_a.imag(), e->i1_a.real(), e->i1_a.imag(),
+                           e->fundamental_dq_a.real(), e->fundamental_dq_a.imag(),
+                           e->fundamental_drift_a_per_s.real(), e->fundamental_drift_a_per_s.imag()};
+  const kernels::PhaseArrays arrays{s.ia_a, s.ib_a, s.ic_a, s.theta_e_rad, s.n};
+  const kernels::ResidualSums sums =
+      kernels::ResidualSumsOf(arrays, n, w_rad_s * ts, t_mid, ts, model, sidebands, kernels::BestIsa());
+  auto c = [](const double* v) { return Complex(v[0], v[1]); };
   double p0 = 0, p1 = 0;
-  for (int b = 0; b < kB; ++b) {
-    p0 += a0r[b] * a0r[b] + a0i[b] * a0i[b];
-    p1 += a1r[b] * a1r[b] + a1i[b] * a1i[b];
+  for (int b = 0; b < 2 * kernels::kResidualBins; ++b) {
+    p0 += std::norm(c(sums.bins0[b]));
+    p1 += std::norm(c(sums.bins1[b]));
   }
-  const double scale = 1.0 / (kB * static_cast<double>(n));
+  const double scale = 1.0 / (2.0 * kernels::kResidualBins * static_cast<double>(n));
   *s0 = p0 * scale;
   *s1 = p1 * scale;
   double hp = 0;
-  for (const Complex& h : harm) hp += std::norm(h / static_cast<double>(n));
+  for (const auto& h : sums.harm) hp += std::norm(c(h) / static_cast<double>(n));
   const double i0_power = std::norm(e->i0_a);
   e->harmonic_ratio = i0_power > 0 ? hp / i0_power : 0.0;
   e->dead_time_sideband_ratio = std::numeric_limits<double>::quiet_NaN();
   const double i0 = std::abs(e->i0_a);
   if (sidebands && i0 > 0) {
     double worst = 0;
-    for (int j = 0; j < 4; ++j) worst = std::max({worst, std::abs(side0[j]), std::abs(side1[j])});
+    for (int j = 0; j < 4; ++j) worst = std::max({worst, std::abs(c(sums.side0[j])), std::abs(c(sums.side1[j]))});
     e->dead_time_sideband_ratio = worst / static_cast<double>(n) / i0;
   }
 }

@@ -329,6 +329,133 @@ FLUXCAL_INLINE void PaperKernel(const PhaseArrays& in, size_t m, size_t p, size_
   PutComplex<W>(out->c01, a.c01r, a.c01i);
 }
 
+// ----------------------------------------------------------- residual
+
+template <int W>
+struct ResidualAcc {
+  using D = typename Vec<W>::D;
+  D b0r[2 * kResidualBins]{}, b0i[2 * kResidualBins]{}, b1r[2 * kResidualBins]{}, b1i[2 * kResidualBins]{};
+  D s0r[4]{}, s0i[4]{}, s1r[4]{}, s1i[4]{};
+  D hr[5]{}, hi[5]{};
+};
+
+// Bin q of index b (q = -kResidualBins..-1, 1..kResidualBins).
+constexpr int BinOrder(int b) { return b < kResidualBins ? b - kResidualBins : b - kResidualBins + 1; }
+
+template <int W, bool kMasked>
+FLUXCAL_INLINE void ResidualStep(ResidualAcc<W>& a, typename Vec<W>::D ia, typename Vec<W>::D ib,
+                                 typename Vec<W>::D ic, typename Vec<W>::D th, typename Vec<W>::D tau,
+                                 typename Vec<W>::D pr, typename Vec<W>::D pi, const typename Vec<W>::D* twr,
+                                 const typename Vec<W>::D* twi, const double* m, bool sidebands,
+                                 typename Vec<W>::D valid) {
+  using D = typename Vec<W>::D;
+  const D yr = (2.0 * ia - ib - ic) * (1.0 / 3.0);
+  const D yi = (ib - ic) * (1.0 / kSqrt3);
+  D st, ct;
+  SinCosV<W>(th, &st, &ct);
+  const D c2 = ct * ct - st * st, s2 = 2.0 * ct * st;          // e^{j 2 theta}
+  const D q1r = c2 * pr + s2 * pi, q1i = s2 * pr - c2 * pi;    // b1 = e^2 conj(p)
+  const D fr = m[4] + m[6] * tau, fi = m[5] + m[7] * tau;      // c0 + c1 tau
+  D rr = yr - (m[0] * pr - m[1] * pi) - (m[2] * q1r - m[3] * q1i) - (fr * ct - fi * st);
+  D ri = yi - (m[0] * pi + m[1] * pr) - (m[2] * q1i + m[3] * q1r) - (fr * st + fi * ct);
+  if constexpr (kMasked) {
+    rr *= valid;
+    ri *= valid;
+  }
+  const D r0r = rr * pr + ri * pi, r0i = ri * pr - rr * pi;        // r conj(p)
+  const D r1r = rr * q1r + ri * q1i, r1i = ri * q1r - rr * q1i;    // r conj(b1)
+  for (int b = 0; b < 2 * kResidualBins; ++b) {
+    a.b0r[b] += r0r * twr[b] - r0i * twi[b];
+    a.b0i[b] += r0r * twi[b] + r0i * twr[b];
+    a.b1r[b] += r1r * twr[b] - r1i * twi[b];
+    a.b1i[b] += r1r * twi[b] + r1i * twr[b];
+  }
+  if (sidebands) {
+    // e^{-j 6 theta} = conj(e^2)^3, e^{-j 12 theta} its square.
+    const D e4r = c2 * c2 - s2 * s2, e4i = -2.0 * c2 * s2;          // conj(e^2)^2
+    const D e6r = e4r * c2 + e4i * s2, e6i = e4i * c2 - e4r * s2;    // conj(e^2)^3
+    const D e12r = e6r * e6r - e6i * e6i, e12i = 2.0 * e6r * e6i;
+    // m = -12, -6, 6, 12: e^{+j12}, e^{+j6}, e^{-j6}, e^{-j12}.
+    const D orr[4] = {e12r, e6r, e6r, e12r}, oi[4] = {-e12i, -e6i, e6i, e12i};
+    for (int j = 0; j < 4; ++j) {
+      a.s0r[j] += r0r * orr[j] - r0i * oi[j];
+      a.s0i[j] += r0r * oi[j] + r0i * orr[j];
+      a.s1r[j] += r1r * orr[j] - r1i * oi[j];
+      a.s1i[j] += r1r * oi[j] + r1i * orr[j];
+    }
+  }
+  // r e^{-j h w t} = r0 e^{-j (h - 1) w t}: p^2, conj(p)^2, p^4, conj(p)^4, p^6.
+  const D p2r = pr * pr - pi * pi, p2i = 2.0 * pr * pi;
+  const D p4r = p2r * p2r - p2i * p2i, p4i = 2.0 * p2r * p2i;
+  const D p6r = p4r * p2r - p4i * p2i, p6i = p4r * p2i + p4i * p2r;
+  const D hr[5] = {p2r, p2r, p4r, p4r, p6r}, hi[5] = {p2i, -p2i, p4i, -p4i, p6i};
+  for (int h = 0; h < 5; ++h) {
+    a.hr[h] += r0r * hr[h] - r0i * hi[h];
+    a.hi[h] += r0r * hi[h] + r0i * hr[h];
+  }
+}
+
+template <int W>
+FLUXCAL_INLINE ResidualSums ResidualKernel(const PhaseArrays& in, size_t n, double w_ts, double t_mid, double ts,
+                                           const double* model, bool sidebands) {
+  using D = typename Vec<W>::D;
+  ResidualAcc<W> a;
+  const D iota = Iota<W>(), ones = iota * 0.0 + 1.0;
+  const double step_c = std::cos(w_ts * W), step_s = std::sin(w_ts * W);
+  // Twiddles per bin and lane, advanced by W samples per vector and
+  // evaluated afresh every kResync vectors, as the injection phasor.
+  D twr[2 * kResidualBins], twi[2 * kResidualBins];
+  double tstep_c[2 * kResidualBins], tstep_s[2 * kResidualBins], tw_rate[2 * kResidualBins];
+  for (int b = 0; b < 2 * kResidualBins; ++b) {
+    tw_rate[b] = -kTwoPi * BinOrder(b) / static_cast<double>(n);
+    tstep_c[b] = std::cos(tw_rate[b] * W);
+    tstep_s[b] = std::sin(tw_rate[b] * W);
+  }
+  auto twiddles_at = [&](size_t k) {
+    for (int b = 0; b < 2 * kResidualBins; ++b) SinCosV<W>((iota + static_cast<double>(k)) * tw_rate[b], &twi[b], &twr[b]);
+  };
+  D pr{}, pi{};
+  size_t k = 0, it = 0;
+  for (; k + W <= n; k += W, ++it) {
+    if (it % kResync == 0) {
+      InjectionPhasor<W>(w_ts, k, &pr, &pi);
+      twiddles_at(k);
+    }
+    const D tau = (iota + static_cast<double>(k)) * ts - t_mid;
+    ResidualStep<W, false>(a, Load<W>(in.ia_a + k), Load<W>(in.ib_a + k), Load<W>(in.ic_a + k),
+                           Load<W>(in.theta_e_rad + k), tau, pr, pi, twr, twi, model, sidebands, ones);
+    const D npr = pr * step_c - pi * step_s;
+    pi = pr * step_s + pi * step_c;
+    pr = npr;
+    for (int b = 0; b < 2 * kResidualBins; ++b) {
+      const D nr = twr[b] * tstep_c[b] - twi[b] * tstep_s[b];
+      twi[b] = twr[b] * tstep_s[b] + twi[b] * tstep_c[b];
+      twr[b] = nr;
+    }
+  }
+  if (k < n) {
+    const size_t rest = n - k;
+    InjectionPhasor<W>(w_ts, k, &pr, &pi);
+    twiddles_at(k);
+    const D tau = (iota + static_cast<double>(k)) * ts - t_mid;
+    const D valid = iota < static_cast<double>(rest) ? ones : ones * 0.0;
+    ResidualStep<W, true>(a, LoadPartial<W>(in.ia_a + k, rest), LoadPartial<W>(in.ib_a + k, rest),
+                          LoadPartial<W>(in.ic_a + k, rest), LoadPartial<W>(in.theta_e_rad + k, rest), tau, pr, pi,
+                          twr, twi, model, sidebands, valid);
+  }
+  ResidualSums out;
+  for (int b = 0; b < 2 * kResidualBins; ++b) {
+    PutComplex<W>(out.bins0[b], a.b0r[b], a.b0i[b]);
+    PutComplex<W>(out.bins1[b], a.b1r[b], a.b1i[b]);
+  }
+  for (int j = 0; j < 4; ++j) {
+    PutComplex<W>(out.side0[j], a.s0r[j], a.s0i[j]);
+    PutComplex<W>(out.side1[j], a.s1r[j], a.s1i[j]);
+  }
+  for (int h = 0; h < 5; ++h) PutComplex<W>(out.harm[h], a.hr[h], a.hi[h]);
+  return out;
+}
+
 // -------------------------------------------------------------- speed
 
 template <int W>
@@ -376,6 +503,7 @@ FLUXCAL_INLINE void SinCosKernel(const double* x, size_t n, double* s, double* c
 
 struct Variant {
   LsqSums (*lsq)(const PhaseArrays&, size_t, double, double, double);
+  ResidualSums (*residual)(const PhaseArrays&, size_t, double, double, double, const double*, bool);
   void (*paper)(const PhaseArrays&, size_t, size_t, size_t, size_t, double, PaperSums*);
   double (*slope)(const double*, size_t);
   void (*sincos)(const double*, size_t, double*, double*);
@@ -388,6 +516,10 @@ struct Variant {
                            double ts) {                                                     \
     return LsqKernel<lanes>(in, n, w_ts, t_mid, ts);                                        \
   }                                                                                         \
+  target ResidualSums name##Residual(const PhaseArrays& in, size_t n, double w_ts, double t_mid, \
+                                     double ts, const double* model, bool sidebands) {       \
+    return ResidualKernel<lanes>(in, n, w_ts, t_mid, ts, model, sidebands);                 \
+  }                                                                                         \
   target void name##Paper(const PhaseArrays& in, size_t m, size_t p, size_t k0,             \
                           size_t periods, double w_ts, PaperSums* out) {                    \
     PaperKernel<lanes>(in, m, p, k0, periods, w_ts, out);                                   \
@@ -396,7 +528,7 @@ struct Variant {
   target void name##SinCos(const double* x, size_t n, double* s, double* c) {               \
     SinCosKernel<lanes>(x, n, s, c);                                                        \
   }                                                                                         \
-  constexpr Variant k##name{&name##Lsq, &name##Paper, &name##Slope, &name##SinCos};
+  constexpr Variant k##name{&name##Lsq, &name##Residual, &name##Paper, &name##Slope, &name##SinCos};
 
 FLUXCAL_DEFINE_VARIANT(Baseline, , 2)
 #ifdef FLUXCAL_X86_DISPATCH
@@ -456,6 +588,11 @@ const char* IsaName(Isa isa) {
 LsqSums LsqNormalSums(const PhaseArrays& in, size_t n_used, double w_ts_rad, double t_mid_s,
                       double ts_s, Isa isa) {
   return Select(isa).lsq(in, n_used, w_ts_rad, t_mid_s, ts_s);
+}
+
+ResidualSums ResidualSumsOf(const PhaseArrays& in, size_t n_used, double w_ts_rad, double t_mid_s, double ts_s,
+                            const double model[8], bool sidebands, Isa isa) {
+  return Select(isa).residual(in, n_used, w_ts_rad, t_mid_s, ts_s, model, sidebands);
 }
 
 PaperSums PaperFilterSums(const PhaseArrays& in, size_t m, size_t p, size_t k0, size_t periods,

@@ -65,6 +65,26 @@ struct PaperSums {
 PaperSums PaperFilterSums(const PhaseArrays& in, size_t m, size_t p, size_t k0, size_t periods,
                           double w_ts_rad, Isa isa);
 
+// The LSQ residual's sums (demod.cc, ResidualAnalysis, which derives what
+// they are for): with the fitted model's residual
+//   r_k = y_k - I0 p_k - I1 b1_k - (c0 + c1 tau_k) e_k,   b1 = e^2 conj(p),
+// r0 = r conj(p), r1 = r conj(b1) and the Fourier twiddles
+// t_qk = e^{-j 2 pi q k / n} for q = -kResidualBins..-1, 1..kResidualBins:
+//   bins0[b] = sum r0_k t_qk, bins1[b] = sum r1_k t_qk  (b in q's order);
+//   side0[j], side1[j] = sum r0 (resp. r1) e^{-j m theta_k} for
+//     m = -12, -6, 6, 12 (only when `sidebands`);
+//   harm[h] = sum r0 conj(p)^(h' - 1) for the injection orders
+//     h' = -1, 3, -3, 5, -5.
+// `model` = {Re I0, Im I0, Re I1, Im I1, Re c0, Im c0, Re c1, Im c1}.
+inline constexpr int kResidualBins = 10;
+struct ResidualSums {
+  double bins0[2 * kResidualBins][2] = {}, bins1[2 * kResidualBins][2] = {};
+  double side0[4][2] = {}, side1[4][2] = {};
+  double harm[5][2] = {};
+};
+ResidualSums ResidualSumsOf(const PhaseArrays& in, size_t n_used, double w_ts_rad, double t_mid_s, double ts_s,
+                            const double model[8], bool sidebands, Isa isa);
+
 // 6 / (n (n^2 - 1)) sum_{j=1}^{n-1} j (n - j) wrap(theta_j - theta_{j-1}):
 // the least-squares slope (rad per sample) of the unwrapped angle against the
 // sample index, written as a weighted sum of increments so it vectorises
