@@ -114,16 +114,9 @@ std::vector<std::pair<size_t, std::string>> GrossHfOutliers(const Calibration& c
   std::vector<double> z(d.inductances.size());
   std::vector<std::string> what(d.inductances.size());
   for (size_t k = 0; k < d.inductances.size(); ++k) {
-    const auto& obs = d.inductances[k];
-    const auto L = internal::PredictedInductance(cal, obs);
-    const double sd = std::max(obs.ldd_h_std, o.relative_sigma_floor * std::abs(obs.ldd_h));
-    const double sq = std::max(obs.lqq_h_std, o.relative_sigma_floor * std::abs(obs.lqq_h));
-    const double zd = (L.ldd_h - obs.ldd_h) / sd, zq = (L.lqq_h - obs.lqq_h) / sq;
-    z[k] = std::max(std::abs(zd), std::abs(zq));
-    if (!std::isfinite(z[k])) z[k] = 0;
-    const bool d_worse = std::abs(zd) >= std::abs(zq);
-    what[k] = absl::StrFormat("%s off the surface by %.3g %% (%.0f sigma", d_worse ? "ldd_h" : "lqq_h",
-                              100 * (d_worse ? L.ldd_h / obs.ldd_h - 1 : L.lqq_h / obs.lqq_h - 1), z[k]);
+    const internal::HfPointMisfit m = internal::MisfitOf(cal, d.inductances[k], o);
+    z[k] = m.sigmas;
+    what[k] = m.text;
   }
   std::vector<std::pair<size_t, std::string>> out;
   if (z.size() < 10) return out;

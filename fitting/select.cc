@@ -365,19 +365,12 @@ void Report(const FitData& d, const FitOptions& o, const std::vector<Solved>& so
   // Points beyond 3 robust scales of their stated sigma (a Huber weight of
   // a third or less at that scale), so a station sees which points did not
   // count fully.
-  for (size_t k = 0; k < d.inductances.size(); ++k) {
-    const auto& obs = d.inductances[k];
-    const auto L = PredictedInductance(cal, obs);
-    const double sd = std::max(obs.ldd_h_std, o.relative_sigma_floor * obs.ldd_h);
-    const double sq = std::max(obs.lqq_h_std, o.relative_sigma_floor * obs.lqq_h);
-    const double zd = (L.ldd_h - obs.ldd_h) / sd, zq = (L.lqq_h - obs.lqq_h) / sq;
-    const double z = std::max(std::abs(zd), std::abs(zq));
-    if (z > 3.0 * o.robust_scale) {
+  for (const auto& obs : d.inductances) {
+    const HfPointMisfit m = MisfitOf(cal, obs, o);
+    if (m.sigmas > 3.0 * o.robust_scale) {
       if (down_weighted != nullptr) ++*down_weighted;
-      excluded.push_back(absl::StrFormat(
-          "hf point (id %.6g A, iq %.6g A): %s off the surface by %.3g %% (%.0f sigma); down-weighted", obs.id_a,
-          obs.iq_a, std::abs(zd) >= std::abs(zq) ? "ldd_h" : "lqq_h",
-          100 * (std::abs(zd) >= std::abs(zq) ? L.ldd_h / obs.ldd_h - 1 : L.lqq_h / obs.lqq_h - 1), z));
+      excluded.push_back(
+          absl::StrFormat("hf point (id %.6g A, iq %.6g A): %s); down-weighted", obs.id_a, obs.iq_a, m.text));
     }
   }
   cal.summary.excluded = excluded;
@@ -390,6 +383,20 @@ void Report(const FitData& d, const FitOptions& o, const std::vector<Solved>& so
 }
 
 }  // namespace
+
+HfPointMisfit MisfitOf(const Calibration& cal, const InductanceObservation& obs, const FitOptions& o) {
+  const auto L = PredictedInductance(cal, obs);
+  const double sd = std::max(obs.ldd_h_std, o.relative_sigma_floor * std::abs(obs.ldd_h));
+  const double sq = std::max(obs.lqq_h_std, o.relative_sigma_floor * std::abs(obs.lqq_h));
+  const double zd = (L.ldd_h - obs.ldd_h) / sd, zq = (L.lqq_h - obs.lqq_h) / sq;
+  HfPointMisfit m;
+  m.sigmas = std::max(std::abs(zd), std::abs(zq));
+  if (!std::isfinite(m.sigmas)) m.sigmas = 0;
+  const bool d_worse = std::abs(zd) >= std::abs(zq);
+  m.text = absl::StrFormat("%s off the surface by %.3g %% (%.0f sigma", d_worse ? "ldd_h" : "lqq_h",
+                           100 * (d_worse ? L.ldd_h / obs.ldd_h - 1 : L.lqq_h / obs.lqq_h - 1), m.sigmas);
+  return m;
+}
 
 absl::StatusOr<Calibration> FitScreened(const FitData& d, std::vector<std::string> excluded,
                                         const std::vector<Calibration::Box>& not_pd, const FitOptions& o,

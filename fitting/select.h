@@ -25,6 +25,16 @@ absl::StatusOr<Calibration> FitScreened(const FitData& d, std::vector<std::strin
                                         const std::vector<Calibration::Box>& not_pd, const FitOptions& o,
                                         int* down_weighted = nullptr, double* selected_cv = nullptr);
 
+// How far `cal` misses an HF point: the larger of Ldd's and Lqq's
+// misfit in sigmas (the stated standard error, at least o's relative
+// floor), and its text for the calibration's lists ("ldd_h off the
+// surface by -23.1 % (115 sigma").
+struct HfPointMisfit {
+  double sigmas = 0;
+  std::string text;
+};
+HfPointMisfit MisfitOf(const Calibration& cal, const InductanceObservation& obs, const FitOptions& o);
+
 }  // namespace fluxcal::fit::internal
 
 #endif  // FLUXCAL_FITTING_SELECT_H_

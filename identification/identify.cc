@@ -27,8 +27,8 @@ constexpr double kLdqNeglectedShare = 0.01;
 // the gate's mean, of about the sidebands' size, lies on I0 and I1 and
 // biases the inductances by about as much or more (I1 is a fraction of
 // I0). Measured (docs/identification.md, Sec. 6), the largest sideband per
-// rotating point: the clean public sets 0.05-0.8 %, four other-kind twin
-// machines 0.02-0.94 % and with a 1 us dead time 1.6-9.1 %, the public
+// rotating point: the clean public sets 0.05-0.8 %, the twin's trait
+// machines 0.01-0.94 % and with a 1 us dead time 1.6-9.1 %, the public
 // dead-time sets 0.96-8.9 %.
 constexpr double kDeadTimeSidebandShare = 0.01;
 
