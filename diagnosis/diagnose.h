@@ -86,6 +86,11 @@ struct HeldOutCheck {
   std::string signal;               // the class left out of the fit
   double significance_sigma = 0;    // largest region significance of its prediction error
   double residual_rms = 0;          // relative RMS of its prediction error
+  // Where the class measures the flux itself (steady-state voltages,
+  // torque) and its prediction missed: the largest move of an effect
+  // parameter refitted without it, in standard deviations of the
+  // difference (Hausman; negative: not used).
+  double parameter_shift_sigma = -1;
   bool passed = false;
 };
 

@@ -104,6 +104,7 @@ nlohmann::json ToJson(const DiagnosisReport& r) {
   for (const auto& h : r.held_out) {
     j["held_out"].push_back({{"signal", h.signal}, {"significance_sigma", h.significance_sigma},
                              {"residual_rms", h.residual_rms}, {"passed", h.passed}});
+    if (h.parameter_shift_sigma >= 0) j["held_out"].back()["parameter_shift_sigma"] = h.parameter_shift_sigma;
   }
   j["rejected_candidates"] = json::array();
   for (const auto& c : r.rejected) {
@@ -167,6 +168,11 @@ std::string ToText(const DiagnosisReport& r) {
     s += absl::StrFormat("  Fitted without %s, the final model predicts it to %.1f sigma (relative RMS %.3g %%)%s.\n",
                          h.signal, h.significance_sigma, 100 * h.residual_rms,
                          h.passed ? "" : ": not predicted, the findings do not account for it");
+    if (h.parameter_shift_sigma >= 0) {
+      s += absl::StrFormat("    (the magnetics from the other classes miss it; every effect is found without it and moves "
+                           "%.1f sigma: %s)\n",
+                           h.parameter_shift_sigma, h.passed ? "consistent" : "not consistent");
+    }
   }
   for (const auto& c : r.rejected) {
     if (r.verdict == "explained" || r.verdict == "no_mismatch") break;

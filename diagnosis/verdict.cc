@@ -87,4 +87,47 @@ double Significance(const Candidate& c, const FitOut& f, const Model& m) {
   return best;
 }
 
+// Hausman's statistic of a held-out fit (docs/diagnosis.md, "Held-out HF
+// phasors"): the largest move of an effect parameter of `free` from the
+// full fit's, in standard deviations of the difference.
+double ParameterShiftSigma(const FitOut& held, const FitOut& full, const std::vector<Block>& free) {
+  double worst = 0;
+  for (Block b : free) {
+    if (b == kBase || !held.stdev.count(b) || !full.stdev.count(b)) continue;
+    for (int i = 0; i < kBlockSize[b]; ++i) {
+      const double d = held.p.b[b][i] - full.p.b[b][i];
+      if (d == 0.0) continue;
+      const double sf = held.stdev.at(b)[i], sc = full.stdev.at(b)[i];
+      // The difference's variance is sd_without^2 - sd_full^2 where
+      // that is positive; where the two fits' chi^2 scales make it not
+      // (the full fit's residual is worse than the noise model), the
+      // sum, as if the estimates were independent (conservative). Where
+      // the class hardly informs a parameter (sd_without ~ sd_full) the
+      // difference is ill-conditioned: its sd is floored at 10 % of
+      // sd_without, below which the two solves' own tolerances and the
+      // covariances' accuracy make any move meaningless.
+      const double var = sf > sc ? std::max(sf * sf - sc * sc, 0.01 * sf * sf) : sf * sf + sc * sc;
+      if (var > 0) worst = std::max(worst, std::abs(d) / std::sqrt(var));
+    }
+  }
+  return worst;
+}
+
+// Whether every effect block of `free` is found in the held-out fit too
+// (some parameter parameter_sigma from neutral): the other classes
+// witness it, so its value can be compared.
+bool FoundWithout(const FitOut& held, const std::vector<Block>& free, double parameter_sigma) {
+  for (Block b : free) {
+    if (b == kBase) continue;
+    if (!held.stdev.count(b)) return false;
+    double best = 0;
+    for (int i = 0; i < kBlockSize[b]; ++i) {
+      const double sd = held.stdev.at(b)[i];
+      if (sd > 0) best = std::max(best, std::abs(held.p.b[b][i]) / sd);
+    }
+    if (best < parameter_sigma) return false;
+  }
+  return true;
+}
+
 }  // namespace fluxcal::diag::detail

@@ -60,18 +60,36 @@ PointRun RunPoint(const TwinConfig& cfg, const PlantModel& m, double id_ref, dou
   const double kp_q = 2 * kPi * cfg.control.bandwidth_hz * l_ctrl_q;
   const double wc_i = 2 * kPi * cfg.control.integral_corner_hz;
 
-  // Start in the steady state of the true machine at the reference.
+  // Start in the steady state of the true machine at the reference, on
+  // the injection's flux orbit: the injection has been running. Started at
+  // the orbit's centre, the first period would integrate the rotating HF
+  // voltage from there and leave the whole orbit offset by its radius
+  // V / w_i (int_0^t V e^{j w s} ds = (V / j w)(e^{j w t} - 1)), a DC flux
+  // step that the current loop removes only over its own time constant and
+  // that, on a machine whose HF orbit is a third of its current, pushed
+  // points past the map's fold into a runaway. The held command of period
+  // k (computed at k Ts, applied over [(k+1) Ts, (k+2) Ts)) has the
+  // fundamental V sinc(w Ts / 2) e^{j(w (t - 1.5 Ts) + phase)}, whose flux
+  // is that over j w (Rs neglected: Rs / (w_i L) < 1e-2).
   State x;
   m.Flux(id_ref, iq_ref, theta0, &x.psd, &x.psq);
+  if (vi > 0) {
+    const double y = 0.5 * wi * ts;
+    const double r = vi * Sinc(y) / wi, a = align.injection_phase_rad - 3.0 * y - theta0;
+    // (r / j) e^{j a} in the rotor frame at theta0.
+    x.psd += r * std::sin(a);
+    x.psq -= r * std::cos(a);
+  }
   x.lpd = id_ref; x.lpq = iq_ref;
-  x.i = Vec2{id_ref, iq_ref};
+  x.i = vi > 0 ? m.Current(x.psd, x.psq, theta0, Vec2{id_ref, iq_ref}) : Vec2{id_ref, iq_ref};
   x.i_term = x.i;
   double int_d = cfg.motor.rs_ohm * id_ref, int_q = cfg.motor.rs_ohm * iq_ref;
 
   std::deque<std::pair<double, double>> cmd_hist;   // alpha-beta commands by period
   cmd_hist.push_back({0, 0});
   // Seed the history with the steady-state command so the first periods are
-  // not a voltage step.
+  // not a voltage step: the command of period -1, injection included (the
+  // orbit the flux starts on assumes it).
   {
     double pd, pq;
     m.Flux(id_ref, iq_ref, theta0, &pd, &pq);
@@ -80,10 +98,15 @@ PointRun RunPoint(const TwinConfig& cfg, const PlantModel& m, double id_ref, dou
     cmd_hist.clear();
     double ual, ube;
     InverseParkCs(ud, uq, c, s, &ual, &ube);
+    ual += vi * std::cos(-wi * ts + align.injection_phase_rad);
+    ube += vi * std::sin(-wi * ts + align.injection_phase_rad);
     for (int k = 0; k < 4; ++k) cmd_hist.push_back({ual, ube});
   }
-  std::deque<std::pair<double, double>> fb_hist;   // dq feedback for the moving average
-  double fb_sum_d = 0, fb_sum_q = 0;
+  // The feedback average, seeded with one injection period at the
+  // reference (the orbit's mean): a partly filled average reads the
+  // orbit's first samples as a current error of up to the orbit's radius.
+  std::deque<std::pair<double, double>> fb_hist(period, {id_ref, iq_ref});
+  double fb_sum_d = static_cast<double>(period) * id_ref, fb_sum_q = static_cast<double>(period) * iq_ref;
   const size_t n_total = n_settle + n_rec;
   out.wave.t_s.reserve(n_rec);
   double acc_ud_app = 0, acc_uq_app = 0;

@@ -545,7 +545,11 @@ TEST(RealMaps, LargeSignalHfIsWhatTheInjectionMeasures) {
     EXPECT_GT(chi2_small / n, 10.0) << t.name;
     EXPECT_LT(chi2_large / n, 3.0) << t.name;
     EXPECT_LT(e_large, 1.05 * e_small) << t.name;
-    if (t.name == "ipm-bridge") EXPECT_LT(e_large, 0.7 * e_small);
+    // On the bridge knee clearly better: 1.34 % against 1.85 % since the
+    // bench starts each point on the injection's orbit (1.51 against 3.46 %
+    // before: the start's flux step, still decaying in the window, bent
+    // the small-signal fit more; docs/simulation.md).
+    if (t.name == "ipm-bridge") EXPECT_LT(e_large, 0.8 * e_small);
   }
 }
 
