@@ -247,6 +247,10 @@ def edits(out):
     def copy(name):
         d = os.path.join(out, 'edits', name)
         shutil.rmtree(d, ignore_errors=True)
+        # Its truth file too: `fluxcal simulate` refuses to overwrite one, and
+        # a rerun into the same --out failed at its first set.
+        if os.path.exists(d + '.truth.json'):
+            os.remove(d + '.truth.json')
         shutil.copytree(src, d)
         return d
 
@@ -316,6 +320,10 @@ def main():
         name, seed, effects, spread, variant = case
         d = os.path.join(a.out, 'sets', name)
         shutil.rmtree(d, ignore_errors=True)
+        # Its truth file too: `fluxcal simulate` refuses to overwrite one, and
+        # a rerun into the same --out failed at its first set.
+        if os.path.exists(d + '.truth.json'):
+            os.remove(d + '.truth.json')
         cmd = [a.fluxcal, 'simulate', '--motor', motors[variant], '--plan', plan, '--seed', str(seed), '--out', d]
         if effects:
             cmd += ['--effects', effects]
