@@ -102,8 +102,8 @@ Label Name(double f, double f_e, double f_i, int pole_pairs, double tol) {
 // dense comb (a dead time's sidebands of the injection at 6 k f_e, 10-80
 // mA at 200 rpm) can null one bin between two of its lines by
 // coincidence, and a residual of the comb's size read there as a line no
-// model explains (35 mA against the model's 3.5 mA between 80 and 40 mA,
-// 6.8 sigma; the probe's `pair_udc_dt_s93`).
+// model explains (a 35 mA line, 6.8 sigma, beside larger model lines;
+// the probe's `pair_udc_dt_s93`).
 double ModelLineSize(const std::vector<Complex>& sim, size_t b) {
   const size_t n = sim.size();
   return kModelLineAccuracy *
@@ -186,7 +186,9 @@ std::vector<WaveformPoint> AnalyseWaveforms(const io::RecordingSet& set, const s
     // sigma^2 / n, sigma^2 from the residual's median power), up to the
     // order below Nyquist. A line at such an order that the series does
     // not lead to is still located.
+    std::map<int, size_t> hf_column;   // order m -> its column in the basis
     auto add_hf = [&](int m) {
+      hf_column[m] = basis.size();
       Eigen::VectorXcd b(n);
       for (size_t k = 0; k < n; ++k) {
         const double t = static_cast<double>(k + 1) / fs;
@@ -216,11 +218,8 @@ std::vector<WaveformPoint> AnalyseWaveforms(const io::RecordingSet& set, const s
       for (size_t k = 0; k < n; ++k) p[k] = std::norm(res(k));
       std::nth_element(p.begin(), p.begin() + n / 2, p.end());
       const double coef_var = p[n / 2] / std::log(2.0) / static_cast<double>(n);
-      // Coefficients of orders +M and -M: the last two columns added
-      // (the first round: the columns of m = -M and +M).
-      const size_t cols = basis.size();
-      const size_t i_lo = hf_order == kHfHarmonics ? cols - 2 * kHfHarmonics : cols - 2, i_hi = cols - 1;
-      const double top = std::max(std::norm(coef(static_cast<long>(i_lo))), std::norm(coef(static_cast<long>(i_hi))));
+      const double top = std::max(std::norm(coef(static_cast<long>(hf_column.at(-hf_order)))),
+                                  std::norm(coef(static_cast<long>(hf_column.at(hf_order)))));
       if (!(top / coef_var >= kLineZ2)) break;
       ++hf_order;
       add_hf(-hf_order);

@@ -74,8 +74,8 @@ PointRun RunPoint(const TwinConfig& cfg, const PlantModel& m, double id_ref, dou
   State x;
   m.Flux(id_ref, iq_ref, theta0, &x.psd, &x.psq);
   if (vi > 0) {
-    const double y = 0.5 * wi * ts;
-    const double r = vi * Sinc(y) / wi, a = align.injection_phase_rad - 3.0 * y - theta0;
+    const double r = vi * physics::ZohGain(wi, ts) / wi;
+    const double a = align.injection_phase_rad - physics::ControlDelayAngle(wi, ts) - theta0;
     // (r / j) e^{j a} in the rotor frame at theta0.
     x.psd += r * std::sin(a);
     x.psq -= r * std::cos(a);

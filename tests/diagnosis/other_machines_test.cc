@@ -164,6 +164,15 @@ TEST(OtherMachines, CatalogueEffectsNamedNeverAnother) {
       std::printf("%-32s %-17s", label.c_str(), r->verdict.c_str());
       for (const auto& f : r->findings) std::printf(" %s", f.effect.c_str());
       std::printf(" (replay residual %.3f A -> %.3f A)\n", r->waveform_rms_before_a, r->waveform_rms_after_a);
+      // Why a set is not `explained`: the held-out classes that failed and
+      // what remains located (docs/diagnosis.md quotes these lines).
+      for (const auto& h : r->held_out) {
+        if (!h.passed) std::printf("    held out %s: %.1f sigma\n", h.signal.c_str(), h.significance_sigma);
+      }
+      for (const auto& m : r->remaining) {
+        std::printf("    remaining %s %s, %.1f sigma: %s\n", m.signal.c_str(), m.kind.c_str(), m.significance_sigma,
+                    m.where.c_str());
+      }
       ++sets;
       for (const auto& n : named) EXPECT_EQ(n, effect) << label << ": named an effect that is not there";
       if (named.count(effect)) ++named_right;
