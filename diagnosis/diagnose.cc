@@ -217,6 +217,9 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
           if (cands[c].block == kHarm) mw.harm_order = cands[c].order;
           Params st = current.p;
           if (cands[c].block == kHarm) st.b[kHarm][0] = 0.0;
+          // A candidate's surfaces are never rougher than the model it is
+          // compared with (internal.h, Model::surf_lambda_floor).
+          mw.surf_lambda_floor = current.lambda;
           trial_fit[c] = Solve(mw, st, trial_of(c));
         },
         opt.cancelled);

@@ -166,6 +166,19 @@ struct Model {
   // calibration's; each refit chooses its own (refit.cc, Solve).
   Eigen::MatrixXd surf_R;
   double surf_lambda = 0;
+  // The least weight a refit may choose (Solve). A candidate effect's
+  // refit keeps its surfaces at least as smooth as the current model's:
+  // an effect explains what the surfaces had to bend for, so with it they
+  // are smoother (diagnose.cc, RelaxesSurfaces), never rougher. A candidate
+  // whose criterion prefers rougher surfaces is trading its parameter
+  // against their flexibility, and with the noise scale estimated from the
+  // data (refit.cc, Bic) n ln RSS rewards interpolation without bound once
+  // the effect has removed what the surfaces could not follow: a strongly
+  // cross-saturated machine's 0.03 rad angle offset refitted at 1e-4 of the
+  // current weight, 89 effective parameters of 198 at chi^2 0.4, and the
+  // offset 2.6 sigma, unnamed; at the current weight chi^2 151 -> 20 with
+  // 41 (docs/diagnosis.md, "A candidate's surfaces are never rougher").
+  double surf_lambda_floor = 0;
   double surf_anisotropy_q = 1;   // the calibration's SmoothingPenalty kappa
   double surf_curvature_weight = 0;   // and its curvature weight mu
   double surf_k_eff = 0;                // effective parameters of the surfaces (BIC)

@@ -4,8 +4,6 @@
 #include <cmath>
 #include <functional>
 #include <limits>
-#include <cstdio>
-#include <cstdlib>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -375,7 +373,7 @@ FitOut Solve(const Model& m, const Params& start, const std::vector<Block>& free
   const Layout L(m, free_blocks);
   const Eigen::MatrixXd S = PenaltyNormal(m, L);
   const bool penalised = S.any();
-  double lambda = penalised ? m.surf_lambda : 0.0;
+  double lambda = penalised ? std::max(m.surf_lambda, m.surf_lambda_floor) : 0.0;
   Eigen::VectorXd x = L.Gather(out.p, m);
   auto objective = [&](const Linearised& lin, const Eigen::VectorXd& xv) {
     return lin.r.squaredNorm() + (penalised ? lambda * xv.dot(S * xv) : 0.0);
@@ -455,6 +453,7 @@ FitOut Solve(const Model& m, const Params& start, const std::vector<Block>& free
         const double rss = (lin.r - JM * w).squaredNorm();
         const double k_eff = (d.array() / (d.array() + lam)).sum();
         const double bic = Bic(rss, k_eff, rows);
+        if (lam < m.surf_lambda_floor) continue;
         if (bic >= best) continue;
         // The linearised step to this lambda's solution, judged physical
         // before it is preferred (SurfacesPositiveDefinite).

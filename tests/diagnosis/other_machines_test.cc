@@ -162,7 +162,10 @@ TEST(OtherMachines, CatalogueEffectsNamedNeverAnother) {
       std::set<std::string> named;
       for (const auto& f : r->findings) named.insert(f.effect);
       std::printf("%-32s %-17s", label.c_str(), r->verdict.c_str());
-      for (const auto& f : r->findings) std::printf(" %s", f.effect.c_str());
+      for (const auto& f : r->findings) {
+        std::printf(" %s", f.effect.c_str());
+        for (const auto& [name, value] : f.parameters) std::printf(" %s=%.4g", name.c_str(), value);
+      }
       std::printf(" (replay residual %.3f A -> %.3f A)\n", r->waveform_rms_before_a, r->waveform_rms_after_a);
       // Why a set is not `explained`: the held-out classes that failed and
       // what remains located (docs/diagnosis.md quotes these lines).
@@ -187,7 +190,10 @@ TEST(OtherMachines, CatalogueEffectsNamedNeverAnother) {
   std::printf("%d sets: the concealed effect named in %d, explained %d (%d of the %d on machines positive definite "
               "over the plan)\n",
               sets, named_right, explained, explained_positive_definite, positive_definite_sets);
-  EXPECT_GE(named_right, sets - 2);
+  // 41 of 42 since a candidate's surfaces are never rougher than the
+  // current model's (docs/diagnosis.md); the one left: the negative-slope
+  // machine's 5 % magnet flux.
+  EXPECT_GE(named_right, sets - 1);
   EXPECT_GE(explained_positive_definite, positive_definite_sets - positive_definite_sets / 10);
 }
 
