@@ -110,6 +110,48 @@ double ModelLineSize(const std::vector<Complex>& sim, size_t b) {
          std::max({std::abs(sim[(b + n - 1) % n]), std::abs(sim[b]), std::abs(sim[(b + 1) % n])});
 }
 
+namespace {
+
+// The zero sequence the model's own sensor gains make of what the replay
+// misses in the phase currents, taken out of the zero-sequence residual
+// `e0` (per sample k, sample k + 1 of the records). The readings are
+// x_j = g_j i_j + o_j with i_a + i_b + i_c = 0, so the recorded zero
+// sequence is 3 z = (g_a - g_c) i_a + (g_b - g_c) i_b + sum o, and the
+// replay's the same with its own gains and currents. With the gains right,
+// 3 (z_rec - z_rep) = (g_a - g_c) d_a + (g_b - g_c) d_b + const to first
+// order, d_j = x_j,rec - x_j,rep the phase residual: a found 2 % gain
+// carries 2 % of whatever the replay misses in phase a into the zero
+// sequence, where the noise is all it is judged against (the phase
+// currents take what the model puts at a line as that line's uncertainty,
+// ModelLineSize; a deep-saturation machine's +-48 A orbit at speed left
+// 9 sigma sidebands there). The gain differences are read off the replay
+// itself: its zero sequence regressed on its phase readings a and b and a
+// constant gives (g_a - g_c) / g_a and (g_b - g_c) / g_b, zero when the
+// model has no gain. Only this first-order term is taken: what the
+// recorded zero sequence holds beyond the model's gains (a crosstalk
+// between two sensors, an error in a gain) stays in the residual.
+// Returns whether a term was taken.
+bool ModelZeroSequenceGains(const io::Waveform& w, const sim::ReplayPoint& r, Eigen::VectorXd* e0) {
+  const Eigen::Index n = e0->size();
+  Eigen::MatrixXd X(n, 3);
+  Eigen::VectorXd z(n);
+  for (Eigen::Index k = 0; k < n; ++k) {
+    const size_t s = static_cast<size_t>(k) + 1;
+    X(k, 0) = r.ia_a[s];
+    X(k, 1) = r.ib_a[s];
+    X(k, 2) = 1.0;
+    z(k) = r.ia_a[s] + r.ib_a[s] + r.ic_a[s];
+  }
+  const Eigen::Vector3d c = X.colPivHouseholderQr().solve(z);
+  if (!c.allFinite() || std::max(std::abs(c(0)), std::abs(c(1))) < 1e-9) return false;
+  for (Eigen::Index k = 0; k < n; ++k) {
+    const size_t s = static_cast<size_t>(k) + 1;
+    (*e0)(k) -= (c(0) * (w.ia_a[s] - r.ia_a[s]) + c(1) * (w.ib_a[s] - r.ib_a[s])) / 3.0;
+  }
+  return true;
+}
+}  // namespace
+
 std::vector<WaveformPoint> AnalyseWaveforms(const io::RecordingSet& set, const std::vector<sim::ReplayPoint>& replay,
                                             int pole_pairs) {
   std::vector<WaveformPoint> out;
@@ -226,6 +268,7 @@ std::vector<WaveformPoint> AnalyseWaveforms(const io::RecordingSet& set, const s
       add_hf(hf_order);
       res = solve(&coef);
     }
+    ModelZeroSequenceGains(w, r, &e0);
     Eigen::VectorXd res0 = e0;
     {
       // The zero sequence: a constant and a ramp (sensor offsets).
