@@ -223,11 +223,15 @@ std::vector<WaveformPoint> AnalyseWaveforms(const io::RecordingSet& set, const s
     // on a strongly cross-saturated machine) the machine's own harmonics
     // continue past order 5 at sizes no smooth calibration reproduces,
     // and are as much its magnetics as orders 2..5. Order M + 1 is taken
-    // as well while the residual's order M (either sign) stands above the
-    // noise as a line would (kLineZ2, against the coefficient's variance
-    // sigma^2 / n, sigma^2 from the residual's median power), up to the
-    // order below Nyquist. A line at such an order that the series does
-    // not lead to is still located.
+    // as well while the residual's order M or M - 1 (either sign) stands
+    // above the noise as a line would (kLineZ2, against the coefficient's
+    // variance sigma^2 / n, sigma^2 from the residual's median power), up
+    // to the order below Nyquist. Two orders, not one: about an operating
+    // point off the curve's centre the bending makes every order, and one
+    // of them can pass near zero between larger neighbours (a deep-
+    // saturation machine's order 5 under the line threshold at a locked
+    // point where order 6 stood at 8.7 sigma). A line at an order the
+    // series does not lead to is still located.
     std::map<int, size_t> hf_column;   // order m -> its column in the basis
     auto add_hf = [&](int m) {
       hf_column[m] = basis.size();
@@ -260,9 +264,12 @@ std::vector<WaveformPoint> AnalyseWaveforms(const io::RecordingSet& set, const s
       for (size_t k = 0; k < n; ++k) p[k] = std::norm(res(k));
       std::nth_element(p.begin(), p.begin() + n / 2, p.end());
       const double coef_var = p[n / 2] / std::log(2.0) / static_cast<double>(n);
-      const double top = std::max(std::norm(coef(static_cast<long>(hf_column.at(-hf_order)))),
-                                  std::norm(coef(static_cast<long>(hf_column.at(hf_order)))));
-      if (!(top / coef_var >= kLineZ2)) break;
+      auto stands = [&](int m) {
+        const double top = std::max(std::norm(coef(static_cast<long>(hf_column.at(-m)))),
+                                    std::norm(coef(static_cast<long>(hf_column.at(m)))));
+        return top / coef_var >= kLineZ2;
+      };
+      if (!stands(hf_order) && !stands(hf_order - 1)) break;
       ++hf_order;
       add_hf(-hf_order);
       add_hf(hf_order);

@@ -7,14 +7,16 @@
 // least as close to the true magnetics as the plain fit. The machines
 // symmetric in iq: one half measured cannot tell the psi_q(id, 0) machine
 // from a symmetric one (docs/fitting.md, "Symmetry").
-// The exception, asserted as such: a machine whose own inductance is not
-// positive definite somewhere in the plan's region (the negative-slope map,
-// Ldd < 0 near zero current). The fit leaves that point out (it cannot be
-// followed by a physical surface, docs/fitting.md) and the replay there
-// misses the injection harmonics the machine's dip makes; the verdict is
-// `unexplained` with that located, never an effect named.
+// That includes a machine whose own inductance is not positive definite
+// somewhere in the plan's region (the negative-slope map, Ldd < 0 near
+// zero current): the fit leaves that point out (it cannot be followed by a
+// physical surface, docs/fitting.md), and the odd harmonics of the
+// injection its dip makes there are its own HF bending (the waveform
+// nuisance's series, diagnosis/waveform.cc), not missing physics.
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
+#include <cstdlib>
 #include <memory>
 #include <set>
 #include <string>
@@ -60,6 +62,13 @@ bool PositiveDefiniteOverPlan(const sim::MagneticModel& m) {
   return true;
 }
 
+// The twin's seed: 11, or FLUXCAL_OTHER_MACHINES_SEED to check the tables
+// on other draws of the noise (docs/diagnosis.md quotes seeds 12 and 13).
+uint64_t Seed() {
+  const char* e = std::getenv("FLUXCAL_OTHER_MACHINES_SEED");
+  return e != nullptr ? std::strtoull(e, nullptr, 10) : 11u;
+}
+
 std::vector<sim::MotorTraits> Kinds() {
   std::vector<sim::MotorTraits> v;
   for (const auto& t : sim::RealLikeMotors(100.0, 0.15)) {
@@ -77,7 +86,7 @@ TEST(OtherMachines, CleanNamesNothingDeadTimeAloneAndCloser) {
   for (const auto& t : kinds) {
     for (double dead_time_s : {0.0, 2e-6}) {
       sim::TwinConfig cfg;
-      cfg.seed = 11;
+      cfg.seed = Seed();
       cfg.motor.sat.psi_pm_wb = t.psi_pm_wb;
       auto truth = std::make_shared<sim::TraitMotor>(t);
       cfg.magnetics = truth;
@@ -98,11 +107,7 @@ TEST(OtherMachines, CleanNamesNothingDeadTimeAloneAndCloser) {
       if (dead_time_s == 0) {
         std::printf("\n");
         EXPECT_TRUE(named.empty()) << label << ": " << r->findings[0].effect << remaining;
-        if (PositiveDefiniteOverPlan(*truth)) {
-          EXPECT_EQ(r->verdict, "no_mismatch") << label << remaining;
-        } else {
-          EXPECT_EQ(r->verdict, "unexplained") << label << remaining;
-        }
+        EXPECT_EQ(r->verdict, "no_mismatch") << label << remaining;
         continue;
       }
       EXPECT_EQ(named, std::set<std::string>{"dead_time"}) << label << remaining;
@@ -128,11 +133,11 @@ TEST(OtherMachines, CleanNamesNothingDeadTimeAloneAndCloser) {
 
 // The same machines with one catalogue effect each (seed 11, default plan):
 // never a wrong effect named, never `explained` without the concealed one,
-// and the concealed effect named in all but two of the 42 sets -- a 5 %
-// magnet flux on the deep-saturation and the negative-slope machines
-// (their flexible surfaces take it within the data's noise) -- and
-// `explained` wherever the machine's own inductance is positive definite
-// over the plan, but for one set in ten: the machine's own magnetics
+// and the concealed effect named in all but one of the 42 sets -- a 5 %
+// magnet flux on the negative-slope machine (its flexible surfaces take
+// it where its screened-out point leaves a gap near zero current) -- and
+// `explained` but for one set in ten, on every machine and on those whose
+// own inductance is positive definite over the plan: the machine's own magnetics
 // (saturation, cross saturation, the HF orbit's harmonics across a knee)
 // are the baseline's, never a reason to leave a true finding partly
 // explained. Prints the table of docs/diagnosis.md, "Beyond the measured
@@ -148,7 +153,7 @@ TEST(OtherMachines, CatalogueEffectsNamedNeverAnother) {
   for (const auto& t : kinds) {
     for (const auto& [spec, effect] : effects) {
       sim::TwinConfig cfg;
-      cfg.seed = 11;
+      cfg.seed = Seed();
       cfg.motor.sat.psi_pm_wb = t.psi_pm_wb;
       cfg.magnetics = std::make_shared<sim::TraitMotor>(t);
       cfg.control.gain_scheduled = true;
@@ -187,14 +192,16 @@ TEST(OtherMachines, CatalogueEffectsNamedNeverAnother) {
       }
     }
   }
-  std::printf("%d sets: the concealed effect named in %d, explained %d (%d of the %d on machines positive definite "
-              "over the plan)\n",
-              sets, named_right, explained, explained_positive_definite, positive_definite_sets);
+  std::printf("seed %llu, %d sets: the concealed effect named in %d, explained %d (%d of the %d on machines positive "
+              "definite over the plan)\n",
+              static_cast<unsigned long long>(Seed()), sets, named_right, explained, explained_positive_definite,
+              positive_definite_sets);
   // 41 of 42 since a candidate's surfaces are never rougher than the
   // current model's (docs/diagnosis.md); the one left: the negative-slope
   // machine's 5 % magnet flux.
   EXPECT_GE(named_right, sets - 1);
   EXPECT_GE(explained_positive_definite, positive_definite_sets - positive_definite_sets / 10);
+  EXPECT_GE(explained, sets - sets / 10);
 }
 
 }  // namespace
