@@ -226,9 +226,10 @@ std::vector<WaveformPoint> AnalyseWaveforms(const io::RecordingSet& set, const s
     // as well while the residual's order M or M - 1 (either sign) stands
     // above the noise as a line would (kLineZ2, against the coefficient's
     // variance sigma^2 / n, sigma^2 from the residual's median power), up
-    // to the order below Nyquist. Two orders, not one: about an operating
-    // point off the curve's centre the bending makes every order, and one
-    // of them can pass near zero between larger neighbours (a deep-
+    // to the order below Nyquist. Two orders, not one: about a point where
+    // the curve bends symmetrically only odd orders appear (the negative-
+    // slope machine's own dip at zero current: +-7, +-9), and elsewhere one
+    // order can pass near zero between larger neighbours (a deep-
     // saturation machine's order 5 under the line threshold at a locked
     // point where order 6 stood at 8.7 sigma). A line at an order the
     // series does not lead to is still located.
