@@ -91,6 +91,9 @@ struct HeldOutCheck {
   // parameter refitted without it, in standard deviations of the
   // difference (Hausman; negative: not used).
   double parameter_shift_sigma = -1;
+  // Whether that move reaches some parameter's materiality floor (only
+  // then can it fail the class; verdict.cc, MaterialMove).
+  bool parameter_shift_material = true;
   bool passed = false;
 };
 

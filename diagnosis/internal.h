@@ -152,6 +152,23 @@ struct Model {
   // block is (loss at this speed, drag), centred so that its two
   // parameters are not collinear over a test's speeds.
   double torque_ref_rad_s = 0.0;
+  // The set's scales of the catalogue's materiality floors
+  // (sim::FloorScale): the largest current magnitude it commands [A], the
+  // largest |torque| its rows record [N m], its mean identified HF
+  // inductance (Ld + Lq) / 2 [H] (observations.cc); Rs, Udc and w_i above.
+  double scale_current_a = 0.0, scale_torque_nm = 0.0, scale_inductance_h = 0.0;
+  double FloorScaleValue(sim::FloorScale s) const {
+    switch (s) {
+      case sim::FloorScale::kNone: return 1.0;
+      case sim::FloorScale::kRsNominal: return rs_nom;
+      case sim::FloorScale::kCurrentMax: return scale_current_a;
+      case sim::FloorScale::kUdc: return udc_nom_v;
+      case sim::FloorScale::kTorqueMax: return scale_torque_nm;
+      case sim::FloorScale::kInductance: return scale_inductance_h;
+      case sim::FloorScale::kReactance: return w_i * scale_inductance_h;
+    }
+    return 1.0;
+  }
 
   // The magnetics: the set's own calibration (fit::Fit of its identified
   // points and steady-state rows, the fit `fluxcal fit SET` makes), its
@@ -304,9 +321,26 @@ struct Model {
   // e^{-j w tau}; at half a sample the magnitude is cos(w T / 2) (-1.2 % at
   // 500 Hz, 10 kHz), which would otherwise be fitted as a 1 % larger inductance.
   Complex StaircaseDelay(double w, double tau_s) const { return physics::StaircaseDelay(w, tau_s, ts); }
+  // The operating point of an HF observation in the true rotor frame. The
+  // controller held the *measured* current, so at standstill unequal
+  // sensor gains put the machine elsewhere by a pattern in twice the rotor
+  // angle (TrueCurrent's m2 term; at speed it averages out of the window).
+  // On a machine whose inductance falls steeply with its current, a 2 %
+  // gain on one phase moves a 26 A point by 0.17 A, and the identified
+  // inductance follows: read at the measured current, that pattern was fitted as a
+  // spatial harmonic beside the gain (tests/diagnosis/
+  // measured_magnetics_test.cc). The mean gain m1 is left out, as in the
+  // phasors: it rescales every current alike, which the surfaces absorb.
+  // So is a sensor offset's shift (0.07 A for a 0.1 A offset on one phase):
+  // with it the same test named a spatial harmonic beside the offset.
+  Complex OperatingPoint(const double* const* p, const HfObs& o) const {
+    const Complex rot = std::polar(1.0, AngleError(p, o.locked, o.theta));
+    const Complex i(o.id_a, o.iq_a);
+    return rot * (o.locked ? i - M2(p) * std::polar(1.0, -2 * o.theta) * std::conj(i) : i);
+  }
   void PredictHf(const double* const* p, const HfObs& o, Complex* i0, Complex* i1) const {
     const Complex rot = std::polar(1.0, AngleError(p, o.locked, o.theta));
-    const Complex it = rot * Complex(o.id_a, o.iq_a);   // true-frame current
+    const Complex it = OperatingPoint(p, o);   // true-frame current
     double ldd, lqq, ldq;
     Inductance(p, it.real(), it.imag(), &ldd, &lqq, &ldq);
     if (o.locked && p[kHarm][0] != 0.0) {
@@ -527,6 +561,9 @@ double Significance(const Candidate& c, const FitOut& f, const Model& m);
 // effect of `free` is found (parameter_sigma from neutral) without it.
 double ParameterShiftSigma(const FitOut& held, const FitOut& full, const std::vector<Block>& free);
 bool FoundWithout(const FitOut& held, const std::vector<Block>& free, double parameter_sigma);
+// Whether some finding's catalogue parameter differs between the fits a
+// and b by its materiality floor or more (verdict.cc, FloorValue).
+bool MaterialMove(const std::vector<Candidate>& findings, const Model& m, const FitOut& a, const FitOut& b);
 
 // ---- evidence.cc ------------------------------------------------------------
 // The currents a set measured: zero and every held point's and

@@ -231,6 +231,20 @@ absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident:
     ++nt;
   }
   if (nt) m.torque_ref_rad_s = w_sum / nt;
+  // The scales of the materiality floors (Model::FloorScaleValue).
+  for (const auto& p : mf.points) m.scale_current_a = std::max(m.scale_current_a, std::hypot(p.id_ref_a, p.iq_ref_a));
+  for (const auto& o : m.ss) {
+    m.scale_current_a = std::max(m.scale_current_a, std::hypot(o.id_a, o.iq_a));
+    if (o.has_torque) m.scale_torque_nm = std::max(m.scale_torque_nm, std::abs(o.torque));
+  }
+  double l_sum = 0;
+  int nl = 0;
+  for (const auto& id : *ids) {
+    if (!std::isfinite(id.ld_h) || !std::isfinite(id.lq_h)) continue;
+    l_sum += 0.5 * (id.ld_h + id.lq_h);
+    ++nl;
+  }
+  if (nl) m.scale_inductance_h = l_sum / nl;
   if (!m.dc.empty()) m.dc_scale_v = std::max(0.01, std::sqrt(dc2 / m.dc.size()));
   double udc_lo = 0, udc_hi = 0;
   for (const auto& d : m.dc) {

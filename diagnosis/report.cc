@@ -104,7 +104,10 @@ nlohmann::json ToJson(const DiagnosisReport& r) {
   for (const auto& h : r.held_out) {
     j["held_out"].push_back({{"signal", h.signal}, {"significance_sigma", h.significance_sigma},
                              {"residual_rms", h.residual_rms}, {"passed", h.passed}});
-    if (h.parameter_shift_sigma >= 0) j["held_out"].back()["parameter_shift_sigma"] = h.parameter_shift_sigma;
+    if (h.parameter_shift_sigma >= 0) {
+      j["held_out"].back()["parameter_shift_sigma"] = h.parameter_shift_sigma;
+      j["held_out"].back()["parameter_shift_material"] = h.parameter_shift_material;
+    }
   }
   j["rejected_candidates"] = json::array();
   for (const auto& c : r.rejected) {
@@ -170,8 +173,10 @@ std::string ToText(const DiagnosisReport& r) {
                          h.passed ? "" : ": not predicted, the findings do not account for it");
     if (h.parameter_shift_sigma >= 0) {
       s += absl::StrFormat("    (the magnetics from the other classes miss it; every effect is found without it and moves "
-                           "%.1f sigma: %s)\n",
-                           h.parameter_shift_sigma, h.passed ? "consistent" : "not consistent");
+                           "%.1f sigma%s: %s)\n",
+                           h.parameter_shift_sigma,
+                           h.parameter_shift_material ? "" : ", less than any parameter's materiality floor",
+                           h.passed ? "consistent" : "not consistent");
     }
   }
   for (const auto& c : r.rejected) {

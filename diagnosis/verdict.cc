@@ -46,6 +46,18 @@ bool Plausible(const Candidate& c, const FitOut& f, const Model& m) {
   return true;
 }
 
+// A catalogue parameter's materiality floor on this set, in the
+// parameter's unit: a floor stated against a scale of the machine means the
+// same on every machine (sim::FloorScale); a relative one is a fraction of
+// the manifest's nominal value.
+double FloorValue(const sim::EffectParameter& par, const Model& m) {
+  if (par.floor_kind == sim::FloorKind::kRelativeNominal) {
+    const double nominal = par.name == "rs_ohm" ? m.rs_nom : m.psi_nom;
+    return par.floor * std::max(std::abs(nominal), par.name == "rs_ohm" ? 1e-3 : 0.0);
+  }
+  return par.floor * m.FloorScaleValue(par.floor_scale);
+}
+
 // Distance of an effect's parameter from neutral, in standard deviations.
 double Significance(const Candidate& c, const FitOut& f, const Model& m) {
   // Materiality (the catalogue's floors): below them no calibration
@@ -58,16 +70,15 @@ double Significance(const Candidate& c, const FitOut& f, const Model& m) {
   for (const auto& par : row->parameters) {
     const auto it = d.parameters.find(std::string(par.name));
     if (it == d.parameters.end() || par.name == "order") continue;
-    double size = 0, floor = par.floor;
+    double size = 0;
+    const double floor = FloorValue(par, m);
     if (par.floor_kind == sim::FloorKind::kBelow) {
       // A parallel resistance: material when present (> 0) and small.
-      if (it->second > 0 && it->second <= par.floor) material = true;
+      if (it->second > 0 && it->second <= floor) material = true;
       continue;
     }
     if (par.floor_kind == sim::FloorKind::kRelativeNominal) {
-      const double nominal = par.name == "rs_ohm" ? m.rs_nom : m.psi_nom;
-      size = std::abs(it->second - nominal);
-      floor = par.floor * std::max(std::abs(nominal), par.name == "rs_ohm" ? 1e-3 : 0.0);
+      size = std::abs(it->second - (par.name == "rs_ohm" ? m.rs_nom : m.psi_nom));
     } else {
       // The reported dead time includes what the manifest declares
       // uncompensated (part of the nominal model); the finding is the rest.
@@ -111,6 +122,29 @@ double ParameterShiftSigma(const FitOut& held, const FitOut& full, const std::ve
     }
   }
   return worst;
+}
+
+// Whether some finding's catalogue parameter moved between the fits by its
+// materiality floor or more (the floor of Significance).
+bool MaterialMove(const std::vector<Candidate>& findings, const Model& m, const FitOut& a, const FitOut& b) {
+  for (const Candidate& c : findings) {
+    const sim::EffectRow* row = sim::FindEffect(c.effect);
+    if (row == nullptr) continue;
+    const Finding fa = Describe(c, m, a), fb = Describe(c, m, b);
+    for (const auto& par : row->parameters) {
+      const auto ia = fa.parameters.find(std::string(par.name)), ib = fb.parameters.find(std::string(par.name));
+      if (ia == fa.parameters.end() || ib == fb.parameters.end() || par.name == "order") continue;
+      const double floor = FloorValue(par, m);
+      if (par.floor_kind == sim::FloorKind::kBelow) {
+        // A parallel resistance: its conductance moves by the floor's.
+        auto g = [](double r) { return r > 0 ? 1.0 / r : 0.0; };
+        if (floor > 0 && std::abs(g(ia->second) - g(ib->second)) >= 1.0 / floor) return true;
+      } else if (std::abs(ia->second - ib->second) >= floor) {
+        return true;
+      }
+    }
+  }
+  return false;
 }
 
 // Whether every effect block of `free` is found in the held-out fit too

@@ -29,6 +29,22 @@ enum class FloorKind {
   kBelow,             // 0 < value <= floor: a parallel resistance, the smaller the larger the effect
 };
 
+// What a floor is a multiple of, so that it means the same on every
+// machine: a current sensor's offset of 0.25 A is 0.18 % of the twin's
+// +-100 A plan and 1 % of a 26 A machine's, and 2 mOhm of HF resistance is
+// 18 % of the twin's winding and 0.3 % of a 0.63 Ohm one. Drive-level
+// quantities (a dead time, a delay, an angle, a gain) keep their own unit.
+// The values are the set's (diagnosis/observations.cc, FloorScales):
+enum class FloorScale {
+  kNone,          // the parameter's own unit
+  kRsNominal,     // the manifest's Rs [ohm]
+  kCurrentMax,    // the largest current magnitude the set commands, points and rows [A]
+  kUdc,           // the manifest's DC-link voltage [V]
+  kTorqueMax,     // the largest |torque| the set's steady-state rows record [N m]
+  kInductance,    // the mean identified HF inductance (Ld + Lq) / 2 [H]
+  kReactance,     // the injection's angular frequency times that [ohm]
+};
+
 struct EffectParameter {
   std::string_view name;       // report name, e.g. "dead_time_s"
   std::string_view unit;       // SI unit ("s", "ohm", "rad", "1", "Wb", "H", "A", "V")
@@ -41,6 +57,8 @@ struct EffectParameter {
   // negative extra delay or HF resistance is a stand-in for something
   // else, not a fault).
   double plausible_min = -1e300;
+  // The floor is `floor` times this scale of the set (kNone: as stated).
+  FloorScale floor_scale = FloorScale::kNone;
 };
 
 struct EffectRow {

@@ -11,9 +11,9 @@ namespace fluxcal::sim {
 // (growing with speed), and has a zero of its own (one direction of
 // rotation cannot tell it from the friction). Fitted on the steady-state
 // rows' torque only (the voltages pin the magnet flux and the currents).
-// 0.05 N m: the torque rows' own uncertainty (0.02 N m + 0.5 %) over a few
-// rows, 0.3 % of these machines' rated torque, below which no torque table
-// changes; drag as 0.05 N m at 1000 rpm.
+// 0.33 % of the largest torque the rows record (0.05 N m on the twin's 15 N
+// m): about the torque rows' own uncertainty (0.02 N m + 0.5 %) over a few
+// rows, below which no torque table changes; drag as that at 1000 rpm.
 CatalogueEffect TorqueLossEffect() {
   CatalogueEffect c;
   c.row = {"torque_loss",
@@ -23,8 +23,9 @@ CatalogueEffect TorqueLossEffect() {
            "that does not scale with the current and grows with the speed, while the voltages agree with the magnet "
            "flux: friction and drag between the air gap and the torque transducer (bearings, seals, windage), or the "
            "transducer's zero",
-           {{"friction_nm", "N m", 0.0, 0.1, 0.05},
-            {"viscous_nm_per_rad_s", "N m s", 0.0, 1e-3, 0.05 / (1000 * 2 * kPi / 60), FloorKind::kAbsolute, 0.0}},
+           {{"friction_nm", "N m", 0.0, 0.1, 0.0033, FloorKind::kAbsolute, -1e300, FloorScale::kTorqueMax},
+            {"viscous_nm_per_rad_s", "N m s", 0.0, 1e-3, 0.0033 / (1000 * 2 * kPi / 60), FloorKind::kAbsolute, 0.0,
+             FloorScale::kTorqueMax}},
            false};
   c.keys = {{"friction_nm", &Effects::friction_nm}, {"viscous_nm_per_rad_s", &Effects::viscous_nm_per_rad_s}};
   c.truth = [](const Effects& e) -> std::map<std::string, double> {
