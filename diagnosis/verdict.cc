@@ -31,7 +31,8 @@ Finding Describe(const Candidate& c, const Model& m, const FitOut& f) {
 }
 
 // Whether every parameter of a candidate's fit lies within its plausible
-// range (catalogue's plausible_min) or within 3 standard deviations of it.
+// range (catalogue's plausible_min .. plausible_max) or within 3
+// standard deviations of it.
 bool Plausible(const Candidate& c, const FitOut& f, const Model& m) {
   const Finding d = Describe(c, m, f);
   const sim::EffectRow* row = sim::FindEffect(c.effect);
@@ -41,7 +42,7 @@ bool Plausible(const Candidate& c, const FitOut& f, const Model& m) {
     if (it == d.parameters.end()) continue;
     const auto sd = d.parameter_std.find(std::string(par.name));
     const double s = sd == d.parameter_std.end() ? 0.0 : sd->second;
-    if (it->second < par.plausible_min - 3 * s) return false;
+    if (it->second < par.plausible_min - 3 * s || it->second > par.plausible_max + 3 * s) return false;
   }
   return true;
 }

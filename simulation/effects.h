@@ -59,6 +59,10 @@ struct EffectParameter {
   double plausible_min = -1e300;
   // The floor is `floor` times this scale of the set (kNone: as stated).
   FloorScale floor_scale = FloorScale::kNone;
+  // Largest physically plausible value, judged as plausible_min: a current
+  // sensor reading 40 % low on all three phases is a stand-in for
+  // something else, not a sensor's gain error.
+  double plausible_max = 1e300;
 };
 
 struct EffectRow {

@@ -3,15 +3,20 @@
 
 namespace fluxcal::sim {
 
+// Plausible within 0.8-1.25 (20 % either way): a phase current sensor
+// further off fails any bench's plausibility check before it reaches a
+// calibration, and a fit that puts every gain at 0.4 (a dead time on a
+// deeply saturating machine at a quarter of the twin's current, the
+// surfaces' misfit bent into a common gain) is a stand-in.
 CatalogueEffect CurrentSensorGainEffect() {
   CatalogueEffect c;
   c.row = {"current_sensor_gain", "phase current sensors with unequal gains (measured = gain x true)",
            "a spurious HF component fixed in the stationary frame (not following 2 theta_e) and held currents off "
            "by a sensor gain: the phase current sensors have unequal gains (their mean is separated from Rs by the "
            "nominal Rs)",
-           {{"gain_a", "1", 1.0, 1e-2, 0.0025},
-            {"gain_b", "1", 1.0, 1e-2, 0.0025},
-            {"gain_c", "1", 1.0, 1e-2, 0.0025}}};
+           {{"gain_a", "1", 1.0, 1e-2, 0.0025, FloorKind::kAbsolute, 0.8, FloorScale::kNone, 1.25},
+            {"gain_b", "1", 1.0, 1e-2, 0.0025, FloorKind::kAbsolute, 0.8, FloorScale::kNone, 1.25},
+            {"gain_c", "1", 1.0, 1e-2, 0.0025, FloorKind::kAbsolute, 0.8, FloorScale::kNone, 1.25}}};
   c.keys = {{"gain_a", &Effects::gain_a, nullptr, nullptr, 0.0, true},
             {"gain_b", &Effects::gain_b, nullptr, nullptr, 0.0, true},
             {"gain_c", &Effects::gain_c, nullptr, nullptr, 0.0, true}};
