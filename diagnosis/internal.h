@@ -153,16 +153,21 @@ struct Model {
   // parameters are not collinear over a test's speeds.
   double torque_ref_rad_s = 0.0;
   // The set's scales of the catalogue's materiality floors
-  // (sim::FloorScale): the largest current magnitude it commands [A], the
-  // largest |torque| its rows record [N m], its mean identified HF
-  // inductance (Ld + Lq) / 2 [H] (observations.cc); Rs, Udc and w_i above.
+  // (sim::FloorScale, observations.cc): the largest current magnitude it
+  // commands [A], the largest |torque| its rows record [N m], its mean
+  // identified HF inductance (Ld + Lq) / 2 [H], and its Rs and Udc: the
+  // manifest's, or where the manifest leaves them out (both optional in
+  // docs/recording-format.md) the median held |u| / |i| of its standstill
+  // points and their mean recorded DC-link voltage, so that a missing value
+  // never makes every effect material.
   double scale_current_a = 0.0, scale_torque_nm = 0.0, scale_inductance_h = 0.0;
+  double scale_rs_ohm = 0.0, scale_udc_v = 0.0;
   double FloorScaleValue(sim::FloorScale s) const {
     switch (s) {
       case sim::FloorScale::kNone: return 1.0;
-      case sim::FloorScale::kRsNominal: return rs_nom;
+      case sim::FloorScale::kRsNominal: return scale_rs_ohm;
       case sim::FloorScale::kCurrentMax: return scale_current_a;
-      case sim::FloorScale::kUdc: return udc_nom_v;
+      case sim::FloorScale::kUdc: return scale_udc_v;
       case sim::FloorScale::kTorqueMax: return scale_torque_nm;
       case sim::FloorScale::kInductance: return scale_inductance_h;
       case sim::FloorScale::kReactance: return w_i * scale_inductance_h;

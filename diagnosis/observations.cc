@@ -245,6 +245,27 @@ absl::StatusOr<Model> BuildModel(const io::RecordingSet& set, std::vector<ident:
     ++nl;
   }
   if (nl) m.scale_inductance_h = l_sum / nl;
+  m.scale_rs_ohm = m.rs_nom;
+  if (!(m.scale_rs_ohm > 0)) {
+    std::vector<double> r;
+    for (const auto& d : m.dc) {
+      const double i = std::hypot(d.id_a, d.iq_a);
+      if (i > 0.05 * m.scale_current_a) r.push_back(std::abs(d.u) / i);
+    }
+    if (!r.empty()) {
+      std::nth_element(r.begin(), r.begin() + r.size() / 2, r.end());
+      m.scale_rs_ohm = r[r.size() / 2];
+    }
+  }
+  m.scale_udc_v = udc_nom;
+  if (!(m.scale_udc_v > 0)) {
+    double u_sum = 0;
+    int nu = 0;
+    for (const auto& d : m.dc) {
+      if (d.udc_v > 0) { u_sum += d.udc_v; ++nu; }
+    }
+    if (nu) m.scale_udc_v = u_sum / nu;
+  }
   if (!m.dc.empty()) m.dc_scale_v = std::max(0.01, std::sqrt(dc2 / m.dc.size()));
   double udc_lo = 0, udc_hi = 0;
   for (const auto& d : m.dc) {

@@ -51,10 +51,15 @@ bool Plausible(const Candidate& c, const FitOut& f, const Model& m) {
 // parameter's unit: a floor stated against a scale of the machine means the
 // same on every machine (sim::FloorScale); a relative one is a fraction of
 // the manifest's nominal value.
+// The manifest's nominal value a kRelativeNominal parameter is judged
+// against (Rs or psi_pm).
+double NominalOf(const sim::EffectParameter& par, const Model& m) {
+  return par.name == "rs_ohm" ? m.rs_nom : m.psi_nom;
+}
+
 double FloorValue(const sim::EffectParameter& par, const Model& m) {
   if (par.floor_kind == sim::FloorKind::kRelativeNominal) {
-    const double nominal = par.name == "rs_ohm" ? m.rs_nom : m.psi_nom;
-    return par.floor * std::max(std::abs(nominal), par.name == "rs_ohm" ? 1e-3 : 0.0);
+    return par.floor * std::max(std::abs(NominalOf(par, m)), par.name == "rs_ohm" ? 1e-3 : 0.0);
   }
   return par.floor * m.FloorScaleValue(par.floor_scale);
 }
@@ -79,7 +84,7 @@ double Significance(const Candidate& c, const FitOut& f, const Model& m) {
       continue;
     }
     if (par.floor_kind == sim::FloorKind::kRelativeNominal) {
-      size = std::abs(it->second - (par.name == "rs_ohm" ? m.rs_nom : m.psi_nom));
+      size = std::abs(it->second - NominalOf(par, m));
     } else {
       // The reported dead time includes what the manifest declares
       // uncompensated (part of the nominal model); the finding is the rest.

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <complex>
+#include <cstdio>
 #include <fstream>
 #include <set>
 #include <sstream>
@@ -13,6 +14,7 @@
 #include "diagnosis/internal.h"
 #include "gtest/gtest.h"
 #include "identification/inductance.h"
+#include "simulation/twin.h"
 
 namespace fluxcal::diag::detail {
 namespace {
@@ -202,6 +204,38 @@ TEST(Locate, AnglePatternOfTheRotorAngle) {
 // Phase parameters: a gain on one phase g_a = 1 + d is m1 = 1 + d/3,
 // m2 = d/3 (measured = m1 i + m2 conj(i)); a zero-sum offset set round-trips
 // through its alpha-beta vector.
+// The materiality floors' scales come from the set (Model::FloorScaleValue):
+// on the twin's own plan they give the floors the catalogue stated in its
+// units before (0.25 A of sensor offset, 2 mOhm of HF resistance), and a
+// manifest without Rs or Udc (both optional) falls back to the held
+// voltages' |u| / |i| and the recorded DC-link voltage, never to zero,
+// which would make every effect material.
+TEST(Verdict, FloorScalesFromTheSet) {
+  sim::TwinConfig cfg;
+  cfg.seed = 5;
+  auto simulated = sim::Simulate(cfg, sim::DefaultPlan());
+  ASSERT_TRUE(simulated.ok()) << simulated.status();
+  std::vector<ident::HfPointResult> ids;
+  auto m = BuildModel(simulated->set, &ids);
+  ASSERT_TRUE(m.ok()) << m.status();
+  const auto& offset = sim::EffectParam("current_sensor_offset", "offset_a_a");
+  const auto& r_hf = sim::EffectParam("hf_resistance", "r_hf_ohm");
+  EXPECT_NEAR(offset.floor * m->FloorScaleValue(offset.floor_scale), 0.25, 0.01);
+  EXPECT_NEAR(r_hf.floor * m->FloorScaleValue(r_hf.floor_scale), 0.002, 0.0001);
+  EXPECT_NEAR(m->FloorScaleValue(sim::FloorScale::kUdc), 50.0, 1e-9);
+
+  io::RecordingSet bare = simulated->set;
+  bare.manifest.motor.rs_ohm.reset();
+  bare.manifest.drive.udc_v.reset();
+  auto mb = BuildModel(bare, &ids);
+  ASSERT_TRUE(mb.ok()) << mb.status();
+  // The held |u| / |i| is Rs plus what the bench's dead-time compensation
+  // leaves (nothing on this twin: 0.01100 ohm), within 10 % of 11 mOhm.
+  std::printf("fallback Rs %.5f ohm, Udc %.3f V\n", mb->FloorScaleValue(sim::FloorScale::kRsNominal), mb->FloorScaleValue(sim::FloorScale::kUdc));
+  EXPECT_NEAR(mb->FloorScaleValue(sim::FloorScale::kRsNominal) / cfg.motor.rs_ohm, 1.0, 0.1);
+  EXPECT_NEAR(mb->FloorScaleValue(sim::FloorScale::kUdc), 50.0, 0.5);
+}
+
 TEST(Verdict, PhaseGainsAndOffsets) {
   const double d = 0.02;
   EXPECT_NEAR(PhaseGain(1 + d / 3, Complex(d / 3, 0), 0), 1 + d, 1e-12);
