@@ -24,7 +24,7 @@ void Quintic(double t, double f[6][3]) {
 size_t Cell(const std::vector<double>& a, double v) {
   const auto it = std::upper_bound(a.begin(), a.end(), v);
   size_t i = it == a.begin() ? 0 : static_cast<size_t>(it - a.begin()) - 1;
-  return std::min(i, a.size() - 2);   // outside: extrapolate the edge cell's patch
+  return std::min(i, a.size() - 2);
 }
 
 }  // namespace
@@ -145,6 +145,45 @@ GriddedFluxMap GriddedFluxMap::FromModel(const MagneticModel& src, double id_min
 
 void GriddedFluxMap::Eval(double id, double iq, double* wx, double* wy, double* wxx, double* wyy,
                           double* wxy) const {
+  // Outside the grid the co-energy continues as its Taylor polynomial at
+  // the nearest edge point, to second order in each variable:
+  //   W = sum_{a, b <= 2} W^(a,b)(edge) dx^a / a! dy^b / b!,
+  // dx, dy the step past the edge (0 along an axis inside). The flux is
+  // that polynomial's gradient, so the map stays reciprocal and continuous
+  // with its flux and inductance at the edge; past the id edge psi_d goes
+  // on linearly with the edge's Ldd (past the iq edge psi_q with Lqq),
+  // and cross saturation continues at the edge's rate. The edge cell's
+  // quintic patch extrapolated instead ran away within half a cell: a map
+  // ending at id = 0 read Ldd 1.6x its edge value at +0.25 A and 14x at
+  // +1 A, which the HF orbit of a point at id = 0 sweeps into and no
+  // machine has (docs/simulation.md, "Gridded flux maps").
+  const double id0 = std::clamp(id, x_.front(), x_.back()), iq0 = std::min(iq, y_.back());
+  double w[3][3];
+  Derivatives(id0, iq0, w);
+  if (id0 == id && iq0 == iq) {
+    *wx = w[1][0];
+    *wy = w[0][1];
+    *wxx = w[2][0];
+    *wyy = w[0][2];
+    *wxy = w[1][1];
+    return;
+  }
+  const double dx = id - id0, dy = iq - iq0;
+  const double px[3] = {1.0, dx, 0.5 * dx * dx}, py[3] = {1.0, dy, 0.5 * dy * dy};
+  // d/dx of dx^a / a! is dx^(a-1) / (a-1)!: px shifted by one.
+  *wx = *wy = *wxx = *wyy = *wxy = 0.0;
+  for (int b = 0; b < 3; ++b) {
+    *wx += (w[1][b] + w[2][b] * dx) * py[b];
+    *wxx += w[2][b] * py[b];
+  }
+  for (int a = 0; a < 3; ++a) {
+    *wy += (w[a][1] + w[a][2] * dy) * px[a];
+    *wyy += w[a][2] * px[a];
+  }
+  *wxy = w[1][1] + w[2][1] * dx + w[1][2] * dy + w[2][2] * dx * dy;
+}
+
+void GriddedFluxMap::Derivatives(double id, double iq, double w[3][3]) const {
   const size_t ny = y_.size();
   const size_t i = Cell(x_, id), j = Cell(y_, iq);
   const double hx = x_[i + 1] - x_[i], hy = y_[j + 1] - y_[j];
@@ -152,8 +191,9 @@ void GriddedFluxMap::Eval(double id, double iq, double* wx, double* wy, double* 
   Quintic((id - x_[i]) / hx, fu);
   Quintic((iq - y_[j]) / hy, fv);
   // W = sum over corners (a, b) and orders (p, q) of
-  //   hx^p hy^q D[p][q](corner) H_{3a+p}(u) H_{3b+q}(v).
-  double r[5] = {0, 0, 0, 0, 0};   // W_u, W_v, W_uu, W_vv, W_uv
+  //   hx^p hy^q D[p][q](corner) H_{3a+p}(u) H_{3b+q}(v);
+  // r[m][n] = d^(m+n) W / du^m dv^n.
+  double r[3][3] = {};
   const double sx[3] = {1, hx, hx * hx}, sy[3] = {1, hy, hy * hy};
   for (int a = 0; a < 2; ++a) {
     for (int b = 0; b < 2; ++b) {
@@ -163,20 +203,16 @@ void GriddedFluxMap::Eval(double id, double iq, double* wx, double* wy, double* 
           const double c = d_[p][q][n] * sx[p] * sy[q];
           const double* U = fu[3 * a + p];
           const double* V = fv[3 * b + q];
-          r[0] += c * U[1] * V[0];
-          r[1] += c * U[0] * V[1];
-          r[2] += c * U[2] * V[0];
-          r[3] += c * U[0] * V[2];
-          r[4] += c * U[1] * V[1];
+          for (int mm = 0; mm < 3; ++mm) {
+            for (int nn = 0; nn < 3; ++nn) r[mm][nn] += c * U[mm] * V[nn];
+          }
         }
       }
     }
   }
-  *wx = r[0] / hx;
-  *wy = r[1] / hy;
-  *wxx = r[2] / (hx * hx);
-  *wyy = r[3] / (hy * hy);
-  *wxy = r[4] / (hx * hy);
+  for (int mm = 0; mm < 3; ++mm) {
+    for (int nn = 0; nn < 3; ++nn) w[mm][nn] = r[mm][nn] / (sx[mm] * sy[nn]);
+  }
 }
 
 FluxLinkage GriddedFluxMap::Flux(double id, double iq, double temperature_c) const {

@@ -38,7 +38,10 @@ class GriddedFluxMap : public MagneticModel {
 
  private:
   // W' and its derivatives at (id, iq >= 0) by the cell's Hermite patch.
+  // Outside the grid: the co-energy's Taylor polynomial at the edge (flux_map.cc).
   void Eval(double id, double iq, double* wx, double* wy, double* wxx, double* wyy, double* wxy) const;
+  // w[a][b] = d^(a+b) W' / did^a diq^b, a, b <= 2, by the cell's patch.
+  void Derivatives(double id, double iq, double w[3][3]) const;
   std::vector<double> x_, y_;              // axes
   // Nodal co-energy derivatives D[p][q] = d^(p+q) W' / did^p diq^q, p, q <= 2.
   std::vector<double> d_[3][3];

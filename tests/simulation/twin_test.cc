@@ -597,6 +597,38 @@ TEST(FluxMap, ReciprocalAndCloseToItsSource) {
   std::printf("map vs source: worst inductance %.3f %%, worst psi_d %.2e Wb\n", 100 * worst_l, worst_psi);
 }
 
+// Outside its grid a map continues with its edge's inductance: the flux
+// is continuous and reciprocal there, and the inductance neither runs away
+// nor changes beyond the edge (the edge cell's quintic patch, extrapolated,
+// read Ldd 14x its edge value 1 A past a map ending at id = 0).
+TEST(FluxMap, ContinuedBeyondItsGridWithTheEdgeInductance) {
+  MotorParams mp;
+  mp.sat.g_cross_h = 3e-5;
+  AnalyticMotor a(mp);
+  const auto m = GriddedFluxMap::FromModel(a, -160, 0, 33, 100, 21);
+  for (double iq : {0.0, 30.0, 75.0, -60.0, 130.0}) {
+    const double iq_edge = std::clamp(iq, -100.0, 100.0);
+    const auto edge = m.Inductance(0.0, iq);
+    for (double past : {1e-9, 0.5, 3.0, 20.0}) {
+      const auto l = m.Inductance(past, iq);
+      EXPECT_NEAR(l.ldd_h, edge.ldd_h, 1e-6 * edge.ldd_h) << past << ", " << iq;
+      // Cross saturation continues at the edge's rate: Lqq changes past the
+      // id edge as the source's does (its own slope and curvature there).
+      EXPECT_NEAR(l.lqq_h / a.Inductance(past, iq_edge).lqq_h, 1.0, past <= 3.0 ? 0.01 : 0.1) << past << ", " << iq;
+      // The flux is the edge's plus the inductance times the step.
+      const auto f0 = m.Flux(0.0, iq), f = m.Flux(past, iq);
+      EXPECT_NEAR(f.psi_d_wb, f0.psi_d_wb + edge.ldd_h * past, 1e-9) << past << ", " << iq;
+      const double h = 1e-4;
+      const double dpd_diq = (m.Flux(past, iq + h).psi_d_wb - m.Flux(past, iq - h).psi_d_wb) / (2 * h);
+      const double dpq_did = (m.Flux(past + h, iq).psi_q_wb - m.Flux(past - h, iq).psi_q_wb) / (2 * h);
+      EXPECT_NEAR(dpd_diq, dpq_did, 1e-8) << past << ", " << iq;
+    }
+  }
+  // Beyond the iq edge as well: Lqq held at its edge value.
+  EXPECT_NEAR(m.Inductance(-50, 140).lqq_h, m.Inductance(-50, 100).lqq_h, 1e-6 * m.Inductance(-50, 100).lqq_h);
+  EXPECT_NEAR(m.Flux(-50, 140).psi_q_wb, m.Flux(-50, 100).psi_q_wb + 40 * m.Inductance(-50, 100).lqq_h, 1e-9);
+}
+
 // The round trip on the second family: within 0.3 % on every
 // locked-rotor point, 0.5 % at speed. (With second-order nodal derivatives
 // and a plain trapezoid co-energy the map's inductance bent within the HF
