@@ -218,8 +218,16 @@ absl::StatusOr<DiagnosisReport> Diagnose(const io::RecordingSet& set, const Diag
           Params st = current.p;
           if (cands[c].block == kHarm) st.b[kHarm][0] = 0.0;
           // A candidate's surfaces are never rougher than the model it is
-          // compared with (internal.h, Model::surf_lambda_floor).
-          mw.surf_lambda_floor = current.lambda;
+          // compared with (internal.h, Model::surf_lambda_floor), or than
+          // the set's own calibration where that model is stiffer: a
+          // baseline that cannot fit an effect takes its misfit for noise
+          // and its scan of the penalty weight goes stiff (a synchronous
+          // reluctance machine with Rs 23 % high: 64 times the
+          // calibration's weight, 22 effective parameters), and at that
+          // floor the surfaces could not follow the HF points beside the
+          // right effect (chi^2 19180 on 256 rows with Rs, 12681 with a
+          // DC-link sense gain, which was named first; docs/diagnosis.md).
+          mw.surf_lambda_floor = std::min(current.lambda, m.surf_lambda);
           trial_fit[c] = Solve(mw, st, trial_of(c));
         },
         opt.cancelled);
