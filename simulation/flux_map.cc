@@ -156,7 +156,7 @@ void GriddedFluxMap::Eval(double id, double iq, double* wx, double* wy, double* 
   // quintic patch extrapolated instead ran away within half a cell: a map
   // ending at id = 0 read Ldd 1.6x its edge value at +0.25 A and 14x at
   // +1 A, which the HF orbit of a point at id = 0 sweeps into and no
-  // machine has (docs/simulation.md, "Gridded flux maps").
+  // machine has (docs/simulation.md, "Gridded flux maps beyond their grid").
   const double id0 = std::clamp(id, x_.front(), x_.back()), iq0 = std::min(iq, y_.back());
   double w[3][3];
   Derivatives(id0, iq0, w);

@@ -598,9 +598,11 @@ TEST(FluxMap, ReciprocalAndCloseToItsSource) {
 }
 
 // Outside its grid a map continues with its edge's inductance: the flux
-// is continuous and reciprocal there, and the inductance neither runs away
-// nor changes beyond the edge (the edge cell's quintic patch, extrapolated,
-// read Ldd 14x its edge value 1 A past a map ending at id = 0).
+// is continuous and reciprocal there, Ldd stays at its edge value past the
+// id edge (Lqq past the iq edge), and cross saturation goes on at the
+// edge's rate, so Lqq past the id edge follows its source. (The edge
+// cell's quintic patch, extrapolated, read Ldd 14x its edge value 1 A past
+// a map ending at id = 0: a scratch print on the tree before.)
 TEST(FluxMap, ContinuedBeyondItsGridWithTheEdgeInductance) {
   MotorParams mp;
   mp.sat.g_cross_h = 3e-5;
